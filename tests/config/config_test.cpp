@@ -1,0 +1,73 @@
+#include "tarmac/config/config.hpp"
+
+#include <gtest/gtest.h>
+
+#include "test_env.hpp"
+
+namespace tarmac::config {
+namespace {
+
+std::string error_of(const std::string& yaml) {
+  auto result = load_config_string(yaml);
+  EXPECT_FALSE(result.ok()) << yaml;
+  return result.ok() ? "" : result.error().message;
+}
+
+TEST(Config, ShippedFileIsValidAndEqualsDefaults) {
+  auto config = load_config_file((test::source_dir() / "config/tarmac.yaml").string());
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  Config defaults;
+  defaults.dds.participant.name = "tarmacd";
+  EXPECT_EQ(to_yaml(config.value()), to_yaml(defaults));
+  EXPECT_EQ(config.value().dds.participant.transport, transport::TransportMode::kLocalhost);
+}
+
+TEST(Config, UnknownKeyNamesItsPath) {
+  EXPECT_EQ(error_of("version: 1\ndds:\n  qos:\n    costmap: {depht: 3}\n"),
+            "dds.qos.costmap.depht: unknown key");
+  EXPECT_EQ(error_of("version: 1\nmapp: {}\n"), "mapp: unknown key");
+}
+
+TEST(Config, OutOfRangeAndBadValuesNameTheKey) {
+  EXPECT_EQ(error_of("version: 1\ndds: {domain_id: 300}\n"),
+            "dds.domain_id: must be in [0, 232], got 300");
+  EXPECT_EQ(error_of("version: 1\ndds: {domain_id: abc}\n"),
+            "dds.domain_id: expected a number, got 'abc'");
+  EXPECT_EQ(error_of("version: 1\ndds: {transport: wifi}\n"),
+            "dds.transport: must be one of {localhost, shm, network}, got 'wifi'");
+  EXPECT_EQ(error_of("version: 1\ndds: {qos: {pose: {depth: 0}}}\n"),
+            "dds.qos.pose.depth: must be in [1, 10000], got 0");
+}
+
+TEST(Config, VersionIsRequiredAndChecked) {
+  EXPECT_NE(error_of("dds: {}\n").find("version:"), std::string::npos);
+  EXPECT_NE(error_of("version: 2\n").find("this build reads version 1"), std::string::npos);
+}
+
+TEST(Config, NetworkTransportIsAnExplicitOptIn) {
+  EXPECT_NE(error_of("version: 1\ndds: {transport: network}\n").find("dds.network_interfaces"),
+            std::string::npos);
+  auto ok =
+      load_config_string("version: 1\ndds: {transport: network, network_interfaces: [10.1.0.5]}\n");
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok.value().dds.participant.network_interfaces, std::vector<std::string>{"10.1.0.5"});
+}
+
+TEST(Config, QosOverridesApplyAndChangeTheHash) {
+  auto config = load_config_string(
+      "version: 1\ndds: {qos: {esdf_slice: {reliability: reliable, depth: 3}}}\n");
+  ASSERT_TRUE(config.ok());
+  EXPECT_EQ(config.value().dds.qos.esdf_slice.reliability, transport::Reliability::kReliable);
+  EXPECT_EQ(config.value().dds.qos.esdf_slice.history_depth, 3u);
+  EXPECT_NE(config_hash(config.value()), config_hash(Config{}));
+  EXPECT_EQ(config_hash(Config{}), config_hash(Config{}));
+}
+
+TEST(Config, SyntaxErrorsAreReportedNotThrown) {
+  auto result = load_config_string("version: 1\ndds: {domain_id: [1,\n");
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().code, "config.syntax");
+}
+
+}  // namespace
+}  // namespace tarmac::config

@@ -1,0 +1,48 @@
+#pragma once
+// What every tarmac test needs from its environment: distinct DDS domains, the data folder, and
+// the CI rule that a missing prerequisite is a failure under CI=true and a skip elsewhere.
+
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace tarmac::test {
+
+/// One DDS domain per test that uses DDS, so ctest -j never cross-talks. Add new ones here.
+enum Domain : std::uint32_t {
+  kDomainLoopbackCloud = 110,
+  kDomainLoopbackGrid = 111,
+  kDomainReaderQueue = 112,
+  kDomainSharedMemoryOnly = 113,
+  kDomainCycloneInterop = 114,
+  kDomainConfinement = 115,
+};
+
+inline bool running_in_ci() {
+  const char* ci = std::getenv("CI");
+  return ci != nullptr && std::string(ci) == "true";
+}
+
+/// ../shared/data unless TARMAC_DATA_DIR says otherwise.
+inline std::filesystem::path data_dir() {
+  if (const char* env = std::getenv("TARMAC_DATA_DIR"); env != nullptr && *env != '\0') return env;
+  return TARMAC_DEFAULT_DATA_DIR;
+}
+
+inline std::filesystem::path source_dir() {
+  return TARMAC_SOURCE_DIR;
+}
+
+}  // namespace tarmac::test
+
+/// A missing prerequisite: a failure under CI=true (CI must run everything), a skip elsewhere.
+#define TARMAC_REQUIRE_OR_SKIP(condition, why)              \
+  do {                                                      \
+    if (!(condition)) {                                     \
+      if (::tarmac::test::running_in_ci()) FAIL() << (why); \
+      GTEST_SKIP() << (why);                                \
+    }                                                       \
+  } while (false)

@@ -1,0 +1,185 @@
+#include "conversions.hpp"
+
+#include <cmath>
+#include <cstring>
+
+#include <gtest/gtest.h>
+
+namespace tarmac::transport {
+namespace {
+
+namespace pf = sensor_msgs::msg::PointField_Constants;
+
+core::PointCloud sample_cloud(bool optional_channels) {
+  core::PointCloud cloud;
+  cloud.frame_id = "lidar_front";
+  cloud.stamp_ns = 1'700'000'000'123'456'789;
+  for (int i = 0; i < 100; ++i) {
+    cloud.points_S.emplace_back(0.5f * i, -0.25f * i, 0.01f * i - 1.0f);
+    if (optional_channels) {
+      cloud.intensity.push_back(3.0f * i);
+      cloud.ring.push_back(static_cast<std::uint16_t>(i % 64));
+      cloud.time_offset_s.push_back(1e-4f * i);
+    }
+  }
+  return cloud;
+}
+
+void add_field(PointCloud2Msg& msg, const char* name, std::uint32_t offset, std::uint8_t type,
+               std::uint32_t count = 1) {
+  sensor_msgs::msg::dds_::PointField_ f;
+  f.name(name);
+  f.offset(offset);
+  f.datatype(type);
+  f.count(count);
+  msg.fields().push_back(f);
+}
+
+template <typename T>
+void put_be(std::vector<std::uint8_t>& data, std::size_t at, T value) {
+  std::uint8_t raw[sizeof(T)];
+  std::memcpy(raw, &value, sizeof(T));
+  for (std::size_t i = 0; i < sizeof(T); ++i) data[at + i] = raw[sizeof(T) - 1 - i];
+}
+
+TEST(TimeMsg, RoundTripsIncludingBeforeTheEpoch) {
+  for (const std::int64_t ns :
+       {0LL, 1LL, 999'999'999LL, 1'700'000'000'123'456'789LL, -1LL, -1'500'000'000LL}) {
+    const auto t = to_time_msg(ns);
+    EXPECT_LT(t.nanosec(), 1'000'000'000u);
+    EXPECT_EQ(from_time_msg(t), ns);
+  }
+  EXPECT_EQ(to_time_msg(-1).sec(), -1);
+  EXPECT_EQ(to_time_msg(-1).nanosec(), 999'999'999u);
+}
+
+TEST(PointCloud2, RoundTripKeepsEveryChannel) {
+  for (const bool optional : {false, true}) {
+    const auto cloud = sample_cloud(optional);
+    core::PointCloud back;
+    ASSERT_TRUE(from_point_cloud2(to_point_cloud2(cloud), back).ok());
+    EXPECT_EQ(back.frame_id, cloud.frame_id);
+    EXPECT_EQ(back.stamp_ns, cloud.stamp_ns);
+    EXPECT_EQ(back.points_S, cloud.points_S);
+    EXPECT_EQ(back.intensity, cloud.intensity);
+    EXPECT_EQ(back.ring, cloud.ring);
+    EXPECT_EQ(back.time_offset_s, cloud.time_offset_s);
+    EXPECT_TRUE(back.consistent());
+  }
+}
+
+// A big-endian cloud with float64 coordinates, int16 intensity, padding between points and at
+// the end of each row, and an unrelated field: parsed by name, offset and datatype alone.
+TEST(PointCloud2, ParsesForeignLayoutBigEndianWithPadding) {
+  PointCloud2Msg msg;
+  msg.header().frame_id("lidar_rear");
+  add_field(msg, "reflectivity", 0, pf::UINT8);
+  add_field(msg, "z", 2, pf::FLOAT64);
+  add_field(msg, "x", 10, pf::FLOAT64);
+  add_field(msg, "y", 18, pf::FLOAT64);
+  add_field(msg, "intensity", 26, pf::INT16);
+  add_field(msg, "timestamp", 28, pf::FLOAT64);
+  msg.is_bigendian(true);
+  msg.height(2);
+  msg.width(3);
+  msg.point_step(40);
+  msg.row_step(3 * 40 + 5);
+  msg.data().assign(msg.row_step() * msg.height(), 0xAB);
+  for (std::uint32_t r = 0; r < 2; ++r) {
+    for (std::uint32_t c = 0; c < 3; ++c) {
+      const std::size_t at = r * msg.row_step() + c * msg.point_step();
+      const double i = r * 3 + c;
+      put_be(msg.data(), at + 10, 1.5 * i);
+      put_be(msg.data(), at + 18, -2.25 * i);
+      put_be(msg.data(), at + 2, 0.125 * i);
+      put_be(msg.data(), at + 26, static_cast<std::int16_t>(-100 * i));
+      put_be(msg.data(), at + 28, 1e-3 * i);
+    }
+  }
+  core::PointCloud cloud;
+  ASSERT_TRUE(from_point_cloud2(msg, cloud).ok());
+  ASSERT_EQ(cloud.size(), 6u);
+  EXPECT_FALSE(cloud.has_ring());
+  for (std::size_t i = 0; i < 6; ++i) {
+    EXPECT_EQ(cloud.points_S[i], Eigen::Vector3f(1.5f * i, -2.25f * i, 0.125f * i)) << i;
+    EXPECT_EQ(cloud.intensity[i], -100.0f * i);
+    EXPECT_FLOAT_EQ(cloud.time_offset_s[i], 1e-3f * i);
+  }
+  EXPECT_EQ(cloud.frame_id, "lidar_rear");
+}
+
+PointCloud2Msg valid_xyz_msg() {
+  return to_point_cloud2(sample_cloud(false));
+}
+
+void expect_rejected(const PointCloud2Msg& msg, const std::string& code) {
+  core::PointCloud cloud;
+  const auto status = from_point_cloud2(msg, cloud);
+  ASSERT_FALSE(status.ok());
+  EXPECT_EQ(status.error().code, code) << status.error().message;
+}
+
+TEST(PointCloud2, RejectsMissingCoordinate) {
+  auto msg = valid_xyz_msg();
+  msg.fields().erase(msg.fields().begin() + 2);  // z
+  expect_rejected(msg, "pointcloud.missing_xyz");
+}
+
+TEST(PointCloud2, RejectsFieldOutsidePoint) {
+  auto msg = valid_xyz_msg();
+  msg.fields()[2].offset(10);  // z would read bytes 10..13 of a 12-byte point
+  expect_rejected(msg, "pointcloud.field_outside_point");
+}
+
+TEST(PointCloud2, RejectsDataSizeMismatch) {
+  auto msg = valid_xyz_msg();
+  msg.data().pop_back();
+  expect_rejected(msg, "pointcloud.bad_size");
+  msg = valid_xyz_msg();
+  msg.width(msg.width() + 1);  // claims more points than the data holds
+  expect_rejected(msg, "pointcloud.bad_row_step");
+}
+
+TEST(PointCloud2, RejectsUnknownDatatypeAndArrays) {
+  auto msg = valid_xyz_msg();
+  msg.fields()[0].datatype(9);
+  expect_rejected(msg, "pointcloud.bad_datatype");
+  msg = valid_xyz_msg();
+  msg.fields()[1].count(3);
+  expect_rejected(msg, "pointcloud.bad_count");
+}
+
+TEST(PointCloud2, KeepsNonFinitePointsForTheFilters) {
+  auto cloud = sample_cloud(false);
+  cloud.points_S[3].x() = std::nanf("");
+  core::PointCloud back;
+  ASSERT_TRUE(from_point_cloud2(to_point_cloud2(cloud), back).ok());
+  EXPECT_TRUE(std::isnan(back.points_S[3].x()));
+  EXPECT_EQ(back.size(), cloud.size());
+}
+
+TEST(OccupancyGrid, RoundTripAndSizeCheck) {
+  core::Costmap costmap(core::GridGeometry2D{-40.0, -20.0, 0.2, 17, 9}, core::kCostUnknown);
+  for (std::size_t i = 0; i < costmap.cells().size(); ++i) {
+    costmap.cells()[i] = static_cast<std::int8_t>(static_cast<int>(i % 102) - 1);
+  }
+  auto msg = to_occupancy_grid(costmap, 42'000'000'001, "map");
+  EXPECT_EQ(msg.header().frame_id(), "map");
+  EXPECT_EQ(msg.header().stamp().sec(), 42);
+  EXPECT_EQ(msg.header().stamp().nanosec(), 1u);
+  EXPECT_EQ(msg.info().origin().orientation().w(), 1.0);
+  auto back = from_occupancy_grid(msg);
+  ASSERT_TRUE(back.ok());
+  EXPECT_EQ(back.value().cells(), costmap.cells());
+  EXPECT_EQ(back.value().width(), 17u);
+  EXPECT_DOUBLE_EQ(back.value().geometry().origin_x_m, -40.0);
+  EXPECT_FLOAT_EQ(static_cast<float>(back.value().geometry().resolution_m), 0.2f);
+
+  msg.data().pop_back();
+  auto bad = from_occupancy_grid(msg);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().code, "occupancy_grid.size");
+}
+
+}  // namespace
+}  // namespace tarmac::transport

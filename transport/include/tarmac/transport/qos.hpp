@@ -1,0 +1,50 @@
+#pragma once
+/// @file DDS quality of service as plain config values (filled from YAML by config/), and the
+/// defaults of DESIGN.md §5 per topic role.
+
+#include <cstdint>
+
+#include "tarmac/core/result.hpp"
+
+namespace tarmac::transport {
+
+enum class Reliability { kBestEffort, kReliable };
+enum class Durability { kVolatile, kTransientLocal };
+
+/// The QoS a reader or writer is created with. History is always KEEP_LAST(depth).
+struct QosSpec {
+  Reliability reliability = Reliability::kReliable;
+  Durability durability = Durability::kVolatile;
+  std::uint32_t history_depth = 1;  ///< samples kept per instance, >= 1
+
+  [[nodiscard]] core::Status validate() const;
+  friend bool operator==(const QosSpec&, const QosSpec&) = default;
+};
+
+/// DESIGN.md §5 defaults.
+namespace qos {
+/// LiDAR scans in: best effort, keep last 2 (a late scan is worth less than the next one).
+inline constexpr QosSpec kLidar{Reliability::kBestEffort, Durability::kVolatile, 2};
+/// Poses in: reliable, keep last 50 (the pose buffer interpolates between them).
+inline constexpr QosSpec kPose{Reliability::kReliable, Durability::kVolatile, 50};
+/// Virtual obstacles in: reliable, transient local, so a late-joining tarmacd gets the zones.
+inline constexpr QosSpec kVirtualObstacles{Reliability::kReliable, Durability::kTransientLocal, 1};
+/// Costmap out: reliable, transient local, keep last 1 (Nav2 map convention).
+inline constexpr QosSpec kCostmap{Reliability::kReliable, Durability::kTransientLocal, 1};
+/// ESDF slices out: best effort, keep last 1 (the safety filter wants the newest only).
+inline constexpr QosSpec kEsdfSlice{Reliability::kBestEffort, Durability::kVolatile, 1};
+/// Diagnostics out: reliable, keep last 20 (the auditor must not miss a cycle).
+inline constexpr QosSpec kDiagnostics{Reliability::kReliable, Durability::kVolatile, 20};
+}  // namespace qos
+
+/// Default topic names, ROS 2 wire form (rt/ prefix). DESIGN.md §5.
+namespace topics {
+inline constexpr const char* kPose = "rt/tarmac/pose";
+inline constexpr const char* kVirtualObstacles = "rt/tarmac/virtual_obstacles";
+inline constexpr const char* kCostmap = "rt/tarmac/costmap";
+inline constexpr const char* kEsdfSlice = "rt/tarmac/esdf_slice";
+inline constexpr const char* kDiagnostics = "rt/tarmac/diagnostics";
+inline constexpr const char* kDiagnosticArray = "rt/diagnostics";
+}  // namespace topics
+
+}  // namespace tarmac::transport

@@ -1,0 +1,282 @@
+#include "conversions.hpp"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <optional>
+
+namespace tarmac::transport {
+
+namespace {
+
+constexpr std::int64_t kNsPerSec = 1'000'000'000;
+
+namespace pf = sensor_msgs::msg::PointField_Constants;
+
+std::size_t datatype_size(std::uint8_t datatype) {
+  switch (datatype) {
+    case pf::INT8:
+    case pf::UINT8: return 1;
+    case pf::INT16:
+    case pf::UINT16: return 2;
+    case pf::INT32:
+    case pf::UINT32:
+    case pf::FLOAT32: return 4;
+    case pf::FLOAT64: return 8;
+    default: return 0;
+  }
+}
+
+/// Where one field lives inside a point record.
+struct FieldSlot {
+  std::uint32_t offset = 0;
+  std::uint8_t datatype = 0;
+};
+
+/// Reads a numeric field of any datatype as double, honouring the message's endianness.
+double read_as_double(const std::uint8_t* p, std::uint8_t datatype, bool swap) {
+  std::uint8_t raw[8];
+  const std::size_t n = datatype_size(datatype);
+  std::memcpy(raw, p, n);
+  if (swap) {
+    for (std::size_t i = 0; i < n / 2; ++i) std::swap(raw[i], raw[n - 1 - i]);
+  }
+  switch (datatype) {
+    case pf::INT8: return static_cast<std::int8_t>(raw[0]);
+    case pf::UINT8: return raw[0];
+    case pf::INT16: {
+      std::int16_t v;
+      std::memcpy(&v, raw, 2);
+      return v;
+    }
+    case pf::UINT16: {
+      std::uint16_t v;
+      std::memcpy(&v, raw, 2);
+      return v;
+    }
+    case pf::INT32: {
+      std::int32_t v;
+      std::memcpy(&v, raw, 4);
+      return v;
+    }
+    case pf::UINT32: {
+      std::uint32_t v;
+      std::memcpy(&v, raw, 4);
+      return v;
+    }
+    case pf::FLOAT32: {
+      float v;
+      std::memcpy(&v, raw, 4);
+      return v;
+    }
+    case pf::FLOAT64: {
+      double v;
+      std::memcpy(&v, raw, 8);
+      return v;
+    }
+    default: return std::nan("");
+  }
+}
+
+core::Error reject(const std::string& reason, const std::string& message) {
+  return core::Error{"pointcloud." + reason, message};
+}
+
+void put_field(PointCloud2Msg& msg, const char* name, std::uint32_t offset, std::uint8_t datatype) {
+  sensor_msgs::msg::dds_::PointField_ field;
+  field.name(name);
+  field.offset(offset);
+  field.datatype(datatype);
+  field.count(1);
+  msg.fields().push_back(field);
+}
+
+}  // namespace
+
+TimeMsg to_time_msg(std::int64_t stamp_ns) {
+  // Floor division so nanosec stays in [0, 1e9) for stamps before the epoch too.
+  std::int64_t sec = stamp_ns / kNsPerSec;
+  std::int64_t nsec = stamp_ns % kNsPerSec;
+  if (nsec < 0) {
+    nsec += kNsPerSec;
+    sec -= 1;
+  }
+  TimeMsg t;
+  t.sec(static_cast<std::int32_t>(sec));
+  t.nanosec(static_cast<std::uint32_t>(nsec));
+  return t;
+}
+
+std::int64_t from_time_msg(const TimeMsg& time) {
+  return static_cast<std::int64_t>(time.sec()) * kNsPerSec + time.nanosec();
+}
+
+OccupancyGridMsg to_occupancy_grid(const core::Costmap& costmap, std::int64_t stamp_ns,
+                                   const std::string& frame_id) {
+  const auto& g = costmap.geometry();
+  OccupancyGridMsg msg;
+  msg.header().stamp(to_time_msg(stamp_ns));
+  msg.header().frame_id(frame_id);
+  msg.info().map_load_time(to_time_msg(stamp_ns));
+  msg.info().resolution(static_cast<float>(g.resolution_m));
+  msg.info().width(g.width);
+  msg.info().height(g.height);
+  msg.info().origin().position().x(g.origin_x_m);
+  msg.info().origin().position().y(g.origin_y_m);
+  msg.info().origin().position().z(0.0);
+  msg.info().origin().orientation().w(1.0);
+  msg.data(costmap.cells());
+  return msg;
+}
+
+core::Result<core::Costmap> from_occupancy_grid(const OccupancyGridMsg& msg) {
+  const auto& info = msg.info();
+  const auto& q = info.origin().orientation();
+  if (q.x() != 0.0 || q.y() != 0.0 || q.z() != 0.0 || q.w() != 1.0) {
+    return core::Error{"occupancy_grid.rotated", "origin orientation is not identity"};
+  }
+  if (!(info.resolution() > 0.0f)) {
+    return core::Error{"occupancy_grid.resolution", "resolution must be > 0"};
+  }
+  if (msg.data().size() != std::size_t{info.width()} * info.height()) {
+    return core::Error{"occupancy_grid.size",
+                       "data has " + std::to_string(msg.data().size()) +
+                           " cells, width*height is " +
+                           std::to_string(std::size_t{info.width()} * info.height())};
+  }
+  core::GridGeometry2D geometry{info.origin().position().x(), info.origin().position().y(),
+                                info.resolution(), info.width(), info.height()};
+  core::Costmap costmap(geometry, core::kCostUnknown);
+  costmap.cells() = msg.data();
+  return costmap;
+}
+
+PointCloud2Msg to_point_cloud2(const core::PointCloud& cloud) {
+  PointCloud2Msg msg;
+  msg.header().stamp(to_time_msg(cloud.stamp_ns));
+  msg.header().frame_id(cloud.frame_id);
+  std::uint32_t step = 12;
+  put_field(msg, "x", 0, pf::FLOAT32);
+  put_field(msg, "y", 4, pf::FLOAT32);
+  put_field(msg, "z", 8, pf::FLOAT32);
+  std::optional<std::uint32_t> intensity_at, ring_at, time_at;
+  if (cloud.has_intensity()) {
+    intensity_at = step;
+    put_field(msg, "intensity", step, pf::FLOAT32);
+    step += 4;
+  }
+  if (cloud.has_time()) {
+    time_at = step;
+    put_field(msg, "time", step, pf::FLOAT32);
+    step += 4;
+  }
+  if (cloud.has_ring()) {
+    ring_at = step;
+    put_field(msg, "ring", step, pf::UINT16);
+    step += 2;
+  }
+  const auto n = static_cast<std::uint32_t>(cloud.size());
+  msg.height(1);
+  msg.width(n);
+  msg.is_bigendian(std::endian::native == std::endian::big);
+  msg.point_step(step);
+  msg.row_step(step * n);
+  msg.is_dense(true);
+  auto& data = msg.data();
+  data.resize(std::size_t{step} * n);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    std::uint8_t* p = data.data() + std::size_t{i} * step;
+    std::memcpy(p, cloud.points_S[i].data(), 12);
+    if (intensity_at) std::memcpy(p + *intensity_at, &cloud.intensity[i], 4);
+    if (time_at) std::memcpy(p + *time_at, &cloud.time_offset_s[i], 4);
+    if (ring_at) std::memcpy(p + *ring_at, &cloud.ring[i], 2);
+  }
+  return msg;
+}
+
+core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out) {
+  out.clear();
+  out.frame_id = msg.header().frame_id();
+  out.stamp_ns = from_time_msg(msg.header().stamp());
+
+  std::optional<FieldSlot> x, y, z, intensity, ring, time;
+  for (const auto& f : msg.fields()) {
+    const std::size_t size = datatype_size(f.datatype());
+    const std::string& name = f.name();
+    const bool wanted = name == "x" || name == "y" || name == "z" || name == "intensity" ||
+                        name == "ring" || name == "time" || name == "t" || name == "timestamp";
+    if (!wanted) continue;  // other fields (normals, reflectivity, ...) are ignored
+    if (size == 0) {
+      return reject("bad_datatype",
+                    "field '" + name + "' has unknown datatype " + std::to_string(f.datatype()));
+    }
+    if (f.count() != 1) {
+      return reject("bad_count", "field '" + name + "' has count " + std::to_string(f.count()));
+    }
+    if (std::size_t{f.offset()} + size > msg.point_step()) {
+      return reject("field_outside_point", "field '" + name + "' at offset " +
+                                               std::to_string(f.offset()) + " exceeds point_step " +
+                                               std::to_string(msg.point_step()));
+    }
+    const FieldSlot slot{f.offset(), f.datatype()};
+    if (name == "x")
+      x = slot;
+    else if (name == "y")
+      y = slot;
+    else if (name == "z")
+      z = slot;
+    else if (name == "intensity")
+      intensity = slot;
+    else if (name == "ring")
+      ring = slot;
+    else if (!time)
+      time = slot;  // first of time / t / timestamp wins
+  }
+  if (!x || !y || !z) return reject("missing_xyz", "fields x, y and z are required");
+
+  const std::size_t width = msg.width();
+  const std::size_t height = msg.height();
+  const std::size_t point_step = msg.point_step();
+  const std::size_t row_step = msg.row_step();
+  if (row_step < width * point_step) {
+    return reject("bad_row_step", "row_step " + std::to_string(row_step) + " < width*point_step " +
+                                      std::to_string(width * point_step));
+  }
+  if (msg.data().size() != row_step * height) {
+    return reject("bad_size", "data has " + std::to_string(msg.data().size()) +
+                                  " bytes, row_step*height is " +
+                                  std::to_string(row_step * height));
+  }
+
+  const bool swap = msg.is_bigendian() != (std::endian::native == std::endian::big);
+  const std::size_t n = width * height;
+  out.points_S.reserve(n);
+  if (intensity) out.intensity.reserve(n);
+  if (ring) out.ring.reserve(n);
+  if (time) out.time_offset_s.reserve(n);
+  const std::uint8_t* base = msg.data().data();
+  for (std::size_t row = 0; row < height; ++row) {
+    for (std::size_t col = 0; col < width; ++col) {
+      const std::uint8_t* p = base + row * row_step + col * point_step;
+      out.points_S.emplace_back(
+          static_cast<float>(read_as_double(p + x->offset, x->datatype, swap)),
+          static_cast<float>(read_as_double(p + y->offset, y->datatype, swap)),
+          static_cast<float>(read_as_double(p + z->offset, z->datatype, swap)));
+      if (intensity) {
+        out.intensity.push_back(
+            static_cast<float>(read_as_double(p + intensity->offset, intensity->datatype, swap)));
+      }
+      if (ring) {
+        const double r = read_as_double(p + ring->offset, ring->datatype, swap);
+        out.ring.push_back(r >= 0.0 && r <= 65535.0 ? static_cast<std::uint16_t>(r) : 0);
+      }
+      if (time) {
+        out.time_offset_s.push_back(
+            static_cast<float>(read_as_double(p + time->offset, time->datatype, swap)));
+      }
+    }
+  }
+  return core::Ok{};
+}
+
+}  // namespace tarmac::transport

@@ -1,0 +1,197 @@
+#pragma once
+/// @file Internal: typed DDS reader and writer over fastddsgen types, RAII-owned.
+/// The listener thread only enqueues into a bounded queue (overflow drops the oldest sample
+/// and counts it); the owner drains without blocking (DESIGN.md §3 step 2).
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <fastdds/dds/core/status/PublicationMatchedStatus.hpp>
+#include <fastdds/dds/core/status/SubscriptionMatchedStatus.hpp>
+#include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+
+#include "participant_impl.hpp"
+
+namespace tarmac::transport {
+
+namespace detail {
+/// Polls `count()` until it reaches `n` or `timeout` passes. For tests, tools and startup only.
+template <typename CountFn>
+bool wait_until_count(CountFn count, std::size_t n, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (count() < n) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
+}
+}  // namespace detail
+
+/// Writes samples of one fastddsgen type (`PubSubType::type`) on one topic.
+template <typename PubSubType>
+class Writer {
+ public:
+  using Message = typename PubSubType::type;
+
+  static core::Result<std::unique_ptr<Writer>> create(const Participant& participant,
+                                                      const std::string& topic_name,
+                                                      const QosSpec& qos) {
+    if (auto valid = qos.validate(); !valid) return valid.error();
+    const auto& impl = participant.impl();
+    auto topic = impl->topic(topic_name, fdds::TypeSupport(new PubSubType()));
+    if (!topic) return topic.error();
+    fdds::DataWriter* writer =
+        impl->publisher()->create_datawriter(topic.value(), to_writer_qos(qos));
+    if (writer == nullptr) {
+      return core::Error{"dds.writer", "cannot create a writer on " + topic_name};
+    }
+    return std::unique_ptr<Writer>(new Writer(impl, writer));
+  }
+
+  ~Writer() { impl_->publisher()->delete_datawriter(writer_); }
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
+
+  /// Publishes one sample; false when Fast DDS refuses it (e.g. history full while reliable).
+  bool write(const Message& message) {
+    // Fast DDS takes a non-const pointer but does not modify the sample.
+    return writer_->write(const_cast<Message*>(
+        &message));  // NOLINT(cppcoreguidelines-pro-type-const-cast): API quirk
+  }
+
+  [[nodiscard]] std::size_t matched_readers() const {
+    fdds::PublicationMatchedStatus status;
+    writer_->get_publication_matched_status(status);
+    return static_cast<std::size_t>(status.current_count);
+  }
+
+  /// Waits until at least `n` readers matched. Not for the cycle.
+  bool wait_for_readers(std::size_t n, std::chrono::milliseconds timeout) const {
+    return detail::wait_until_count([this] { return matched_readers(); }, n, timeout);
+  }
+
+  /// Waits until every reliable reader acknowledged what was written. Not for the cycle.
+  bool wait_for_acknowledgments(std::chrono::milliseconds timeout) {
+    const eprosima::fastrtps::Duration_t max_wait(static_cast<double>(timeout.count()) / 1000.0);
+    return writer_->wait_for_acknowledgments(max_wait) == ReturnCode_t::RETCODE_OK;
+  }
+
+ private:
+  Writer(std::shared_ptr<ParticipantImpl> impl, fdds::DataWriter* writer)
+      : impl_(std::move(impl)), writer_(writer) {}
+
+  std::shared_ptr<ParticipantImpl> impl_;
+  fdds::DataWriter* writer_;
+};
+
+/// Reads samples of one fastddsgen type into a bounded queue.
+template <typename PubSubType>
+class Reader : private fdds::DataReaderListener {
+ public:
+  using Message = typename PubSubType::type;
+
+  /// @param queue_capacity samples kept between drains; when full the oldest is dropped.
+  static core::Result<std::unique_ptr<Reader>> create(const Participant& participant,
+                                                      const std::string& topic_name,
+                                                      const QosSpec& qos,
+                                                      std::size_t queue_capacity) {
+    if (auto valid = qos.validate(); !valid) return valid.error();
+    if (queue_capacity == 0) return core::Error{"config.qos", "queue_capacity: must be >= 1"};
+    const auto& impl = participant.impl();
+    auto topic = impl->topic(topic_name, fdds::TypeSupport(new PubSubType()));
+    if (!topic) return topic.error();
+    std::unique_ptr<Reader> reader(new Reader(impl, queue_capacity));
+    // The listener is attached at creation so no sample arrives unseen.
+    reader->reader_ = impl->subscriber()->create_datareader(
+        topic.value(), to_reader_qos(qos), reader.get(), fdds::StatusMask::data_available());
+    if (reader->reader_ == nullptr) {
+      return core::Error{"dds.reader", "cannot create a reader on " + topic_name};
+    }
+    return reader;
+  }
+
+  ~Reader() override {
+    if (reader_ != nullptr) {
+      reader_->set_listener(nullptr);
+      impl_->subscriber()->delete_datareader(reader_);
+    }
+  }
+  Reader(const Reader&) = delete;
+  Reader& operator=(const Reader&) = delete;
+
+  /// Moves every queued sample to the end of `out`, oldest first; never blocks on DDS.
+  /// Returns the number moved.
+  std::size_t take_all(std::vector<Message>& out) {
+    std::lock_guard lock(mutex_);
+    const std::size_t n = queue_.size();
+    for (auto& message : queue_) out.push_back(std::move(message));
+    queue_.clear();
+    return n;
+  }
+
+  /// Blocks until at least one sample is queued or `timeout` passes. Not for the cycle.
+  bool wait_for_sample(std::chrono::milliseconds timeout) {
+    std::unique_lock lock(mutex_);
+    return cv_.wait_for(lock, timeout, [this] { return !queue_.empty(); });
+  }
+
+  /// Samples dropped because the queue was full (oldest first), since creation.
+  [[nodiscard]] std::uint64_t dropped() const { return dropped_.load(); }
+  /// Samples received, since creation.
+  [[nodiscard]] std::uint64_t received() const { return received_.load(); }
+
+  [[nodiscard]] std::size_t matched_writers() const {
+    fdds::SubscriptionMatchedStatus status;
+    reader_->get_subscription_matched_status(status);
+    return static_cast<std::size_t>(status.current_count);
+  }
+
+  bool wait_for_writers(std::size_t n, std::chrono::milliseconds timeout) const {
+    return detail::wait_until_count([this] { return matched_writers(); }, n, timeout);
+  }
+
+ private:
+  Reader(std::shared_ptr<ParticipantImpl> impl, std::size_t capacity)
+      : impl_(std::move(impl)), capacity_(capacity) {}
+
+  void on_data_available(fdds::DataReader* reader) override {
+    Message message;
+    fdds::SampleInfo info;
+    while (reader->take_next_sample(&message, &info) == ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      received_.fetch_add(1);
+      {
+        std::lock_guard lock(mutex_);
+        if (queue_.size() == capacity_) {
+          queue_.pop_front();
+          dropped_.fetch_add(1);
+        }
+        queue_.push_back(std::move(message));
+      }
+      cv_.notify_all();
+      message = Message();
+    }
+  }
+
+  std::shared_ptr<ParticipantImpl> impl_;
+  fdds::DataReader* reader_ = nullptr;
+  const std::size_t capacity_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<Message> queue_;
+  std::atomic<std::uint64_t> dropped_{0};
+  std::atomic<std::uint64_t> received_{0};
+};
+
+}  // namespace tarmac::transport

@@ -1,0 +1,194 @@
+#include "tarmac/transport/participant.hpp"
+
+#include <arpa/inet.h>
+
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
+#include <fastrtps/utils/IPLocator.h>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
+
+#include "participant_impl.hpp"
+#include "tarmac/transport/qos.hpp"
+
+namespace tarmac::transport {
+
+using eprosima::fastrtps::rtps::IPLocator;
+using eprosima::fastrtps::rtps::Locator_t;
+
+namespace {
+
+bool is_ipv4(const std::string& text) {
+  in_addr addr{};
+  return inet_pton(AF_INET, text.c_str(), &addr) == 1;
+}
+
+core::Error config_error(const std::string& key, const std::string& why) {
+  return core::Error{"config.transport", key + ": " + why};
+}
+
+Locator_t udp_locator(const std::string& address) {
+  Locator_t locator;
+  locator.kind = LOCATOR_KIND_UDPv4;
+  IPLocator::setIPv4(locator, address);
+  return locator;
+}
+
+fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
+  fdds::DomainParticipantQos qos;
+  qos.name(config.name);
+  // Only the transports chosen here: the built-in ones would bind every interface.
+  qos.transport().use_builtin_transports = false;
+
+  auto shm = std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>();
+  shm->segment_size(config.shm_segment_bytes);
+  shm->max_message_size(config.shm_max_message_bytes);
+  qos.transport().user_transports.push_back(shm);
+
+  auto& builtin = qos.wire_protocol().builtin;
+  switch (config.transport) {
+    case TransportMode::kSharedMemoryOnly: break;
+    case TransportMode::kLocalhost: {
+      auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+      udp->interfaceWhiteList.emplace_back("127.0.0.1");
+      qos.transport().user_transports.push_back(udp);
+      builtin.initialPeersList.push_back(udp_locator("127.0.0.1"));
+      break;
+    }
+    case TransportMode::kNetwork: {
+      auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+      udp->interfaceWhiteList = config.network_interfaces;
+      qos.transport().user_transports.push_back(udp);
+      for (const auto& peer : config.initial_peers) {
+        builtin.initialPeersList.push_back(udp_locator(peer));
+      }
+      break;
+    }
+  }
+  return qos;
+}
+
+}  // namespace
+
+const char* to_string(TransportMode mode) {
+  switch (mode) {
+    case TransportMode::kLocalhost: return "localhost";
+    case TransportMode::kSharedMemoryOnly: return "shm";
+    case TransportMode::kNetwork: return "network";
+  }
+  return "?";
+}
+
+core::Status ParticipantConfig::validate() const {
+  if (domain_id > 232) {
+    return config_error("dds.domain_id", "must be 0..232, got " + std::to_string(domain_id));
+  }
+  if (shm_segment_bytes < shm_max_message_bytes) {
+    return config_error("dds.shm_segment_bytes", "must be >= dds.shm_max_message_bytes");
+  }
+  if (shm_max_message_bytes < 64u * 1024u) {
+    return config_error("dds.shm_max_message_bytes", "must be >= 65536");
+  }
+  if (transport == TransportMode::kNetwork && network_interfaces.empty()) {
+    return config_error("dds.network_interfaces",
+                        "transport 'network' needs the interface addresses to use, explicitly");
+  }
+  if (transport != TransportMode::kNetwork &&
+      (!network_interfaces.empty() || !initial_peers.empty())) {
+    return config_error("dds.network_interfaces",
+                        std::string("only allowed with transport 'network', transport is '") +
+                            to_string(transport) + "'");
+  }
+  for (const auto& address : network_interfaces) {
+    if (!is_ipv4(address))
+      return config_error("dds.network_interfaces", "not an IPv4 address: " + address);
+  }
+  for (const auto& address : initial_peers) {
+    if (!is_ipv4(address))
+      return config_error("dds.initial_peers", "not an IPv4 address: " + address);
+  }
+  return core::Ok{};
+}
+
+core::Status QosSpec::validate() const {
+  if (history_depth < 1) return core::Error{"config.qos", "history_depth: must be >= 1"};
+  return core::Ok{};
+}
+
+core::Result<Participant> Participant::create(const ParticipantConfig& config) {
+  if (auto valid = config.validate(); !valid) return valid.error();
+
+  auto* factory = fdds::DomainParticipantFactory::get_instance();
+  fdds::DomainParticipant* participant =
+      factory->create_participant(config.domain_id, participant_qos(config));
+  if (participant == nullptr) {
+    return core::Error{"dds.participant", "Fast DDS refused to create a participant on domain " +
+                                              std::to_string(config.domain_id) + " (transport " +
+                                              to_string(config.transport) + ")"};
+  }
+  fdds::Publisher* publisher = participant->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
+  fdds::Subscriber* subscriber = participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
+  auto impl = std::make_shared<ParticipantImpl>(config, participant, publisher, subscriber);
+  if (publisher == nullptr || subscriber == nullptr) {
+    return core::Error{"dds.participant", "Fast DDS refused to create a publisher/subscriber"};
+  }
+  return Participant(std::move(impl));
+}
+
+const ParticipantConfig& Participant::config() const {
+  return impl_->config();
+}
+
+ParticipantImpl::~ParticipantImpl() {
+  // Endpoints hold a shared_ptr to this object, so all of them are gone by now.
+  participant_->delete_contained_entities();
+  fdds::DomainParticipantFactory::get_instance()->delete_participant(participant_);
+}
+
+core::Result<fdds::Topic*> ParticipantImpl::topic(const std::string& name, fdds::TypeSupport type) {
+  std::lock_guard lock(mutex_);
+  if (auto it = topics_.find(name); it != topics_.end()) {
+    if (it->second->get_type_name() != type.get_type_name()) {
+      return core::Error{"dds.topic", "topic " + name + " already exists with type " +
+                                          it->second->get_type_name()};
+    }
+    return it->second;
+  }
+  if (participant_->find_type(type.get_type_name()).empty() &&
+      type.register_type(participant_) != ReturnCode_t::RETCODE_OK) {
+    return core::Error{"dds.topic", "cannot register type " + type.get_type_name()};
+  }
+  fdds::Topic* topic =
+      participant_->create_topic(name, type.get_type_name(), fdds::TOPIC_QOS_DEFAULT);
+  if (topic == nullptr) return core::Error{"dds.topic", "cannot create topic " + name};
+  topics_.emplace(name, topic);
+  return topic;
+}
+
+namespace {
+template <typename Qos>
+void apply(const QosSpec& spec, Qos& qos) {
+  qos.reliability().kind = spec.reliability == Reliability::kReliable
+                               ? fdds::RELIABLE_RELIABILITY_QOS
+                               : fdds::BEST_EFFORT_RELIABILITY_QOS;
+  qos.durability().kind = spec.durability == Durability::kTransientLocal
+                              ? fdds::TRANSIENT_LOCAL_DURABILITY_QOS
+                              : fdds::VOLATILE_DURABILITY_QOS;
+  qos.history().kind = fdds::KEEP_LAST_HISTORY_QOS;
+  qos.history().depth = static_cast<std::int32_t>(spec.history_depth);
+}
+}  // namespace
+
+fdds::DataWriterQos to_writer_qos(const QosSpec& spec) {
+  fdds::DataWriterQos qos = fdds::DATAWRITER_QOS_DEFAULT;
+  apply(spec, qos);
+  return qos;
+}
+
+fdds::DataReaderQos to_reader_qos(const QosSpec& spec) {
+  fdds::DataReaderQos qos = fdds::DATAREADER_QOS_DEFAULT;
+  apply(spec, qos);
+  return qos;
+}
+
+}  // namespace tarmac::transport

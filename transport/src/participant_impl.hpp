@@ -1,0 +1,60 @@
+#pragma once
+/// @file Internal: the Fast DDS entities behind tarmac::transport::Participant. Not a public
+/// header (it exposes Fast DDS types); used by this library, its tests and tools that need the
+/// raw IDL types.
+
+#include <map>
+#include <mutex>
+#include <string>
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+
+#include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
+#include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+
+#include "tarmac/transport/participant.hpp"
+#include "tarmac/transport/qos.hpp"
+
+namespace tarmac::transport {
+
+namespace fdds = eprosima::fastdds::dds;
+
+class ParticipantImpl {
+ public:
+  ParticipantImpl(ParticipantConfig config, fdds::DomainParticipant* participant,
+                  fdds::Publisher* publisher, fdds::Subscriber* subscriber)
+      : config_(std::move(config)),
+        participant_(participant),
+        publisher_(publisher),
+        subscriber_(subscriber) {}
+  ~ParticipantImpl();
+  ParticipantImpl(const ParticipantImpl&) = delete;
+  ParticipantImpl& operator=(const ParticipantImpl&) = delete;
+
+  /// Registers `type` (once per type name) and returns the topic `name` (created once).
+  /// Fails when the topic exists with another type.
+  core::Result<fdds::Topic*> topic(const std::string& name, fdds::TypeSupport type);
+
+  [[nodiscard]] const ParticipantConfig& config() const { return config_; }
+  [[nodiscard]] fdds::DomainParticipant* participant() const { return participant_; }
+  [[nodiscard]] fdds::Publisher* publisher() const { return publisher_; }
+  [[nodiscard]] fdds::Subscriber* subscriber() const { return subscriber_; }
+
+ private:
+  ParticipantConfig config_;
+  fdds::DomainParticipant* participant_;
+  fdds::Publisher* publisher_;
+  fdds::Subscriber* subscriber_;
+  std::mutex mutex_;  // guards topics_ and type registration
+  std::map<std::string, fdds::Topic*> topics_;
+};
+
+/// Converts a QosSpec into Fast DDS writer/reader QoS.
+fdds::DataWriterQos to_writer_qos(const QosSpec& spec);
+fdds::DataReaderQos to_reader_qos(const QosSpec& spec);
+
+}  // namespace tarmac::transport
