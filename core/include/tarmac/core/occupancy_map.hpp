@@ -1,0 +1,119 @@
+#pragma once
+/// @file The hot local occupancy map: a dense rolling (ring-buffer) voxel window that follows the
+/// vehicle without copying, holding clamped log-odds per voxel (OctoMap's sensor model:
+/// Hornung et al., "OctoMap", Autonomous Robots 2013).
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "tarmac/core/result.hpp"
+#include "tarmac/core/task_runner.hpp"
+
+namespace tarmac::core {
+
+/// Sensor model and window. Defaults: OctoMap's 0.7 / 0.4 / 0.12 / 0.97, 80 m × 80 m × 8 m at 0.2
+/// m.
+struct OccupancyParams {
+  double voxel_size_m = 0.2;
+  int window_x_vox = 400;
+  int window_y_vox = 400;
+  int window_z_vox = 40;
+  /// The window spans [vehicle z − window_below_m, … + window_z_vox·voxel) vertically.
+  double window_below_m = 3.0;
+  float prob_hit = 0.7f;
+  float prob_miss = 0.4f;
+  float clamp_min = 0.12f;
+  float clamp_max = 0.97f;
+  /// Returns farther than this do not mark; their ray clears free space up to clearing_range_m.
+  double max_range_m = 50.0;
+  /// How far a beam with no return (or beyond max range) clears free space.
+  double clearing_range_m = 30.0;
+
+  [[nodiscard]] Status validate() const;
+};
+
+/// Integer voxel coordinates on the world lattice: voxel i covers [i·v, (i+1)·v).
+using VoxelIndex = Eigen::Vector3i;
+
+/// What one scan changed, for later stages and reports.
+struct OccupancyUpdateStats {
+  std::uint64_t rays = 0;            ///< rays cast (returns + clearing beams)
+  std::uint64_t hit_updates = 0;     ///< voxels updated as occupied
+  std::uint64_t miss_updates = 0;    ///< voxels updated as free
+  std::uint64_t voxel_visits = 0;    ///< voxels stepped through, including repeats
+  std::uint64_t outside_window = 0;  ///< returns whose voxel lies outside the window
+};
+
+/// The rolling window. Move-only (tens of MB). Not thread-safe: one writer.
+class OccupancyMap {
+ public:
+  /// Log-odds value that marks a voxel never observed.
+  static constexpr float kUnknown = -1.0e9f;
+
+  explicit OccupancyMap(const OccupancyParams& params);
+  OccupancyMap(OccupancyMap&&) noexcept = default;
+  OccupancyMap& operator=(OccupancyMap&&) noexcept = default;
+  OccupancyMap(const OccupancyMap&) = delete;
+  OccupancyMap& operator=(const OccupancyMap&) = delete;
+
+  /// Moves the window so that it is centred on `position_W` in x/y and spans
+  /// [z − window_below_m, …) in z. Voxels that leave are forgotten (unknown when they re-enter);
+  /// voxels that stay keep their content, without copying. RT-safe.
+  void recenter(const Eigen::Vector3d& position_W);
+
+  /// Integrates one scan: `points_W` are returns in the world frame taken from `origin_W`.
+  /// Each voxel is updated at most once per scan, occupied winning over free; free space is
+  /// every voxel a ray passes through before its return voxel. Non-finite points are skipped
+  /// (filters count them). Returns beyond max_range_m clear up to clearing_range_m.
+  /// `clearing_dirs_W` are unit directions of beams with no return: they clear up to
+  /// clearing_range_m. Deterministic for any runner.
+  OccupancyUpdateStats integrate(const Eigen::Vector3d& origin_W,
+                                 std::span<const Eigen::Vector3f> points_W,
+                                 std::span<const Eigen::Vector3f> clearing_dirs_W,
+                                 TaskRunner& runner);
+
+  /// Log-odds at a voxel, kUnknown when unobserved or outside the window.
+  [[nodiscard]] float log_odds(const VoxelIndex& v) const;
+  [[nodiscard]] bool in_window(const VoxelIndex& v) const;
+  [[nodiscard]] VoxelIndex voxel_of(const Eigen::Vector3d& p_W) const;
+
+  /// Lowest-corner voxel of the window (inclusive) and its size in voxels.
+  [[nodiscard]] const VoxelIndex& window_min() const { return min_; }
+  [[nodiscard]] Eigen::Vector3i window_size() const { return dims_; }
+  [[nodiscard]] const OccupancyParams& params() const { return params_; }
+  [[nodiscard]] float hit_log_odds() const { return l_hit_; }
+  [[nodiscard]] float miss_log_odds() const { return l_miss_; }
+  [[nodiscard]] float min_log_odds() const { return l_min_; }
+  [[nodiscard]] float max_log_odds() const { return l_max_; }
+  [[nodiscard]] std::size_t memory_bytes() const;
+
+  /// Copies the window into `out` in window order (z slowest, x fastest) starting at window_min().
+  void export_log_odds(std::vector<float>& out) const;
+
+ private:
+  [[nodiscard]] std::size_t slot(const VoxelIndex& v) const;
+  void clear_slab(int axis, int global_index);
+  void update(std::size_t slot, bool hit);
+
+  OccupancyParams params_;
+  Eigen::Vector3i dims_;
+  VoxelIndex min_;
+  float l_hit_, l_miss_, l_min_, l_max_;
+  std::vector<float> log_odds_;
+  /// Per-voxel scan epoch ×2 (+1 when the voxel was hit in that scan): once-per-scan updates.
+  std::vector<std::uint32_t> touched_;
+  std::uint32_t epoch_ = 0;
+  bool placed_ = false;
+  /// Per (ray chunk, window band) voxel slots of one scan; capacity kept across scans.
+  std::vector<std::vector<std::uint32_t>> bins_;
+};
+
+/// ln(p / (1 − p)).
+float log_odds_of(float probability);
+/// 1 / (1 + exp(−l)).
+float probability_of(float log_odds);
+
+}  // namespace tarmac::core

@@ -1,0 +1,75 @@
+#include "tarmac/daemon/thread_pool.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+
+namespace tarmac::daemon {
+
+ThreadPool::ThreadPool(std::size_t threads, const std::vector<int>& cpus) {
+  const std::size_t workers = threads > 1 ? threads - 1 : 0;
+  workers_.reserve(workers);
+  for (std::size_t i = 0; i < workers; ++i) {
+    workers_.emplace_back([this] { work_loop(); });
+    if (i < cpus.size()) {
+      cpu_set_t set;
+      CPU_ZERO(&set);
+      CPU_SET(cpus[i], &set);
+      if (pthread_setaffinity_np(workers_.back().native_handle(), sizeof set, &set) != 0) {
+        ++pin_failures_;
+      }
+    }
+  }
+}
+
+ThreadPool::~ThreadPool() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  for (auto& t : workers_) t.join();
+}
+
+void ThreadPool::drain(std::unique_lock<std::mutex>& lock) {
+  // Runs tasks (lock released while running) until none are left to hand out.
+  while (next_ < count_) {
+    const std::size_t task = next_++;
+    const auto* job = job_;
+    lock.unlock();
+    (*job)(task);
+    lock.lock();
+    if (++finished_ == count_) done_.notify_all();
+  }
+}
+
+void ThreadPool::work_loop() {
+  std::uint64_t seen = 0;
+  std::unique_lock lock(mutex_);
+  while (true) {
+    wake_.wait(lock, [&] { return stop_ || generation_ != seen; });
+    if (stop_) return;
+    seen = generation_;
+    drain(lock);
+  }
+}
+
+void ThreadPool::parallel_for(std::size_t count, const std::function<void(std::size_t)>& fn) {
+  if (count == 0) return;
+  if (workers_.empty() || count == 1) {
+    for (std::size_t i = 0; i < count; ++i) fn(i);
+    return;
+  }
+  std::unique_lock lock(mutex_);
+  job_ = &fn;
+  count_ = count;
+  next_ = 0;
+  finished_ = 0;
+  ++generation_;
+  wake_.notify_all();
+  drain(lock);
+  done_.wait(lock, [&] { return finished_ == count_; });
+  job_ = nullptr;
+  count_ = 0;
+}
+
+}  // namespace tarmac::daemon

@@ -1,0 +1,141 @@
+#include "tarmac/core/distance_field.hpp"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace tarmac::core {
+namespace {
+
+/// Small runner that runs tasks in reverse order: results must not depend on task order.
+class ReverseRunner final : public TaskRunner {
+ public:
+  void parallel_for(std::size_t count, const std::function<void(std::size_t)>& fn) override {
+    for (std::size_t i = count; i-- > 0;) fn(i);
+  }
+  [[nodiscard]] std::size_t concurrency() const override { return 4; }
+};
+
+std::vector<CellState> random_states(const Eigen::Vector3i& dims, double p_occ, double p_unknown,
+                                     std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<CellState> states(static_cast<std::size_t>(dims.prod()));
+  for (auto& s : states) {
+    const double u = static_cast<double>(rng() >> 11) / 9007199254740992.0;
+    s = u < p_occ ? CellState::kOccupied
+                  : (u < p_occ + p_unknown ? CellState::kUnknown : CellState::kFree);
+  }
+  return states;
+}
+
+/// Brute force: squared distance (cell units) from every cell to every site.
+void check_against_brute_force(const Eigen::Vector3i& dims, const std::vector<CellState>& states,
+                               UnknownPolicy policy, const DistanceField& field) {
+  const double cell = field.cell_size_m;
+  std::vector<Eigen::Vector3i> sites;
+  for (int z = 0; z < dims.z(); ++z)
+    for (int y = 0; y < dims.y(); ++y)
+      for (int x = 0; x < dims.x(); ++x) {
+        const auto s = states[(static_cast<std::size_t>(z) * dims.y() + y) * dims.x() + x];
+        if (s == CellState::kOccupied ||
+            (s == CellState::kUnknown && policy == UnknownPolicy::kUnknownIsOccupied)) {
+          sites.emplace_back(x, y, z);
+        }
+      }
+  std::size_t i = 0;
+  for (int z = 0; z < dims.z(); ++z)
+    for (int y = 0; y < dims.y(); ++y)
+      for (int x = 0; x < dims.x(); ++x, ++i) {
+        if (states[i] == CellState::kUnknown && policy == UnknownPolicy::kReportUnknown) {
+          ASSERT_TRUE(std::isnan(field.distance_m[i]));
+          continue;
+        }
+        std::int64_t best = std::numeric_limits<std::int64_t>::max();
+        for (const auto& s : sites) {
+          const Eigen::Vector3i d = Eigen::Vector3i(x, y, z) - s;
+          best = std::min<std::int64_t>(best, std::int64_t{d.x()} * d.x() +
+                                                  std::int64_t{d.y()} * d.y() +
+                                                  std::int64_t{d.z()} * d.z());
+        }
+        if (sites.empty()) {
+          ASSERT_EQ(field.distance_m[i], std::numeric_limits<float>::infinity());
+          continue;
+        }
+        const float expected = static_cast<float>(std::sqrt(static_cast<double>(best)) * cell);
+        ASSERT_EQ(field.distance_m[i], expected) << "cell " << x << "," << y << "," << z;
+        // The gradient points away from a nearest obstacle: following it back by the distance
+        // lands exactly on an obstacle cell centre at that distance.
+        if (best > 0) {
+          const Eigen::Vector3d g(field.gradient_x[i], field.gradient_y[i], field.gradient_z[i]);
+          ASSERT_NEAR(g.norm(), 1.0, 1e-6);
+          const Eigen::Vector3d site =
+              Eigen::Vector3d(x, y, z) - g * std::sqrt(static_cast<double>(best));
+          const Eigen::Vector3i rounded = site.array().round().cast<int>();
+          ASSERT_LT((site - rounded.cast<double>()).norm(), 1e-3);
+          const auto s =
+              states[(static_cast<std::size_t>(rounded.z()) * dims.y() + rounded.y()) * dims.x() +
+                     rounded.x()];
+          ASSERT_TRUE(s == CellState::kOccupied ||
+                      (s == CellState::kUnknown && policy == UnknownPolicy::kUnknownIsOccupied));
+        } else {
+          ASSERT_EQ(field.gradient_x[i], 0.0f);
+          ASSERT_EQ(field.gradient_y[i], 0.0f);
+        }
+      }
+}
+
+TEST(DistanceField, Exact2D_EqualsBruteForceOnRandomScenes) {
+  SerialRunner runner;
+  for (std::uint64_t seed = 1; seed <= 6; ++seed) {
+    const Eigen::Vector3i dims(37 + seed, 29, 1);
+    const auto states = random_states(dims, 0.002 * seed * seed, 0.1, seed);
+    for (const auto policy : {UnknownPolicy::kReportUnknown, UnknownPolicy::kUnknownIsOccupied}) {
+      DistanceField field;
+      DistanceFieldScratch scratch;
+      compute_distance_field(states, dims, 0.2, policy, field, scratch, runner);
+      check_against_brute_force(dims, states, policy, field);
+    }
+  }
+}
+
+TEST(DistanceField, Exact3D_EqualsBruteForceOnRandomScenes) {
+  SerialRunner runner;
+  for (std::uint64_t seed = 11; seed <= 13; ++seed) {
+    const Eigen::Vector3i dims(21, 17, 9);
+    const auto states = random_states(dims, 0.003, 0.05, seed);
+    DistanceField field;
+    DistanceFieldScratch scratch;
+    compute_distance_field(states, dims, 0.1, UnknownPolicy::kReportUnknown, field, scratch,
+                           runner);
+    check_against_brute_force(dims, states, UnknownPolicy::kReportUnknown, field);
+  }
+}
+
+TEST(DistanceField, NoObstacle_IsInfinite) {
+  SerialRunner runner;
+  const Eigen::Vector3i dims(5, 4, 1);
+  std::vector<CellState> states(20, CellState::kFree);
+  DistanceField field;
+  DistanceFieldScratch scratch;
+  compute_distance_field(states, dims, 0.2, UnknownPolicy::kReportUnknown, field, scratch, runner);
+  for (const float d : field.distance_m) EXPECT_EQ(d, std::numeric_limits<float>::infinity());
+}
+
+TEST(DistanceField, SameResultForAnyTaskOrder) {
+  const Eigen::Vector3i dims(64, 48, 6);
+  const auto states = random_states(dims, 0.01, 0.1, 99);
+  SerialRunner serial;
+  ReverseRunner reverse;
+  DistanceField a, b;
+  DistanceFieldScratch sa, sb;
+  compute_distance_field(states, dims, 0.2, UnknownPolicy::kReportUnknown, a, sa, serial);
+  compute_distance_field(states, dims, 0.2, UnknownPolicy::kReportUnknown, b, sb, reverse);
+  EXPECT_EQ(0, std::memcmp(a.distance_m.data(), b.distance_m.data(), a.distance_m.size() * 4));
+  EXPECT_EQ(a.gradient_x, b.gradient_x);
+  EXPECT_EQ(a.gradient_y, b.gradient_y);
+  EXPECT_EQ(a.gradient_z, b.gradient_z);
+}
+
+}  // namespace
+}  // namespace tarmac::core

@@ -1,0 +1,206 @@
+#include "tarmac/core/occupancy_map.hpp"
+
+#include <cmath>
+#include <random>
+#include <set>
+
+#include <gtest/gtest.h>
+
+#include "tarmac/daemon/thread_pool.hpp"
+
+namespace tarmac::core {
+namespace {
+
+OccupancyParams small_params() {
+  OccupancyParams p;
+  p.voxel_size_m = 0.2;
+  p.window_x_vox = 100;
+  p.window_y_vox = 100;
+  p.window_z_vox = 20;
+  p.window_below_m = 2.0;
+  p.max_range_m = 8.0;
+  p.clearing_range_m = 5.0;
+  return p;
+}
+
+struct Scan {
+  Eigen::Vector3d origin;
+  std::vector<Eigen::Vector3f> points;
+  std::vector<Eigen::Vector3f> clearing;
+};
+
+OccupancyUpdateStats integrate(OccupancyMap& map, const Scan& scan) {
+  SerialRunner runner;
+  return map.integrate(scan.origin, scan.points, scan.clearing, runner);
+}
+
+/// Reference traversal: voxels crossed by the segment, found by sampling it every 1e-4 voxel.
+std::set<std::tuple<int, int, int>> sampled_voxels(const Eigen::Vector3d& a,
+                                                   const Eigen::Vector3d& b, double v) {
+  std::set<std::tuple<int, int, int>> out;
+  const int n = static_cast<int>((b - a).norm() / v * 1e4) + 1;
+  for (int i = 0; i <= n; ++i) {
+    const Eigen::Vector3d p = a + (b - a) * (static_cast<double>(i) / n);
+    const Eigen::Vector3i q = (p / v).array().floor().cast<int>();
+    out.emplace(q.x(), q.y(), q.z());
+  }
+  return out;
+}
+
+TEST(OccupancyMap, LogOddsArithmeticAndClamping) {
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  const Scan scan{Eigen::Vector3d(0.1, 0.1, 0.1), {Eigen::Vector3f(3.1f, 0.1f, 0.1f)}, {}};
+  const VoxelIndex hit = map.voxel_of(Eigen::Vector3d(3.1, 0.1, 0.1));
+  const VoxelIndex free = map.voxel_of(Eigen::Vector3d(1.5, 0.1, 0.1));
+  EXPECT_EQ(map.log_odds(hit), OccupancyMap::kUnknown);
+  float expected = 0.0f;
+  for (int i = 0; i < 10; ++i) {
+    integrate(map, scan);
+    expected = std::min(expected + std::log(0.7f / 0.3f), std::log(0.97f / 0.03f));
+    EXPECT_FLOAT_EQ(map.log_odds(hit), expected) << i;
+  }
+  EXPECT_FLOAT_EQ(map.log_odds(hit), map.max_log_odds());
+  EXPECT_FLOAT_EQ(map.log_odds(free), map.min_log_odds());  // 0.4 clamps at 0.12 after 5 misses
+  EXPECT_NEAR(probability_of(map.min_log_odds()), 0.12f, 1e-6);
+}
+
+TEST(OccupancyMap, OncePerScan_OccupiedWinsOverFree) {
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  // Two returns along one line: the far ray passes through the near return's voxel, and two
+  // returns in one voxel: still a single hit update.
+  const Scan scan{Eigen::Vector3d(0.1, 0.1, 0.1),
+                  {Eigen::Vector3f(2.1f, 0.1f, 0.1f), Eigen::Vector3f(2.15f, 0.12f, 0.1f),
+                   Eigen::Vector3f(4.1f, 0.1f, 0.1f)},
+                  {}};
+  const auto stats = integrate(map, scan);
+  EXPECT_EQ(stats.hit_updates, 2u);
+  EXPECT_FLOAT_EQ(map.log_odds(map.voxel_of(Eigen::Vector3d(2.1, 0.1, 0.1))), map.hit_log_odds());
+  EXPECT_FLOAT_EQ(map.log_odds(map.voxel_of(Eigen::Vector3d(1.1, 0.1, 0.1))), map.miss_log_odds());
+}
+
+TEST(OccupancyMap, Raycast_MatchesReferenceTraversal) {
+  const auto params = small_params();
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-6.0, 6.0);
+  for (int trial = 0; trial < 200; ++trial) {
+    OccupancyMap map(params);
+    map.recenter(Eigen::Vector3d::Zero());
+    const Eigen::Vector3d origin(0.3 * u(rng) / 6.0 + 0.05, 0.3 * u(rng) / 6.0 + 0.07, 0.013);
+    Eigen::Vector3f end(static_cast<float>(u(rng)), static_cast<float>(u(rng)),
+                        static_cast<float>(u(rng) / 4.0));
+    if ((end.cast<double>() - origin).norm() > params.max_range_m) continue;
+    integrate(map, Scan{origin, {end}, {}});
+    auto expected = sampled_voxels(origin, end.cast<double>(), params.voxel_size_m);
+    const VoxelIndex e = map.voxel_of(end.cast<double>());
+    expected.erase({e.x(), e.y(), e.z()});
+    // Every voxel the segment crosses is free; the end voxel is occupied; nothing else changed.
+    std::size_t free_count = 0;
+    for (int z = -10; z < 10; ++z)
+      for (int y = -50; y < 50; ++y)
+        for (int x = -50; x < 50; ++x) {
+          const float l = map.log_odds(VoxelIndex(x, y, z));
+          if (l == map.miss_log_odds()) {
+            ++free_count;
+            ASSERT_TRUE(expected.count({x, y, z}))
+                << "extra free voxel " << x << "," << y << "," << z;
+          }
+        }
+    ASSERT_EQ(free_count, expected.size()) << "trial " << trial;
+    ASSERT_FLOAT_EQ(map.log_odds(e), map.hit_log_odds());
+  }
+}
+
+TEST(OccupancyMap, NoReturnAndBeyondMaxRange_ClearUpToClearingRange) {
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  const Eigen::Vector3d origin(0.1, 0.1, 0.1);
+  // A beam with no return along +y, a return at 9 m (beyond max range 8) along +x.
+  const Scan scan{origin, {Eigen::Vector3f(9.1f, 0.1f, 0.1f)}, {Eigen::Vector3f(0.0f, 1.0f, 0.0f)}};
+  const auto stats = integrate(map, scan);
+  EXPECT_EQ(stats.hit_updates, 0u);
+  EXPECT_FLOAT_EQ(map.log_odds(map.voxel_of(Eigen::Vector3d(0.1, 4.9, 0.1))), map.miss_log_odds());
+  EXPECT_EQ(map.log_odds(map.voxel_of(Eigen::Vector3d(0.1, 5.3, 0.1))), OccupancyMap::kUnknown);
+  EXPECT_FLOAT_EQ(map.log_odds(map.voxel_of(Eigen::Vector3d(4.9, 0.1, 0.1))), map.miss_log_odds());
+  EXPECT_EQ(map.log_odds(map.voxel_of(Eigen::Vector3d(5.3, 0.1, 0.1))), OccupancyMap::kUnknown);
+  EXPECT_EQ(map.log_odds(map.voxel_of(Eigen::Vector3d(9.1, 0.1, 0.1))), OccupancyMap::kUnknown);
+}
+
+TEST(OccupancyMap, NonFinitePointsAreSkipped) {
+  OccupancyMap map(small_params());
+  const Scan scan{Eigen::Vector3d(0.1, 0.1, 0.1),
+                  {Eigen::Vector3f(std::nanf(""), 1.0f, 0.0f), Eigen::Vector3f(INFINITY, 0, 0)},
+                  {Eigen::Vector3f(std::nanf(""), 0, 0), Eigen::Vector3f::Zero()}};
+  const auto stats = integrate(map, scan);
+  EXPECT_EQ(stats.hit_updates + stats.miss_updates, 0u);
+}
+
+TEST(OccupancyMap, Scrolling_KeepsContentAndForgetsWhatLeft) {
+  const auto params = small_params();
+  OccupancyMap map(params);
+  map.recenter(Eigen::Vector3d::Zero());
+  const Eigen::Vector3d origin(0.1, 0.1, 0.1);
+  integrate(
+      map,
+      Scan{origin, {Eigen::Vector3f(6.1f, 3.1f, 0.5f), Eigen::Vector3f(-7.9f, -2.9f, 0.3f)}, {}});
+  std::vector<float> before;
+  map.export_log_odds(before);
+  const VoxelIndex near_hit = map.voxel_of(Eigen::Vector3d(6.1, 3.1, 0.5));
+  const VoxelIndex far_hit = map.voxel_of(Eigen::Vector3d(-7.9, -2.9, 0.3));
+  const VoxelIndex min_before = map.window_min();
+
+  // Move 3.1 m in +x, 1.3 m in +y, 0.45 m up: the window scrolls by (15, 6, 2) voxels.
+  map.recenter(Eigen::Vector3d(3.1, 1.3, 0.45));
+  const VoxelIndex shift = map.window_min() - min_before;
+  EXPECT_EQ(shift, VoxelIndex(15, 6, 2));
+  EXPECT_FLOAT_EQ(map.log_odds(near_hit), map.hit_log_odds());
+  EXPECT_FALSE(map.in_window(far_hit));  // x = -40 left the window (new min x = -35)
+  // Every voxel still in the window holds exactly what it held before.
+  const Eigen::Vector3i dims = map.window_size();
+  for (int z = 0; z < dims.z(); ++z)
+    for (int y = 0; y < dims.y(); ++y)
+      for (int x = 0; x < dims.x(); ++x) {
+        const VoxelIndex g = min_before + VoxelIndex(x, y, z);
+        if (!map.in_window(g)) continue;
+        ASSERT_EQ(map.log_odds(g),
+                  before[(static_cast<std::size_t>(z) * dims.y() + y) * dims.x() + x]);
+      }
+  // Coming back: what left is unknown, not resurrected from the ring.
+  map.recenter(Eigen::Vector3d::Zero());
+  EXPECT_EQ(map.log_odds(far_hit), OccupancyMap::kUnknown);
+  EXPECT_FLOAT_EQ(map.log_odds(near_hit), map.hit_log_odds());
+}
+
+TEST(OccupancyMap, Deterministic_ForOneTwoAndFourThreads) {
+  auto params = small_params();
+  params.window_x_vox = 200;
+  params.window_y_vox = 200;
+  params.max_range_m = 18.0;
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<float> u(-19.0f, 19.0f);
+  std::vector<Scan> scans;
+  for (int s = 0; s < 5; ++s) {
+    Scan scan{Eigen::Vector3d(0.3 * s, 0.1 * s, 0.2), {}, {}};
+    for (int i = 0; i < 20000; ++i) scan.points.emplace_back(u(rng), u(rng), u(rng) / 10.0f);
+    for (int i = 0; i < 500; ++i)
+      scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), 0.1f).normalized());
+    scans.push_back(std::move(scan));
+  }
+  std::vector<std::vector<float>> results;
+  for (const std::size_t threads : {1u, 2u, 4u}) {
+    daemon::ThreadPool pool(threads);
+    OccupancyMap map(params);
+    for (const auto& scan : scans) {
+      map.recenter(scan.origin);
+      map.integrate(scan.origin, scan.points, scan.clearing, pool);
+    }
+    results.emplace_back();
+    map.export_log_odds(results.back());
+  }
+  EXPECT_EQ(0, std::memcmp(results[0].data(), results[1].data(), results[0].size() * 4));
+  EXPECT_EQ(0, std::memcmp(results[0].data(), results[2].data(), results[0].size() * 4));
+}
+
+}  // namespace
+}  // namespace tarmac::core
