@@ -153,6 +153,53 @@ void read_dds(MapReader& r, DdsConfig& dds) {
   });
 }
 
+const std::vector<std::string> kUnknownCost = {"unknown", "lethal", "free"};
+
+void read_vector3(MapReader& r, const std::string& key, Eigen::Vector3d& v) {
+  r.map(key, [&](MapReader& m) {
+    m.scalar<double>("x", v.x(), -1e3, 1e3);
+    m.scalar<double>("y", v.y(), -1e3, 1e3);
+    m.scalar<double>("z", v.z(), -1e3, 1e3);
+  });
+}
+
+void read_mapping(MapReader& root, core::MapperParams& p) {
+  root.map("filters", [&](MapReader& r) {
+    r.scalar<double>("min_range_m", p.filters.min_range_m, 0.0, 100.0);
+    r.scalar<bool>("ego_box_enabled", p.filters.ego_box_enabled, false, true);
+    read_vector3(r, "ego_box_min_m", p.filters.ego_box_min_B);
+    read_vector3(r, "ego_box_max_m", p.filters.ego_box_max_B);
+  });
+  root.map("occupancy", [&](MapReader& r) {
+    auto& o = p.occupancy;
+    r.scalar<double>("voxel_size_m", o.voxel_size_m, 0.02, 2.0);
+    r.scalar<int>("window_x_vox", o.window_x_vox, 4, 4096);
+    r.scalar<int>("window_y_vox", o.window_y_vox, 4, 4096);
+    r.scalar<int>("window_z_vox", o.window_z_vox, 4, 4096);
+    r.scalar<double>("window_below_m", o.window_below_m, 0.0, 100.0);
+    r.scalar<float>("prob_hit", o.prob_hit, 0.5001f, 0.9999f);
+    r.scalar<float>("prob_miss", o.prob_miss, 0.0001f, 0.4999f);
+    r.scalar<float>("clamp_min", o.clamp_min, 0.0001f, 0.4999f);
+    r.scalar<float>("clamp_max", o.clamp_max, 0.5001f, 0.9999f);
+    r.scalar<double>("max_range_m", o.max_range_m, 0.1, 1000.0);
+    r.scalar<double>("clearing_range_m", o.clearing_range_m, 0.0, 1000.0);
+  });
+  root.map("costmap", [&](MapReader& r) {
+    auto& c = p.costmap;
+    r.scalar<double>("min_obstacle_height_m", c.min_obstacle_height_m, 0.0, 10.0);
+    r.scalar<double>("vehicle_height_m", c.vehicle_height_m, 0.1, 20.0);
+    r.scalar<double>("clearance_m", c.clearance_m, 0.0, 10.0);
+    r.scalar<double>("inscribed_radius_m", c.inscribed_radius_m, 0.0, 20.0);
+    r.scalar<double>("inflation_radius_m", c.inflation_radius_m, 0.0, 50.0);
+    r.scalar<double>("cost_scaling_factor", c.cost_scaling_factor, 0.01, 100.0);
+    r.scalar<double>("ground_cell_m", c.ground_cell_m, 0.05, 20.0);
+    r.scalar<double>("max_ground_step_m", c.max_ground_step_m, 0.01, 10.0);
+    if (const int i = r.choice("unknown_cost", kUnknownCost); i >= 0) {
+      c.unknown_cost = static_cast<core::UnknownCost>(i);
+    }
+  });
+}
+
 void emit_qos(YAML::Emitter& out, const char* name, const transport::QosSpec& q) {
   out << YAML::Key << name << YAML::Value << YAML::Flow << YAML::BeginMap;
   out << YAML::Key << "reliability" << YAML::Value << kReliability[static_cast<int>(q.reliability)];
@@ -179,6 +226,7 @@ core::Result<Config> load_config_string(const std::string& yaml_text) {
                              (root["version"] ? root["version"].as<std::string>() : "nothing")};
     }
     r.map("dds", [&](MapReader& m) { read_dds(m, config.dds); });
+    read_mapping(r, config.mapping);
     r.finish();
   } catch (const ConfigError& e) {
     return core::Error{"config." + e.reason, e.message};
@@ -186,6 +234,7 @@ core::Result<Config> load_config_string(const std::string& yaml_text) {
     return core::Error{"config.syntax", std::string("<yaml>: ") + e.what()};
   }
   if (auto valid = config.dds.participant.validate(); !valid) return valid.error();
+  if (auto valid = config.mapping.validate(); !valid) return valid.error();
   return config;
 }
 
@@ -219,7 +268,46 @@ std::string to_yaml(const Config& config) {
   emit_qos(out, "costmap", config.dds.qos.costmap);
   emit_qos(out, "esdf_slice", config.dds.qos.esdf_slice);
   emit_qos(out, "diagnostics", config.dds.qos.diagnostics);
-  out << YAML::EndMap << YAML::EndMap << YAML::EndMap;
+  out << YAML::EndMap << YAML::EndMap;
+  const auto& m = config.mapping;
+  const auto vec = [&](const char* key, const Eigen::Vector3d& v) {
+    out << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "x"
+        << YAML::Value << v.x() << YAML::Key << "y" << YAML::Value << v.y() << YAML::Key << "z"
+        << YAML::Value << v.z() << YAML::EndMap;
+  };
+  out << YAML::Key << "filters" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "min_range_m" << YAML::Value << m.filters.min_range_m;
+  out << YAML::Key << "ego_box_enabled" << YAML::Value << m.filters.ego_box_enabled;
+  vec("ego_box_min_m", m.filters.ego_box_min_B);
+  vec("ego_box_max_m", m.filters.ego_box_max_B);
+  out << YAML::EndMap;
+  const auto& o = m.occupancy;
+  out << YAML::Key << "occupancy" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "voxel_size_m" << YAML::Value << o.voxel_size_m;
+  out << YAML::Key << "window_x_vox" << YAML::Value << o.window_x_vox;
+  out << YAML::Key << "window_y_vox" << YAML::Value << o.window_y_vox;
+  out << YAML::Key << "window_z_vox" << YAML::Value << o.window_z_vox;
+  out << YAML::Key << "window_below_m" << YAML::Value << o.window_below_m;
+  out << YAML::Key << "prob_hit" << YAML::Value << o.prob_hit;
+  out << YAML::Key << "prob_miss" << YAML::Value << o.prob_miss;
+  out << YAML::Key << "clamp_min" << YAML::Value << o.clamp_min;
+  out << YAML::Key << "clamp_max" << YAML::Value << o.clamp_max;
+  out << YAML::Key << "max_range_m" << YAML::Value << o.max_range_m;
+  out << YAML::Key << "clearing_range_m" << YAML::Value << o.clearing_range_m;
+  out << YAML::EndMap;
+  const auto& c = m.costmap;
+  out << YAML::Key << "costmap" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "min_obstacle_height_m" << YAML::Value << c.min_obstacle_height_m;
+  out << YAML::Key << "vehicle_height_m" << YAML::Value << c.vehicle_height_m;
+  out << YAML::Key << "clearance_m" << YAML::Value << c.clearance_m;
+  out << YAML::Key << "inscribed_radius_m" << YAML::Value << c.inscribed_radius_m;
+  out << YAML::Key << "inflation_radius_m" << YAML::Value << c.inflation_radius_m;
+  out << YAML::Key << "cost_scaling_factor" << YAML::Value << c.cost_scaling_factor;
+  out << YAML::Key << "ground_cell_m" << YAML::Value << c.ground_cell_m;
+  out << YAML::Key << "max_ground_step_m" << YAML::Value << c.max_ground_step_m;
+  out << YAML::Key << "unknown_cost" << YAML::Value
+      << kUnknownCost[static_cast<int>(c.unknown_cost)];
+  out << YAML::EndMap << YAML::EndMap;
   return out.c_str();
 }
 

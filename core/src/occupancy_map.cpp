@@ -294,6 +294,18 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   return stats;
 }
 
+void OccupancyMap::column(int wx, int wy, float* out) const {
+  const std::size_t rx = static_cast<std::size_t>(wrap(min_.x() + wx, dims_.x()));
+  const std::size_t ry = static_cast<std::size_t>(wrap(min_.y() + wy, dims_.y()));
+  const std::size_t plane = static_cast<std::size_t>(dims_.x()) * dims_.y();
+  int rz = wrap(min_.z(), dims_.z());
+  const float* base = log_odds_.data() + ry * dims_.x() + rx;
+  for (int z = 0; z < dims_.z(); ++z) {
+    out[z] = base[static_cast<std::size_t>(rz) * plane];
+    if (++rz == dims_.z()) rz = 0;
+  }
+}
+
 void OccupancyMap::export_log_odds(std::vector<float>& out) const {
   out.resize(log_odds_.size());
   std::size_t i = 0;

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <string>
 
+#include "tarmac/core/mapper.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/transport/participant.hpp"
 #include "tarmac/transport/qos.hpp"
@@ -33,6 +34,7 @@ struct DdsConfig {
 struct Config {
   int version = kConfigVersion;
   DdsConfig dds;
+  core::MapperParams mapping;  ///< YAML sections filters, occupancy, costmap
 };
 
 /// Parses YAML text. Error code "config.<reason>", message "<key.path>: <why>".

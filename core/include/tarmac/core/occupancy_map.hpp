@@ -90,6 +90,9 @@ class OccupancyMap {
   [[nodiscard]] float max_log_odds() const { return l_max_; }
   [[nodiscard]] std::size_t memory_bytes() const;
 
+  /// Copies the column at window cell (wx, wy), bottom to top, into `out` (window_z_vox values).
+  void column(int wx, int wy, float* out) const;
+
   /// Copies the window into `out` in window order (z slowest, x fastest) starting at window_min().
   void export_log_odds(std::vector<float>& out) const;
 

@@ -1,0 +1,85 @@
+#pragma once
+/// @file The airside costmap: a height-filtered projection of the occupancy window that respects
+/// the vehicle envelope, inflated in Nav2's cost convention, with virtual obstacle zones burned in.
+///
+/// Envelope rule: a cell blocks when an occupied voxel lies between (local ground + min obstacle
+/// height) and (local ground + vehicle height + clearance). So a wing or a jet bridge above the
+/// vehicle does not block, an object on the ground does. The filter decides marking only; free
+/// space comes from the occupancy map's rays, which are never height-filtered.
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "tarmac/core/distance_field.hpp"
+#include "tarmac/core/grid2d.hpp"
+#include "tarmac/core/occupancy_map.hpp"
+#include "tarmac/core/result.hpp"
+
+namespace tarmac::core {
+
+/// What an unknown cell costs.
+enum class UnknownCost : std::uint8_t {
+  kUnknown,  ///< −1 in the OccupancyGrid (the planner decides)
+  kLethal,   ///< 100 everywhere
+  kFree,     ///< 0 (optimistic; for tests and open-apron demos only)
+};
+
+struct CostmapParams {
+  double min_obstacle_height_m = 0.10;  ///< above local ground; at least one voxel is used
+  double vehicle_height_m = 2.5;        ///< top of the vehicle above ground
+  double clearance_m = 0.3;             ///< extra headroom above the vehicle
+  double inscribed_radius_m = 1.0;      ///< cells within this of an obstacle are "inscribed" (99)
+  double inflation_radius_m = 3.0;      ///< costs decay to 0 beyond this
+  double cost_scaling_factor = 3.0;     ///< Nav2's exponential decay rate, 1/m
+  double ground_cell_m = 1.0;           ///< horizontal size of a local ground estimate cell
+  double max_ground_step_m = 0.5;  ///< a ground cell this far above its neighbours is not ground
+  UnknownCost unknown_cost = UnknownCost::kUnknown;
+
+  [[nodiscard]] Status validate() const;
+};
+
+/// A no-go polygon in the map frame (fleet operations: jet blast, engine intake, fuel spill).
+struct VirtualZone {
+  std::string id;
+  std::vector<Eigen::Vector2d> polygon_W;  ///< vertices in order, map frame, m
+  double min_z_m = -1e9;                   ///< z range in the map frame
+  double max_z_m = 1e9;
+  std::int64_t expiry_ns = 0;  ///< 0: never expires
+  /// false: a no-go zone, every cell inside is lethal. true: a restricted area, only cells not
+  /// observed (unknown) inside are lethal; observed free cells stay drivable.
+  bool restricted = false;
+};
+
+/// Per-cell class before inflation.
+enum class ColumnClass : std::uint8_t { kFree = 0, kObstacle = 1, kUnknown = 2, kVirtual = 3 };
+
+/// Everything one costmap update produces (reused across cycles: no allocation after warm-up).
+struct CostmapLayers {
+  Costmap costmap;                    ///< 0..100, −1 unknown (OccupancyGrid values)
+  Grid2D<float> ground_z_m;           ///< local ground height estimate per cell
+  Grid2D<std::uint8_t> column_class;  ///< ColumnClass per cell
+  std::vector<CellState> esdf_input;  ///< obstacles (incl. virtual zones) for the 2D ESDF
+  DistanceField obstacle_distance;    ///< exact 2D distance to the nearest obstacle cell
+  DistanceFieldScratch scratch;
+};
+
+/// Builds the costmap of the occupancy window at the window's horizontal resolution.
+/// @param base_W vehicle base position (fallback ground height where nothing was seen).
+/// @param stamp_ns current time, for zone expiry only.
+void build_costmap(const OccupancyMap& map, const CostmapParams& params,
+                   const Eigen::Vector3d& base_W, std::span<const VirtualZone> zones,
+                   std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner);
+
+/// Nav2 inflation cost (0..254 scale: 254 lethal, 253 inscribed) at a distance from an obstacle.
+std::uint8_t nav2_cost(double distance_m, const CostmapParams& params);
+/// Nav2's OccupancyGrid translation of a 0..254 cost: 0→0, 253→99, 254→100, 1..252→1..98.
+std::int8_t to_occupancy_value(std::uint8_t nav2_cost);
+
+/// True when the point lies inside the polygon (even-odd rule).
+bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vector2d& p);
+
+}  // namespace tarmac::core

@@ -1,0 +1,54 @@
+#pragma once
+/// @file The per-scan mapping pipeline as the daemon and the offline tools run it:
+/// filter → integrate occupancy → costmap + 2D ESDF. Each stage is a separate call so the caller
+/// can time it and give it a budget (the core has no clock).
+
+#include <span>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/core/occupancy_map.hpp"
+#include "tarmac/core/point_cloud.hpp"
+#include "tarmac/core/scan_filter.hpp"
+
+namespace tarmac::core {
+
+struct MapperParams {
+  FilterParams filters;
+  OccupancyParams occupancy;
+  CostmapParams costmap;
+
+  [[nodiscard]] Status validate() const;
+};
+
+class Mapper {
+ public:
+  /// @pre params.validate().ok()
+  explicit Mapper(const MapperParams& params);
+
+  /// Stage 1: filters `cloud` (sensor frame) and keeps the survivors in the world frame.
+  /// T_W_B is the vehicle base pose, T_B_S the sensor's extrinsic.
+  FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+                      const Eigen::Isometry3d& T_B_S);
+  /// Stage 2: moves the window with the vehicle and integrates the ingested scan.
+  OccupancyUpdateStats integrate(TaskRunner& runner);
+  /// Stage 3: rebuilds the costmap and the 2D distance map from the window.
+  void update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                      TaskRunner& runner);
+
+  [[nodiscard]] const OccupancyMap& occupancy() const { return map_; }
+  [[nodiscard]] const CostmapLayers& costmap() const { return layers_; }
+  [[nodiscard]] const MapperParams& params() const { return params_; }
+
+ private:
+  MapperParams params_;
+  OccupancyMap map_;
+  CostmapLayers layers_;
+  std::vector<Eigen::Vector3f> points_W_;
+  Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d base_W_ = Eigen::Vector3d::Zero();
+};
+
+}  // namespace tarmac::core

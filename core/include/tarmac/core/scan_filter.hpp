@@ -1,0 +1,41 @@
+#pragma once
+/// @file Per-scan filters before integration, each counted: non-finite points, points closer than
+/// min range (the sensor's blind zone, spray on the housing) and points inside the ego-vehicle box
+/// (in the base frame). Survivors are transformed into the world frame.
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "tarmac/core/point_cloud.hpp"
+#include "tarmac/core/result.hpp"
+
+namespace tarmac::core {
+
+struct FilterParams {
+  double min_range_m = 1.0;  ///< from the sensor origin
+  /// Ego-vehicle box in the base frame; points inside are the vehicle itself.
+  Eigen::Vector3d ego_box_min_B{-2.5, -1.2, -0.5};
+  Eigen::Vector3d ego_box_max_B{2.5, 1.2, 2.5};
+  bool ego_box_enabled = true;
+
+  [[nodiscard]] Status validate() const;
+};
+
+/// Why points were dropped in one scan.
+struct FilterCounts {
+  std::uint64_t input = 0;
+  std::uint64_t non_finite = 0;
+  std::uint64_t too_close = 0;
+  std::uint64_t ego_vehicle = 0;
+  std::uint64_t kept = 0;
+};
+
+/// Filters `cloud` (sensor frame) and writes survivors into `points_W` (cleared first, capacity
+/// kept). T_W_S: sensor to world; T_B_S: sensor to vehicle base (extrinsic). RT-safe after warm-up.
+FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
+                         const Eigen::Isometry3d& T_B_S, const FilterParams& params,
+                         std::vector<Eigen::Vector3f>& points_W);
+
+}  // namespace tarmac::core

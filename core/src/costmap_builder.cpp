@@ -1,0 +1,258 @@
+#include "tarmac/core/costmap_builder.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace tarmac::core {
+
+namespace {
+
+constexpr std::size_t kRowTasks = 16;
+constexpr float kNoGround = std::numeric_limits<float>::quiet_NaN();
+
+bool is_occupied(float l) {
+  return l != OccupancyMap::kUnknown && l > 0.0f;
+}
+
+}  // namespace
+
+Status CostmapParams::validate() const {
+  const auto bad = [](const std::string& key, const std::string& why) {
+    return Error{"config.range", "costmap." + key + ": " + why};
+  };
+  if (!(min_obstacle_height_m >= 0.0)) return bad("min_obstacle_height_m", "must be >= 0");
+  if (!(vehicle_height_m > min_obstacle_height_m)) {
+    return bad("vehicle_height_m", "must be > min_obstacle_height_m");
+  }
+  if (!(clearance_m >= 0.0)) return bad("clearance_m", "must be >= 0");
+  if (!(inscribed_radius_m >= 0.0)) return bad("inscribed_radius_m", "must be >= 0");
+  if (!(inflation_radius_m >= inscribed_radius_m)) {
+    return bad("inflation_radius_m", "must be >= inscribed_radius_m");
+  }
+  if (!(cost_scaling_factor > 0.0)) return bad("cost_scaling_factor", "must be > 0");
+  if (!(ground_cell_m > 0.0)) return bad("ground_cell_m", "must be > 0");
+  if (!(max_ground_step_m > 0.0)) return bad("max_ground_step_m", "must be > 0");
+  return Ok{};
+}
+
+std::uint8_t nav2_cost(double distance_m, const CostmapParams& p) {
+  if (distance_m <= 0.0) return 254;
+  if (distance_m <= p.inscribed_radius_m) return 253;
+  if (distance_m > p.inflation_radius_m) return 0;
+  const double factor = std::exp(-p.cost_scaling_factor * (distance_m - p.inscribed_radius_m));
+  return static_cast<std::uint8_t>(252.0 * factor);
+}
+
+std::int8_t to_occupancy_value(std::uint8_t cost) {
+  if (cost == 0) return 0;
+  if (cost == 253) return 99;
+  if (cost == 254) return 100;
+  if (cost == 255) return -1;
+  return static_cast<std::int8_t>(1 + (97 * (cost - 1)) / 251);
+}
+
+bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vector2d& p) {
+  bool inside = false;
+  for (std::size_t i = 0, j = polygon.size() - 1; i < polygon.size(); j = i++) {
+    const auto& a = polygon[i];
+    const auto& b = polygon[j];
+    if ((a.y() > p.y()) != (b.y() > p.y()) &&
+        p.x() < (b.x() - a.x()) * (p.y() - a.y()) / (b.y() - a.y()) + a.x()) {
+      inside = !inside;
+    }
+  }
+  return inside;
+}
+
+void build_costmap(const OccupancyMap& map, const CostmapParams& params,
+                   const Eigen::Vector3d& base_W, std::span<const VirtualZone> zones,
+                   std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner) {
+  const double v = map.params().voxel_size_m;
+  const Eigen::Vector3i dims = map.window_size();
+  const VoxelIndex& wmin = map.window_min();
+  const int nx = dims.x(), ny = dims.y(), nz = dims.z();
+  const GridGeometry2D geometry{wmin.x() * v, wmin.y() * v, v, static_cast<std::uint32_t>(nx),
+                                static_cast<std::uint32_t>(ny)};
+  if (!(out.costmap.geometry() == geometry)) {
+    out.costmap = Costmap(geometry, kCostUnknown);
+    out.ground_z_m = Grid2D<float>(geometry, kNoGround);
+    out.column_class = Grid2D<std::uint8_t>(geometry, 0);
+  }
+  out.esdf_input.resize(geometry.cell_count());
+
+  // 1. Lowest occupied voxel per coarse ground cell (window voxel units).
+  const int g = std::max(1, static_cast<int>(std::lround(params.ground_cell_m / v)));
+  const int gx = (nx + g - 1) / g, gy = (ny + g - 1) / g;
+  std::vector<float> coarse(static_cast<std::size_t>(gx) * gy, kNoGround);
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    std::vector<float> column(static_cast<std::size_t>(nz));
+    const int cy0 = static_cast<int>(gy * task / kRowTasks);
+    const int cy1 = static_cast<int>(gy * (task + 1) / kRowTasks);
+    for (int cy = cy0; cy < cy1; ++cy) {
+      for (int y = cy * g; y < std::min(ny, (cy + 1) * g); ++y) {
+        for (int x = 0; x < nx; ++x) {
+          map.column(x, y, column.data());
+          for (int z = 0; z < nz; ++z) {
+            if (is_occupied(column[z])) {
+              float& c = coarse[static_cast<std::size_t>(cy) * gx + x / g];
+              if (std::isnan(c) || z < c) c = static_cast<float>(z);
+              break;
+            }
+          }
+        }
+      }
+    }
+  });
+
+  // 2. Reject cells far above their neighbours (a truck roof, a wing seen from afar with no
+  //    ground below), then fill gaps from neighbours; what stays empty gets the vehicle's ground.
+  const float step_vox = static_cast<float>(params.max_ground_step_m / v);
+  std::vector<float> filtered = coarse;
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) {
+      const float c = coarse[static_cast<std::size_t>(cy) * gx + cx];
+      if (std::isnan(c)) continue;
+      float lowest = std::numeric_limits<float>::infinity();
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int ux = cx + dx, uy = cy + dy;
+          if ((dx == 0 && dy == 0) || ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+          const float n = coarse[static_cast<std::size_t>(uy) * gx + ux];
+          if (!std::isnan(n)) lowest = std::min(lowest, n);
+        }
+      }
+      if (c - lowest > step_vox) filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
+    }
+  }
+  std::vector<float> next = filtered;
+  for (int iteration = 0; iteration < std::max(gx, gy); ++iteration) {
+    bool changed = false;
+    for (int cy = 0; cy < gy; ++cy) {
+      for (int cx = 0; cx < gx; ++cx) {
+        const std::size_t i = static_cast<std::size_t>(cy) * gx + cx;
+        next[i] = filtered[i];
+        if (!std::isnan(filtered[i])) continue;
+        float sum = 0.0f;
+        int count = 0;
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int ux = cx + dx, uy = cy + dy;
+            if (ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+            const float n = filtered[static_cast<std::size_t>(uy) * gx + ux];
+            if (!std::isnan(n)) {
+              sum += n;
+              ++count;
+            }
+          }
+        }
+        if (count > 0) {
+          next[i] = sum / static_cast<float>(count);
+          changed = true;
+        }
+      }
+    }
+    filtered.swap(next);
+    if (!changed) break;
+  }
+  const float base_ground = static_cast<float>(std::floor(base_W.z() / v) - wmin.z());
+  for (auto& c : filtered) {
+    if (std::isnan(c)) c = base_ground;
+  }
+
+  // 3. Classify columns against the envelope. A column's own ground is its lowest occupied voxel
+  //    when that lies within one voxel of the local estimate (slopes, tilted world frames),
+  //    otherwise the estimate. An obstacle voxel starts at least min_obstacle_height above the
+  //    top of the ground voxel (so a ground surface that crosses a voxel boundary is not an
+  //    obstacle) and starts below ground + vehicle height + clearance.
+  const double hi_m = params.vehicle_height_m + params.clearance_m;
+  const int lo_layers = 1 + static_cast<int>(std::ceil(params.min_obstacle_height_m / v - 1e-9));
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    std::vector<float> column(static_cast<std::size_t>(nz));
+    const int y0 = static_cast<int>(ny * task / kRowTasks);
+    const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    for (int y = y0; y < y1; ++y) {
+      for (int x = 0; x < nx; ++x) {
+        const float estimate = filtered[static_cast<std::size_t>(y / g) * gx + x / g];
+        map.column(x, y, column.data());
+        int ground = static_cast<int>(std::lround(estimate));
+        for (int z = std::max(0, ground - 1); z <= std::min(nz - 1, ground + 1); ++z) {
+          if (is_occupied(column[z])) {
+            ground = z;
+            break;
+          }
+        }
+        out.ground_z_m.at(x, y) = static_cast<float>((wmin.z() + ground + 0.5) * v);
+        bool obstacle = false, known = false;
+        for (int z = std::max(0, ground); z < nz; ++z) {
+          if ((z - ground - 0.5) * v >= hi_m) break;  // voxel bottom above the envelope
+          if (column[z] == OccupancyMap::kUnknown) continue;
+          known = true;
+          if (z - ground >= lo_layers && column[z] > 0.0f) {
+            obstacle = true;
+            break;
+          }
+        }
+        out.column_class.at(x, y) = static_cast<std::uint8_t>(obstacle ? ColumnClass::kObstacle
+                                                              : known  ? ColumnClass::kFree
+                                                                       : ColumnClass::kUnknown);
+      }
+    }
+  });
+
+  // 4. Virtual zones: active, and their z range meets the vehicle's envelope at that cell.
+  for (const auto& zone : zones) {
+    if (zone.polygon_W.size() < 3 || (zone.expiry_ns != 0 && zone.expiry_ns <= stamp_ns)) continue;
+    Eigen::Vector2d lo = zone.polygon_W[0], hi = zone.polygon_W[0];
+    for (const auto& p : zone.polygon_W) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    const int x0 = std::max(0, static_cast<int>(std::floor((lo.x() - geometry.origin_x_m) / v)));
+    const int x1 =
+        std::min(nx - 1, static_cast<int>(std::floor((hi.x() - geometry.origin_x_m) / v)));
+    const int y0 = std::max(0, static_cast<int>(std::floor((lo.y() - geometry.origin_y_m) / v)));
+    const int y1 =
+        std::min(ny - 1, static_cast<int>(std::floor((hi.y() - geometry.origin_y_m) / v)));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        if (!polygon_contains(zone.polygon_W, geometry.center_of(x, y))) continue;
+        const double ground_m = out.ground_z_m.at(x, y);
+        if (zone.max_z_m < ground_m || zone.min_z_m > ground_m + hi_m) continue;
+        auto& cls = out.column_class.at(x, y);
+        // A no-go zone blocks every cell; a restricted zone blocks only what was not observed.
+        if (!zone.restricted || cls == static_cast<std::uint8_t>(ColumnClass::kUnknown)) {
+          cls = static_cast<std::uint8_t>(ColumnClass::kVirtual);
+        }
+      }
+    }
+  }
+
+  // 5. Exact distance to the nearest obstacle cell, then Nav2 inflation.
+  const auto& classes = out.column_class.cells();
+  for (std::size_t i = 0; i < classes.size(); ++i) {
+    const auto c = static_cast<ColumnClass>(classes[i]);
+    out.esdf_input[i] = c == ColumnClass::kObstacle || c == ColumnClass::kVirtual
+                            ? CellState::kOccupied
+                        : c == ColumnClass::kUnknown ? CellState::kUnknown
+                                                     : CellState::kFree;
+  }
+  compute_distance_field(out.esdf_input, Eigen::Vector3i(nx, ny, 1), v,
+                         UnknownPolicy::kReportUnknown, out.obstacle_distance, out.scratch, runner);
+  const std::int8_t unknown_value = params.unknown_cost == UnknownCost::kLethal ? kCostLethal
+                                    : params.unknown_cost == UnknownCost::kFree ? kCostFree
+                                                                                : kCostUnknown;
+  auto& cells = out.costmap.cells();
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    switch (static_cast<ColumnClass>(classes[i])) {
+      case ColumnClass::kObstacle:
+      case ColumnClass::kVirtual: cells[i] = kCostLethal; break;
+      case ColumnClass::kUnknown: cells[i] = unknown_value; break;
+      case ColumnClass::kFree:
+        cells[i] = to_occupancy_value(nav2_cost(out.obstacle_distance.distance_m[i], params));
+        break;
+    }
+  }
+}
+
+}  // namespace tarmac::core

@@ -1,0 +1,33 @@
+#include "tarmac/core/mapper.hpp"
+
+namespace tarmac::core {
+
+Status MapperParams::validate() const {
+  if (auto s = filters.validate(); !s) return s;
+  if (auto s = occupancy.validate(); !s) return s;
+  return costmap.validate();
+}
+
+Mapper::Mapper(const MapperParams& params) : params_(params), map_(params.occupancy) {
+  TARMAC_ASSERT(params.validate().ok(), "MapperParams must be validated first");
+}
+
+FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+                            const Eigen::Isometry3d& T_B_S) {
+  const Eigen::Isometry3d T_W_S = T_W_B * T_B_S;
+  sensor_W_ = T_W_S.translation();
+  base_W_ = T_W_B.translation();
+  return filter_scan(cloud, T_W_S, T_B_S, params_.filters, points_W_);
+}
+
+OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
+  map_.recenter(base_W_);
+  return map_.integrate(sensor_W_, points_W_, {}, runner);
+}
+
+void Mapper::update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                            TaskRunner& runner) {
+  build_costmap(map_, params_.costmap, base_W_, zones, stamp_ns, layers_, runner);
+}
+
+}  // namespace tarmac::core

@@ -1,0 +1,32 @@
+#pragma once
+/// @file Reading a sequence in KITTI layout: scans/NNNNNN.bin (float32 x, y, z, intensity, sensor
+/// frame), poses.txt (row-major 3×4 T_world_sensor per scan), optional times.txt (s).
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "tarmac/core/point_cloud.hpp"
+#include "tarmac/core/result.hpp"
+
+namespace tarmac::tools {
+
+struct KittiSequence {
+  std::filesystem::path dir;
+  std::vector<std::filesystem::path> scans;  ///< sorted by name
+  std::vector<Eigen::Isometry3d> T_W_S;      ///< one per scan
+  std::vector<double> times_s;               ///< one per scan (10 Hz assumed when absent)
+};
+
+/// Opens a sequence; `poses_file` overrides poses.txt (e.g. poses_leveled.txt). Checks that
+/// there is one pose per scan and that every rotation is orthonormal.
+core::Result<KittiSequence> open_kitti(const std::filesystem::path& dir,
+                                       const std::string& poses_file = "poses.txt");
+
+/// Reads one scan into `cloud` (points in the sensor frame, intensity). Rejects files whose size
+/// is not a multiple of 16 bytes.
+core::Status read_kitti_scan(const std::filesystem::path& file, core::PointCloud& cloud);
+
+}  // namespace tarmac::tools

@@ -1,0 +1,349 @@
+// tarmac-map: the offline mapping tool. Runs the same core pipeline as the daemon, scan by scan,
+// on a KITTI-layout sequence, and writes the maps, images, timings and a digest.
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "tarmac/config/config.hpp"
+#include "tarmac/core/mapper.hpp"
+#include "tarmac/daemon/thread_pool.hpp"
+#include "tarmac/tools/array_io.hpp"
+#include "tarmac/tools/kitti.hpp"
+
+namespace {
+
+using namespace tarmac;
+using Clock = std::chrono::steady_clock;
+
+constexpr int kExitUsage = 64;
+constexpr int kExitData = 65;
+constexpr int kExitIo = 74;
+constexpr int kExitConfig = 78;
+
+struct Options {
+  std::string dataset, out = "out/map", config, poses = "poses.txt";
+  std::size_t threads = 2;
+  std::size_t max_scans = 0;  // 0: all
+  double sensor_height_m = 1.9;
+};
+
+void usage() {
+  std::fprintf(stderr,
+               "usage: tarmac-map --dataset DIR [--out DIR] [--config FILE] [--threads N]\n"
+               "                  [--poses FILE] [--scans N] [--sensor-height M]\n"
+               "  DIR in KITTI layout: scans/NNNNNN.bin, poses.txt (T_world_sensor), times.txt\n"
+               "  --poses FILE      pose file inside DIR (default poses.txt)\n"
+               "  --sensor-height M sensor above the vehicle base, m (default 1.9)\n");
+}
+
+struct StageTimes {
+  const char* name;
+  std::vector<double> ms;
+};
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size()))) - 1;
+  return v[std::min(i, v.size() - 1)];
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0.0;
+  for (const double x : v) s += x;
+  return v.empty() ? 0.0 : s / static_cast<double>(v.size());
+}
+
+template <typename Fn>
+double timed_ms(Fn&& fn) {
+  const auto t0 = Clock::now();
+  fn();
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+std::vector<std::uint8_t> render_costmap(const core::CostmapLayers& layers) {
+  const auto& cm = layers.costmap;
+  const std::uint32_t w = cm.width(), h = cm.height();
+  std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
+  for (std::uint32_t y = 0; y < h; ++y) {
+    for (std::uint32_t x = 0; x < w; ++x) {
+      std::uint8_t* px = &rgb[(std::size_t{h - 1 - y} * w + x) * 3];  // north up
+      const auto cls = static_cast<core::ColumnClass>(layers.column_class.at(x, y));
+      const int c = cm.at(x, y);
+      std::uint8_t r, g, b;
+      if (cls == core::ColumnClass::kVirtual) {
+        r = 200, g = 0, b = 200;  // virtual zone: magenta
+      } else if (c == core::kCostUnknown) {
+        r = 70, g = 80, b = 110;  // unknown: slate blue
+      } else if (c == core::kCostLethal) {
+        r = 0, g = 0, b = 0;  // lethal: black
+      } else if (c == core::kCostInscribed) {
+        r = 180, g = 0, b = 0;  // inscribed: dark red
+      } else if (c > 0) {
+        r = 255, g = static_cast<std::uint8_t>(230 - 2 * c), b = 60;  // inflated: yellow → orange
+      } else {
+        r = g = b = 245;  // free: white
+      }
+      px[0] = r, px[1] = g, px[2] = b;
+    }
+  }
+  return rgb;
+}
+
+std::vector<std::uint8_t> render_distance(const core::DistanceField& field, double max_m) {
+  const int w = field.dims.x(), h = field.dims.y();
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      std::uint8_t* px = &rgb[(static_cast<std::size_t>(h - 1 - y) * w + x) * 3];
+      const float d = field.distance_m[static_cast<std::size_t>(y) * w + x];
+      if (std::isnan(d)) {
+        px[0] = 70, px[1] = 80, px[2] = 110;
+        continue;
+      }
+      const double t = std::min(1.0, static_cast<double>(d) / max_m);
+      px[0] = static_cast<std::uint8_t>(255 * (1.0 - t));
+      px[1] = static_cast<std::uint8_t>(255 * t * (1.0 - t) * 4 * 0.8);
+      px[2] = static_cast<std::uint8_t>(255 * t);
+    }
+  }
+  return rgb;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool has_value = i + 1 < argc;
+    if (a == "--dataset" && has_value)
+      opt.dataset = argv[++i];
+    else if (a == "--out" && has_value)
+      opt.out = argv[++i];
+    else if (a == "--config" && has_value)
+      opt.config = argv[++i];
+    else if (a == "--poses" && has_value)
+      opt.poses = argv[++i];
+    else if (a == "--threads" && has_value)
+      opt.threads = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--scans" && has_value)
+      opt.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
+    else if (a == "--sensor-height" && has_value)
+      opt.sensor_height_m = std::atof(argv[++i]);
+    else if (a == "--help" || a == "-h") {
+      usage();
+      return 0;
+    } else {
+      std::fprintf(stderr, "tarmac-map: unexpected argument '%s'\n", a.c_str());
+      usage();
+      return kExitUsage;
+    }
+  }
+  if (opt.dataset.empty()) {
+    usage();
+    return kExitUsage;
+  }
+
+  config::Config cfg;
+  if (!opt.config.empty()) {
+    auto loaded = config::load_config_file(opt.config);
+    if (!loaded) {
+      std::fprintf(stderr, "tarmac-map: invalid config: %s\n", loaded.error().message.c_str());
+      return kExitConfig;
+    }
+    cfg = std::move(loaded).value();
+  }
+  const core::MapperParams& params = cfg.mapping;
+  if (auto valid = params.validate(); !valid) {
+    std::fprintf(stderr, "tarmac-map: invalid config: %s\n", valid.error().message.c_str());
+    return kExitConfig;
+  }
+  auto seq = tools::open_kitti(opt.dataset, opt.poses);
+  if (!seq) {
+    std::fprintf(stderr, "tarmac-map: %s\n", seq.error().message.c_str());
+    return kExitData;
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(opt.out, ec);
+  if (ec) {
+    std::fprintf(stderr, "tarmac-map: %s: %s\n", opt.out.c_str(), ec.message().c_str());
+    return kExitIo;
+  }
+
+  daemon::ThreadPool pool(opt.threads);
+  core::Mapper mapper(params);
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.translation().z() = opt.sensor_height_m;
+  const std::size_t n = opt.max_scans == 0 ? seq.value().scans.size()
+                                           : std::min(opt.max_scans, seq.value().scans.size());
+  StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
+      t_cost{"costmap+esdf2d", {}}, t_total{"pipeline", {}};
+  std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
+                dropped_ego = 0, voxel_visits = 0;
+  const bool tty = isatty(STDERR_FILENO) != 0;
+  core::PointCloud cloud;
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto& s = seq.value();
+    t_read.ms.push_back(timed_ms([&] {
+      if (auto r = tools::read_kitti_scan(s.scans[k], cloud); !r) {
+        std::fprintf(stderr, "tarmac-map: %s\n", r.error().message.c_str());
+        std::exit(kExitData);
+      }
+    }));
+    cloud.stamp_ns = static_cast<std::int64_t>(std::llround(s.times_s[k] * 1e9));
+    const Eigen::Isometry3d T_W_B = s.T_W_S[k] * T_B_S.inverse();
+    core::FilterCounts counts;
+    core::OccupancyUpdateStats occ;
+    const double f_ms = timed_ms([&] { counts = mapper.ingest(cloud, T_W_B, T_B_S); });
+    const double o_ms = timed_ms([&] { occ = mapper.integrate(pool); });
+    const double c_ms = timed_ms([&] { mapper.update_costmap({}, cloud.stamp_ns, pool); });
+    t_filter.ms.push_back(f_ms);
+    t_occ.ms.push_back(o_ms);
+    t_cost.ms.push_back(c_ms);
+    t_total.ms.push_back(f_ms + o_ms + c_ms);
+    points_in += counts.input;
+    points_used += counts.kept;
+    dropped_nonfinite += counts.non_finite;
+    dropped_close += counts.too_close;
+    dropped_ego += counts.ego_vehicle;
+    voxel_visits += occ.voxel_visits;
+    if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
+  }
+  if (tty) std::fprintf(stderr, "\n");
+
+  // ---- outputs ----
+  const auto& occ_map = mapper.occupancy();
+  const auto& layers = mapper.costmap();
+  const Eigen::Vector3i dims = occ_map.window_size();
+  const double v = occ_map.params().voxel_size_m;
+  const std::filesystem::path out = opt.out;
+  std::vector<float> log_odds;
+  occ_map.export_log_odds(log_odds);
+  std::vector<float> probability(log_odds.size());
+  std::vector<core::CellState> states3d(log_odds.size());
+  const auto& ground = layers.ground_z_m;
+  for (std::size_t i = 0; i < log_odds.size(); ++i) {
+    const float l = log_odds[i];
+    probability[i] = l == core::OccupancyMap::kUnknown ? std::nanf("") : core::probability_of(l);
+    const int x = static_cast<int>(i % dims.x());
+    const int y = static_cast<int>((i / dims.x()) % dims.y());
+    const int z = static_cast<int>(i / (static_cast<std::size_t>(dims.x()) * dims.y()));
+    const double bottom_m = (occ_map.window_min().z() + z) * v;
+    // Ground excluded: the voxel layer holding the local ground is not an obstacle.
+    const bool is_ground = bottom_m < ground.at(x, y) + v * 0.5;
+    states3d[i] = l == core::OccupancyMap::kUnknown ? core::CellState::kUnknown
+                  : (l > 0.0f && !is_ground)        ? core::CellState::kOccupied
+                                                    : core::CellState::kFree;
+  }
+  core::DistanceField esdf3d;
+  core::DistanceFieldScratch scratch3d;
+  const double esdf3d_ms = timed_ms([&] {
+    core::compute_distance_field(states3d, dims, v, core::UnknownPolicy::kReportUnknown, esdf3d,
+                                 scratch3d, pool);
+  });
+  const std::vector<std::size_t> shape3{static_cast<std::size_t>(dims.z()),
+                                        static_cast<std::size_t>(dims.y()),
+                                        static_cast<std::size_t>(dims.x())};
+  const std::vector<std::size_t> shape2{static_cast<std::size_t>(dims.y()),
+                                        static_cast<std::size_t>(dims.x())};
+  const auto& slice = layers.obstacle_distance;
+  std::vector<core::Status> writes;
+  writes.push_back(tools::write_npy(out / "occupancy.npy", probability, shape3));
+  writes.push_back(tools::write_npy(out / "esdf.npy", esdf3d.distance_m, shape3));
+  writes.push_back(tools::write_npy(out / "esdf_slice.npy", slice.distance_m, shape2));
+  writes.push_back(tools::write_npy(out / "costmap.npy", layers.costmap.cells(), shape2));
+  writes.push_back(
+      tools::write_png(out / "costmap.png", render_costmap(layers), dims.x(), dims.y()));
+  writes.push_back(
+      tools::write_png(out / "esdf_slice.png", render_distance(slice, 5.0), dims.x(), dims.y()));
+  for (const auto& w : writes) {
+    if (!w) {
+      std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+      return kExitIo;
+    }
+  }
+  const double ox = occ_map.window_min().x() * v, oy = occ_map.window_min().y() * v,
+               oz = occ_map.window_min().z() * v;
+  {
+    std::ofstream j(out / "map.json");
+    j << "{\n  \"frame\": \"world (the dataset's pose frame)\",\n"
+      << "  \"voxel_size_m\": " << v << ",\n"
+      << "  \"origin_m\": [" << ox << ", " << oy << ", " << oz << "],\n"
+      << "  \"lattice\": \"voxel i along an axis covers [origin + i*v, origin + (i+1)*v)\",\n"
+      << "  \"axis_order\": \"arrays are C order, shape (nz, ny, nx) or (ny, nx): x varies "
+         "fastest\",\n"
+      << "  \"shape_3d\": [" << dims.z() << ", " << dims.y() << ", " << dims.x() << "],\n"
+      << "  \"shape_2d\": [" << dims.y() << ", " << dims.x() << "],\n"
+      << "  \"scans\": " << n << ",\n"
+      << "  \"files\": {\n"
+      << "    \"occupancy.npy\": \"float32 occupancy probability, NaN = unknown (3D window at the "
+         "end)\",\n"
+      << "    \"esdf.npy\": \"float32 m to the nearest occupied voxel, ground layer excluded, NaN "
+         "= unknown, inf = none in window\",\n"
+      << "    \"esdf_slice.npy\": \"float32 m to the nearest costmap obstacle cell (vehicle height "
+         "band), NaN = unknown\",\n"
+      << "    \"costmap.npy\": \"int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 "
+         "lethal, -1 unknown\",\n"
+      << "    \"costmap.png\": \"white free, yellow-orange inflated, dark red inscribed, black "
+         "lethal, slate unknown, magenta virtual zone; north up\",\n"
+      << "    \"esdf_slice.png\": \"red near an obstacle to blue at >= 5 m, slate unknown; north "
+         "up\"\n"
+      << "  }\n}\n";
+  }
+
+  // ---- timing table ----
+  double total_s = 0.0;
+  for (const double ms : t_total.ms) total_s += ms / 1000.0;
+  std::printf(
+      "tarmac-map: %zu scans, %llu points in, %llu used (dropped: %llu non-finite, %llu too close, "
+      "%llu ego vehicle), %zu threads\n",
+      n, static_cast<unsigned long long>(points_in), static_cast<unsigned long long>(points_used),
+      static_cast<unsigned long long>(dropped_nonfinite),
+      static_cast<unsigned long long>(dropped_close), static_cast<unsigned long long>(dropped_ego),
+      opt.threads);
+  std::printf("%-16s %9s %9s %9s %9s   (ms per scan)\n", "stage", "mean", "p50", "p99", "max");
+  std::ofstream tj(out / "timing.json");
+  tj << "{\n  \"scans\": " << n << ",\n  \"threads\": " << opt.threads << ",\n  \"stages_ms\": {\n";
+  const StageTimes* stages[] = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
+  for (std::size_t i = 0; i < 5; ++i) {
+    const auto& s = *stages[i];
+    const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
+    std::printf("%-16s %9.2f %9.2f %9.2f %9.2f\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
+                percentile(s.ms, 0.99), mx);
+    tj << "    \"" << s.name << "\": {\"mean\": " << mean(s.ms)
+       << ", \"p50\": " << percentile(s.ms, 0.5) << ", \"p99\": " << percentile(s.ms, 0.99)
+       << ", \"max\": " << mx << "}" << (i < 4 ? "," : "") << "\n";
+  }
+  const double pts_per_s = total_s > 0 ? static_cast<double>(points_used) / total_s : 0.0;
+  std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d", esdf3d_ms,
+              dims.x(), dims.y(), dims.z());
+  std::printf(
+      "pipeline throughput: %.2f M points/s (filter+occupancy+costmap), %.1f voxel visits/point\n",
+      pts_per_s / 1e6, points_used > 0 ? static_cast<double>(voxel_visits) / points_used : 0.0);
+  tj << "  },\n  \"esdf3d_ms\": " << esdf3d_ms << ",\n  \"points_per_s\": " << pts_per_s << "\n}\n";
+
+  const auto bytes = [](const auto& vec) {
+    return std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(vec.data()),
+                                         vec.size() * sizeof(vec[0]));
+  };
+  std::printf("digest: occupancy %s costmap %s esdf_slice %s esdf %s\n",
+              tools::digest(bytes(log_odds)).c_str(),
+              tools::digest(bytes(layers.costmap.cells())).c_str(),
+              tools::digest(bytes(slice.distance_m)).c_str(),
+              tools::digest(bytes(esdf3d.distance_m)).c_str());
+  std::printf(
+      "wrote "
+      "%s/"
+      "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
+      "timing.json}\n",
+      opt.out.c_str());
+  return 0;
+}
