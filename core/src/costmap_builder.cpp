@@ -11,8 +11,15 @@ namespace {
 constexpr std::size_t kRowTasks = 16;
 constexpr float kNoGround = std::numeric_limits<float>::quiet_NaN();
 
-bool is_occupied(float l) {
-  return l != OccupancyMap::kUnknown && l > 0.0f;
+/// Calls fn(window_x0, values, count) for window row `wy` of a ring layer as at most two
+/// contiguous runs (the ring wraps once along x), so passes read memory in order.
+template <typename Fn>
+void for_row_runs(const OccupancyMap& map, const float* layer, int wy, Fn&& fn) {
+  const int nx = map.window_size().x();
+  const int rx0 = map.ring_x(0);
+  const float* row = layer + static_cast<std::size_t>(map.ring_y(wy)) * nx;
+  fn(0, row + rx0, nx - rx0);
+  if (rx0 > 0) fn(nx - rx0, row, rx0);
 }
 
 }  // namespace
@@ -81,29 +88,35 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   }
   out.esdf_input.resize(geometry.cell_count());
 
-  // 1. Lowest occupied voxel per coarse ground cell (window voxel units).
-  const int g = std::max(1, static_cast<int>(std::lround(params.ground_cell_m / v)));
-  const int gx = (nx + g - 1) / g, gy = (ny + g - 1) / g;
-  std::vector<float> coarse(static_cast<std::size_t>(gx) * gy, kNoGround);
+  // 1. Lowest occupied voxel per column (layer by layer, in memory order), then per coarse
+  //    ground cell. Unknown (−1e9) and free (< 0) are both "not > 0".
+  auto& lowest = out.lowest_occupied;
+  lowest.assign(geometry.cell_count(), -1);
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
-    std::vector<float> column(static_cast<std::size_t>(nz));
-    const int cy0 = static_cast<int>(gy * task / kRowTasks);
-    const int cy1 = static_cast<int>(gy * (task + 1) / kRowTasks);
-    for (int cy = cy0; cy < cy1; ++cy) {
-      for (int y = cy * g; y < std::min(ny, (cy + 1) * g); ++y) {
-        for (int x = 0; x < nx; ++x) {
-          map.column(x, y, column.data());
-          for (int z = 0; z < nz; ++z) {
-            if (is_occupied(column[z])) {
-              float& c = coarse[static_cast<std::size_t>(cy) * gx + x / g];
-              if (std::isnan(c) || z < c) c = static_cast<float>(z);
-              break;
-            }
-          }
-        }
+    const int y0 = static_cast<int>(ny * task / kRowTasks);
+    const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    for (int z = 0; z < nz; ++z) {
+      const float* layer = map.ring_layer(z);
+      const auto zz = static_cast<std::int16_t>(z);
+      for (int y = y0; y < y1; ++y) {
+        std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+        for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
+          std::int16_t* lo = low + x0;
+          for (int k = 0; k < count; ++k) lo[k] = (lo[k] < 0 && l[k] > 0.0f) ? zz : lo[k];
+        });
       }
     }
   });
+  const int g = std::max(1, static_cast<int>(std::lround(params.ground_cell_m / v)));
+  const int gx = (nx + g - 1) / g, gy = (ny + g - 1) / g;
+  std::vector<float> coarse(static_cast<std::size_t>(gx) * gy, kNoGround);
+  for (int y = 0; y < ny; ++y) {
+    for (int x = 0; x < nx; ++x) {
+      const int z = lowest[static_cast<std::size_t>(y) * nx + x];
+      float& c = coarse[static_cast<std::size_t>(y / g) * gx + x / g];
+      if (z >= 0 && (std::isnan(c) || z < c)) c = static_cast<float>(z);
+    }
+  }
 
   // 2. Reject cells far above their neighbours (a truck roof, a wing seen from afar with no
   //    ground below), then fill gaps from neighbours; what stays empty gets the vehicle's ground.
@@ -167,35 +180,44 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   //    obstacle) and starts below ground + vehicle height + clearance.
   const double hi_m = params.vehicle_height_m + params.clearance_m;
   const int lo_layers = 1 + static_cast<int>(std::ceil(params.min_obstacle_height_m / v - 1e-9));
+  auto& ground_layer = out.ground_layer;
+  ground_layer.resize(geometry.cell_count());
+  auto& classes = out.column_class.cells();
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
-    std::vector<float> column(static_cast<std::size_t>(nz));
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    // The column's ground: its lowest occupied voxel if within one voxel of the estimate.
     for (int y = y0; y < y1; ++y) {
       for (int x = 0; x < nx; ++x) {
-        const float estimate = filtered[static_cast<std::size_t>(y / g) * gx + x / g];
-        map.column(x, y, column.data());
-        int ground = static_cast<int>(std::lround(estimate));
-        for (int z = std::max(0, ground - 1); z <= std::min(nz - 1, ground + 1); ++z) {
-          if (is_occupied(column[z])) {
-            ground = z;
-            break;
+        const std::size_t i = static_cast<std::size_t>(y) * nx + x;
+        const int estimate =
+            static_cast<int>(std::lround(filtered[static_cast<std::size_t>(y / g) * gx + x / g]));
+        const int low = lowest[i];
+        const int ground = low >= 0 && std::abs(low - estimate) <= 1 ? low : estimate;
+        ground_layer[i] = static_cast<std::int16_t>(ground);
+        out.ground_z_m.cells()[i] = static_cast<float>((wmin.z() + ground + 0.5) * v);
+        classes[i] = static_cast<std::uint8_t>(ColumnClass::kUnknown);
+      }
+    }
+    // Layer by layer: a voxel counts when its bottom lies below ground + envelope top.
+    const int top_layers = static_cast<int>(std::ceil(hi_m / v + 0.5));  // above − 0.5 < hi/v
+    for (int z = 0; z < nz; ++z) {
+      const float* layer = map.ring_layer(z);
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t row = static_cast<std::size_t>(y) * nx;
+        for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
+          const std::int16_t* gl = &ground_layer[row + x0];
+          std::uint8_t* cls = &classes[row + x0];
+          for (int k = 0; k < count; ++k) {
+            const int above = z - gl[k];
+            if (above < 0 || above >= top_layers || l[k] == OccupancyMap::kUnknown ||
+                cls[k] == static_cast<std::uint8_t>(ColumnClass::kObstacle)) {
+              continue;
+            }
+            cls[k] = static_cast<std::uint8_t>(
+                above >= lo_layers && l[k] > 0.0f ? ColumnClass::kObstacle : ColumnClass::kFree);
           }
-        }
-        out.ground_z_m.at(x, y) = static_cast<float>((wmin.z() + ground + 0.5) * v);
-        bool obstacle = false, known = false;
-        for (int z = std::max(0, ground); z < nz; ++z) {
-          if ((z - ground - 0.5) * v >= hi_m) break;  // voxel bottom above the envelope
-          if (column[z] == OccupancyMap::kUnknown) continue;
-          known = true;
-          if (z - ground >= lo_layers && column[z] > 0.0f) {
-            obstacle = true;
-            break;
-          }
-        }
-        out.column_class.at(x, y) = static_cast<std::uint8_t>(obstacle ? ColumnClass::kObstacle
-                                                              : known  ? ColumnClass::kFree
-                                                                       : ColumnClass::kUnknown);
+        });
       }
     }
   });
@@ -229,7 +251,6 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   }
 
   // 5. Exact distance to the nearest obstacle cell, then Nav2 inflation.
-  const auto& classes = out.column_class.cells();
   for (std::size_t i = 0; i < classes.size(); ++i) {
     const auto c = static_cast<ColumnClass>(classes[i]);
     out.esdf_input[i] = c == ColumnClass::kObstacle || c == ColumnClass::kVirtual

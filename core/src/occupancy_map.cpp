@@ -35,7 +35,7 @@ std::uint64_t traverse(const WindowGeometry& w, const Eigen::Vector3d& origin_W,
   const Eigen::Vector3d o = origin_W / w.voxel_size_m;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - o;
-  int cur[3], rel[3], ring[3], step[3];
+  int cur[3], rel[3], ring[3], step[3];  // NOLINT(cppcoreguidelines-init-variables): set below
   double t_max[3], t_delta[3];
   int remaining = 0;
   for (int a = 0; a < 3; ++a) {
@@ -66,7 +66,7 @@ std::uint64_t traverse(const WindowGeometry& w, const Eigen::Vector3d& origin_W,
   for (;; --remaining) {
     if (remaining == 0 && !include_end) break;
     if (!inside()) break;
-    visit(static_cast<std::uint32_t>((ring[2] * ny + ring[1]) * nx + ring[0]));
+    visit(static_cast<std::uint32_t>((ring[2] * ny + ring[1]) * nx + ring[0]), ring[2]);
     ++visits;
     if (remaining == 0) break;
     const int a =
@@ -242,13 +242,17 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const std::size_t n_chunks = (n_rays + kRaysPerChunk - 1) / kRaysPerChunk;
   bins_.resize(std::max(bins_.size(), n_chunks * kApplyBands));
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
+  // Bands are ranges of ring layers, looked up per visit (no division in the inner loop).
   const int band_height = (dims_.z() + kApplyBands - 1) / kApplyBands;
-  const std::size_t band_slots = static_cast<std::size_t>(band_height) * dims_.x() * dims_.y();
+  band_of_z_.resize(static_cast<std::size_t>(dims_.z()));
+  for (int z = 0; z < dims_.z(); ++z)
+    band_of_z_[static_cast<std::size_t>(z)] = static_cast<std::uint8_t>(z / band_height);
+  const std::uint8_t* band_of_z = band_of_z_.data();
   std::vector<std::uint64_t> chunk_visits(n_chunks, 0);
   runner.parallel_for(n_chunks, [&](std::size_t chunk) {
     std::vector<std::uint32_t>* bins = &bins_[chunk * kApplyBands];
     for (int b = 0; b < kApplyBands; ++b) bins[b].clear();
-    const auto visit = [&](std::uint32_t s) { bins[s / band_slots].push_back(s); };
+    const auto visit = [&](std::uint32_t s, int ring_z) { bins[band_of_z[ring_z]].push_back(s); };
     const std::size_t begin = chunk * kRaysPerChunk;
     const std::size_t end = std::min(n_rays, begin + kRaysPerChunk);
     std::uint64_t visits = 0;
@@ -282,7 +286,8 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         std::uint32_t& t = touched_[s];
         if (t == hit_mark || t == free_mark) continue;
         t = free_mark;
-        update(s, false);
+        float& l = log_odds_[s];
+        l = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);  // a miss only lowers
         ++updates;
       }
     }
@@ -294,16 +299,15 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   return stats;
 }
 
-void OccupancyMap::column(int wx, int wy, float* out) const {
-  const std::size_t rx = static_cast<std::size_t>(wrap(min_.x() + wx, dims_.x()));
-  const std::size_t ry = static_cast<std::size_t>(wrap(min_.y() + wy, dims_.y()));
-  const std::size_t plane = static_cast<std::size_t>(dims_.x()) * dims_.y();
-  int rz = wrap(min_.z(), dims_.z());
-  const float* base = log_odds_.data() + ry * dims_.x() + rx;
-  for (int z = 0; z < dims_.z(); ++z) {
-    out[z] = base[static_cast<std::size_t>(rz) * plane];
-    if (++rz == dims_.z()) rz = 0;
-  }
+const float* OccupancyMap::ring_layer(int wz) const {
+  return log_odds_.data() +
+         static_cast<std::size_t>(wrap(min_.z() + wz, dims_.z())) * dims_.x() * dims_.y();
+}
+int OccupancyMap::ring_x(int wx) const {
+  return wrap(min_.x() + wx, dims_.x());
+}
+int OccupancyMap::ring_y(int wy) const {
+  return wrap(min_.y() + wy, dims_.y());
 }
 
 void OccupancyMap::export_log_odds(std::vector<float>& out) const {

@@ -65,6 +65,8 @@ struct CostmapLayers {
   std::vector<CellState> esdf_input;  ///< obstacles (incl. virtual zones) for the 2D ESDF
   DistanceField obstacle_distance;    ///< exact 2D distance to the nearest obstacle cell
   DistanceFieldScratch scratch;
+  std::vector<std::int16_t> lowest_occupied;  ///< per cell, window layer or −1
+  std::vector<std::int16_t> ground_layer;     ///< per cell, window layer of the ground voxel
 };
 
 /// Builds the costmap of the occupancy window at the window's horizontal resolution.

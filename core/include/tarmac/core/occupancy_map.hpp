@@ -90,8 +90,12 @@ class OccupancyMap {
   [[nodiscard]] float max_log_odds() const { return l_max_; }
   [[nodiscard]] std::size_t memory_bytes() const;
 
-  /// Copies the column at window cell (wx, wy), bottom to top, into `out` (window_z_vox values).
-  void column(int wx, int wy, float* out) const;
+  /// Direct read access for whole-window passes, cache-friendly: the storage of window layer
+  /// `wz` is a plane of window_x·window_y floats in ring order; window cell (wx, wy) of it is at
+  /// ring_y(wy)·window_x + ring_x(wx).
+  [[nodiscard]] const float* ring_layer(int wz) const;
+  [[nodiscard]] int ring_x(int wx) const;
+  [[nodiscard]] int ring_y(int wy) const;
 
   /// Copies the window into `out` in window order (z slowest, x fastest) starting at window_min().
   void export_log_odds(std::vector<float>& out) const;
@@ -112,6 +116,7 @@ class OccupancyMap {
   bool placed_ = false;
   /// Per (ray chunk, window band) voxel slots of one scan; capacity kept across scans.
   std::vector<std::vector<std::uint32_t>> bins_;
+  std::vector<std::uint8_t> band_of_z_;
 };
 
 /// ln(p / (1 − p)).
