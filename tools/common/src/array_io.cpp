@@ -62,10 +62,10 @@ core::Status write_png(const std::filesystem::path& file, std::span<const std::u
                PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_write_info(png, info);
   for (std::uint32_t y = 0; y < height; ++y) {
-    png_write_row(
-        png, const_cast<png_bytep>(rgb.data() +
-                                   std::size_t{y} * width * 3));  // NOLINT(cppcoreguidelines-pro-type-const-cast):
-                                                                  // libpng API is not const-correct
+    png_write_row(png, const_cast<png_bytep>(
+                           rgb.data() + std::size_t{y} * width *
+                                            3));  // NOLINT(cppcoreguidelines-pro-type-const-cast):
+                                                  // libpng API is not const-correct
   }
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
