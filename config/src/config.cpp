@@ -169,6 +169,9 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     r.scalar<bool>("ego_box_enabled", p.filters.ego_box_enabled, false, true);
     read_vector3(r, "ego_box_min_m", p.filters.ego_box_min_B);
     read_vector3(r, "ego_box_max_m", p.filters.ego_box_max_B);
+    r.scalar<int>("outlier_min_neighbors", p.filters.outlier_min_neighbors, 0, 26);
+    r.scalar<double>("outlier_cell_m", p.filters.outlier_cell_m, 0.05, 5.0);
+    r.scalar<double>("outlier_max_range_m", p.filters.outlier_max_range_m, 0.0, 1000.0);
   });
   root.map("occupancy", [&](MapReader& r) {
     auto& o = p.occupancy;
@@ -280,6 +283,9 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "ego_box_enabled" << YAML::Value << m.filters.ego_box_enabled;
   vec("ego_box_min_m", m.filters.ego_box_min_B);
   vec("ego_box_max_m", m.filters.ego_box_max_B);
+  out << YAML::Key << "outlier_min_neighbors" << YAML::Value << m.filters.outlier_min_neighbors;
+  out << YAML::Key << "outlier_cell_m" << YAML::Value << m.filters.outlier_cell_m;
+  out << YAML::Key << "outlier_max_range_m" << YAML::Value << m.filters.outlier_max_range_m;
   out << YAML::EndMap;
   const auto& o = m.occupancy;
   out << YAML::Key << "occupancy" << YAML::Value << YAML::BeginMap;

@@ -17,7 +17,7 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   const Eigen::Isometry3d T_W_S = T_W_B * T_B_S;
   sensor_W_ = T_W_S.translation();
   base_W_ = T_W_B.translation();
-  return filter_scan(cloud, T_W_S, T_B_S, params_.filters, points_W_);
+  return filter_scan(cloud, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_);
 }
 
 OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {

@@ -138,10 +138,8 @@ int main(int argc, char** argv) {
 
   std::vector<double> t_filter, t_occ, t_cost, t_pipeline, t_octomap, t_occ_only;
   std::uint64_t points = 0;
-  std::vector<Eigen::Vector3f> points_W;
   for (std::size_t k = 0; k < n; ++k) {
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
-    const Eigen::Isometry3d T_W_S = seq.value().T_W_S[k];
     // tarmac, stage by stage.
     core::FilterCounts counts;
     const double f = timed_ms([&] { counts = mapper.ingest(clouds[k], T_W_B, T_B_S); });
@@ -154,11 +152,10 @@ int main(int argc, char** argv) {
     t_occ_only.push_back(f + o);
     points += counts.kept;
     // OctoMap on exactly the points tarmac kept, in the world frame, from the same origin.
-    core::filter_scan(clouds[k], T_W_S, T_B_S, params.filters, points_W);
     octomap::Pointcloud cloud;
-    cloud.reserve(points_W.size());
-    for (const auto& p : points_W) cloud.push_back(p.x(), p.y(), p.z());
-    const Eigen::Vector3d o_W = T_W_S.translation();
+    cloud.reserve(mapper.points_W().size());
+    for (const auto& p : mapper.points_W()) cloud.push_back(p.x(), p.y(), p.z());
+    const Eigen::Vector3d o_W = mapper.sensor_W();
     t_octomap.push_back(timed_ms([&] {
       octree.insertPointCloud(
           cloud,

@@ -187,7 +187,7 @@ int main(int argc, char** argv) {
   StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
       t_cost{"costmap+esdf2d", {}}, t_total{"pipeline", {}};
   std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
-                dropped_ego = 0, voxel_visits = 0;
+                dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0;
   const bool tty = isatty(STDERR_FILENO) != 0;
   core::PointCloud cloud;
   for (std::size_t k = 0; k < n; ++k) {
@@ -214,6 +214,7 @@ int main(int argc, char** argv) {
     dropped_nonfinite += counts.non_finite;
     dropped_close += counts.too_close;
     dropped_ego += counts.ego_vehicle;
+    dropped_isolated += counts.isolated;
     voxel_visits += occ.voxel_visits;
     if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
   }
@@ -304,11 +305,11 @@ int main(int argc, char** argv) {
   for (const double ms : t_total.ms) total_s += ms / 1000.0;
   std::printf(
       "tarmac-map: %zu scans, %llu points in, %llu used (dropped: %llu non-finite, %llu too close, "
-      "%llu ego vehicle), %zu threads\n",
+      "%llu ego vehicle, %llu isolated), %zu threads\n",
       n, static_cast<unsigned long long>(points_in), static_cast<unsigned long long>(points_used),
       static_cast<unsigned long long>(dropped_nonfinite),
       static_cast<unsigned long long>(dropped_close), static_cast<unsigned long long>(dropped_ego),
-      opt.threads);
+      static_cast<unsigned long long>(dropped_isolated), opt.threads);
   std::printf("%-16s %9s %9s %9s %9s   (ms per scan)\n", "stage", "mean", "p50", "p99", "max");
   std::ofstream tj(out / "timing.json");
   tj << "{\n  \"scans\": " << n << ",\n  \"threads\": " << opt.threads << ",\n  \"stages_ms\": {\n";

@@ -38,6 +38,9 @@ class Mapper {
   void update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                       TaskRunner& runner);
 
+  /// The last ingested scan's surviving points, world frame, and the sensor origin.
+  [[nodiscard]] const std::vector<Eigen::Vector3f>& points_W() const { return points_W_; }
+  [[nodiscard]] const Eigen::Vector3d& sensor_W() const { return sensor_W_; }
   [[nodiscard]] const OccupancyMap& occupancy() const { return map_; }
   [[nodiscard]] const CostmapLayers& costmap() const { return layers_; }
   [[nodiscard]] const MapperParams& params() const { return params_; }
@@ -47,6 +50,7 @@ class Mapper {
   OccupancyMap map_;
   CostmapLayers layers_;
   std::vector<Eigen::Vector3f> points_W_;
+  FilterScratch filter_scratch_;
   Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d base_W_ = Eigen::Vector3d::Zero();
 };

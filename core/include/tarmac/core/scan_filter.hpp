@@ -19,6 +19,12 @@ struct FilterParams {
   Eigen::Vector3d ego_box_min_B{-2.5, -1.2, -0.5};
   Eigen::Vector3d ego_box_max_B{2.5, 1.2, 2.5};
   bool ego_box_enabled = true;
+  /// Isolated-outlier filter (rain, spray, dust, multipath): a point closer than
+  /// outlier_max_range_m is dropped when fewer than outlier_min_neighbors other points of the
+  /// scan lie in its cell or the 26 cells around it (cells of outlier_cell_m). 0 disables.
+  int outlier_min_neighbors = 2;
+  double outlier_cell_m = 0.5;
+  double outlier_max_range_m = 30.0;
 
   [[nodiscard]] Status validate() const;
 };
@@ -29,13 +35,22 @@ struct FilterCounts {
   std::uint64_t non_finite = 0;
   std::uint64_t too_close = 0;
   std::uint64_t ego_vehicle = 0;
+  std::uint64_t isolated = 0;
   std::uint64_t kept = 0;
+};
+
+/// Buffers of the filter, reused across scans (no allocation after warm-up).
+struct FilterScratch {
+  std::vector<std::uint64_t> keys;       ///< open-addressing table of cell keys (0 = empty)
+  std::vector<std::uint32_t> counts;     ///< points per table slot
+  std::vector<std::uint64_t> point_key;  ///< cell key per candidate point
+  std::vector<Eigen::Vector3f> candidates_S;
 };
 
 /// Filters `cloud` (sensor frame) and writes survivors into `points_W` (cleared first, capacity
 /// kept). T_W_S: sensor to world; T_B_S: sensor to vehicle base (extrinsic). RT-safe after warm-up.
 FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
-                         std::vector<Eigen::Vector3f>& points_W);
+                         std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch);
 
 }  // namespace tarmac::core

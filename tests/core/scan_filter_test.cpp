@@ -1,0 +1,89 @@
+#include "tarmac/core/scan_filter.hpp"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+namespace tarmac::core {
+namespace {
+
+struct Fixture {
+  FilterParams params;
+  FilterScratch scratch;
+  std::vector<Eigen::Vector3f> out_W;
+  FilterCounts run(const PointCloud& cloud,
+                   const Eigen::Isometry3d& T_W_S = Eigen::Isometry3d::Identity(),
+                   const Eigen::Isometry3d& T_B_S = Eigen::Isometry3d::Identity()) {
+    return filter_scan(cloud, T_W_S, T_B_S, params, out_W, scratch);
+  }
+};
+
+/// A dense 2 m × 2 m wall patch at x = 10 (points 5 cm apart), plus `extra`.
+PointCloud wall_plus(std::vector<Eigen::Vector3f> extra) {
+  PointCloud cloud;
+  for (float y = -1.0f; y <= 1.0f; y += 0.05f)
+    for (float z = -1.0f; z <= 1.0f; z += 0.05f) cloud.points_S.emplace_back(10.0f, y, z);
+  for (const auto& p : extra) cloud.points_S.push_back(p);
+  return cloud;
+}
+
+TEST(ScanFilter, CountsEachReasonAndTransformsSurvivors) {
+  Fixture f;
+  f.params.outlier_min_neighbors = 0;
+  PointCloud cloud;
+  cloud.points_S = {
+      {std::nanf(""), 0, 0}, {0.3f, 0.2f, 0.1f}, {1.5f, 0.0f, -1.0f}, {5.0f, 1.0f, 0.0f}};
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.translation().z() = 1.9;  // sensor 1.9 m above the base
+  Eigen::Isometry3d T_W_S = Eigen::Isometry3d::Identity();
+  T_W_S.translation() = Eigen::Vector3d(100, 200, 2);
+  const auto c = f.run(cloud, T_W_S, T_B_S);
+  EXPECT_EQ(c.input, 4u);
+  EXPECT_EQ(c.non_finite, 1u);
+  EXPECT_EQ(c.too_close, 1u);    // 0.37 m < 1 m
+  EXPECT_EQ(c.ego_vehicle, 1u);  // (1.5, 0, 0.9) in the base frame is inside the vehicle box
+  EXPECT_EQ(c.kept, 1u);
+  ASSERT_EQ(f.out_W.size(), 1u);
+  EXPECT_EQ(f.out_W[0], Eigen::Vector3f(105, 201, 2));
+}
+
+TEST(ScanFilter, IsolatedReturnsAreDroppedDenseSurfacesKept) {
+  Fixture f;
+  f.params.ego_box_enabled = false;
+  // Two rain drops in the air, far from anything; one pair of points close together (each has
+  // one neighbour: below the default of 2 others, so both go); a drop beyond 30 m is not tested.
+  const auto cloud = wall_plus({{4.0f, 2.0f, 1.0f},
+                                {6.0f, -3.0f, 0.5f},
+                                {7.0f, 3.0f, 0.0f},
+                                {7.05f, 3.0f, 0.0f},
+                                {40.0f, 0.0f, 5.0f}});
+  const auto c = f.run(cloud);
+  EXPECT_EQ(c.isolated, 4u);
+  EXPECT_EQ(c.kept, cloud.size() - 4);
+  // Every wall point survived, and the far point.
+  std::size_t wall = 0;
+  for (const auto& p : f.out_W) wall += p.x() == 10.0f ? 1 : 0;
+  EXPECT_EQ(wall, cloud.size() - 5);
+  EXPECT_EQ(f.out_W.back(), Eigen::Vector3f(40.0f, 0.0f, 5.0f));
+}
+
+TEST(ScanFilter, OutlierDecisionDoesNotDependOnPointOrder) {
+  Fixture a, b;
+  auto cloud =
+      wall_plus({{4.0f, 2.0f, 1.0f}, {7.0f, 3.0f, 0.0f}, {7.05f, 3.0f, 0.0f}, {7.1f, 3.0f, 0.05f}});
+  const auto ca = a.run(cloud);
+  std::reverse(cloud.points_S.begin(), cloud.points_S.end());
+  const auto cb = b.run(cloud);
+  EXPECT_EQ(ca.isolated, cb.isolated);
+  EXPECT_EQ(ca.isolated, 1u);  // the triple has two neighbours each and stays
+  auto sa = a.out_W, sb = b.out_W;
+  const auto less = [](const Eigen::Vector3f& p, const Eigen::Vector3f& q) {
+    return std::tie(p.x(), p.y(), p.z()) < std::tie(q.x(), q.y(), q.z());
+  };
+  std::sort(sa.begin(), sa.end(), less);
+  std::sort(sb.begin(), sb.end(), less);
+  EXPECT_EQ(sa, sb);
+}
+
+}  // namespace
+}  // namespace tarmac::core
