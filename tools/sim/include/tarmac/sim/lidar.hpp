@@ -1,0 +1,159 @@
+#pragma once
+/// @file A simulated spinning multi-beam LiDAR on a vehicle driving through a Scene, and the
+/// writer of the resulting sequence in KITTI layout.
+///
+/// Frames: W is the scene frame (scene.hpp); S the sensor (x forward, y left, z up); base the
+/// vehicle base on the ground (x along the heading). O is the world frame of poses.txt: W
+/// rotated about x by the tilt, T_O_W = Rx(tilt_deg), so that a non-zero tilt gives poses in a
+/// frame that is not gravity-aligned while the scans (frame S) stay the same.
+
+#include <cstdint>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "tarmac/sim/scene.hpp"
+
+namespace tarmac::sim {
+
+/// Intensity written for returns from the ground plane.
+inline constexpr float kGroundIntensity = 10.0f;
+/// Intensity written for returns from every other object.
+inline constexpr float kObjectIntensity = 100.0f;
+
+/// Gaussian samples from a seeded std::mt19937_64 (whose output sequence the C++ standard fixes)
+/// by Marsaglia's polar method, so the stream depends only on the seed: no
+/// std::normal_distribution, whose algorithm differs between standard libraries.
+class GaussianNoise {
+ public:
+  explicit GaussianNoise(std::uint64_t seed) : engine_(seed) {}
+
+  /// Next sample of N(0, 1).
+  double sample();
+
+ private:
+  /// Uniform in [0, 1) with 53 random bits.
+  double uniform();
+
+  std::mt19937_64 engine_;
+  double spare_ = 0.0;
+  bool has_spare_ = false;
+};
+
+/// The sensor model. Beam b has elevation min + b·(max − min)/(beams − 1) (0 for one beam);
+/// azimuth step j has azimuth 2π·j/azimuth_steps, counter-clockwise from +x of frame S.
+struct LidarParams {
+  int beams = 32;                    ///< number of beams (rings), >= 1
+  double min_elevation_deg = -22.5;  ///< lowest beam, degrees above the sensor's xy plane
+  double max_elevation_deg = 22.5;   ///< highest beam
+  int azimuth_steps = 1024;          ///< firings per revolution, >= 1
+  double max_range_m = 100.0;        ///< returns beyond this are dropped (> 0)
+  double range_noise_m = 0.0;        ///< standard deviation of Gaussian range noise (>= 0)
+
+  /// Empty when valid, else what is wrong.
+  std::string validate() const;
+};
+
+/// One return of one beam.
+struct LidarReturn {
+  Eigen::Vector3d point_S;    ///< measured point, frame S (m): range_m · direction
+  double range_m = 0.0;       ///< measured range (true range plus noise), m
+  double true_range_m = 0.0;  ///< exact range to the surface hit, m
+  float intensity = 0.0f;     ///< kGroundIntensity or kObjectIntensity
+  int beam = 0;               ///< 0 = lowest
+  int azimuth_step = 0;       ///< 0 .. azimuth_steps − 1
+  int object_id = -1;         ///< Object::id of the surface hit
+};
+
+/// A spinning multi-beam LiDAR. One scan is one revolution taken at a single instant (no motion
+/// distortion).
+class Lidar {
+ public:
+  /// Precondition: params.validate() is empty.
+  explicit Lidar(const LidarParams& params);
+
+  const LidarParams& params() const { return params_; }
+
+  /// Unit direction of (beam, azimuth_step) in frame S.
+  const Eigen::Vector3d& direction_S(int beam, int azimuth_step) const {
+    return directions_S_[static_cast<std::size_t>(azimuth_step * params_.beams + beam)];
+  }
+
+  /// Casts every beam of one revolution from the sensor pose T_W_S into `scene` at time t_s.
+  /// Fills `returns` (cleared first) in firing order: azimuth step by azimuth step, beams low to
+  /// high within a step. Beams that hit nothing within max_range_m are omitted. When
+  /// range_noise_m > 0, each return draws one sample from `noise` (must then be non-null).
+  void scan(const Scene& scene, const Eigen::Isometry3d& T_W_S, double t_s, GaussianNoise* noise,
+            std::vector<LidarReturn>& returns) const;
+
+ private:
+  LidarParams params_;
+  std::vector<Eigen::Vector3d> directions_S_;  // [azimuth_step * beams + beam]
+};
+
+/// The vehicle drives in a straight line from start_W to end_W at constant speed, heading along
+/// the line, and stops at end_W. The sensor sits sensor_height_m above the base
+/// (T_base_S = translation (0, 0, sensor_height_m), no rotation).
+struct DrivePath {
+  Eigen::Vector2d start_W{0.0, 0.0};  ///< m, on the ground
+  Eigen::Vector2d end_W{60.0, 0.0};   ///< m, != start_W
+  double speed_mps = 3.0;             ///< > 0
+  double sensor_height_m = 2.0;
+
+  /// Length of the path (m).
+  double length_m() const { return (end_W - start_W).norm(); }
+  /// Time to drive the whole path (s).
+  double duration_s() const { return length_m() / speed_mps; }
+  /// Pose of the vehicle base at time t_s (clamped to [0, duration_s()]).
+  Eigen::Isometry3d T_W_base(double t_s) const;
+  /// Pose of the sensor at time t_s.
+  Eigen::Isometry3d T_W_S(double t_s) const;
+};
+
+/// Everything that defines a generated sequence; equal parameters give byte-identical output.
+struct SequenceParams {
+  LidarParams lidar;
+  DrivePath path;
+  double rate_hz = 10.0;   ///< scans per second, > 0; scan i is taken at i / rate_hz
+  int scans = 0;           ///< 0: enough to drive the whole path, floor(duration·rate) + 1
+  double tilt_deg = 0.0;   ///< rotation of the poses' world frame O about x (T_O_W)
+  std::uint64_t seed = 1;  ///< seed of the range noise
+
+  /// The number of scans to write (resolves scans == 0).
+  int scan_count() const;
+  /// Stamp of scan i (s).
+  double stamp_s(int i) const { return static_cast<double>(i) / rate_hz; }
+  /// The rotation from the scene frame W to the poses' world frame O.
+  Eigen::Isometry3d T_O_W() const;
+  /// Empty when valid, else what is wrong.
+  std::string validate() const;
+};
+
+/// Counts of a written sequence.
+struct SequenceSummary {
+  int scans = 0;
+  std::size_t min_points = 0;     ///< points in the emptiest scan
+  std::size_t median_points = 0;  ///< the upper median over scans
+  std::size_t max_points = 0;
+};
+
+/// Result of write_sequence: `error` is empty on success.
+struct SequenceResult {
+  std::string error;
+  SequenceSummary summary;
+
+  bool ok() const { return error.empty(); }
+};
+
+/// Simulates the sequence and writes it to `out_dir` in KITTI layout: scans/NNNNNN.bin
+/// (float32 little-endian x, y, z, intensity per point, frame S), poses.txt (row-major 3×4
+/// T_O_S per scan, shortest round-trip decimal), times.txt (stamp per scan, s), scene.json and
+/// README.txt. Creates the directories; removes stale scans/NNNNNN.bin files first.
+SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
+                              const std::filesystem::path& out_dir);
+
+}  // namespace tarmac::sim

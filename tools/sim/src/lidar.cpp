@@ -1,0 +1,298 @@
+#include "tarmac/sim/lidar.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <system_error>
+
+namespace tarmac::sim {
+namespace {
+
+double radians(double deg) {
+  return deg * std::numbers::pi / 180.0;
+}
+
+/// Shortest decimal that reads back as the same double (deterministic, locale-independent).
+std::string number(double value) {
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof(buf), value);
+  return std::string(buf, res.ptr);
+}
+
+void append_le(std::string& bytes, float value) {
+  const auto bits = std::bit_cast<std::uint32_t>(value);
+  for (int i = 0; i < 4; ++i) bytes += static_cast<char>((bits >> (8 * i)) & 0xffu);
+}
+
+bool write_file(const std::filesystem::path& file, const std::string& bytes, std::string& error) {
+  std::ofstream out(file, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  out.close();
+  if (!out) {
+    error = file.string() + ": cannot be written";
+    return false;
+  }
+  return true;
+}
+
+/// scans/NNNNNN.bin, the names this writer produces.
+bool is_scan_name(const std::string& name) {
+  return name.size() == 10 && name.ends_with(".bin") &&
+         std::all_of(name.begin(), name.begin() + 6, [](char c) { return c >= '0' && c <= '9'; });
+}
+
+std::string scan_name(int i) {
+  std::string digits = std::to_string(i);
+  if (digits.size() < 6) digits.insert(0, 6 - digits.size(), '0');
+  return digits + ".bin";
+}
+
+std::string pose_line(const Eigen::Isometry3d& T) {
+  std::string line;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      if (!line.empty()) line += ' ';
+      line += number(T.matrix()(r, c));
+    }
+  }
+  return line + "\n";
+}
+
+std::string readme(const SequenceParams& p) {
+  const LidarParams& l = p.lidar;
+  std::string s;
+  s += "tarmac-sim: a synthetic airside sequence in KITTI layout with analytic ground truth.\n\n";
+  s += "A simulated spinning multi-beam LiDAR on a vehicle driving through an airside apron\n";
+  s += "made of exact primitives (scene.json: parked aircraft with a wing over the path, jet\n";
+  s += "bridge, traffic cones, 10 cm debris, a tug crossing the path).\n\n";
+  s += "Files:\n";
+  s += "  scans/NNNNNN.bin  float32 little-endian x, y, z, intensity per point, sensor frame S\n";
+  s += "                    (x forward, y left, z up, m); intensity " + number(kGroundIntensity) +
+       " ground, " + number(kObjectIntensity) + " other objects\n";
+  s += "  poses.txt         per scan, row-major 3x4 T_world_sensor (12 numbers)\n";
+  s += "  times.txt         per scan, stamp in s (scan i at i / rate)\n";
+  s += "  scene.json        the scene in the scene frame (x along the apron, y left, z up, m,\n";
+  s += "                    ground z = 0) and T_world_scene (rotation about x by the tilt)\n\n";
+  s += "Each scan is one revolution taken at its stamp (no motion distortion). Beams that hit\n";
+  s += "nothing within the maximum range give no point.\n\n";
+  s += "Parameters:\n";
+  s += "  path              (" + number(p.path.start_W.x()) + ", " + number(p.path.start_W.y()) +
+       ") -> (" + number(p.path.end_W.x()) + ", " + number(p.path.end_W.y()) + ") m at " +
+       number(p.path.speed_mps) + " m/s, sensor " + number(p.path.sensor_height_m) +
+       " m above the base\n";
+  s += "  beams             " + std::to_string(l.beams) + ", elevation " +
+       number(l.min_elevation_deg) + " .. " + number(l.max_elevation_deg) + " deg\n";
+  s += "  azimuth steps     " + std::to_string(l.azimuth_steps) + "\n";
+  s += "  max range         " + number(l.max_range_m) + " m\n";
+  s += "  range noise       " + number(l.range_noise_m) + " m (1 sigma), seed " +
+       std::to_string(p.seed) + "\n";
+  s += "  rate              " + number(p.rate_hz) + " Hz, " + std::to_string(p.scan_count()) +
+       " scans\n";
+  s += "  tilt              " + number(p.tilt_deg) + " deg about x (world = Rx(tilt) * scene)\n";
+  return s;
+}
+
+}  // namespace
+
+double GaussianNoise::uniform() {
+  return static_cast<double>(engine_() >> 11) * 0x1.0p-53;
+}
+
+double GaussianNoise::sample() {
+  if (has_spare_) {
+    has_spare_ = false;
+    return spare_;
+  }
+  double u = 0.0, v = 0.0, s = 0.0;
+  do {
+    u = 2.0 * uniform() - 1.0;
+    v = 2.0 * uniform() - 1.0;
+    s = u * u + v * v;
+  } while (s >= 1.0 || s == 0.0);
+  const double m = std::sqrt(-2.0 * std::log(s) / s);
+  spare_ = v * m;
+  has_spare_ = true;
+  return u * m;
+}
+
+std::string LidarParams::validate() const {
+  if (beams < 1 || beams > 1024) return "beams must be in [1, 1024]";
+  if (azimuth_steps < 1 || azimuth_steps > 65536) return "azimuth steps must be in [1, 65536]";
+  if (!std::isfinite(min_elevation_deg) || !std::isfinite(max_elevation_deg) ||
+      min_elevation_deg > max_elevation_deg || min_elevation_deg < -90.0 ||
+      max_elevation_deg > 90.0) {
+    return "elevations must satisfy -90 <= min <= max <= 90 deg";
+  }
+  if (!(max_range_m > 0.0) || !std::isfinite(max_range_m)) return "max range must be > 0 m";
+  if (!(range_noise_m >= 0.0) || !std::isfinite(range_noise_m)) return "noise must be >= 0 m";
+  return {};
+}
+
+Lidar::Lidar(const LidarParams& params) : params_(params) {
+  directions_S_.reserve(static_cast<std::size_t>(params_.beams) *
+                        static_cast<std::size_t>(params_.azimuth_steps));
+  for (int j = 0; j < params_.azimuth_steps; ++j) {
+    const double azimuth = 2.0 * std::numbers::pi * j / params_.azimuth_steps;
+    for (int b = 0; b < params_.beams; ++b) {
+      const double elevation_deg =
+          params_.beams == 1 ? 0.5 * (params_.min_elevation_deg + params_.max_elevation_deg)
+                             : params_.min_elevation_deg +
+                                   b * (params_.max_elevation_deg - params_.min_elevation_deg) /
+                                       (params_.beams - 1);
+      const double elevation = radians(elevation_deg);
+      directions_S_.emplace_back(std::cos(elevation) * std::cos(azimuth),
+                                 std::cos(elevation) * std::sin(azimuth), std::sin(elevation));
+    }
+  }
+}
+
+void Lidar::scan(const Scene& scene, const Eigen::Isometry3d& T_W_S, double t_s,
+                 GaussianNoise* noise, std::vector<LidarReturn>& returns) const {
+  returns.clear();
+  const Eigen::Vector3d origin_W = T_W_S.translation();
+  const Eigen::Matrix3d R_W_S = T_W_S.linear();
+  for (int j = 0; j < params_.azimuth_steps; ++j) {
+    for (int b = 0; b < params_.beams; ++b) {
+      const Eigen::Vector3d& dir_S = direction_S(b, j);
+      const std::optional<Hit> hit =
+          scene.raycast(origin_W, R_W_S * dir_S, params_.max_range_m, t_s);
+      if (!hit) continue;
+      LidarReturn r;
+      r.true_range_m = hit->range_m;
+      r.range_m = hit->range_m;
+      if (params_.range_noise_m > 0.0) r.range_m += params_.range_noise_m * noise->sample();
+      if (r.range_m <= 0.0) continue;  // noise cannot put a point behind the sensor
+      r.point_S = r.range_m * dir_S;
+      r.intensity = scene.objects()[static_cast<std::size_t>(hit->object_id)].kind == "ground"
+                        ? kGroundIntensity
+                        : kObjectIntensity;
+      r.beam = b;
+      r.azimuth_step = j;
+      r.object_id = hit->object_id;
+      returns.push_back(r);
+    }
+  }
+}
+
+Eigen::Isometry3d DrivePath::T_W_base(double t_s) const {
+  const double length = length_m();
+  const Eigen::Vector2d heading = (end_W - start_W) / length;
+  const double travelled_m = std::clamp(speed_mps * t_s, 0.0, length);
+  const Eigen::Vector2d p = start_W + travelled_m * heading;
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(std::atan2(heading.y(), heading.x()), Eigen::Vector3d::UnitZ())
+                   .toRotationMatrix();
+  T.translation() = Eigen::Vector3d(p.x(), p.y(), 0.0);
+  return T;
+}
+
+Eigen::Isometry3d DrivePath::T_W_S(double t_s) const {
+  Eigen::Isometry3d T_base_S = Eigen::Isometry3d::Identity();
+  T_base_S.translation() = Eigen::Vector3d(0.0, 0.0, sensor_height_m);
+  return T_W_base(t_s) * T_base_S;
+}
+
+int SequenceParams::scan_count() const {
+  if (scans > 0) return scans;
+  // The small margin keeps an exact multiple (60 m / 3 m/s · 10 Hz = 200) from rounding down.
+  return static_cast<int>(std::floor(path.duration_s() * rate_hz + 1e-9)) + 1;
+}
+
+Eigen::Isometry3d SequenceParams::T_O_W() const {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  if (tilt_deg != 0.0) {
+    T.linear() = Eigen::AngleAxisd(radians(tilt_deg), Eigen::Vector3d::UnitX()).toRotationMatrix();
+  }
+  return T;
+}
+
+std::string SequenceParams::validate() const {
+  if (std::string e = lidar.validate(); !e.empty()) return e;
+  if (!(path.speed_mps > 0.0) || !std::isfinite(path.speed_mps)) return "speed must be > 0 m/s";
+  if (!(path.length_m() > 0.0)) return "the drive path must have a length";
+  if (!std::isfinite(path.sensor_height_m)) return "sensor height must be finite";
+  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz)) return "rate must be > 0 Hz";
+  if (scans < 0) return "scans must be >= 0 (0: drive the whole path)";
+  if (!std::isfinite(tilt_deg) || std::abs(tilt_deg) > 180.0) {
+    return "tilt must be in [-180, 180] deg";
+  }
+  if (scans > 1000000 || (scans == 0 && !(path.duration_s() * rate_hz < 1e6))) {
+    return "too many scans (more than 1000000)";
+  }
+  return {};
+}
+
+SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
+                              const std::filesystem::path& out_dir) {
+  SequenceResult result;
+  if (std::string e = params.validate(); !e.empty()) {
+    result.error = e;
+    return result;
+  }
+  const std::filesystem::path scans_dir = out_dir / "scans";
+  std::error_code ec;
+  std::filesystem::create_directories(scans_dir, ec);
+  if (ec) {
+    result.error = scans_dir.string() + ": " + ec.message();
+    return result;
+  }
+  for (const auto& entry : std::filesystem::directory_iterator(scans_dir, ec)) {
+    if (entry.is_regular_file() && is_scan_name(entry.path().filename().string())) {
+      std::filesystem::remove(entry.path(), ec);
+      if (ec) {
+        result.error = entry.path().string() + ": " + ec.message();
+        return result;
+      }
+    }
+  }
+  if (ec) {
+    result.error = scans_dir.string() + ": " + ec.message();
+    return result;
+  }
+
+  const Eigen::Isometry3d T_O_W = params.T_O_W();
+  if (!write_file(out_dir / "scene.json", scene.to_json(T_O_W), result.error) ||
+      !write_file(out_dir / "README.txt", readme(params), result.error)) {
+    return result;
+  }
+
+  const Lidar lidar(params.lidar);
+  GaussianNoise noise(params.seed);
+  std::vector<LidarReturn> returns;
+  std::vector<std::size_t> points_per_scan;
+  std::string poses, times, bytes;
+  const int n = params.scan_count();
+  for (int i = 0; i < n; ++i) {
+    const double t_s = params.stamp_s(i);
+    const Eigen::Isometry3d T_W_S = params.path.T_W_S(t_s);
+    lidar.scan(scene, T_W_S, t_s, &noise, returns);
+    bytes.clear();
+    bytes.reserve(returns.size() * 16);
+    for (const LidarReturn& r : returns) {
+      append_le(bytes, static_cast<float>(r.point_S.x()));
+      append_le(bytes, static_cast<float>(r.point_S.y()));
+      append_le(bytes, static_cast<float>(r.point_S.z()));
+      append_le(bytes, r.intensity);
+    }
+    if (!write_file(scans_dir / scan_name(i), bytes, result.error)) return result;
+    poses += pose_line(T_O_W * T_W_S);
+    times += number(t_s) + "\n";
+    points_per_scan.push_back(returns.size());
+  }
+  if (!write_file(out_dir / "poses.txt", poses, result.error) ||
+      !write_file(out_dir / "times.txt", times, result.error)) {
+    return result;
+  }
+
+  std::sort(points_per_scan.begin(), points_per_scan.end());
+  result.summary.scans = n;
+  result.summary.min_points = points_per_scan.front();
+  result.summary.median_points = points_per_scan[points_per_scan.size() / 2];
+  result.summary.max_points = points_per_scan.back();
+  return result;
+}
+
+}  // namespace tarmac::sim

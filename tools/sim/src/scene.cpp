@@ -1,0 +1,410 @@
+#include "tarmac/sim/scene.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+namespace tarmac::sim {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// The parameter interval [lo, hi] of a ray inside a convex solid; empty when lo > hi.
+struct Interval {
+  double lo = -kInf;
+  double hi = kInf;
+
+  bool empty() const { return lo > hi; }
+  void clip(double new_lo, double new_hi) {
+    lo = std::max(lo, new_lo);
+    hi = std::min(hi, new_hi);
+  }
+};
+
+constexpr Interval kEmpty{kInf, -kInf};
+
+/// Where o + t·d lies in the slab lo <= x <= hi (one coordinate).
+Interval slab(double o, double d, double lo, double hi) {
+  if (d == 0.0) return (o >= lo && o <= hi) ? Interval{} : kEmpty;
+  const double t0 = (lo - o) / d;
+  const double t1 = (hi - o) / d;
+  return {std::min(t0, t1), std::max(t0, t1)};
+}
+
+/// Real roots r0 <= r1 of a·t² + b·t + c (a != 0), computed without cancellation; false when
+/// there are none.
+bool solve_quadratic(double a, double b, double c, double& r0, double& r1) {
+  const double disc = b * b - 4.0 * a * c;
+  if (disc < 0.0) return false;
+  const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
+  if (q == 0.0) {  // b = 0 and c = 0: a double root at 0
+    r0 = r1 = 0.0;
+    return true;
+  }
+  r0 = q / a;
+  r1 = c / q;
+  if (r0 > r1) std::swap(r0, r1);
+  return true;
+}
+
+/// Nearest surface crossing at t >= 0 of a ray whose interval in a convex solid is `in`.
+std::optional<double> entry_or_exit(const Interval& in) {
+  if (in.empty() || in.hi < 0.0) return std::nullopt;
+  return in.lo >= 0.0 ? in.lo : in.hi;
+}
+
+int axis_index(Axis axis) {
+  return static_cast<int>(axis);
+}
+
+Interval interval(const Box& box, const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
+  Interval in;
+  for (int i = 0; i < 3 && !in.empty(); ++i) {
+    const Interval s = slab(o[i], d[i], box.min_W[i], box.max_W[i]);
+    in.clip(s.lo, s.hi);
+  }
+  return in;
+}
+
+Interval interval(const Cylinder& cyl, const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
+  const int a = axis_index(cyl.axis);
+  const int u = (a + 1) % 3;
+  const int v = (a + 2) % 3;
+  Interval in = slab(o[a], d[a], cyl.base_W[a], cyl.base_W[a] + cyl.length_m);
+  if (in.empty()) return in;
+  // Infinite cylinder: |(o + t·d − base) projected on the (u, v) plane|² <= r².
+  const double pu = o[u] - cyl.base_W[u];
+  const double pv = o[v] - cyl.base_W[v];
+  const double qa = d[u] * d[u] + d[v] * d[v];
+  const double qb = 2.0 * (pu * d[u] + pv * d[v]);
+  const double qc = pu * pu + pv * pv - cyl.radius_m * cyl.radius_m;
+  if (qa == 0.0) return qc <= 0.0 ? in : kEmpty;  // parallel to the axis
+  double r0 = 0.0, r1 = 0.0;
+  if (!solve_quadratic(qa, qb, qc, r0, r1)) return kEmpty;
+  in.clip(r0, r1);
+  return in;
+}
+
+Interval interval(const Cone& cone, const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
+  const double apex_z = cone.base_W.z() + cone.height_m;
+  // Between the base and the apex only the lower nappe of the double cone exists, and the solid
+  // there is convex: f(t) = horizontal² − k²·(apex_z − z)² <= 0 with k = radius / height.
+  Interval in = slab(o.z(), d.z(), cone.base_W.z(), apex_z);
+  if (in.empty()) return in;
+  const double k = cone.radius_m / cone.height_m;
+  const double k2 = k * k;
+  const double px = o.x() - cone.base_W.x();
+  const double py = o.y() - cone.base_W.y();
+  const double pz = apex_z - o.z();  // height below the apex
+  const double qa = d.x() * d.x() + d.y() * d.y() - k2 * d.z() * d.z();
+  const double qb = 2.0 * (px * d.x() + py * d.y() + k2 * pz * d.z());
+  const double qc = px * px + py * py - k2 * pz * pz;
+  if (qa == 0.0) {  // parallel to a generator: f is linear
+    if (qb == 0.0) return qc <= 0.0 ? in : kEmpty;
+    const double t = -qc / qb;
+    if (qb > 0.0) {
+      in.clip(-kInf, t);
+    } else {
+      in.clip(t, kInf);
+    }
+    return in;
+  }
+  double r0 = 0.0, r1 = 0.0;
+  if (!solve_quadratic(qa, qb, qc, r0, r1)) return qa > 0.0 ? kEmpty : in;
+  if (qa > 0.0) {
+    in.clip(r0, r1);
+    return in;
+  }
+  // f <= 0 outside [r0, r1]: one piece per nappe; keep the one below the apex inside the slab
+  // (the slab is finite here because a steep ray has d.z() != 0).
+  Interval below = in;
+  below.clip(-kInf, r0);
+  Interval above = in;
+  above.clip(r1, kInf);
+  const auto in_lower_nappe = [&](const Interval& piece) {
+    return !piece.empty() && o.z() + 0.5 * (piece.lo + piece.hi) * d.z() <= apex_z;
+  };
+  if (in_lower_nappe(below)) return below;
+  if (in_lower_nappe(above)) return above;
+  return kEmpty;
+}
+
+std::optional<double> nearest(const Plane& plane, const Eigen::Vector3d& o,
+                              const Eigen::Vector3d& d) {
+  const double denom = plane.normal_W.dot(d);
+  if (denom == 0.0) return std::nullopt;  // parallel: no crossing
+  const double t = (plane.offset_m - plane.normal_W.dot(o)) / denom;
+  if (!(t >= 0.0)) return std::nullopt;
+  return t;
+}
+
+template <typename ConvexSolid>
+std::optional<double> nearest(const ConvexSolid& solid, const Eigen::Vector3d& o,
+                              const Eigen::Vector3d& d) {
+  return entry_or_exit(interval(solid, o, d));
+}
+
+// ---- JSON writing (deterministic: shortest round-trip number formatting) ----
+
+std::string number(double value) {
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof(buf), value);
+  return std::string(buf, res.ptr);
+}
+
+std::string vec(const Eigen::Vector3d& v) {
+  return "[" + number(v.x()) + ", " + number(v.y()) + ", " + number(v.z()) + "]";
+}
+
+std::string quoted(std::string_view s) {
+  std::string out = "\"";
+  for (const char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+const char* axis_name(Axis axis) {
+  switch (axis) {
+    case Axis::kX: return "x";
+    case Axis::kY: return "y";
+    case Axis::kZ: return "z";
+  }
+  return "?";
+}
+
+std::string primitive_json(const Primitive& primitive) {
+  struct Visitor {
+    std::string operator()(const Plane& p) const {
+      return "{\"type\": \"plane\", \"normal\": " + vec(p.normal_W) +
+             ", \"offset_m\": " + number(p.offset_m) + "}";
+    }
+    std::string operator()(const Box& b) const {
+      return "{\"type\": \"box\", \"min\": " + vec(b.min_W) + ", \"max\": " + vec(b.max_W) + "}";
+    }
+    std::string operator()(const Cylinder& c) const {
+      return "{\"type\": \"cylinder\", \"axis\": \"" + std::string(axis_name(c.axis)) +
+             "\", \"base\": " + vec(c.base_W) + ", \"length_m\": " + number(c.length_m) +
+             ", \"radius_m\": " + number(c.radius_m) + "}";
+    }
+    std::string operator()(const Cone& c) const {
+      return "{\"type\": \"cone\", \"base\": " + vec(c.base_W) +
+             ", \"radius_m\": " + number(c.radius_m) + ", \"height_m\": " + number(c.height_m) +
+             "}";
+    }
+  };
+  return std::visit(Visitor{}, primitive);
+}
+
+}  // namespace
+
+Eigen::Vector3d LinearMotion::displacement_W(double t_s) const {
+  const double moving_s = std::clamp(t_s, start_s, std::max(start_s, stop_s)) - start_s;
+  return velocity_W_mps * moving_s;
+}
+
+std::optional<double> intersect(const Primitive& primitive, const Eigen::Vector3d& origin_W,
+                                const Eigen::Vector3d& dir_W) {
+  return std::visit([&](const auto& shape) { return nearest(shape, origin_W, dir_W); }, primitive);
+}
+
+bool contains(const Primitive& primitive, const Eigen::Vector3d& p_W) {
+  struct Visitor {
+    const Eigen::Vector3d& p;
+    bool operator()(const Plane& plane) const { return plane.normal_W.dot(p) < plane.offset_m; }
+    bool operator()(const Box& b) const {
+      return (p.array() >= b.min_W.array()).all() && (p.array() <= b.max_W.array()).all();
+    }
+    bool operator()(const Cylinder& c) const {
+      const int a = axis_index(c.axis);
+      const int u = (a + 1) % 3;
+      const int v = (a + 2) % 3;
+      const double du = p[u] - c.base_W[u];
+      const double dv = p[v] - c.base_W[v];
+      return p[a] >= c.base_W[a] && p[a] <= c.base_W[a] + c.length_m &&
+             du * du + dv * dv <= c.radius_m * c.radius_m;
+    }
+    bool operator()(const Cone& c) const {
+      const double h = p.z() - c.base_W.z();
+      if (h < 0.0 || h > c.height_m) return false;
+      const double r = c.radius_m * (1.0 - h / c.height_m);
+      const double dx = p.x() - c.base_W.x();
+      const double dy = p.y() - c.base_W.y();
+      return dx * dx + dy * dy <= r * r;
+    }
+  };
+  return std::visit(Visitor{p_W}, primitive);
+}
+
+Aabb bounds(const Primitive& primitive) {
+  struct Visitor {
+    Aabb operator()(const Plane& p) const {
+      Aabb box{Eigen::Vector3d::Constant(-kInf), Eigen::Vector3d::Constant(kInf)};
+      // An axis-aligned half-space is bounded along its normal; any other plane is not.
+      for (int i = 0; i < 3; ++i) {
+        if (std::abs(p.normal_W[i]) != 1.0) continue;
+        if (p.normal_W[i] > 0.0) {
+          box.max_W[i] = p.offset_m;
+        } else {
+          box.min_W[i] = -p.offset_m;
+        }
+      }
+      return box;
+    }
+    Aabb operator()(const Box& b) const { return {b.min_W, b.max_W}; }
+    Aabb operator()(const Cylinder& c) const {
+      const int a = axis_index(c.axis);
+      Aabb box{c.base_W.array() - c.radius_m, c.base_W.array() + c.radius_m};
+      box.min_W[a] = c.base_W[a];
+      box.max_W[a] = c.base_W[a] + c.length_m;
+      return box;
+    }
+    Aabb operator()(const Cone& c) const {
+      Aabb box{c.base_W.array() - c.radius_m, c.base_W.array() + c.radius_m};
+      box.min_W.z() = c.base_W.z();
+      box.max_W.z() = c.base_W.z() + c.height_m;
+      return box;
+    }
+  };
+  return std::visit(Visitor{}, primitive);
+}
+
+Primitive translated(const Primitive& primitive, const Eigen::Vector3d& offset_W) {
+  struct Visitor {
+    const Eigen::Vector3d& offset;
+    Primitive operator()(Plane p) const {
+      p.offset_m += p.normal_W.dot(offset);
+      return p;
+    }
+    Primitive operator()(Box b) const {
+      b.min_W += offset;
+      b.max_W += offset;
+      return b;
+    }
+    Primitive operator()(Cylinder c) const {
+      c.base_W += offset;
+      return c;
+    }
+    Primitive operator()(Cone c) const {
+      c.base_W += offset;
+      return c;
+    }
+  };
+  return std::visit(Visitor{offset_W}, primitive);
+}
+
+int Scene::add(std::string name, std::string kind, Primitive shape_W,
+               std::optional<LinearMotion> motion) {
+  Object object;
+  object.id = static_cast<int>(objects_.size());
+  object.name = std::move(name);
+  object.kind = std::move(kind);
+  object.shape_W = std::move(shape_W);
+  object.motion = std::move(motion);
+  objects_.push_back(std::move(object));
+  return objects_.back().id;
+}
+
+const Object* Scene::find(std::string_view name) const {
+  for (const Object& object : objects_) {
+    if (object.name == name) return &object;
+  }
+  return nullptr;
+}
+
+Primitive Scene::shape_at(int id, double t_s) const {
+  const Object& object = objects_.at(static_cast<std::size_t>(id));
+  if (!object.motion) return object.shape_W;
+  return translated(object.shape_W, object.motion->displacement_W(t_s));
+}
+
+Aabb Scene::bounds_at(int id, double t_s) const {
+  return bounds(shape_at(id, t_s));
+}
+
+std::optional<Hit> Scene::raycast(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
+                                  double max_range_m, double t_s) const {
+  const Eigen::Vector3d d = dir_W.normalized();
+  std::optional<Hit> best;
+  for (const Object& object : objects_) {
+    const std::optional<double> range_m = object.motion
+                                              ? intersect(shape_at(object.id, t_s), origin_W, d)
+                                              : intersect(object.shape_W, origin_W, d);
+    if (!range_m || *range_m > max_range_m) continue;
+    if (best && *range_m >= best->range_m) continue;  // ties go to the lower id
+    best = Hit{*range_m, origin_W + *range_m * d, object.id};
+  }
+  return best;
+}
+
+bool Scene::occupied(const Eigen::Vector3d& p_W, double t_s) const {
+  for (const Object& object : objects_) {
+    if (contains(shape_at(object.id, t_s), p_W)) return true;
+  }
+  return false;
+}
+
+std::string Scene::to_json(const Eigen::Isometry3d& T_world_W) const {
+  std::string out = "{\n";
+  out +=
+      "  \"frame\": \"scene frame: x forward along the apron, y left, z up, metres; ground plane "
+      "z = 0; time in seconds from the first scan\",\n";
+  out += "  \"T_world_scene\": [";
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      out += number(T_world_W.matrix()(r, c));
+      if (r < 2 || c < 3) out += ", ";
+    }
+  }
+  out += "],\n";
+  out += "  \"objects\": [\n";
+  for (const Object& object : objects_) {
+    out += "    {\"id\": " + std::to_string(object.id) + ", \"name\": " + quoted(object.name) +
+           ", \"kind\": " + quoted(object.kind) +
+           ", \"dynamic\": " + (object.dynamic() ? "true" : "false") +
+           ",\n     \"primitive\": " + primitive_json(object.shape_W);
+    if (object.motion) {
+      out += ",\n     \"motion\": {\"velocity_mps\": " + vec(object.motion->velocity_W_mps) +
+             ", \"start_s\": " + number(object.motion->start_s) +
+             ", \"stop_s\": " + number(object.motion->stop_s) + "}";
+    }
+    out += "}";
+    out += (object.id + 1 < static_cast<int>(objects_.size())) ? ",\n" : "\n";
+  }
+  out += "  ]\n}\n";
+  return out;
+}
+
+Scene Scene::airside_default() {
+  using V = Eigen::Vector3d;
+  Scene scene;
+  scene.add("ground", "ground", Plane{V::UnitZ(), 0.0});
+  // Parked aircraft, nose towards +x, fuselage parallel to the path 12 m to its left; the right
+  // wing reaches across the path 4 m up.
+  scene.add("fuselage", "fuselage", Cylinder{Axis::kX, V(10.0, 12.0, 3.0), 40.0, 2.0});
+  scene.add("wing_right", "wing", Box{V(26.0, -8.0, 4.0), V(34.0, 12.0, 4.4)});
+  scene.add("wing_left", "wing", Box{V(26.0, 12.0, 4.0), V(34.0, 32.0, 4.4)});
+  scene.add("engine_right", "engine", Cylinder{Axis::kX, V(23.0, 5.0, 2.2), 5.0, 1.0});
+  scene.add("engine_left", "engine", Cylinder{Axis::kX, V(23.0, 19.0, 2.2), 5.0, 1.0});
+  scene.add("gear_front", "landing_gear", Cylinder{Axis::kZ, V(29.0, 3.0, 0.0), 3.0, 0.3});
+  scene.add("gear_rear", "landing_gear", Cylinder{Axis::kZ, V(33.0, 3.0, 0.0), 3.0, 0.3});
+  // Jet bridge across the path, 4 m clearance, on pillars outside the path.
+  scene.add("jet_bridge", "jet_bridge", Box{V(52.0, -6.0, 4.0), V(56.0, 6.0, 7.0)});
+  scene.add("jet_bridge_pillar_right", "jet_bridge_pillar",
+            Cylinder{Axis::kZ, V(54.0, -5.0, 0.0), 4.0, 0.4});
+  scene.add("jet_bridge_pillar_left", "jet_bridge_pillar",
+            Cylinder{Axis::kZ, V(54.0, 5.0, 0.0), 4.0, 0.4});
+  scene.add("cone_right", "cone", Cone{V(20.0, -1.5, 0.0), 0.2, 0.5});
+  scene.add("cone_left", "cone", Cone{V(20.0, 1.5, 0.0), 0.2, 0.5});
+  scene.add("cone_path", "cone", Cone{V(40.0, 0.0, 0.0), 0.2, 0.5});
+  scene.add("debris", "debris", Box{V(46.9, 0.4, 0.0), V(47.1, 0.6, 0.1)});
+  // A tug crossing the path ahead of the vehicle, then parked clear of the path and aircraft.
+  scene.add("tug", "tug", Box{V(14.2, -5.5, 0.0), V(15.8, -2.5, 1.5)},
+            LinearMotion{V(0.0, 2.0, 0.0), 0.0, 6.0});
+  return scene;
+}
+
+}  // namespace tarmac::sim
