@@ -1,6 +1,8 @@
 #include "tarmac/core/occupancy_map.hpp"
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -14,10 +16,13 @@ int wrap(int i, int n) {
   return r < 0 ? r + n : r;
 }
 
-/// Rays are cast in fixed chunks and their voxels applied in fixed bands of the window, so the
-/// work splits the same way whatever the runner's thread count (determinism contract).
-constexpr std::size_t kRaysPerChunk = 2048;
-constexpr int kApplyBands = 8;
+/// Rays are split into a fixed number of tasks, each marking its own bit set, and the marks are
+/// applied in fixed ranges of the window, so the work splits the same way whatever the runner's
+/// thread count (determinism contract).
+constexpr std::size_t kRayTasks = 4;
+constexpr std::size_t kApplyTasks = 8;
+/// Free-space marks are tracked per block of 64 bit words (4096 voxels).
+constexpr int kBlockShift = 6;
 
 /// Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing" (Eurographics 1987), on
 /// the lattice [i·v, (i+1)·v), clipped to the window. Calls visit(slot) for each voxel from the
@@ -29,54 +34,87 @@ struct WindowGeometry {
   double voxel_size_m;
 };
 
+/// One axis of a traversal: position in window and ring coordinates, step and crossing times.
+struct AxisWalk {
+  int rel;         ///< window-relative index, in [0, n) while inside
+  int ring;        ///< ring-buffer index
+  int step;        ///< +1, −1 or 0
+  int n;           ///< window size along the axis
+  int stride;      ///< slot stride of one index
+  double t_max;    ///< ray parameter of the next boundary crossing
+  double t_delta;  ///< parameter length of one voxel
+
+  /// Steps once; updates the slot; false when the walk left the window.
+  bool advance(std::int64_t& slot) {
+    rel += step;
+    if (static_cast<unsigned>(rel) >= static_cast<unsigned>(n)) return false;
+    ring += step;
+    if (ring == n) {
+      ring = 0;
+      slot -= static_cast<std::int64_t>(n - 1) * stride;
+    } else if (ring < 0) {
+      ring = n - 1;
+      slot += static_cast<std::int64_t>(n - 1) * stride;
+    } else {
+      slot += static_cast<std::int64_t>(step) * stride;
+    }
+    t_max += t_delta;
+    return true;
+  }
+};
+
 template <typename Visit>
 std::uint64_t traverse(const WindowGeometry& w, const Eigen::Vector3d& origin_W,
                        const Eigen::Vector3d& end_W, bool include_end, Visit&& visit) {
   const Eigen::Vector3d o = origin_W / w.voxel_size_m;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - o;
-  int cur[3], rel[3], ring[3], step[3];  // NOLINT(cppcoreguidelines-init-variables): set below
-  double t_max[3], t_delta[3];
-  int remaining = 0;
+  const int strides[3] = {1, w.dims[0], w.dims[0] * w.dims[1]};
+  AxisWalk ax[3];  // NOLINT(cppcoreguidelines-pro-type-member-init): every field set below
+  std::int64_t remaining = 0;
   for (int a = 0; a < 3; ++a) {
-    cur[a] = static_cast<int>(std::floor(o[a]));
+    const int cur = static_cast<int>(std::floor(o[a]));
     const int last = static_cast<int>(std::floor(e[a]));
-    remaining += std::abs(last - cur[a]);
-    rel[a] = cur[a] - w.min[a];
-    ring[a] = wrap(cur[a], w.dims[a]);
+    remaining += std::abs(last - cur);
+    AxisWalk& k = ax[a];
+    k.rel = cur - w.min[a];
+    k.ring = wrap(cur, w.dims[a]);
+    k.n = w.dims[a];
+    k.stride = strides[a];
     if (d[a] > 0) {
-      step[a] = 1;
-      t_delta[a] = 1.0 / d[a];
-      t_max[a] = (cur[a] + 1 - o[a]) * t_delta[a];
+      k.step = 1;
+      k.t_delta = 1.0 / d[a];
+      k.t_max = (cur + 1 - o[a]) * k.t_delta;
     } else if (d[a] < 0) {
-      step[a] = -1;
-      t_delta[a] = -1.0 / d[a];
-      t_max[a] = (o[a] - cur[a]) * t_delta[a];
+      k.step = -1;
+      k.t_delta = -1.0 / d[a];
+      k.t_max = (o[a] - cur) * k.t_delta;
     } else {
-      step[a] = 0;
-      t_delta[a] = std::numeric_limits<double>::infinity();
-      t_max[a] = std::numeric_limits<double>::infinity();
+      k.step = 0;
+      k.t_delta = std::numeric_limits<double>::infinity();
+      k.t_max = std::numeric_limits<double>::infinity();
     }
   }
-  const int nx = w.dims[0], ny = w.dims[1], nz = w.dims[2];
+  for (const AxisWalk& k : ax) {
+    if (static_cast<unsigned>(k.rel) >= static_cast<unsigned>(k.n)) return 0;
+  }
+  // Scalars the loop keeps in registers; the axis choice breaks ties as x, then y, before z.
+  AxisWalk x = ax[0], y = ax[1], z = ax[2];
+  std::int64_t slot = static_cast<std::int64_t>(z.ring) * z.stride +
+                      static_cast<std::int64_t>(y.ring) * y.stride + x.ring;
   std::uint64_t visits = 0;
-  const auto inside = [&] {
-    return rel[0] >= 0 && rel[0] < nx && rel[1] >= 0 && rel[1] < ny && rel[2] >= 0 && rel[2] < nz;
-  };
   for (;; --remaining) {
     if (remaining == 0 && !include_end) break;
-    if (!inside()) break;
-    visit(static_cast<std::uint32_t>((ring[2] * ny + ring[1]) * nx + ring[0]), ring[2]);
+    visit(static_cast<std::uint32_t>(slot));
     ++visits;
     if (remaining == 0) break;
-    const int a =
-        t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
-    cur[a] += step[a];
-    rel[a] += step[a];
-    ring[a] += step[a];
-    if (ring[a] == w.dims[a]) ring[a] = 0;
-    if (ring[a] < 0) ring[a] = w.dims[a] - 1;
-    t_max[a] += t_delta[a];
+    bool inside;  // NOLINT(cppcoreguidelines-init-variables): every branch sets it
+    if (x.t_max < y.t_max) {
+      inside = x.t_max < z.t_max ? x.advance(slot) : z.advance(slot);
+    } else {
+      inside = y.t_max < z.t_max ? y.advance(slot) : z.advance(slot);
+    }
+    if (!inside) break;
   }
   return visits;
 }
@@ -125,11 +163,20 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   TARMAC_ASSERT(params.validate().ok(), "OccupancyParams must be validated first");
   const std::size_t n = static_cast<std::size_t>(dims_.x()) * dims_.y() * dims_.z();
   log_odds_.assign(n, kUnknown);
-  touched_.assign(n, 0);
+  const std::size_t words = (n + 63) / 64;
+  const std::size_t blocks = (words >> kBlockShift) + 1;
+  hit_bits_.assign(words, 0);
+  free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
+  dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>(blocks, 0));
 }
 
 std::size_t OccupancyMap::memory_bytes() const {
-  return log_odds_.capacity() * sizeof(float) + touched_.capacity() * sizeof(std::uint32_t);
+  std::size_t bytes = log_odds_.capacity() * sizeof(float) +
+                      hit_bits_.capacity() * sizeof(std::uint64_t) +
+                      hit_slots_.capacity() * sizeof(std::uint32_t);
+  for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
+  for (const auto& d : dirty_blocks_) bytes += d.capacity();
+  return bytes;
 }
 
 VoxelIndex OccupancyMap::voxel_of(const Eigen::Vector3d& p_W) const {
@@ -206,18 +253,11 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
                                              TaskRunner& runner) {
   OccupancyUpdateStats stats;
   if (!placed_) recenter(origin_W);
-  // A new epoch per scan: touched_ == 2·epoch (+1 for a hit) means "updated in this scan".
-  if (epoch_ >= std::numeric_limits<std::uint32_t>::max() / 2 - 1) {
-    std::fill(touched_.begin(), touched_.end(), 0u);
-    epoch_ = 0;
-  }
-  ++epoch_;
-  const std::uint32_t free_mark = 2 * epoch_;
-  const std::uint32_t hit_mark = free_mark + 1;
   const double max_range = params_.max_range_m;
   const double clear_range = params_.clearing_range_m;
 
   // 1. Hits first, so that a voxel hit by any ray of this scan is never also cleared by it.
+  hit_slots_.clear();
   for (const auto& p : points_W) {
     if (!p.allFinite()) continue;
     const Eigen::Vector3d pd = p.cast<double>();
@@ -228,36 +268,34 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       continue;
     }
     const std::size_t s = slot(v);
-    if (touched_[s] != hit_mark) {
-      touched_[s] = hit_mark;
+    std::uint64_t& word = hit_bits_[s >> 6];
+    const std::uint64_t bit = std::uint64_t{1} << (s & 63);
+    if ((word & bit) == 0) {
+      word |= bit;
+      hit_slots_.push_back(static_cast<std::uint32_t>(s));
       update(s, true);
       ++stats.hit_updates;
     }
   }
 
-  // 2. Free space: rays cast in fixed chunks (in parallel), their voxels binned by window band,
-  //    then each band applied by one task in chunk order. Membership, not order, decides each
-  //    voxel's update, so the result is the same for any thread count.
-  const std::size_t n_rays = points_W.size() + clearing_dirs_W.size();
-  const std::size_t n_chunks = (n_rays + kRaysPerChunk - 1) / kRaysPerChunk;
-  bins_.resize(std::max(bins_.size(), n_chunks * kApplyBands));
+  // 2. Free space: each ray task marks the voxels its rays pass through in its own bit set
+  //    (contiguous ray ranges, so the split does not depend on the thread count).
+  const std::size_t n_points = points_W.size();
+  const std::size_t n_rays = n_points + clearing_dirs_W.size();
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
-  // Bands are ranges of ring layers, looked up per visit (no division in the inner loop).
-  const int band_height = (dims_.z() + kApplyBands - 1) / kApplyBands;
-  band_of_z_.resize(static_cast<std::size_t>(dims_.z()));
-  for (int z = 0; z < dims_.z(); ++z)
-    band_of_z_[static_cast<std::size_t>(z)] = static_cast<std::uint8_t>(z / band_height);
-  const std::uint8_t* band_of_z = band_of_z_.data();
-  std::vector<std::uint64_t> chunk_visits(n_chunks, 0);
-  runner.parallel_for(n_chunks, [&](std::size_t chunk) {
-    std::vector<std::uint32_t>* bins = &bins_[chunk * kApplyBands];
-    for (int b = 0; b < kApplyBands; ++b) bins[b].clear();
-    const auto visit = [&](std::uint32_t s, int ring_z) { bins[band_of_z[ring_z]].push_back(s); };
-    const std::size_t begin = chunk * kRaysPerChunk;
-    const std::size_t end = std::min(n_rays, begin + kRaysPerChunk);
+  std::array<std::uint64_t, kRayTasks> task_visits{};
+  runner.parallel_for(kRayTasks, [&](std::size_t task) {
+    std::uint64_t* bits = free_bits_[task].data();
+    std::uint8_t* dirty = dirty_blocks_[task].data();
+    const auto visit = [bits, dirty](std::uint32_t s) {
+      bits[s >> 6] |= std::uint64_t{1} << (s & 63);
+      dirty[s >> (6 + kBlockShift)] = 1;
+    };
+    const std::size_t begin = n_rays * task / kRayTasks;
+    const std::size_t end = n_rays * (task + 1) / kRayTasks;
     std::uint64_t visits = 0;
     for (std::size_t i = begin; i < end; ++i) {
-      if (i < points_W.size()) {
+      if (i < n_points) {
         const Eigen::Vector3f& p = points_W[i];
         if (!p.allFinite()) continue;
         const Eigen::Vector3d pd = p.cast<double>();
@@ -269,33 +307,57 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
                              visit);
         }
       } else {
-        const Eigen::Vector3f& dir = clearing_dirs_W[i - points_W.size()];
+        const Eigen::Vector3f& dir = clearing_dirs_W[i - n_points];
         const double norm = dir.cast<double>().norm();
         if (!dir.allFinite() || norm == 0.0 || clear_range <= 0.0) continue;
         visits += traverse(w, origin_W, origin_W + dir.cast<double>() * (clear_range / norm), true,
                            visit);
       }
     }
-    chunk_visits[chunk] = visits;
+    task_visits[task] = visits;
   });
-  std::vector<std::uint64_t> band_updates(kApplyBands, 0);
-  runner.parallel_for(kApplyBands, [&](std::size_t band) {
+
+  // 3. Apply: fixed ranges of blocks, each voxel marked by any task and not hit gets one miss.
+  //    The marks are cleared as they are read, ready for the next scan.
+  const std::size_t n_blocks = dirty_blocks_[0].size();
+  const std::size_t n_words = hit_bits_.size();
+  std::array<std::uint64_t, kApplyTasks> task_updates{};
+  runner.parallel_for(kApplyTasks, [&](std::size_t task) {
     std::uint64_t updates = 0;
-    for (std::size_t chunk = 0; chunk < n_chunks; ++chunk) {
-      for (const std::uint32_t s : bins_[chunk * kApplyBands + band]) {
-        std::uint32_t& t = touched_[s];
-        if (t == hit_mark || t == free_mark) continue;
-        t = free_mark;
-        float& l = log_odds_[s];
-        l = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);  // a miss only lowers
-        ++updates;
+    const std::size_t b_begin = n_blocks * task / kApplyTasks;
+    const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
+    for (std::size_t b = b_begin; b < b_end; ++b) {
+      bool any = false;
+      for (std::size_t t = 0; t < kRayTasks; ++t) {
+        any = any || dirty_blocks_[t][b] != 0;
+        dirty_blocks_[t][b] = 0;
+      }
+      if (!any) continue;
+      const std::size_t w_begin = b << kBlockShift;
+      const std::size_t w_end = std::min(n_words, (b + 1) << kBlockShift);
+      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
+        std::uint64_t marks = 0;
+        for (std::size_t t = 0; t < kRayTasks; ++t) {
+          marks |= free_bits_[t][wi];
+          free_bits_[t][wi] = 0;
+        }
+        marks &= ~hit_bits_[wi];
+        while (marks != 0) {
+          const int bit = std::countr_zero(marks);
+          marks &= marks - 1;
+          float& l = log_odds_[(wi << 6) + static_cast<std::size_t>(bit)];
+          l = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);  // a miss only lowers
+          ++updates;
+        }
       }
     }
-    band_updates[band] = updates;
+    task_updates[task] = updates;
   });
+  for (const std::uint32_t s : hit_slots_) hit_bits_[s >> 6] = 0;
+
   stats.rays = n_rays;
-  for (const auto v : chunk_visits) stats.voxel_visits += v;
-  for (const auto u : band_updates) stats.miss_updates += u;
+  for (const auto v : task_visits) stats.voxel_visits += v;
+  for (const auto u : task_updates) stats.miss_updates += u;
   return stats;
 }
 

@@ -110,13 +110,17 @@ class OccupancyMap {
   VoxelIndex min_;
   float l_hit_, l_miss_, l_min_, l_max_;
   std::vector<float> log_odds_;
-  /// Per-voxel scan epoch ×2 (+1 when the voxel was hit in that scan): once-per-scan updates.
-  std::vector<std::uint32_t> touched_;
-  std::uint32_t epoch_ = 0;
+  /// Per-scan marks, one bit per window voxel in slot order: the voxels this scan's returns hit,
+  /// and, per ray task, the voxels its rays passed through. A bit set costs far less memory
+  /// traffic than a list of visits (a 400×400×40 window is 0.8 MB of bits, cache-resident), and
+  /// membership is all that decides an update, so the result is independent of ray order.
+  std::vector<std::uint64_t> hit_bits_;
+  std::vector<std::vector<std::uint64_t>> free_bits_;
+  /// Per ray task, one flag per block of 64 words (4096 voxels) that holds any free bit, so the
+  /// apply pass skips the untouched part of the window.
+  std::vector<std::vector<std::uint8_t>> dirty_blocks_;
+  std::vector<std::uint32_t> hit_slots_;  ///< to clear hit_bits_ after the scan
   bool placed_ = false;
-  /// Per (ray chunk, window band) voxel slots of one scan; capacity kept across scans.
-  std::vector<std::vector<std::uint32_t>> bins_;
-  std::vector<std::uint8_t> band_of_z_;
 };
 
 /// ln(p / (1 − p)).
