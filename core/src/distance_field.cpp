@@ -80,7 +80,7 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
   out.gradient_y.resize(n);
   out.gradient_z.resize(n);
   s.sq.resize(n);
-  for (auto& site : s.site) site.resize(n);
+  for (int a = 0; a < 3; ++a) s.site[a].resize(a < 2 || nz > 1 ? n : 0);
   const int longest = std::max({nx, ny, nz});
   const auto ensure = [&](auto& lines) {
     lines.resize(kTasksPerPass);
@@ -91,22 +91,24 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
   ensure(s.line_arg);
   ensure(s.line_z);
   ensure(s.line_d);
-  for (auto& l : s.line_s) ensure(l);
+  ensure(s.line_s[0]);
+  ensure(s.line_s[1]);
 
   const auto is_site = [&](CellState c) {
     return c == CellState::kOccupied ||
            (c == CellState::kUnknown && policy == UnknownPolicy::kUnknownIsOccupied);
   };
 
-  // Pass along x builds, per cell, the squared distance to the nearest site in its row.
-  // Passes along y and z take lower envelopes of the previous pass's result. Each line's
-  // nearest site is carried as 3 integer coordinates.
+  // Pass along x builds, per cell, the squared distance to the nearest site in its row and that
+  // site's x. The pass along y takes the lower envelope of each column: the winner's x is copied
+  // from the cell it came from, its y is the argmin. The pass along z does the same for x and y.
+  // So each pass carries only the coordinates of the axes before it.
+  const std::size_t plane = static_cast<std::size_t>(nx) * ny;
   const int lens[3] = {nx, ny, nz};
-  const std::size_t strides[3] = {1, static_cast<std::size_t>(nx),
-                                  static_cast<std::size_t>(nx) * ny};
-  for (int axis = 0; axis < 3; ++axis) {
+  const std::size_t strides[3] = {1, static_cast<std::size_t>(nx), plane};
+  const int passes = nz == 1 ? 2 : 3;
+  for (int axis = 0; axis < passes; ++axis) {
     const int len = lens[axis];
-    if (axis == 2 && nz == 1) break;
     const std::size_t stride = strides[axis];
     const std::size_t lines = n / static_cast<std::size_t>(len);
     runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
@@ -115,74 +117,66 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
       std::int32_t* arg = s.line_arg[task].data();
       std::int32_t* v = s.line_v[task].data();
       float* z = s.line_z[task].data();
-      std::int32_t* site_copy[3] = {s.line_s[0][task].data(), s.line_s[1][task].data(),
-                                    s.line_s[2][task].data()};
+      std::int32_t* carried[2] = {s.line_s[0][task].data(), s.line_s[1][task].data()};
       const std::size_t first = lines * task / kTasksPerPass;
       const std::size_t last = lines * (task + 1) / kTasksPerPass;
       for (std::size_t line = first; line < last; ++line) {
         // The line's first cell: line enumerates the other two axes.
-        std::size_t base;
+        const std::size_t base = axis == 0   ? line * static_cast<std::size_t>(nx)
+                                 : axis == 1 ? (line / nx) * plane + (line % nx)
+                                             : line;
         if (axis == 0) {
-          base = line * static_cast<std::size_t>(nx);
-        } else if (axis == 1) {
-          base = (line / nx) * strides[2] + (line % nx);
+          for (int q = 0; q < len; ++q) f[q] = is_site(states[base + q]) ? 0.0f : kInf;
         } else {
-          base = line;
-        }
-        for (int q = 0; q < len; ++q) {
-          const std::size_t i = base + q * stride;
-          if (axis == 0) {
-            f[q] = is_site(states[i]) ? 0.0f : kInf;
-          } else {
+          for (int q = 0; q < len; ++q) {
+            const std::size_t i = base + q * stride;
             f[q] = s.sq[i];
-            for (int a = 0; a < 3; ++a) site_copy[a][q] = s.site[a][i];
+            for (int a = 0; a < axis; ++a) carried[a][q] = s.site[a][i];
           }
         }
         edt_1d(f, len, d, arg, v, z);
         for (int q = 0; q < len; ++q) {
           const std::size_t i = base + q * stride;
           s.sq[i] = d[q];
-          if (arg[q] < 0) {
-            for (int a = 0; a < 3; ++a) s.site[a][i] = -1;
-          } else if (axis == 0) {
-            s.site[0][i] = arg[q];
-            s.site[1][i] = static_cast<std::int32_t>((i / nx) % ny);
-            s.site[2][i] = static_cast<std::int32_t>(i / (static_cast<std::size_t>(nx) * ny));
-          } else {
-            for (int a = 0; a < 3; ++a) s.site[a][i] = site_copy[a][arg[q]];
-          }
+          const std::int32_t from = arg[q];
+          for (int a = 0; a < axis; ++a) s.site[a][i] = from < 0 ? -1 : carried[a][from];
+          s.site[axis][i] = from;
         }
       }
     });
   }
 
-  // Metres and gradients from the nearest site.
+  // Metres and gradients from the nearest site, row by row.
+  const std::size_t rows = static_cast<std::size_t>(ny) * nz;
   runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
-    const std::size_t first = n * task / kTasksPerPass;
-    const std::size_t last = n * (task + 1) / kTasksPerPass;
-    for (std::size_t i = first; i < last; ++i) {
-      float& dist = out.distance_m[i];
-      float& gx = out.gradient_x[i];
-      float& gy = out.gradient_y[i];
-      float& gz = out.gradient_z[i];
-      gx = gy = gz = 0.0f;
-      if (states[i] == CellState::kUnknown && policy == UnknownPolicy::kReportUnknown) {
-        dist = std::nanf("");
-        continue;
-      }
-      if (s.sq[i] == kInf) {
-        dist = kInf;
-        continue;
-      }
-      const double r = std::sqrt(static_cast<double>(s.sq[i]));
-      dist = static_cast<float>(r * cell_size_m);
-      if (r > 0.0) {
-        const int x = static_cast<int>(i % nx);
-        const int y = static_cast<int>((i / nx) % ny);
-        const int zz = static_cast<int>(i / (static_cast<std::size_t>(nx) * ny));
-        gx = static_cast<float>((x - s.site[0][i]) / r);
-        gy = static_cast<float>((y - s.site[1][i]) / r);
-        gz = static_cast<float>((zz - s.site[2][i]) / r);
+    const std::size_t first = rows * task / kTasksPerPass;
+    const std::size_t last = rows * (task + 1) / kTasksPerPass;
+    for (std::size_t row = first; row < last; ++row) {
+      const int y = static_cast<int>(row % ny);
+      const int zz = static_cast<int>(row / ny);
+      const std::size_t base = row * static_cast<std::size_t>(nx);
+      for (int x = 0; x < nx; ++x) {
+        const std::size_t i = base + x;
+        float& dist = out.distance_m[i];
+        float& gx = out.gradient_x[i];
+        float& gy = out.gradient_y[i];
+        float& gz = out.gradient_z[i];
+        gx = gy = gz = 0.0f;
+        if (states[i] == CellState::kUnknown && policy == UnknownPolicy::kReportUnknown) {
+          dist = std::nanf("");
+          continue;
+        }
+        if (s.sq[i] == kInf) {
+          dist = kInf;
+          continue;
+        }
+        const double r = std::sqrt(static_cast<double>(s.sq[i]));
+        dist = static_cast<float>(r * cell_size_m);
+        if (r > 0.0) {
+          gx = static_cast<float>((x - s.site[0][i]) / r);
+          gy = static_cast<float>((y - s.site[1][i]) / r);
+          if (passes == 3) gz = static_cast<float>((zz - s.site[2][i]) / r);
+        }
       }
     }
   });

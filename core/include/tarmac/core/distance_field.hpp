@@ -46,7 +46,7 @@ struct DistanceFieldScratch {
   std::vector<std::vector<float>> line_f;  // per task: 1D input
   std::vector<std::vector<std::int32_t>> line_v, line_arg;
   std::vector<std::vector<float>> line_z, line_d;
-  std::vector<std::vector<std::int32_t>> line_s[3];
+  std::vector<std::vector<std::int32_t>> line_s[2];  // per task: carried site coordinates
 };
 
 /// Computes the exact distance field of `states` (dims.z() == 1 for 2D). Lines are split into a
