@@ -22,6 +22,26 @@ void for_row_runs(const OccupancyMap& map, const float* layer, int wy, Fn&& fn) 
   if (rx0 > 0) fn(nx - rx0, row, rx0);
 }
 
+/// lowest[k] = z where layer z is occupied (called from the top layer down).
+void mark_lowest(std::int16_t* __restrict lowest, const float* __restrict log_odds, int count,
+                 std::int16_t z) {
+  for (int k = 0; k < count; ++k) lowest[k] = log_odds[k] > 0.0f ? z : lowest[k];
+}
+
+/// Accumulates, for one layer z of a row run, whether each column's envelope holds a known
+/// voxel and an obstacle voxel (occupied, at least lo_layers above the column's ground).
+void mark_envelope(std::uint8_t* __restrict known, std::uint8_t* __restrict obstacle,
+                   const std::int16_t* __restrict ground, const float* __restrict log_odds,
+                   int count, int z, int lo_layers, int top_layers) {
+  for (int k = 0; k < count; ++k) {
+    const int above = z - ground[k];
+    const bool envelope = above >= 0 && above < top_layers;
+    const float l = log_odds[k];
+    known[k] |= static_cast<std::uint8_t>(envelope & (l != OccupancyMap::kUnknown));
+    obstacle[k] |= static_cast<std::uint8_t>(envelope & (above >= lo_layers) & (l > 0.0f));
+  }
+}
+
 }  // namespace
 
 Status CostmapParams::validate() const {
@@ -95,14 +115,15 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
-    for (int z = 0; z < nz; ++z) {
+    // Top down, overwriting: what stays is the lowest occupied layer. A plain select per cell,
+    // which the compiler vectorises (the "first occupied from below" test did not).
+    for (int z = nz - 1; z >= 0; --z) {
       const float* layer = map.ring_layer(z);
       const auto zz = static_cast<std::int16_t>(z);
       for (int y = y0; y < y1; ++y) {
         std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
         for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
-          std::int16_t* lo = low + x0;
-          for (int k = 0; k < count; ++k) lo[k] = (lo[k] < 0 && l[k] > 0.0f) ? zz : lo[k];
+          mark_lowest(low + x0, l, count, zz);
         });
       }
     }
@@ -183,6 +204,10 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   auto& ground_layer = out.ground_layer;
   ground_layer.resize(geometry.cell_count());
   auto& classes = out.column_class.cells();
+  auto& any_known = out.any_known;
+  auto& any_obstacle = out.any_obstacle;
+  any_known.resize(geometry.cell_count());
+  any_obstacle.resize(geometry.cell_count());
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
@@ -196,29 +221,39 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
         const int ground = low >= 0 && std::abs(low - estimate) <= 1 ? low : estimate;
         ground_layer[i] = static_cast<std::int16_t>(ground);
         out.ground_z_m.cells()[i] = static_cast<float>((wmin.z() + ground + 0.5) * v);
-        classes[i] = static_cast<std::uint8_t>(ColumnClass::kUnknown);
       }
     }
-    // Layer by layer: a voxel counts when its bottom lies below ground + envelope top.
+    // Layer by layer, only through the layers some column's envelope reaches: a voxel counts
+    // when its bottom lies below ground + envelope top. A column is an obstacle when any
+    // envelope voxel at least lo_layers above its ground is occupied, free when any envelope
+    // voxel is known, unknown otherwise (so the result does not depend on the layer order).
     const int top_layers = static_cast<int>(std::ceil(hi_m / v + 0.5));  // above − 0.5 < hi/v
-    for (int z = 0; z < nz; ++z) {
+    const std::size_t r0 = static_cast<std::size_t>(y0) * nx;
+    const std::size_t r1 = static_cast<std::size_t>(y1) * nx;
+    if (r0 == r1) return;
+    const auto [gmin, gmax] =
+        std::minmax_element(ground_layer.begin() + static_cast<std::ptrdiff_t>(r0),
+                            ground_layer.begin() + static_cast<std::ptrdiff_t>(r1));
+    std::fill(any_known.begin() + static_cast<std::ptrdiff_t>(r0),
+              any_known.begin() + static_cast<std::ptrdiff_t>(r1), 0);
+    std::fill(any_obstacle.begin() + static_cast<std::ptrdiff_t>(r0),
+              any_obstacle.begin() + static_cast<std::ptrdiff_t>(r1), 0);
+    const int z_begin = std::max(0, static_cast<int>(*gmin));
+    const int z_end = std::min(nz, static_cast<int>(*gmax) + top_layers);
+    for (int z = z_begin; z < z_end; ++z) {
       const float* layer = map.ring_layer(z);
       for (int y = y0; y < y1; ++y) {
         const std::size_t row = static_cast<std::size_t>(y) * nx;
         for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
-          const std::int16_t* gl = &ground_layer[row + x0];
-          std::uint8_t* cls = &classes[row + x0];
-          for (int k = 0; k < count; ++k) {
-            const int above = z - gl[k];
-            if (above < 0 || above >= top_layers || l[k] == OccupancyMap::kUnknown ||
-                cls[k] == static_cast<std::uint8_t>(ColumnClass::kObstacle)) {
-              continue;
-            }
-            cls[k] = static_cast<std::uint8_t>(
-                above >= lo_layers && l[k] > 0.0f ? ColumnClass::kObstacle : ColumnClass::kFree);
-          }
+          mark_envelope(&any_known[row + x0], &any_obstacle[row + x0], &ground_layer[row + x0], l,
+                        count, z, lo_layers, top_layers);
         });
       }
+    }
+    for (std::size_t i = r0; i < r1; ++i) {
+      classes[i] = static_cast<std::uint8_t>(any_obstacle[i] != 0 ? ColumnClass::kObstacle
+                                             : any_known[i] != 0  ? ColumnClass::kFree
+                                                                  : ColumnClass::kUnknown);
     }
   });
 

@@ -67,6 +67,8 @@ struct CostmapLayers {
   DistanceFieldScratch scratch;
   std::vector<std::int16_t> lowest_occupied;  ///< per cell, window layer or −1
   std::vector<std::int16_t> ground_layer;     ///< per cell, window layer of the ground voxel
+  std::vector<std::uint8_t> any_known;        ///< per cell: some envelope voxel observed
+  std::vector<std::uint8_t> any_obstacle;     ///< per cell: some envelope voxel is an obstacle
 };
 
 /// Builds the costmap of the occupancy window at the window's horizontal resolution.
