@@ -186,6 +186,7 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     r.scalar<float>("clamp_max", o.clamp_max, 0.5001f, 0.9999f);
     r.scalar<double>("max_range_m", o.max_range_m, 0.1, 1000.0);
     r.scalar<double>("clearing_range_m", o.clearing_range_m, 0.0, 1000.0);
+    r.scalar<double>("ground_radius_m", o.ground_radius_m, 0.0, 10.0);
   });
   root.map("costmap", [&](MapReader& r) {
     auto& c = p.costmap;
@@ -197,6 +198,8 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     r.scalar<double>("cost_scaling_factor", c.cost_scaling_factor, 0.01, 100.0);
     r.scalar<double>("ground_cell_m", c.ground_cell_m, 0.05, 20.0);
     r.scalar<double>("max_ground_step_m", c.max_ground_step_m, 0.01, 10.0);
+    r.scalar<double>("max_ground_slope", c.max_ground_slope, 0.0, 1.0);
+    r.scalar<double>("ground_tolerance_m", c.ground_tolerance_m, 0.0, 10.0);
     if (const int i = r.choice("unknown_cost", kUnknownCost); i >= 0) {
       c.unknown_cost = static_cast<core::UnknownCost>(i);
     }
@@ -300,6 +303,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "clamp_max" << YAML::Value << o.clamp_max;
   out << YAML::Key << "max_range_m" << YAML::Value << o.max_range_m;
   out << YAML::Key << "clearing_range_m" << YAML::Value << o.clearing_range_m;
+  out << YAML::Key << "ground_radius_m" << YAML::Value << o.ground_radius_m;
   out << YAML::EndMap;
   const auto& c = m.costmap;
   out << YAML::Key << "costmap" << YAML::Value << YAML::BeginMap;
@@ -311,6 +315,8 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "cost_scaling_factor" << YAML::Value << c.cost_scaling_factor;
   out << YAML::Key << "ground_cell_m" << YAML::Value << c.ground_cell_m;
   out << YAML::Key << "max_ground_step_m" << YAML::Value << c.max_ground_step_m;
+  out << YAML::Key << "max_ground_slope" << YAML::Value << c.max_ground_slope;
+  out << YAML::Key << "ground_tolerance_m" << YAML::Value << c.ground_tolerance_m;
   out << YAML::Key << "unknown_cost" << YAML::Value
       << kUnknownCost[static_cast<int>(c.unknown_cost)];
   out << YAML::EndMap << YAML::EndMap;

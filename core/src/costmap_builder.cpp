@@ -60,6 +60,10 @@ Status CostmapParams::validate() const {
   if (!(cost_scaling_factor > 0.0)) return bad("cost_scaling_factor", "must be > 0");
   if (!(ground_cell_m > 0.0)) return bad("ground_cell_m", "must be > 0");
   if (!(max_ground_step_m > 0.0)) return bad("max_ground_step_m", "must be > 0");
+  if (!(max_ground_slope >= 0.0 && max_ground_slope <= 1.0)) {
+    return bad("max_ground_slope", "must be in [0, 1]");
+  }
+  if (!(ground_tolerance_m >= 0.0)) return bad("ground_tolerance_m", "must be >= 0");
   return Ok{};
 }
 
@@ -93,7 +97,7 @@ bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vec
 }
 
 void build_costmap(const OccupancyMap& map, const CostmapParams& params,
-                   const Eigen::Vector3d& base_W, std::span<const VirtualZone> zones,
+                   const Eigen::Isometry3d& T_W_B, std::span<const VirtualZone> zones,
                    std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner) {
   const double v = map.params().voxel_size_m;
   const Eigen::Vector3i dims = map.window_size();
@@ -139,14 +143,36 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
     }
   }
 
-  // 2. Reject cells far above their neighbours (a truck roof, a wing seen from afar with no
-  //    ground below), then fill gaps from neighbours; what stays empty gets the vehicle's ground.
+  // 2. Reject cells that cannot be ground: far off the plane of the vehicle's own wheels
+  //    (extended with the steepest slope allowed; the world frame need not be gravity-aligned,
+  //    the vehicle's z axis is the local "up") — a wing or a fuselage seen with no ground under
+  //    it — or far above their neighbours (a truck roof). Then fill gaps from neighbours; what
+  //    stays empty gets the vehicle's plane.
+  const Eigen::Vector3d base_W = T_W_B.translation();
+  const Eigen::Vector3d up_W = T_W_B.linear().col(2);
+  const double up_z = std::max(up_W.z(), 0.1);  // a vehicle on its side has no ground plane
+  // Expected ground layer (window layers, voxel bottom) at a map-frame (x, y).
+  const auto plane_layer = [&](double x_m, double y_m) {
+    const double z_m =
+        base_W.z() - (up_W.x() * (x_m - base_W.x()) + up_W.y() * (y_m - base_W.y())) / up_z;
+    return static_cast<float>(std::floor(z_m / v) - wmin.z());
+  };
+  const auto coarse_center = [&](int cx, int cy) {
+    return Eigen::Vector2d((wmin.x() + (cx + 0.5) * g) * v, (wmin.y() + (cy + 0.5) * g) * v);
+  };
   const float step_vox = static_cast<float>(params.max_ground_step_m / v);
   std::vector<float> filtered = coarse;
   for (int cy = 0; cy < gy; ++cy) {
     for (int cx = 0; cx < gx; ++cx) {
       const float c = coarse[static_cast<std::size_t>(cy) * gx + cx];
       if (std::isnan(c)) continue;
+      const Eigen::Vector2d center = coarse_center(cx, cy);
+      const double reach_m =
+          params.ground_tolerance_m + params.max_ground_slope * (center - base_W.head<2>()).norm();
+      if (std::abs(c - plane_layer(center.x(), center.y())) > reach_m / v) {
+        filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
+        continue;
+      }
       float lowest = std::numeric_limits<float>::infinity();
       for (int dy = -1; dy <= 1; ++dy) {
         for (int dx = -1; dx <= 1; ++dx) {
@@ -189,9 +215,13 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
     filtered.swap(next);
     if (!changed) break;
   }
-  const float base_ground = static_cast<float>(std::floor(base_W.z() / v) - wmin.z());
-  for (auto& c : filtered) {
-    if (std::isnan(c)) c = base_ground;
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) {
+      float& c = filtered[static_cast<std::size_t>(cy) * gx + cx];
+      if (!std::isnan(c)) continue;
+      const Eigen::Vector2d center = coarse_center(cx, cy);
+      c = plane_layer(center.x(), center.y());
+    }
   }
 
   // 3. Classify columns against the envelope. A column's own ground is its lowest occupied voxel
@@ -254,6 +284,31 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       classes[i] = static_cast<std::uint8_t>(any_obstacle[i] != 0 ? ColumnClass::kObstacle
                                              : any_known[i] != 0  ? ColumnClass::kFree
                                                                   : ColumnClass::kUnknown);
+    }
+  });
+
+  // 3b. Objects lower than the voxels that separate them from the ground (10 cm debris shares a
+  //     20 cm voxel with the ground under it): a free column becomes an obstacle when the latest
+  //     returns of a voxel below the voxel rule's reach rise at least min_obstacle_height above
+  //     their own scan's ground next to them (OccupancyMap::ring_layer_rise_cm).
+  const auto min_rise_cm = static_cast<int>(std::ceil(params.min_obstacle_height_m * 100.0 - 1e-9));
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    const int y0 = static_cast<int>(ny * task / kRowTasks);
+    const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    for (int y = y0; y < y1; ++y) {
+      const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
+      for (int x = 0; x < nx; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * nx + x;
+        if (classes[i] != static_cast<std::uint8_t>(ColumnClass::kFree)) continue;
+        const std::size_t sl = ring_row + static_cast<std::size_t>(map.ring_x(x));
+        const int gz = ground_layer[i];
+        for (int z = std::max(0, gz); z < std::min(nz, gz + lo_layers); ++z) {
+          if (map.ring_layer_rise_cm(z)[sl] >= min_rise_cm) {
+            classes[i] = static_cast<std::uint8_t>(ColumnClass::kObstacle);
+            break;
+          }
+        }
+      }
     }
   });
 

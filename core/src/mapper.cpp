@@ -16,18 +16,18 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
                             const Eigen::Isometry3d& T_B_S) {
   const Eigen::Isometry3d T_W_S = T_W_B * T_B_S;
   sensor_W_ = T_W_S.translation();
-  base_W_ = T_W_B.translation();
+  T_W_B_ = T_W_B;
   return filter_scan(cloud, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_);
 }
 
 OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
-  map_.recenter(base_W_);
-  return map_.integrate(sensor_W_, points_W_, {}, runner);
+  map_.recenter(T_W_B_.translation());
+  return map_.integrate(sensor_W_, points_W_, {}, runner, T_W_B_.linear().col(2));
 }
 
 void Mapper::update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                             TaskRunner& runner) {
-  build_costmap(map_, params_.costmap, base_W_, zones, stamp_ns, layers_, runner);
+  build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner);
 }
 
 }  // namespace tarmac::core

@@ -146,6 +146,9 @@ Status OccupancyParams::validate() const {
   if (!(clamp_max > 0.5f && clamp_max < 1.0f)) return bad("clamp_max", "must be in (0.5, 1)");
   if (!(max_range_m > 0.0)) return bad("max_range_m", "must be > 0");
   if (!(clearing_range_m >= 0.0)) return bad("clearing_range_m", "must be >= 0");
+  if (!(ground_radius_m >= 0.0 && ground_radius_m <= 10.0)) {
+    return bad("ground_radius_m", "must be in [0, 10]");
+  }
   if (!(window_below_m >= 0.0 && window_below_m <= window_z_vox * voxel_size_m)) {
     return bad("window_below_m", "must be within the window height");
   }
@@ -163,6 +166,9 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   TARMAC_ASSERT(params.validate().ok(), "OccupancyParams must be validated first");
   const std::size_t n = static_cast<std::size_t>(dims_.x()) * dims_.y() * dims_.z();
   log_odds_.assign(n, kUnknown);
+  rise_cm_.assign(n, 0);
+  scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
+                        std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;
   const std::size_t blocks = (words >> kBlockShift) + 1;
   hit_bits_.assign(words, 0);
@@ -171,9 +177,10 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
 }
 
 std::size_t OccupancyMap::memory_bytes() const {
-  std::size_t bytes = log_odds_.capacity() * sizeof(float) +
-                      hit_bits_.capacity() * sizeof(std::uint64_t) +
-                      hit_slots_.capacity() * sizeof(std::uint32_t);
+  std::size_t bytes =
+      log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() +
+      scan_ground_z_.capacity() * sizeof(float) + scan_ground_min_.capacity() * sizeof(float) +
+      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t);
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_blocks_) bytes += d.capacity();
   return bytes;
@@ -207,8 +214,11 @@ void OccupancyMap::clear_slab(int axis, int global_index) {
       const std::size_t row = (static_cast<std::size_t>(z) * ny + y) * nx;
       if (axis == 0) {
         log_odds_[row + r] = kUnknown;
+        rise_cm_[row + r] = 0;
       } else {
-        std::fill_n(log_odds_.begin() + static_cast<std::ptrdiff_t>(row), nx, kUnknown);
+        const auto first = static_cast<std::ptrdiff_t>(row);
+        std::fill_n(log_odds_.begin() + first, nx, kUnknown);
+        std::fill_n(rise_cm_.begin() + first, nx, std::uint8_t{0});
       }
     }
   }
@@ -232,6 +242,7 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W) {
     if (shift == 0) continue;
     if (std::abs(shift) >= dims_[a]) {
       std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
+      std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
     } else if (shift > 0) {
       for (int g = min_[a] + dims_[a]; g < target[a] + dims_[a]; ++g) clear_slab(a, g);
     } else {
@@ -250,23 +261,65 @@ void OccupancyMap::update(std::size_t s, bool hit) {
 OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
                                              std::span<const Eigen::Vector3f> points_W,
                                              std::span<const Eigen::Vector3f> clearing_dirs_W,
-                                             TaskRunner& runner) {
+                                             TaskRunner& runner, const Eigen::Vector3d& up_W) {
   OccupancyUpdateStats stats;
   if (!placed_) recenter(origin_W);
   const double max_range = params_.max_range_m;
   const double clear_range = params_.clearing_range_m;
 
   // 1. Hits first, so that a voxel hit by any ray of this scan is never also cleared by it.
+  //    First the scan's own ground: the lowest return (along up_W) per window column, then the
+  //    lowest within ground_radius_m (a separable square min filter, rows then columns).
+  const int nx = dims_.x(), ny = dims_.y();
+  constexpr float kNone = std::numeric_limits<float>::infinity();
+  const Eigen::Vector3f up = up_W.normalized().cast<float>();
+  std::fill(scan_ground_z_.begin(), scan_ground_z_.end(), kNone);
+  const auto in_range = [&](const Eigen::Vector3f& p) {
+    return p.allFinite() && (p.cast<double>() - origin_W).norm() <= max_range;
+  };
+  for (const auto& p : points_W) {
+    if (!in_range(p)) continue;
+    const VoxelIndex v = voxel_of(p.cast<double>());
+    if (!in_window(v)) continue;
+    float& g = scan_ground_z_[static_cast<std::size_t>(v.y() - min_.y()) * nx + (v.x() - min_.x())];
+    g = std::min(g, up.dot(p));
+  }
+  const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+  scan_ground_min_.resize(scan_ground_z_.size());
+  for (int y = 0; y < ny; ++y) {  // along x into scan_ground_min_
+    const float* in = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
+    float* out = &scan_ground_min_[static_cast<std::size_t>(y) * nx];
+    for (int x = 0; x < nx; ++x) {
+      float m = kNone;
+      for (int u = std::max(0, x - r); u <= std::min(nx - 1, x + r); ++u) m = std::min(m, in[u]);
+      out[x] = m;
+    }
+  }
+  for (int x = 0; x < nx; ++x) {  // along y back into scan_ground_z_
+    for (int y = 0; y < ny; ++y) {
+      float m = kNone;
+      for (int u = std::max(0, y - r); u <= std::min(ny - 1, y + r); ++u) {
+        m = std::min(m, scan_ground_min_[static_cast<std::size_t>(u) * nx + x]);
+      }
+      scan_ground_z_[static_cast<std::size_t>(y) * nx + x] = m;
+    }
+  }
   hit_slots_.clear();
   for (const auto& p : points_W) {
-    if (!p.allFinite()) continue;
+    if (!in_range(p)) continue;
     const Eigen::Vector3d pd = p.cast<double>();
-    if ((pd - origin_W).norm() > max_range) continue;
     const VoxelIndex v = voxel_of(pd);
     if (!in_window(v)) {
       ++stats.outside_window;
       continue;
     }
+    // Rise above the lowest return of this scan nearby (an object cannot hide the ground
+    // around it).
+    const float ground_z =
+        scan_ground_z_[static_cast<std::size_t>(v.y() - min_.y()) * nx + (v.x() - min_.x())];
+    const float h = up.dot(p);
+    const auto rise =
+        static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
     const std::size_t s = slot(v);
     std::uint64_t& word = hit_bits_[s >> 6];
     const std::uint64_t bit = std::uint64_t{1} << (s & 63);
@@ -275,6 +328,9 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       hit_slots_.push_back(static_cast<std::uint32_t>(s));
       update(s, true);
       ++stats.hit_updates;
+      rise_cm_[s] = rise;  // the latest scan's returns replace older ones
+    } else {
+      rise_cm_[s] = std::max(rise_cm_[s], rise);
     }
   }
 
@@ -363,6 +419,10 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
 
 const float* OccupancyMap::ring_layer(int wz) const {
   return log_odds_.data() +
+         static_cast<std::size_t>(wrap(min_.z() + wz, dims_.z())) * dims_.x() * dims_.y();
+}
+const std::uint8_t* OccupancyMap::ring_layer_rise_cm(int wz) const {
+  return rise_cm_.data() +
          static_cast<std::size_t>(wrap(min_.z() + wz, dims_.z())) * dims_.x() * dims_.y();
 }
 int OccupancyMap::ring_x(int wx) const {

@@ -68,7 +68,7 @@ class Envelope : public ::testing::Test {
   void build(const CostmapParams& cp = {}, std::span<const VirtualZone> zones = {},
              std::int64_t stamp_ns = 0) {
     SerialRunner runner;
-    build_costmap(map_, cp, Eigen::Vector3d(0, 0, 0), zones, stamp_ns, layers_, runner);
+    build_costmap(map_, cp, Eigen::Isometry3d::Identity(), zones, stamp_ns, layers_, runner);
   }
 
   static void box(std::vector<Eigen::Vector3f>& pts, Eigen::Vector3f lo, Eigen::Vector3f hi) {

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include "tarmac/core/distance_field.hpp"
 #include "tarmac/core/grid2d.hpp"
@@ -29,14 +30,21 @@ enum class UnknownCost : std::uint8_t {
 };
 
 struct CostmapParams {
-  double min_obstacle_height_m = 0.10;  ///< above local ground; at least one voxel is used
-  double vehicle_height_m = 2.5;        ///< top of the vehicle above ground
-  double clearance_m = 0.3;             ///< extra headroom above the vehicle
-  double inscribed_radius_m = 1.0;      ///< cells within this of an obstacle are "inscribed" (99)
-  double inflation_radius_m = 3.0;      ///< costs decay to 0 beyond this
-  double cost_scaling_factor = 3.0;     ///< Nav2's exponential decay rate, 1/m
-  double ground_cell_m = 1.0;           ///< horizontal size of a local ground estimate cell
-  double max_ground_step_m = 0.5;  ///< a ground cell this far above its neighbours is not ground
+  /// Returns this far above the local ground surface mark an obstacle (sub-voxel: heights of the
+  /// returns inside voxels are kept), so the brief's 10 cm debris blocks with margin.
+  double min_obstacle_height_m = 0.08;
+  double vehicle_height_m = 2.5;     ///< top of the vehicle above ground
+  double clearance_m = 0.3;          ///< extra headroom above the vehicle
+  double inscribed_radius_m = 1.0;   ///< cells within this of an obstacle are "inscribed" (99)
+  double inflation_radius_m = 3.0;   ///< costs decay to 0 beyond this
+  double cost_scaling_factor = 3.0;  ///< Nav2's exponential decay rate, 1/m
+  double ground_cell_m = 1.0;        ///< horizontal size of a local ground estimate cell
+  double max_ground_step_m = 0.5;    ///< a ground cell this far above its neighbours is not ground
+  /// Ground lies within ground_tolerance_m + max_ground_slope · (horizontal distance) of the
+  /// plane of the vehicle's wheels (its base frame's xy plane); lower or higher lowest returns
+  /// (a wing, a fuselage with no ground seen under it) are not taken for ground.
+  double max_ground_slope = 0.05;
+  double ground_tolerance_m = 0.5;
   UnknownCost unknown_cost = UnknownCost::kUnknown;
 
   [[nodiscard]] Status validate() const;
@@ -69,13 +77,15 @@ struct CostmapLayers {
   std::vector<std::int16_t> ground_layer;     ///< per cell, window layer of the ground voxel
   std::vector<std::uint8_t> any_known;        ///< per cell: some envelope voxel observed
   std::vector<std::uint8_t> any_obstacle;     ///< per cell: some envelope voxel is an obstacle
+  std::vector<std::uint16_t> ground_scan;     ///< per cell: scan of those returns
 };
 
 /// Builds the costmap of the occupancy window at the window's horizontal resolution.
-/// @param base_W vehicle base position (fallback ground height where nothing was seen).
+/// @param T_W_B vehicle base pose: its xy plane is the ground prior (and the fallback ground
+/// where nothing was seen), so tilted world frames work.
 /// @param stamp_ns current time, for zone expiry only.
 void build_costmap(const OccupancyMap& map, const CostmapParams& params,
-                   const Eigen::Vector3d& base_W, std::span<const VirtualZone> zones,
+                   const Eigen::Isometry3d& T_W_B, std::span<const VirtualZone> zones,
                    std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner);
 
 /// Nav2 inflation cost (0..254 scale: 254 lethal, 253 inscribed) at a distance from an obstacle.

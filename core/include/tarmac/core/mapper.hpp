@@ -52,7 +52,7 @@ class Mapper {
   std::vector<Eigen::Vector3f> points_W_;
   FilterScratch filter_scratch_;
   Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();
-  Eigen::Vector3d base_W_ = Eigen::Vector3d::Zero();
+  Eigen::Isometry3d T_W_B_ = Eigen::Isometry3d::Identity();  ///< of the last ingested scan
 };
 
 }  // namespace tarmac::core

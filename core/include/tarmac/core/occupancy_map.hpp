@@ -31,6 +31,12 @@ struct OccupancyParams {
   double max_range_m = 50.0;
   /// How far a beam with no return (or beyond max range) clears free space.
   double clearing_range_m = 30.0;
+  /// Heights of returns above the ground are taken against the lowest return of the same scan
+  /// within this horizontal radius (a beam that grazes a 10 cm object at range d from a sensor
+  /// h up lands on the ground 0.1·d/h further: with 0.4 m and a sensor 2 m up, 10 cm debris is
+  /// marked from the scans taken within about 8 m of it; larger radii met road camber and
+  /// noise on real data, tests/data).
+  double ground_radius_m = 0.4;
 
   [[nodiscard]] Status validate() const;
 };
@@ -70,10 +76,14 @@ class OccupancyMap {
   /// (filters count them). Returns beyond max_range_m clear up to clearing_range_m.
   /// `clearing_dirs_W` are unit directions of beams with no return: they clear up to
   /// clearing_range_m. Deterministic for any runner.
+  /// `up_W` is the vehicle's up axis (its base frame's z in the world frame): heights of returns
+  /// above the scan's ground (ring_layer_rise_cm) are measured along it, so a world frame that
+  /// is not gravity-aligned does not tilt them.
   OccupancyUpdateStats integrate(const Eigen::Vector3d& origin_W,
                                  std::span<const Eigen::Vector3f> points_W,
                                  std::span<const Eigen::Vector3f> clearing_dirs_W,
-                                 TaskRunner& runner);
+                                 TaskRunner& runner,
+                                 const Eigen::Vector3d& up_W = Eigen::Vector3d::UnitZ());
 
   /// Log-odds at a voxel, kUnknown when unobserved or outside the window.
   [[nodiscard]] float log_odds(const VoxelIndex& v) const;
@@ -94,6 +104,14 @@ class OccupancyMap {
   /// `wz` is a plane of window_x·window_y floats in ring order; window cell (wx, wy) of it is at
   /// ring_y(wy)·window_x + ring_x(wx).
   [[nodiscard]] const float* ring_layer(int wz) const;
+  /// Height of the latest returns above the local ground of their own scan, per voxel, in the
+  /// same ring order as ring_layer(): the highest return of the latest scan that hit the voxel,
+  /// in cm above the lowest return of that scan within ground_radius_m of it (0..255; 0 also where
+  /// nothing was returned). Heights within one sweep share one pose, so pose error between
+  /// scans cannot look like an object, and they stay after grazing rays clear the voxel (rays
+  /// through the empty upper part of a 20 cm voxel over 10 cm debris do not contradict it). The
+  /// costmap uses them for objects lower than a voxel.
+  [[nodiscard]] const std::uint8_t* ring_layer_rise_cm(int wz) const;
   [[nodiscard]] int ring_x(int wx) const;
   [[nodiscard]] int ring_y(int wy) const;
 
@@ -110,6 +128,11 @@ class OccupancyMap {
   VoxelIndex min_;
   float l_hit_, l_miss_, l_min_, l_max_;
   std::vector<float> log_odds_;
+  std::vector<std::uint8_t> rise_cm_;  ///< see ring_layer_rise_cm()
+  /// Per scan: lowest return height per window column, then within ground_radius_m (m along
+  /// the up axis, +inf where none).
+  std::vector<float> scan_ground_z_;
+  std::vector<float> scan_ground_min_;
   /// Per-scan marks, one bit per window voxel in slot order: the voxels this scan's returns hit,
   /// and, per ray task, the voxels its rays passed through. A bit set costs far less memory
   /// traffic than a list of visits (a 400×400×40 window is 0.8 MB of bits, cache-resident), and
