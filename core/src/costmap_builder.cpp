@@ -134,7 +134,9 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   });
   const int g = std::max(1, static_cast<int>(std::lround(params.ground_cell_m / v)));
   const int gx = (nx + g - 1) / g, gy = (ny + g - 1) / g;
-  std::vector<float> coarse(static_cast<std::size_t>(gx) * gy, kNoGround);
+  // Coarse ground buffers live in `out` and keep their capacity: no allocation after warm-up.
+  auto& coarse = out.coarse_ground;
+  coarse.assign(static_cast<std::size_t>(gx) * gy, kNoGround);
   for (int y = 0; y < ny; ++y) {
     for (int x = 0; x < nx; ++x) {
       const int z = lowest[static_cast<std::size_t>(y) * nx + x];
@@ -161,7 +163,8 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
     return Eigen::Vector2d((wmin.x() + (cx + 0.5) * g) * v, (wmin.y() + (cy + 0.5) * g) * v);
   };
   const float step_vox = static_cast<float>(params.max_ground_step_m / v);
-  std::vector<float> filtered = coarse;
+  auto& filtered = out.coarse_filtered;
+  filtered.assign(coarse.begin(), coarse.end());
   for (int cy = 0; cy < gy; ++cy) {
     for (int cx = 0; cx < gx; ++cx) {
       const float c = coarse[static_cast<std::size_t>(cy) * gx + cx];
@@ -185,7 +188,8 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       if (c - lowest > step_vox) filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
     }
   }
-  std::vector<float> next = filtered;
+  auto& next = out.coarse_next;
+  next.assign(filtered.begin(), filtered.end());
   for (int iteration = 0; iteration < std::max(gx, gy); ++iteration) {
     bool changed = false;
     for (int cy = 0; cy < gy; ++cy) {
