@@ -56,11 +56,12 @@ Status detect_changes(const TsdfLayer& prior, const TsdfLayer& current, const Ch
           const double z_m = (now.block.z() * kTsdfBlockEdge + k + 0.5) * v;
           if (z_m < params.min_z_m || z_m > params.max_z_m) continue;
           const int n = tsdf_voxel_offset(i, j, k);
-          const float wn = now.weight[n], wp = before->weight[n];
+          const float wn = now.voxels[n].weight, wp = before->voxels[n].weight;
           if (!(wn >= params.min_weight && wp >= params.min_weight)) continue;
           ++out.compared_voxels;
           if (std::isnan(cell)) cell = 0.0f;
-          const float dn = std::abs(now.distance_m[n]), dp = std::abs(before->distance_m[n]);
+          const float dn = std::abs(now.voxels[n].distance_m);
+          const float dp = std::abs(before->voxels[n].distance_m);
           const float confidence = std::min(1.0f, std::min(wn, wp) / params.confident_weight);
           float signed_change = 0.0f;
           if (dn <= band && dp >= off) {

@@ -13,14 +13,17 @@ namespace tarmac::core {
 
 namespace {
 
-using FloatTree = openvdb::FloatTree;
-using FloatLeaf = FloatTree::LeafNodeType;
+using Tree = TsdfTree;
+using Leaf = Tree::LeafNodeType;
+using Value = Tree::ValueType;  // (distance, weight)
 /// Unregistered accessor: used only within one integration phase, during which the tree's
 /// structure does not change.
-using FastAccessor = openvdb::tree::ValueAccessor<FloatTree, false>;
+using FastAccessor = openvdb::tree::ValueAccessor<Tree, false>;
 
-static_assert(FloatLeaf::DIM == kTsdfBlockEdge, "TSDF blocks are OpenVDB leaves");
-static_assert(FloatLeaf::SIZE == kTsdfBlockVoxels, "TSDF blocks are OpenVDB leaves");
+static_assert(Leaf::DIM == kTsdfBlockEdge, "TSDF blocks are OpenVDB leaves");
+static_assert(Leaf::SIZE == kTsdfBlockVoxels, "TSDF blocks are OpenVDB leaves");
+static_assert(sizeof(Value) == sizeof(TsdfVoxel) && sizeof(TsdfVoxel) == 2 * sizeof(float),
+              "a leaf buffer is an array of TsdfVoxel");
 
 /// Ray chunks and block partitions: fixed, independent of the thread count (determinism).
 constexpr std::size_t kRayChunks = 32;
@@ -71,35 +74,48 @@ struct Partition {
   std::vector<std::uint32_t> slot_start;
   std::vector<std::uint32_t> sample_slot;
   std::vector<GroupedSample> grouped;
-  std::vector<std::unique_ptr<FloatLeaf>> new_distance, new_weight;
+  std::vector<std::uint64_t> slot_lines;  // cache lines (8 voxels) of the block touched
+  std::vector<TsdfLeafCache::Entry> slot_entry;
+  std::vector<std::unique_ptr<Leaf>> new_leaves;
   std::array<float, kTsdfBlockVoxels> sum{};
   std::array<std::uint32_t, kTsdfBlockVoxels> count{};
   std::vector<std::uint32_t> touched;
   std::uint64_t voxel_updates = 0;
 
-  void reserve_table(std::size_t blocks) {
-    std::size_t cap = 1024;
-    while (cap < 2 * blocks) cap *= 2;
-    if (table_keys.size() >= cap) return;
-    table_keys.assign(cap, kEmptyKey);
-    table_slots.assign(cap, 0);
+  std::size_t home(std::uint64_t key) const {
+    return static_cast<std::size_t>(mix(key) >> 20) & (table_keys.size() - 1);
   }
 
+  /// Slot of a block, numbered in first-touch order (independent of the table's size).
   std::uint32_t slot_for(std::uint64_t key) {
     const std::size_t mask = table_keys.size() - 1;
-    std::size_t h = static_cast<std::size_t>(mix(key) >> 20) & mask;
+    std::size_t h = home(key);
     while (true) {
       if (table_keys[h] == key) return table_slots[h];
-      if (table_keys[h] == kEmptyKey) {
-        const auto slot = static_cast<std::uint32_t>(slot_keys.size());
-        table_keys[h] = key;
-        table_slots[h] = slot;
-        slot_keys.push_back(key);
-        slot_hash_pos.push_back(static_cast<std::uint32_t>(h));
-        slot_count.push_back(0);
-        return slot;
-      }
+      if (table_keys[h] == kEmptyKey) break;
       h = (h + 1) & mask;
+    }
+    const auto slot = static_cast<std::uint32_t>(slot_keys.size());
+    table_keys[h] = key;
+    table_slots[h] = slot;
+    slot_keys.push_back(key);
+    slot_hash_pos.push_back(static_cast<std::uint32_t>(h));
+    slot_count.push_back(0);
+    if (2 * slot_keys.size() > table_keys.size()) grow();  // at most half full
+    return slot;
+  }
+
+  /// Doubles the table (warm-up only: capacity is kept across scans).
+  void grow() {
+    const std::size_t cap = std::max<std::size_t>(1024, 2 * table_keys.size());
+    table_keys.assign(cap, kEmptyKey);
+    table_slots.assign(cap, 0);
+    for (std::uint32_t sl = 0; sl < slot_keys.size(); ++sl) {
+      std::size_t h = home(slot_keys[sl]);
+      while (table_keys[h] != kEmptyKey) h = (h + 1) & (cap - 1);
+      table_keys[h] = slot_keys[sl];
+      table_slots[h] = sl;
+      slot_hash_pos[sl] = static_cast<std::uint32_t>(h);
     }
   }
 
@@ -147,13 +163,9 @@ openvdb::math::Transform::Ptr tsdf_transform(float voxel_size_m) {
 }
 
 void make_tsdf_grids(float voxel_size_m, float truncation_m, TsdfLayer::Grids& grids) {
-  grids.distance = openvdb::FloatGrid::create(truncation_m);
-  grids.distance->setName("tsdf");
-  grids.distance->setGridClass(openvdb::GRID_LEVEL_SET);
-  grids.distance->setTransform(tsdf_transform(voxel_size_m));
-  grids.weight = openvdb::FloatGrid::create(0.0f);
-  grids.weight->setName("weight");
-  grids.weight->setTransform(tsdf_transform(voxel_size_m));
+  grids.tsdf = TsdfGrid::create(Value(truncation_m, 0.0f));
+  grids.tsdf->setName("tsdf_weight");
+  grids.tsdf->setTransform(tsdf_transform(voxel_size_m));
 }
 
 TsdfLayer::TsdfLayer(float voxel_size_m, float truncation_m)
@@ -166,10 +178,9 @@ TsdfLayer::TsdfLayer(TsdfLayer&&) noexcept = default;
 TsdfLayer& TsdfLayer::operator=(TsdfLayer&&) noexcept = default;
 
 std::optional<TsdfVoxel> TsdfLayer::voxel(const TsdfVoxelIndex& v) const {
-  const openvdb::Coord c(v.x(), v.y(), v.z());
-  const float w = grids_->weight->tree().getValue(c);
-  if (!(w > 0.0f)) return std::nullopt;
-  return TsdfVoxel{grids_->distance->tree().getValue(c), w};
+  const Value x = grids_->tsdf->tree().getValue(openvdb::Coord(v.x(), v.y(), v.z()));
+  if (!(x[1] > 0.0f)) return std::nullopt;
+  return TsdfVoxel{x[0], x[1]};
 }
 
 TsdfVoxelIndex TsdfLayer::voxel_of(const Eigen::Vector3d& p_W) const {
@@ -181,39 +192,34 @@ Eigen::Vector3d TsdfLayer::center_of(const TsdfVoxelIndex& v) const {
 }
 
 std::size_t TsdfLayer::block_count() const {
-  return grids_->distance->tree().leafCount();
+  return grids_->tsdf->tree().leafCount();
 }
 
 std::size_t TsdfLayer::voxel_count() const {
-  return grids_->distance->tree().activeLeafVoxelCount();
+  return grids_->tsdf->tree().activeLeafVoxelCount();
 }
 
 std::size_t TsdfLayer::memory_bytes() const {
-  return grids_->distance->memUsage() + grids_->weight->memUsage();
+  return grids_->tsdf->memUsage();
 }
 
 void TsdfLayer::for_each_block(const std::function<void(const TsdfBlockView&)>& fn) const {
-  openvdb::tree::ValueAccessor<const FloatTree> weights(grids_->weight->tree());
-  for (auto it = grids_->distance->tree().cbeginLeaf(); it; ++it) {
+  for (auto it = grids_->tsdf->tree().cbeginLeaf(); it; ++it) {
     const openvdb::Coord o = it->origin();
-    const FloatLeaf* w = weights.probeConstLeaf(o);
-    TARMAC_ASSERT(w != nullptr, "TSDF distance and weight grids share one topology");
-    fn(TsdfBlockView{BlockIndex(o.x() >> 3, o.y() >> 3, o.z() >> 3), it->buffer().data(),
-                     w->buffer().data()});
+    fn(TsdfBlockView{BlockIndex(o.x() >> 3, o.y() >> 3, o.z() >> 3),
+                     reinterpret_cast<const TsdfVoxel*>(it->buffer().data())});
   }
 }
 
 std::optional<TsdfBlockView> TsdfLayer::find_block(const BlockIndex& b) const {
   const openvdb::Coord o(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge, b.z() * kTsdfBlockEdge);
-  const FloatLeaf* d = grids_->distance->tree().probeConstLeaf(o);
-  if (d == nullptr) return std::nullopt;
-  const FloatLeaf* w = grids_->weight->tree().probeConstLeaf(o);
-  TARMAC_ASSERT(w != nullptr, "TSDF distance and weight grids share one topology");
-  return TsdfBlockView{b, d->buffer().data(), w->buffer().data()};
+  const Leaf* leaf = grids_->tsdf->tree().probeConstLeaf(o);
+  if (leaf == nullptr) return std::nullopt;
+  return TsdfBlockView{b, reinterpret_cast<const TsdfVoxel*>(leaf->buffer().data())};
 }
 
 std::uint64_t TsdfLayer::digest() const {
-  // FNV-1a 64 over 32-bit words (coordinates, then distances and weights of every voxel).
+  // FNV-1a 64 over 32-bit words (coordinates, then distance and weight of every voxel).
   std::uint64_t h = 1469598103934665603ull;
   const auto word = [&h](std::uint32_t x) {
     h ^= x;
@@ -223,8 +229,8 @@ std::uint64_t TsdfLayer::digest() const {
     for (int a = 0; a < 3; ++a) word(static_cast<std::uint32_t>(b.block[a]));
     for (int n = 0; n < kTsdfBlockVoxels; ++n) {
       std::uint32_t d, w;
-      std::memcpy(&d, &b.distance_m[n], 4);
-      std::memcpy(&w, &b.weight[n], 4);
+      std::memcpy(&d, &b.voxels[n].distance_m, 4);
+      std::memcpy(&w, &b.voxels[n].weight, 4);
       word(d);
       word(w);
     }
@@ -234,6 +240,12 @@ std::uint64_t TsdfLayer::digest() const {
 
 void TsdfLayer::clear() {
   make_tsdf_grids(voxel_size_m_, truncation_m_, *grids_);
+  grids_->leaf_cache.clear();
+}
+
+TsdfLayer::Grids& TsdfLayer::grids() {
+  grids_->leaf_cache.clear();
+  return *grids_;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -264,6 +276,8 @@ void band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double r
   Eigen::Vector3i idx = q0.array().floor().cast<int>();
   int step[3];
   double t_max[3], t_delta[3];
+  // A huge finite value for axes the ray does not cross (0 · kNever must stay 0 below).
+  constexpr double kNever = 1e300;
   for (int a = 0; a < 3; ++a) {
     if (dir[a] > 0.0) {
       step[a] = 1;
@@ -275,33 +289,40 @@ void band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double r
       t_max[a] = t0 + (q0[a] - idx[a]) * t_delta[a];
     } else {
       step[a] = 0;
-      t_delta[a] = std::numeric_limits<double>::infinity();
-      t_max[a] = std::numeric_limits<double>::infinity();
+      t_delta[a] = 0.0;
+      t_max[a] = kNever;
     }
   }
+  // Traversal state in registers; the axis of the nearest boundary is chosen without branches
+  // (a branch there mispredicts about half of the time).
+  int ix = idx.x(), iy = idx.y(), iz = idx.z();
+  double tx = t_max[0], ty = t_max[1], tz = t_max[2];
   const double half = 0.5 * v;
   std::uint64_t last_key = kEmptyKey;
   std::vector<Sample>* bin = nullptr;
   while (true) {
-    const double cx = idx.x() * v + half - o.x(), cy = idx.y() * v + half - o.y(),
-                 cz = idx.z() * v + half - o.z();
+    const double cx = ix * v + half - o.x(), cy = iy * v + half - o.y(), cz = iz * v + half - o.z();
     double sdf = range - std::sqrt(cx * cx + cy * cy + cz * cz);
     if (carve && sdf > trunc) sdf = trunc;
     if (sdf <= trunc && sdf >= -trunc) {
-      const std::uint64_t key = pack_block(idx.x() >> 3, idx.y() >> 3, idx.z() >> 3);
+      const std::uint64_t key = pack_block(ix >> 3, iy >> 3, iz >> 3);
       if (key != last_key) {
         last_key = key;
         bin = &bins[partition_of(key)];
       }
-      const auto offset =
-          static_cast<std::uint32_t>(tsdf_voxel_offset(idx.x() & 7, idx.y() & 7, idx.z() & 7));
+      const auto offset = static_cast<std::uint32_t>(tsdf_voxel_offset(ix & 7, iy & 7, iz & 7));
       bin->push_back(Sample{key, offset, static_cast<float>(sdf)});
     }
-    const int a =
-        t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
-    if (t_max[a] > t1) break;
-    idx[a] += step[a];
-    t_max[a] += t_delta[a];
+    const int xy = tx < ty, xz = tx < tz, yz = ty < tz;
+    const int bx = xy & xz, by = (1 - xy) & yz, bz = 1 - bx - by;
+    const double t_next = bx ? tx : (by ? ty : tz);
+    if (t_next > t1) break;
+    ix += bx * step[0];
+    iy += by * step[1];
+    iz += bz * step[2];
+    tx += bx * t_delta[0];
+    ty += by * t_delta[1];
+    tz += bz * t_delta[2];
   }
 }
 
@@ -349,30 +370,26 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
   });
 
   // 2. Per partition: group samples by block (first-touch order, samples in ray order), merge
-  //    each voxel's samples (mean) and apply one running-average update. Existing leaves are
-  //    found read-only; new ones are built aside and added to the trees in step 3.
+  //    each voxel's samples (their mean) and apply one running-average update.
   const float max_w = params_.max_weight;
-  const float background = params_.truncation_m;
-  auto& grids = layer.grids();
-  FloatTree& dist_tree = grids.distance->tree();
-  FloatTree& weight_tree = grids.weight->tree();
+  const Value background(params_.truncation_m, 0.0f);
+  TsdfLayer::Grids& grids = *layer.grids_;
+  Tree& tree = grids.tsdf->tree();
+  grids.leaf_cache.resize(kPartitions);
   runner.parallel_for(kPartitions, [&](std::size_t p) {
     Partition& part = s.partitions[p];
     std::size_t total = 0;
     for (std::size_t c = 0; c < kRayChunks; ++c) total += s.bins[c * kPartitions + p].size();
-    // Worst case every sample is its own block: the table never fills beyond half.
-    part.reserve_table(total);
+    if (part.table_keys.empty()) part.grow();
     part.sample_slot.resize(total);
     part.grouped.resize(total);
-    part.new_distance.clear();
-    part.new_weight.clear();
+    part.new_leaves.clear();
     part.voxel_updates = 0;
     std::size_t k = 0;
     for (std::size_t c = 0; c < kRayChunks; ++c) {
-      const auto& bin = s.bins[c * kPartitions + p];
       std::uint64_t last = kEmptyKey;
       std::uint32_t slot = 0;
-      for (const Sample& smp : bin) {
+      for (const Sample& smp : s.bins[c * kPartitions + p]) {
         if (smp.block_key != last) {
           last = smp.block_key;
           slot = part.slot_for(last);
@@ -392,29 +409,70 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     // Scatter (stable: ray order within each block).
     k = 0;
     for (std::size_t sl = 0; sl < slots; ++sl) part.slot_count[sl] = part.slot_start[sl];
+    part.slot_lines.assign(slots, 0);
     for (std::size_t c = 0; c < kRayChunks; ++c) {
       for (const Sample& smp : s.bins[c * kPartitions + p]) {
-        part.grouped[part.slot_count[part.sample_slot[k++]]++] = {smp.offset, smp.sdf_m};
+        const std::uint32_t slot = part.sample_slot[k++];
+        part.grouped[part.slot_count[slot]++] = {smp.offset, smp.sdf_m};
+        part.slot_lines[slot] |= std::uint64_t{1} << (smp.offset >> 3);
       }
     }
-    FastAccessor dist_acc(dist_tree), weight_acc(weight_tree);
-    for (std::size_t sl = 0; sl < slots; ++sl) {
-      const BlockIndex b = unpack_block(part.slot_keys[sl]);
-      const openvdb::Coord origin(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge,
-                                  b.z() * kTsdfBlockEdge);
-      FloatLeaf* dl = dist_acc.probeLeaf(origin);
-      FloatLeaf* wl = nullptr;
-      if (dl != nullptr) {
-        wl = weight_acc.probeLeaf(origin);
-      } else {
-        part.new_distance.push_back(std::make_unique<FloatLeaf>(origin, background, false));
-        part.new_weight.push_back(std::make_unique<FloatLeaf>(origin, 0.0f, false));
-        dl = part.new_distance.back().get();
-        wl = part.new_weight.back().get();
+    // The leaf of every block: from the leaf cache, else found in the tree read-only (its
+    // structure does not change in this step), else built aside and handed to the tree in
+    // step 3. The cache spares a walk down the tree (several dependent cache misses) per block.
+    part.slot_entry.resize(slots);
+    {
+      TsdfLeafCache& cache = grids.leaf_cache[p];
+      if (cache.table.size() < 2 * (cache.size + slots)) {
+        std::size_t cap = std::max<std::size_t>(1024, cache.table.size());
+        while (cap < 2 * (cache.size + slots)) cap *= 2;
+        std::vector<TsdfLeafCache::Entry> old = std::move(cache.table);
+        cache.table.assign(cap, TsdfLeafCache::Entry{kEmptyKey, nullptr, nullptr});
+        for (const auto& e : old) {
+          if (e.key == kEmptyKey) continue;
+          std::size_t h = static_cast<std::size_t>(mix(e.key) >> 24) & (cap - 1);
+          while (cache.table[h].key != kEmptyKey) h = (h + 1) & (cap - 1);
+          cache.table[h] = e;
+        }
       }
-      TARMAC_ASSERT(wl != nullptr, "TSDF distance and weight grids share one topology");
-      float* dv = dl->buffer().data();
-      float* wv = wl->buffer().data();
+      const std::size_t mask = cache.table.size() - 1;
+      FastAccessor acc_tree(tree);
+      for (std::size_t sl = 0; sl < slots; ++sl) {
+        const std::uint64_t key = part.slot_keys[sl];
+        std::size_t h = static_cast<std::size_t>(mix(key) >> 24) & mask;
+        while (cache.table[h].key != key && cache.table[h].key != kEmptyKey) h = (h + 1) & mask;
+        if (cache.table[h].key != key) {
+          const BlockIndex b = unpack_block(key);
+          const openvdb::Coord origin(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge,
+                                      b.z() * kTsdfBlockEdge);
+          Leaf* leaf = acc_tree.probeLeaf(origin);
+          if (leaf == nullptr) {
+            part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
+            leaf = part.new_leaves.back().get();
+          }
+          cache.table[h] = TsdfLeafCache::Entry{key, leaf, leaf->buffer().data()};
+          ++cache.size;
+        }
+        part.slot_entry[sl] = cache.table[h];
+      }
+    }
+    // Apply, prefetching the touched cache lines of the blocks a few slots ahead: leaves are
+    // scattered in memory, so this step is bound by cache misses, not arithmetic.
+    constexpr std::size_t kAhead = 4;
+    const auto prefetch = [&](std::size_t sl) {
+      __builtin_prefetch(&part.slot_entry[sl].leaf->getValueMask(), 1);
+      std::uint64_t lines = part.slot_lines[sl];
+      while (lines != 0) {
+        const int l = __builtin_ctzll(lines);
+        lines &= lines - 1;
+        __builtin_prefetch(part.slot_entry[sl].values + 8 * l, 1);
+      }
+    };
+    for (std::size_t sl = 0; sl < std::min(slots, kAhead); ++sl) prefetch(sl);
+    for (std::size_t sl = 0; sl < slots; ++sl) {
+      if (sl + kAhead < slots) prefetch(sl + kAhead);
+      Leaf* leaf = part.slot_entry[sl].leaf;
+      Value* values = part.slot_entry[sl].values;
       for (std::uint32_t g = part.slot_start[sl]; g < part.slot_start[sl + 1]; ++g) {
         const GroupedSample gs = part.grouped[g];
         if (part.count[gs.offset] == 0) part.touched.push_back(gs.offset);
@@ -423,11 +481,12 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       }
       for (const std::uint32_t off : part.touched) {
         const float obs = part.sum[off] / static_cast<float>(part.count[off]);
-        const float w = wv[off];
-        dv[off] = (dv[off] * w + obs) / (w + 1.0f);
-        wv[off] = std::min(w + 1.0f, max_w);
-        dl->setActiveState(off, true);
-        wl->setActiveState(off, true);
+        Value& x = values[off];
+        const float w = x[1];
+        // Weighted running average; the cap lets an old surface be re-learnt.
+        x[0] = (x[0] * w + obs) / (w + 1.0f);
+        x[1] = std::min(w + 1.0f, max_w);
+        leaf->setActiveState(off, true);
         part.sum[off] = 0.0f;
         part.count[off] = 0;
       }
@@ -436,15 +495,12 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     }
   });
 
-  // 3. Serial: hand the new leaves to the trees, collect the changed blocks in partition order.
-  FastAccessor dist_acc(dist_tree), weight_acc(weight_tree);
+  // 3. Serial: hand the new leaves to the tree, collect the changed blocks in partition order.
+  FastAccessor acc_tree(tree);
   for (std::size_t p = 0; p < kPartitions; ++p) {
     Partition& part = s.partitions[p];
-    for (std::size_t i = 0; i < part.new_distance.size(); ++i) {
-      dist_acc.addLeaf(part.new_distance[i].release());
-      weight_acc.addLeaf(part.new_weight[i].release());
-    }
-    update_.blocks_created += part.new_distance.size();
+    for (auto& leaf : part.new_leaves) acc_tree.addLeaf(leaf.release());
+    update_.blocks_created += part.new_leaves.size();
     update_.voxel_updates += part.voxel_updates;
     for (const std::uint64_t key : part.slot_keys) update_.blocks.push_back(unpack_block(key));
     update_.samples += part.grouped.size();

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <memory>
 #include <sstream>
 
 #include <openvdb/io/Stream.h>
@@ -60,6 +61,56 @@ bool read_meta(const openvdb::MetaMap& meta, const std::string& key, T& out) {
   return true;
 }
 
+using FloatLeaf = openvdb::FloatTree::LeafNodeType;
+using PairLeaf = TsdfTree::LeafNodeType;
+
+/// The in-memory (distance, weight) grid as the two standard float grids of the file.
+void split_grids(const TsdfLayer& layer, openvdb::FloatGrid::Ptr& distance,
+                 openvdb::FloatGrid::Ptr& weight) {
+  const auto& src = *layer.grids().tsdf;
+  distance = openvdb::FloatGrid::create(layer.truncation_m());
+  distance->setName("tsdf");
+  distance->setGridClass(openvdb::GRID_LEVEL_SET);
+  distance->setTransform(src.transform().copy());
+  weight = openvdb::FloatGrid::create(0.0f);
+  weight->setName("weight");
+  weight->setTransform(src.transform().copy());
+  openvdb::tree::ValueAccessor<openvdb::FloatTree> da(distance->tree()), wa(weight->tree());
+  for (auto leaf = src.tree().cbeginLeaf(); leaf; ++leaf) {
+    auto dl = std::make_unique<FloatLeaf>(leaf->origin(), layer.truncation_m(), false);
+    auto wl = std::make_unique<FloatLeaf>(leaf->origin(), 0.0f, false);
+    for (openvdb::Index n = 0; n < PairLeaf::SIZE; ++n) {
+      const auto& v = leaf->getValue(n);
+      dl->setValueOnly(n, v[0]);
+      wl->setValueOnly(n, v[1]);
+      if (leaf->isValueOn(n)) {
+        dl->setActiveState(n, true);
+        wl->setActiveState(n, true);
+      }
+    }
+    da.addLeaf(dl.release());
+    wa.addLeaf(wl.release());
+  }
+}
+
+/// The file's two float grids merged into the in-memory grid. @pre same topology.
+void merge_grids(const openvdb::FloatGrid& distance, const openvdb::FloatGrid& weight,
+                 TsdfLayer& layer) {
+  TsdfTree& tree = layer.grids().tsdf->tree();
+  openvdb::tree::ValueAccessor<TsdfTree> acc(tree);
+  openvdb::tree::ValueAccessor<const openvdb::FloatTree> wa(weight.tree());
+  const TsdfTree::ValueType background(layer.truncation_m(), 0.0f);
+  for (auto dl = distance.tree().cbeginLeaf(); dl; ++dl) {
+    const FloatLeaf* wl = wa.probeConstLeaf(dl->origin());
+    auto leaf = std::make_unique<PairLeaf>(dl->origin(), background, false);
+    for (openvdb::Index n = 0; n < FloatLeaf::SIZE; ++n) {
+      if (!dl->isValueOn(n)) continue;
+      leaf->setValueOn(n, TsdfTree::ValueType(dl->getValue(n), wl->getValue(n)));
+    }
+    acc.addLeaf(leaf.release());
+  }
+}
+
 }  // namespace
 
 Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, TsdfMapInfo info) {
@@ -76,7 +127,9 @@ Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, Tsdf
     meta.insertMeta("tarmac.truncation_m", openvdb::FloatMetadata(info.truncation_m));
     meta.insertMeta("tarmac.config_hash", openvdb::StringMetadata(info.config_hash));
     meta.insertMeta("tarmac.stamp_ns", openvdb::Int64Metadata(info.stamp_ns));
-    openvdb::GridCPtrVec grids{layer.grids().distance, layer.grids().weight};
+    openvdb::FloatGrid::Ptr distance, weight;
+    split_grids(layer, distance, weight);
+    openvdb::GridCPtrVec grids{distance, weight};
     openvdb::io::File out(tmp.string());
     out.setCompression(openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK);
     out.write(grids, meta);
@@ -172,6 +225,9 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file) {
       !(info.truncation_m > 0.0f && info.truncation_m <= 32.0f * info.voxel_size_m)) {
     return Error{"tsdf_io.corrupt", name + ": implausible voxel size or truncation"};
   }
+  if (distance->tree().hasActiveTiles() || weight->tree().hasActiveTiles()) {
+    return Error{"tsdf_io.corrupt", name + ": active tiles (a TSDF has voxels only)"};
+  }
   if (distance->transform() != *tsdf_transform(info.voxel_size_m) ||
       weight->transform() != distance->transform()) {
     return Error{"tsdf_io.corrupt", name + ": grid transform does not match the voxel size"};
@@ -193,8 +249,7 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file) {
     }
   }
   TsdfLayer layer(info.voxel_size_m, info.truncation_m);
-  layer.grids().distance = distance;
-  layer.grids().weight = weight;
+  merge_grids(*distance, *weight, layer);
   return LoadedTsdf{std::move(layer), std::move(info)};
 }
 

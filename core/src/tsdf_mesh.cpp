@@ -10,21 +10,26 @@ Status extract_mesh(const TsdfLayer& layer, float min_weight, TriangleMesh& out)
   out.vertices_W.clear();
   out.triangles.clear();
   if (!(min_weight >= 0.0f)) return Error{"tsdf_mesh.invalid", "min_weight must be >= 0"};
-  const auto& grids = layer.grids();
-  const openvdb::FloatTree& weight_tree = grids.weight->tree();
-  // Cells (voxel i and its +x/+y/+z neighbours up to i + (1, 1, 1)) with every corner observed.
+  const TsdfTree& tree = layer.grids().tsdf->tree();
+  const auto& xform = layer.grids().tsdf->transform();
+  // The mesher wants a scalar grid: the distances, with the same topology.
+  auto distance = openvdb::FloatGrid::create(layer.truncation_m());
+  distance->setTransform(xform.copy());
+  // Cells (voxel i up to i + (1, 1, 1)) whose eight corners are observed: the region to mesh.
   auto mask = openvdb::BoolGrid::create(false);
-  mask->setTransform(grids.distance->transform().copy());
+  mask->setTransform(xform.copy());
   {
-    openvdb::tree::ValueAccessor<const openvdb::FloatTree> w(weight_tree);
+    openvdb::tree::ValueAccessor<const TsdfTree> acc(tree);
+    openvdb::tree::ValueAccessor<openvdb::FloatTree> d(distance->tree());
     openvdb::tree::ValueAccessor<openvdb::BoolTree> m(mask->tree());
     const auto observed = [&](const openvdb::Coord& c) {
-      const float x = w.getValue(c);
-      return x > 0.0f && x >= min_weight;
+      const float w = acc.getValue(c)[1];
+      return w > 0.0f && w >= min_weight;
     };
-    for (auto leaf = weight_tree.cbeginLeaf(); leaf; ++leaf) {
+    for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) {
       for (auto it = leaf->cbeginValueOn(); it; ++it) {
         const openvdb::Coord c = it.getCoord();
+        d.setValue(c, (*it)[0]);
         bool all = true;
         for (int corner = 0; corner < 8 && all; ++corner) {
           all = observed(c.offsetBy(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1));
@@ -36,7 +41,7 @@ Status extract_mesh(const TsdfLayer& layer, float min_weight, TriangleMesh& out)
   try {
     openvdb::tools::VolumeToMesh mesher(/*isovalue=*/0.0, /*adaptivity=*/0.0);
     mesher.setSurfaceMask(mask);
-    mesher(*grids.distance);
+    mesher(*distance);
     out.vertices_W.reserve(mesher.pointListSize());
     for (std::size_t i = 0; i < mesher.pointListSize(); ++i) {
       const openvdb::Vec3s& p = mesher.pointList()[i];

@@ -46,8 +46,8 @@ std::vector<ObservedVoxel> observed(const TsdfLayer& layer) {
       for (int j = 0; j < 8; ++j)
         for (int k = 0; k < 8; ++k) {
           const int n = tsdf_voxel_offset(i, j, k);
-          if (b.weight[n] > 0.0f) {
-            out.push_back({b.block * 8 + TsdfVoxelIndex(i, j, k), {b.distance_m[n], b.weight[n]}});
+          if (b.voxels[n].weight > 0.0f) {
+            out.push_back({b.block * 8 + TsdfVoxelIndex(i, j, k), b.voxels[n]});
           }
         }
   });

@@ -63,12 +63,11 @@ struct TsdfVoxel {
 };
 
 /// Read-only view of one block's storage. Voxel (i, j, k) of the block (each 0..7, the voxel
-/// origin + (i, j, k)) is at index (i·8 + j)·8 + k (x slowest: OpenVDB's leaf order).
-/// weight[n] == 0 means voxel n was never observed (its distance is then +truncation).
+/// 8·block + (i, j, k)) is voxels[(i·8 + j)·8 + k] (x slowest: OpenVDB's leaf order).
+/// weight == 0 means never observed (its distance is then +truncation).
 struct TsdfBlockView {
   BlockIndex block;
-  const float* distance_m = nullptr;  ///< kTsdfBlockVoxels values
-  const float* weight = nullptr;      ///< kTsdfBlockVoxels values
+  const TsdfVoxel* voxels = nullptr;  ///< kTsdfBlockVoxels values
 };
 
 /// Offset of voxel (i, j, k) inside its block (see TsdfBlockView).
@@ -76,7 +75,7 @@ constexpr int tsdf_voxel_offset(int i, int j, int k) {
   return (i * kTsdfBlockEdge + j) * kTsdfBlockEdge + k;
 }
 
-/// The TSDF map: an OpenVDB FloatGrid of distances and one of weights, sharing one topology.
+/// The TSDF map: one OpenVDB grid of (distance, weight) pairs (Vec2SGrid).
 /// Move-only. Not thread-safe: one writer, or any number of readers.
 class TsdfLayer {
  public:
@@ -98,7 +97,7 @@ class TsdfLayer {
   /// Centre of a voxel in the world frame, m.
   [[nodiscard]] Eigen::Vector3d center_of(const TsdfVoxelIndex& v) const;
 
-  /// Blocks allocated, voxels observed, and the memory of both grids (OpenVDB's memUsage).
+  /// Blocks allocated, voxels observed, and the memory of the grid (OpenVDB's memUsage).
   [[nodiscard]] std::size_t block_count() const;
   [[nodiscard]] std::size_t voxel_count() const;
   [[nodiscard]] std::size_t memory_bytes() const;
@@ -116,11 +115,13 @@ class TsdfLayer {
   void clear();
 
   /// OpenVDB grids (defined in core/src/tsdf_grids.hpp, for the core's own .cpp files only).
+  /// Mutable access drops the integrator's leaf-pointer cache (the tree may change).
   struct Grids;
-  [[nodiscard]] Grids& grids() { return *grids_; }
+  [[nodiscard]] Grids& grids();
   [[nodiscard]] const Grids& grids() const { return *grids_; }
 
  private:
+  friend class TsdfIntegrator;  // writes voxels through its leaf cache, not through grids()
   float voxel_size_m_;
   float truncation_m_;
   std::unique_ptr<Grids> grids_;
