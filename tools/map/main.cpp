@@ -461,7 +461,8 @@ int main(int argc, char** argv) {
   std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d", esdf3d_ms,
               dims.x(), dims.y(), dims.z());
   std::printf(
-      "pipeline throughput: %.2f M points/s (filter+occupancy+costmap), %.1f voxel visits/point\n",
+      "pipeline throughput: %.2f M points/s (filter+occupancy+tsdf+costmap), %.1f voxel "
+      "visits/point\n",
       pts_per_s / 1e6, points_used > 0 ? static_cast<double>(voxel_visits) / points_used : 0.0);
   tj << "  },\n  \"esdf3d_ms\": " << esdf3d_ms << ",\n  \"points_per_s\": " << pts_per_s;
   if (params.tsdf.enabled) {
