@@ -345,5 +345,21 @@ TEST(TsdfIntegrator, Update_ReportsEveryChangedBlockOnce) {
   EXPECT_EQ(up2.blocks.size(), blocks.size());
 }
 
+// The integrator caches leaf pointers inside the layer: clearing the layer (or any outside
+// mutation through grids()) must drop them, so integrating afterwards equals a fresh layer.
+TEST(TsdfIntegrator, LeafCache_ClearGivesTheSameMapAsAFreshLayer) {
+  const auto scans = synthetic_scans();
+  TsdfIntegrator integrator(params_01());
+  SerialRunner runner;
+  TsdfLayer fresh = integrator.make_layer();
+  integrator.integrate(scans[1].first, scans[1].second, fresh, runner);
+  TsdfLayer reused = integrator.make_layer();
+  integrator.integrate(scans[0].first, scans[0].second, reused, runner);
+  reused.clear();
+  EXPECT_EQ(reused.block_count(), 0u);
+  integrator.integrate(scans[1].first, scans[1].second, reused, runner);
+  EXPECT_EQ(reused.digest(), fresh.digest());
+}
+
 }  // namespace
 }  // namespace tarmac::core
