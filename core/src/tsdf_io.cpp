@@ -131,7 +131,11 @@ Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, Tsdf
     split_grids(layer, distance, weight);
     openvdb::GridCPtrVec grids{distance, weight};
     openvdb::io::File out(tmp.string());
-    out.setCompression(openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK);
+    // Blosc is ~10x faster than zlib here; integrity comes from the trailer's checksum.
+    const std::uint32_t codec = openvdb::io::Archive::hasBloscCompression()
+                                    ? openvdb::io::COMPRESS_BLOSC
+                                    : openvdb::io::COMPRESS_ZIP;
+    out.setCompression(codec | openvdb::io::COMPRESS_ACTIVE_MASK);
     out.write(grids, meta);
     out.close();
   } catch (const std::exception& e) {
