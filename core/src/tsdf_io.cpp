@@ -93,8 +93,8 @@ void split_grids(const TsdfLayer& layer, openvdb::FloatGrid::Ptr& distance,
   }
 }
 
-/// The file's two float grids merged into the in-memory grid. @pre same topology.
-void merge_grids(const openvdb::FloatGrid& distance, const openvdb::FloatGrid& weight,
+/// The file's two float grids merged into the in-memory grid; false when a weight leaf is missing.
+bool merge_grids(const openvdb::FloatGrid& distance, const openvdb::FloatGrid& weight,
                  TsdfLayer& layer) {
   TsdfTree& tree = layer.grids().tsdf->tree();
   openvdb::tree::ValueAccessor<TsdfTree> acc(tree);
@@ -102,6 +102,7 @@ void merge_grids(const openvdb::FloatGrid& distance, const openvdb::FloatGrid& w
   const TsdfTree::ValueType background(layer.truncation_m(), 0.0f);
   for (auto dl = distance.tree().cbeginLeaf(); dl; ++dl) {
     const FloatLeaf* wl = wa.probeConstLeaf(dl->origin());
+    if (wl == nullptr) return false;
     auto leaf = std::make_unique<PairLeaf>(dl->origin(), background, false);
     for (openvdb::Index n = 0; n < FloatLeaf::SIZE; ++n) {
       if (!dl->isValueOn(n)) continue;
@@ -109,6 +110,7 @@ void merge_grids(const openvdb::FloatGrid& distance, const openvdb::FloatGrid& w
     }
     acc.addLeaf(leaf.release());
   }
+  return true;
 }
 
 }  // namespace
@@ -253,7 +255,9 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file) {
     }
   }
   TsdfLayer layer(info.voxel_size_m, info.truncation_m);
-  merge_grids(*distance, *weight, layer);
+  if (!merge_grids(*distance, *weight, layer)) {
+    return Error{"tsdf_io.corrupt", name + ": 'weight' lacks a block that 'tsdf' has"};
+  }
   return LoadedTsdf{std::move(layer), std::move(info)};
 }
 
