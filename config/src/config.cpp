@@ -204,6 +204,15 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
       c.unknown_cost = static_cast<core::UnknownCost>(i);
     }
   });
+  root.map("tsdf", [&](MapReader& r) {
+    auto& t = p.tsdf;
+    r.scalar<bool>("enabled", t.enabled, false, true);
+    r.scalar<float>("voxel_size_m", t.voxel_size_m, 0.01f, 2.0f);
+    r.scalar<float>("truncation_m", t.truncation_m, 0.01f, 64.0f);
+    r.scalar<float>("max_weight", t.max_weight, 1.0f, 1e6f);
+    r.scalar<float>("max_range_m", t.max_range_m, 0.1f, 1000.0f);
+    r.scalar<bool>("space_carving", t.space_carving, false, true);
+  });
 }
 
 void emit_qos(YAML::Emitter& out, const char* name, const transport::QosSpec& q) {
@@ -319,6 +328,15 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "ground_tolerance_m" << YAML::Value << c.ground_tolerance_m;
   out << YAML::Key << "unknown_cost" << YAML::Value
       << kUnknownCost[static_cast<int>(c.unknown_cost)];
+  out << YAML::EndMap;
+  const auto& t = m.tsdf;
+  out << YAML::Key << "tsdf" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "enabled" << YAML::Value << t.enabled;
+  out << YAML::Key << "voxel_size_m" << YAML::Value << t.voxel_size_m;
+  out << YAML::Key << "truncation_m" << YAML::Value << t.truncation_m;
+  out << YAML::Key << "max_weight" << YAML::Value << t.max_weight;
+  out << YAML::Key << "max_range_m" << YAML::Value << t.max_range_m;
+  out << YAML::Key << "space_carving" << YAML::Value << t.space_carving;
   out << YAML::EndMap << YAML::EndMap;
   return out.c_str();
 }

@@ -5,10 +5,15 @@ namespace tarmac::core {
 Status MapperParams::validate() const {
   if (auto s = filters.validate(); !s) return s;
   if (auto s = occupancy.validate(); !s) return s;
+  if (auto s = tsdf.validate(); !s) return s;
   return costmap.validate();
 }
 
-Mapper::Mapper(const MapperParams& params) : params_(params), map_(params.occupancy) {
+Mapper::Mapper(const MapperParams& params)
+    : params_(params),
+      map_(params.occupancy),
+      tsdf_integrator_(params.tsdf),
+      tsdf_(tsdf_integrator_.make_layer()) {
   TARMAC_ASSERT(params.validate().ok(), "MapperParams must be validated first");
 }
 
@@ -23,6 +28,11 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
 OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
   map_.recenter(T_W_B_.translation());
   return map_.integrate(sensor_W_, points_W_, {}, runner, T_W_B_.linear().col(2));
+}
+
+const TsdfUpdate& Mapper::integrate_tsdf(TaskRunner& runner) {
+  if (!params_.tsdf.enabled) return no_tsdf_update_;
+  return tsdf_integrator_.integrate(sensor_W_, points_W_, tsdf_, runner);
 }
 
 void Mapper::update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,

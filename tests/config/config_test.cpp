@@ -69,5 +69,25 @@ TEST(Config, SyntaxErrorsAreReportedNotThrown) {
   EXPECT_EQ(result.error().code, "config.syntax");
 }
 
+TEST(Config, TsdfSectionAppliesAndIsValidated) {
+  auto config = load_config_string(
+      "version: 1\ntsdf: {enabled: false, voxel_size_m: 0.2, truncation_m: 0.6, max_weight: 20,\n"
+      "       max_range_m: 80, space_carving: true}\n");
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  const auto& t = config.value().mapping.tsdf;
+  EXPECT_FALSE(t.enabled);
+  EXPECT_FLOAT_EQ(t.voxel_size_m, 0.2f);
+  EXPECT_FLOAT_EQ(t.truncation_m, 0.6f);
+  EXPECT_FLOAT_EQ(t.max_weight, 20.f);
+  EXPECT_FLOAT_EQ(t.max_range_m, 80.f);
+  EXPECT_TRUE(t.space_carving);
+  EXPECT_NE(config_hash(config.value()), config_hash(Config{}));
+  EXPECT_EQ(error_of("version: 1\ntsdf: {trunction_m: 0.3}\n"), "tsdf.trunction_m: unknown key");
+  EXPECT_EQ(error_of("version: 1\ntsdf: {max_weight: 0}\n"),
+            "tsdf.max_weight: must be in [1, 1e+06], got 0");
+  EXPECT_EQ(error_of("version: 1\ntsdf: {voxel_size_m: 0.2, truncation_m: 0.1}\n"),
+            "tsdf.truncation_m: must be in [voxel_size_m, 32 * voxel_size_m]");
+}
+
 }  // namespace
 }  // namespace tarmac::config

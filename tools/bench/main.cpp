@@ -10,6 +10,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <ctime>
 #include <limits>
 #include <string>
 #include <vector>
@@ -32,6 +34,9 @@ struct Options {
   std::size_t max_scans = 0;
   double sensor_height_m = 1.9;
   bool esdf = true;
+  float tsdf_voxel_m = 0.1f;
+  float tsdf_truncation_m = 0.3f;
+  bool tsdf_only = false;
 };
 
 template <typename Fn>
@@ -39,6 +44,13 @@ double timed_ms(Fn&& fn) {
   const auto t0 = Clock::now();
   fn();
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+/// CPU time of the whole process (all threads), ms: robust to other load on the machine.
+double process_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
 }
 
 struct Summary {
@@ -83,11 +95,18 @@ int main(int argc, char** argv) {
       opt.sensor_height_m = std::atof(argv[++i]);
     else if (a == "--no-esdf")
       opt.esdf = false;
+    else if (a == "--tsdf-voxel" && v)
+      opt.tsdf_voxel_m = static_cast<float>(std::atof(argv[++i]));
+    else if (a == "--tsdf-truncation" && v)
+      opt.tsdf_truncation_m = static_cast<float>(std::atof(argv[++i]));
+    else if (a == "--tsdf-only")
+      opt.tsdf_only = true;
     else {
       std::fprintf(
           stderr,
           "usage: tarmac-bench --dataset DIR [--resolution M] [--max-range M] [--threads N]\n"
-          "                    [--scans N] [--poses FILE] [--sensor-height M] [--no-esdf]\n");
+          "                    [--scans N] [--poses FILE] [--sensor-height M] [--no-esdf]\n"
+          "                    [--tsdf-voxel M] [--tsdf-truncation M] [--tsdf-only]\n");
       return a == "--help" ? 0 : 64;
     }
   }
@@ -115,6 +134,10 @@ int main(int argc, char** argv) {
   params.occupancy.max_range_m = opt.max_range_m;
   // OctoMap's insertPointCloud: a return beyond max range clears free space up to max range.
   params.occupancy.clearing_range_m = opt.max_range_m;
+  // TSDF at its own resolution (default 0.1 m / 0.3 m, VDBFusion's KITTI setting), same max range.
+  params.tsdf.voxel_size_m = opt.tsdf_voxel_m;
+  params.tsdf.truncation_m = opt.tsdf_truncation_m;
+  params.tsdf.max_range_m = static_cast<float>(opt.max_range_m);
   if (auto valid = params.validate(); !valid) {
     std::fprintf(stderr, "tarmac-bench: %s\n", valid.error().message.c_str());
     return 64;
@@ -137,21 +160,30 @@ int main(int argc, char** argv) {
     }
   }
 
-  std::vector<double> t_filter, t_occ, t_cost, t_pipeline, t_octomap, t_occ_only, t_esdf2d;
+  std::vector<double> t_filter, t_occ, t_cost, t_pipeline, t_octomap, t_occ_only, t_tsdf,
+      t_tsdf_cpu, t_esdf2d;
   core::DistanceField field2d;
   core::DistanceFieldScratch scratch2d;
-  std::uint64_t points = 0;
+  std::uint64_t points = 0, tsdf_samples = 0, tsdf_updates = 0;
   for (std::size_t k = 0; k < n; ++k) {
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
     // tarmac, stage by stage.
     core::FilterCounts counts;
     const double f = timed_ms([&] { counts = mapper.ingest(clouds[k], T_W_B, T_B_S); });
-    const double o = timed_ms([&] { mapper.integrate(pool); });
-    const double c = timed_ms([&] { mapper.update_costmap({}, 0, pool); });
+    const double o = opt.tsdf_only ? 0.0 : timed_ms([&] { mapper.integrate(pool); });
+    const double cpu0 = process_cpu_ms();
+    const double ts = timed_ms([&] {
+      const core::TsdfUpdate& up = mapper.integrate_tsdf(pool);
+      tsdf_samples += up.samples;
+      tsdf_updates += up.voxel_updates;
+    });
+    t_tsdf_cpu.push_back(process_cpu_ms() - cpu0);
+    t_tsdf.push_back(ts);
+    const double c = opt.tsdf_only ? 0.0 : timed_ms([&] { mapper.update_costmap({}, 0, pool); });
     t_filter.push_back(f);
     t_occ.push_back(o);
     t_cost.push_back(c);
-    t_pipeline.push_back(f + o + c);
+    t_pipeline.push_back(f + o + ts + c);
     t_occ_only.push_back(f + o);
     // The 2D ESDF alone, on the costmap's own input (the costmap stage computes it inside).
     const auto& layers = mapper.costmap();
@@ -162,6 +194,10 @@ int main(int argc, char** argv) {
                                    core::UnknownPolicy::kReportUnknown, field2d, scratch2d, pool);
     }));
     points += counts.kept;
+    if (opt.tsdf_only) {
+      std::fprintf(stderr, "\rtarmac-bench: scan %zu/%zu", k + 1, n);
+      continue;
+    }
     // OctoMap on exactly the points tarmac kept, in the world frame, from the same origin.
     octomap::Pointcloud cloud;
     cloud.reserve(mapper.points_W().size());
@@ -177,6 +213,53 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "\rtarmac-bench: scan %zu/%zu", k + 1, n);
   }
   std::fprintf(stderr, "\n");
+
+  // TSDF: integration time per scan, and memory per mapped area (area = voxel columns holding at
+  // least one observed voxel).
+  {
+    const core::TsdfLayer& tsdf = mapper.tsdf();
+    std::vector<std::uint64_t> columns;
+    tsdf.for_each_block([&](const core::TsdfBlockView& b) {
+      for (int i = 0; i < core::kTsdfBlockEdge; ++i) {
+        for (int j = 0; j < core::kTsdfBlockEdge; ++j) {
+          bool seen = false;
+          for (int k = 0; k < core::kTsdfBlockEdge && !seen; ++k) {
+            seen = b.voxels[core::tsdf_voxel_offset(i, j, k)].weight > 0.0f;
+          }
+          if (!seen) continue;
+          const auto x = static_cast<std::uint32_t>(b.block.x() * core::kTsdfBlockEdge + i);
+          const auto y = static_cast<std::uint32_t>(b.block.y() * core::kTsdfBlockEdge + j);
+          columns.push_back((static_cast<std::uint64_t>(x) << 32) | y);
+        }
+      }
+    });
+    std::sort(columns.begin(), columns.end());
+    columns.erase(std::unique(columns.begin(), columns.end()), columns.end());
+    const double vox = tsdf.voxel_size_m();
+    const double area_m2 = static_cast<double>(columns.size()) * vox * vox;
+    const double mib = static_cast<double>(tsdf.memory_bytes()) / (1024.0 * 1024.0);
+    std::printf(
+        "\ntarmac-bench: TSDF %.2f m voxels, truncation %.2f m, max range %.0f m, %zu threads, %zu "
+        "scans, %.0f points/scan\n",
+        vox, static_cast<double>(tsdf.truncation_m()), opt.max_range_m, opt.threads, n,
+        static_cast<double>(points) / static_cast<double>(n));
+    std::printf("  %-26s %9s %9s %9s %9s   (ms per scan)\n", "", "mean", "p50", "p99", "max");
+    print_row("tsdf integrate (wall)", t_tsdf);
+    print_row("tsdf integrate (CPU, sum)", t_tsdf_cpu);
+    double load[3] = {0, 0, 0};
+    if (getloadavg(load, 3) > 0) {
+      std::printf("  (CPU = process CPU time over all threads; machine load average %.2f)\n",
+                  load[0]);
+    }
+    std::printf("  %.1f band samples/point, %.1f voxel updates/point\n",
+                static_cast<double>(tsdf_samples) / static_cast<double>(points),
+                static_cast<double>(tsdf_updates) / static_cast<double>(points));
+    std::printf(
+        "  map: %zu blocks, %zu voxels, %.1f MiB over %.0f m^2 mapped -> %.2f MiB per 1000 m^2\n",
+        tsdf.block_count(), tsdf.voxel_count(), mib, area_m2,
+        area_m2 > 0 ? mib / area_m2 * 1000.0 : 0.0);
+  }
+  if (opt.tsdf_only) return 0;
 
   // Agreement inside tarmac's window, voxel by voxel on the shared lattice [i·v, (i+1)·v).
   const auto& map = mapper.occupancy();
@@ -230,6 +313,7 @@ int main(int argc, char** argv) {
   std::printf("  tarmac full pipeline per stage:\n");
   print_row("filter", t_filter);
   print_row("occupancy", t_occ);
+  print_row("tsdf", t_tsdf);
   print_row("costmap + 2D ESDF", t_cost);
   print_row("  of which 2D ESDF", t_esdf2d);
   print_row("pipeline", t_pipeline);

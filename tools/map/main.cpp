@@ -8,14 +8,19 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/tsdf_changes.hpp"
+#include "tarmac/core/tsdf_io.hpp"
+#include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/array_io.hpp"
 #include "tarmac/tools/kitti.hpp"
+#include "tarmac/tools/mesh_io.hpp"
 
 namespace {
 
@@ -28,7 +33,7 @@ constexpr int kExitIo = 74;
 constexpr int kExitConfig = 78;
 
 struct Options {
-  std::string dataset, out = "out/map", config, poses = "poses.txt";
+  std::string dataset, out = "out/map", config, poses = "poses.txt", prior;
   std::size_t threads = 2;
   std::size_t max_scans = 0;  // 0: all
   double sensor_height_m = 1.9;
@@ -37,10 +42,11 @@ struct Options {
 void usage() {
   std::fprintf(stderr,
                "usage: tarmac-map --dataset DIR [--out DIR] [--config FILE] [--threads N]\n"
-               "                  [--poses FILE] [--scans N] [--sensor-height M]\n"
+               "                  [--poses FILE] [--scans N] [--sensor-height M] [--prior FILE]\n"
                "  DIR in KITTI layout: scans/NNNNNN.bin, poses.txt (T_world_sensor), times.txt\n"
                "  --poses FILE      pose file inside DIR (default poses.txt)\n"
-               "  --sensor-height M sensor above the vehicle base, m (default 1.9)\n");
+               "  --sensor-height M sensor above the vehicle base, m (default 1.9)\n"
+               "  --prior FILE      a tsdf.vdb from an earlier run: writes changes.npy/.png\n");
 }
 
 struct StageTimes {
@@ -117,6 +123,96 @@ std::vector<std::uint8_t> render_distance(const core::DistanceField& field, doub
   return rgb;
 }
 
+/// Frame of the TSDF lattice written by this tool: the dataset's pose frame.
+constexpr const char* kTsdfFrame = "world";
+
+std::vector<std::uint8_t> render_changes(const core::ChangeMap& m) {
+  const std::uint32_t w = m.geometry.width, h = m.geometry.height;
+  std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
+  for (std::uint32_t y = 0; y < h; ++y) {
+    for (std::uint32_t x = 0; x < w; ++x) {
+      std::uint8_t* px = &rgb[(std::size_t{h - 1 - y} * w + x) * 3];  // north up
+      const float c = m.change[std::size_t{y} * w + x];
+      const auto fade = [&](int full) {  // from white at confidence 0 to `full` at 1
+        return static_cast<std::uint8_t>(245 - (245 - full) * std::min(1.0f, std::abs(c)));
+      };
+      if (std::isnan(c)) {
+        px[0] = 70, px[1] = 80, px[2] = 110;  // not observed in both: slate
+      } else if (c > 0) {
+        px[0] = 230, px[1] = fade(0), px[2] = fade(0);  // new: red
+      } else if (c < 0) {
+        px[0] = fade(0), px[1] = fade(90), px[2] = 230;  // removed: blue
+      } else {
+        px[0] = px[1] = px[2] = 245;  // unchanged: white
+      }
+    }
+  }
+  return rgb;
+}
+
+struct TsdfOutputs {
+  double mesh_ms = 0.0, save_ms = 0.0, changes_ms = 0.0;
+  std::size_t vertices = 0, triangles = 0;
+  core::ChangeMap changes;
+};
+
+/// tsdf.vdb, tsdf.json, mesh.ply and, with a prior, changes.npy + changes.png.
+core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::TsdfLayer& tsdf,
+                                const std::string& config_hash, std::int64_t stamp_ns,
+                                const core::TsdfLayer* prior, TsdfOutputs& result) {
+  core::TsdfMapInfo info;
+  info.frame_id = kTsdfFrame;
+  info.config_hash = config_hash;
+  info.stamp_ns = stamp_ns;
+  core::Status saved = core::Ok{};
+  result.save_ms = timed_ms([&] { saved = core::save_tsdf(out / "tsdf.vdb", tsdf, info); });
+  if (!saved) return saved;
+  core::TriangleMesh mesh;
+  core::Status meshed = core::Ok{};
+  result.mesh_ms = timed_ms([&] { meshed = core::extract_mesh(tsdf, 1.0f, mesh); });
+  if (!meshed) return meshed;
+  result.vertices = mesh.vertices_W.size();
+  result.triangles = mesh.triangles.size();
+  if (auto w = tools::write_ply(out / "mesh.ply", mesh); !w) return w;
+  std::ofstream j(out / "tsdf.json");
+  j << "{\n  \"frame\": \"" << kTsdfFrame << "\",\n  \"voxel_size_m\": " << tsdf.voxel_size_m()
+    << ",\n  \"truncation_m\": " << tsdf.truncation_m() << ",\n  \"blocks\": " << tsdf.block_count()
+    << ",\n  \"voxels\": " << tsdf.voxel_count() << ",\n  \"memory_bytes\": " << tsdf.memory_bytes()
+    << ",\n  \"config_hash\": \"" << config_hash << "\",\n  \"stamp_ns\": " << stamp_ns;
+  if (prior != nullptr) {
+    core::Status detected = core::Ok{};
+    result.changes_ms = timed_ms([&] {
+      detected = core::detect_changes(*prior, tsdf, core::ChangeParams{}, result.changes);
+    });
+    if (!detected) return detected;
+    const auto& g = result.changes.geometry;
+    const std::vector<std::size_t> shape{g.height, g.width};
+    if (auto w = tools::write_npy(out / "changes.npy", result.changes.change, shape); !w) return w;
+    if (auto w = tools::write_png(out / "changes.png", render_changes(result.changes), g.width,
+                                  g.height);
+        !w) {
+      return w;
+    }
+    j << ",\n  \"changes\": {\"origin_m\": [" << g.origin_x_m << ", " << g.origin_y_m
+      << "], \"resolution_m\": " << g.resolution_m << ", \"shape\": [" << g.height << ", "
+      << g.width << "], \"compared_voxels\": " << result.changes.compared_voxels
+      << ", \"new_voxels\": " << result.changes.new_voxels
+      << ", \"removed_voxels\": " << result.changes.removed_voxels << "}";
+  }
+  j << ",\n  \"files\": {\n"
+    << "    \"tsdf.vdb\": \"OpenVDB float grids 'tsdf' (signed distance, m, + in front) and "
+       "'weight' (scans, capped), + tarmac trailer; index i = voxel centre (i + 0.5) * v\",\n"
+    << "    \"mesh.ply\": \"binary PLY of the zero level set, world frame, m\"";
+  if (prior != nullptr) {
+    j << ",\n    \"changes.npy\": \"float32 (ny, nx) per voxel column: +c new surface, -c "
+         "removed, confidence c in (0, 1]; 0 unchanged; NaN not observed in both maps\",\n"
+      << "    \"changes.png\": \"red new, blue removed (fainter = less confident), white "
+         "unchanged, slate unknown; north up\"";
+  }
+  j << "\n  }\n}\n";
+  return core::Ok{};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -138,6 +234,8 @@ int main(int argc, char** argv) {
       opt.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
     else if (a == "--sensor-height" && has_value)
       opt.sensor_height_m = std::atof(argv[++i]);
+    else if (a == "--prior" && has_value)
+      opt.prior = argv[++i];
     else if (a == "--help" || a == "-h") {
       usage();
       return 0;
@@ -178,6 +276,25 @@ int main(int argc, char** argv) {
     return kExitIo;
   }
 
+  // The prior map for change detection, checked before any work is done.
+  std::optional<core::LoadedTsdf> prior;
+  if (!opt.prior.empty()) {
+    auto loaded = core::load_tsdf(opt.prior);
+    if (loaded.ok()) {
+      if (auto m = core::check_tsdf_matches(loaded.value().info, kTsdfFrame,
+                                            params.tsdf.voxel_size_m, params.tsdf.truncation_m);
+          !m) {
+        loaded = core::Error{m.error().code, opt.prior + ": " + m.error().message};
+      }
+    }
+    if (!loaded) {
+      std::fprintf(stderr, "tarmac-map: prior refused: %s [%s]\n", loaded.error().message.c_str(),
+                   loaded.error().code.c_str());
+      return kExitData;
+    }
+    prior.emplace(std::move(loaded).value());
+  }
+
   daemon::ThreadPool pool(opt.threads);
   core::Mapper mapper(params);
   Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
@@ -185,7 +302,8 @@ int main(int argc, char** argv) {
   const std::size_t n = opt.max_scans == 0 ? seq.value().scans.size()
                                            : std::min(opt.max_scans, seq.value().scans.size());
   StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
-      t_cost{"costmap+esdf2d", {}}, t_total{"pipeline", {}};
+      t_cost{"costmap+esdf2d", {}}, t_tsdf{"tsdf", {}}, t_total{"pipeline", {}};
+  std::uint64_t tsdf_samples = 0, tsdf_updates = 0;
   std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
                 dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0;
   const bool tty = isatty(STDERR_FILENO) != 0;
@@ -204,11 +322,17 @@ int main(int argc, char** argv) {
     core::OccupancyUpdateStats occ;
     const double f_ms = timed_ms([&] { counts = mapper.ingest(cloud, T_W_B, T_B_S); });
     const double o_ms = timed_ms([&] { occ = mapper.integrate(pool); });
+    const double tsdf_ms = timed_ms([&] {
+      const core::TsdfUpdate& up = mapper.integrate_tsdf(pool);
+      tsdf_samples += up.samples;
+      tsdf_updates += up.voxel_updates;
+    });
     const double c_ms = timed_ms([&] { mapper.update_costmap({}, cloud.stamp_ns, pool); });
     t_filter.ms.push_back(f_ms);
     t_occ.ms.push_back(o_ms);
     t_cost.ms.push_back(c_ms);
-    t_total.ms.push_back(f_ms + o_ms + c_ms);
+    if (params.tsdf.enabled) t_tsdf.ms.push_back(tsdf_ms);
+    t_total.ms.push_back(f_ms + o_ms + tsdf_ms + c_ms);
     points_in += counts.input;
     points_used += counts.kept;
     dropped_nonfinite += counts.non_finite;
@@ -271,6 +395,15 @@ int main(int argc, char** argv) {
       return kExitIo;
     }
   }
+  TsdfOutputs tsdf_out;
+  if (params.tsdf.enabled) {
+    if (auto w = write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(cfg), cloud.stamp_ns,
+                                    prior ? &prior->layer : nullptr, tsdf_out);
+        !w) {
+      std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+      return kExitIo;
+    }
+  }
   const double ox = occ_map.window_min().x() * v, oy = occ_map.window_min().y() * v,
                oz = occ_map.window_min().z() * v;
   {
@@ -313,38 +446,71 @@ int main(int argc, char** argv) {
   std::printf("%-16s %9s %9s %9s %9s   (ms per scan)\n", "stage", "mean", "p50", "p99", "max");
   std::ofstream tj(out / "timing.json");
   tj << "{\n  \"scans\": " << n << ",\n  \"threads\": " << opt.threads << ",\n  \"stages_ms\": {\n";
-  const StageTimes* stages[] = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
-  for (std::size_t i = 0; i < 5; ++i) {
+  std::vector<const StageTimes*> stages = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
+  if (params.tsdf.enabled) stages.insert(stages.begin() + 3, &t_tsdf);
+  for (std::size_t i = 0; i < stages.size(); ++i) {
     const auto& s = *stages[i];
     const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
     std::printf("%-16s %9.2f %9.2f %9.2f %9.2f\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
                 percentile(s.ms, 0.99), mx);
     tj << "    \"" << s.name << "\": {\"mean\": " << mean(s.ms)
        << ", \"p50\": " << percentile(s.ms, 0.5) << ", \"p99\": " << percentile(s.ms, 0.99)
-       << ", \"max\": " << mx << "}" << (i < 4 ? "," : "") << "\n";
+       << ", \"max\": " << mx << "}" << (i + 1 < stages.size() ? "," : "") << "\n";
   }
   const double pts_per_s = total_s > 0 ? static_cast<double>(points_used) / total_s : 0.0;
   std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d", esdf3d_ms,
               dims.x(), dims.y(), dims.z());
   std::printf(
-      "pipeline throughput: %.2f M points/s (filter+occupancy+costmap), %.1f voxel visits/point\n",
+      "pipeline throughput: %.2f M points/s (filter+occupancy+tsdf+costmap), %.1f voxel "
+      "visits/point\n",
       pts_per_s / 1e6, points_used > 0 ? static_cast<double>(voxel_visits) / points_used : 0.0);
-  tj << "  },\n  \"esdf3d_ms\": " << esdf3d_ms << ",\n  \"points_per_s\": " << pts_per_s << "\n}\n";
+  tj << "  },\n  \"esdf3d_ms\": " << esdf3d_ms << ",\n  \"points_per_s\": " << pts_per_s;
+  if (params.tsdf.enabled) {
+    tj << ",\n  \"tsdf_mesh_ms\": " << tsdf_out.mesh_ms
+       << ",\n  \"tsdf_save_ms\": " << tsdf_out.save_ms;
+    if (prior) tj << ",\n  \"tsdf_changes_ms\": " << tsdf_out.changes_ms;
+  }
+  tj << "\n}\n";
+  if (params.tsdf.enabled) {
+    std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
+                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
+                tsdf_out.save_ms);
+    std::printf(
+        "tsdf: %zu blocks, %zu voxels, %.1f MiB, %.1f voxel samples/point, %.1f voxel "
+        "updates/point\n",
+        mapper.tsdf().block_count(), mapper.tsdf().voxel_count(),
+        static_cast<double>(mapper.tsdf().memory_bytes()) / (1024.0 * 1024.0),
+        points_used > 0 ? static_cast<double>(tsdf_samples) / static_cast<double>(points_used)
+                        : 0.0,
+        points_used > 0 ? static_cast<double>(tsdf_updates) / static_cast<double>(points_used)
+                        : 0.0);
+    if (prior) {
+      std::printf(
+          "changes vs %s: %llu voxels compared, %llu new, %llu removed (%.1f ms)\n",
+          opt.prior.c_str(), static_cast<unsigned long long>(tsdf_out.changes.compared_voxels),
+          static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
+          static_cast<unsigned long long>(tsdf_out.changes.removed_voxels), tsdf_out.changes_ms);
+    }
+  }
 
   const auto bytes = [](const auto& vec) {
     return std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(vec.data()),
                                          vec.size() * sizeof(vec[0]));
   };
-  std::printf("digest: occupancy %s costmap %s esdf_slice %s esdf %s\n",
+  std::printf("digest: occupancy %s costmap %s esdf_slice %s esdf %s tsdf %016llx\n",
               tools::digest(bytes(log_odds)).c_str(),
               tools::digest(bytes(layers.costmap.cells())).c_str(),
               tools::digest(bytes(slice.distance_m)).c_str(),
-              tools::digest(bytes(esdf3d.distance_m)).c_str());
+              tools::digest(bytes(esdf3d.distance_m)).c_str(),
+              static_cast<unsigned long long>(mapper.tsdf().digest()));
   std::printf(
       "wrote "
       "%s/"
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
-      "timing.json}\n",
-      opt.out.c_str());
+      "timing.json%s}\n",
+      opt.out.c_str(),
+      params.tsdf.enabled ? (prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
+                                   : ",tsdf.vdb,tsdf.json,mesh.ply")
+                          : "");
   return 0;
 }

@@ -34,7 +34,7 @@ struct DdsConfig {
 struct Config {
   int version = kConfigVersion;
   DdsConfig dds;
-  core::MapperParams mapping;  ///< YAML sections filters, occupancy, costmap
+  core::MapperParams mapping;  ///< YAML sections filters, occupancy, costmap, tsdf
 };
 
 /// Parses YAML text. Error code "config.<reason>", message "<key.path>: <why>".

@@ -12,6 +12,7 @@
 #include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/scan_filter.hpp"
+#include "tarmac/core/tsdf_integrator.hpp"
 
 namespace tarmac::core {
 
@@ -19,6 +20,7 @@ struct MapperParams {
   FilterParams filters;
   OccupancyParams occupancy;
   CostmapParams costmap;
+  TsdfParams tsdf;
 
   [[nodiscard]] Status validate() const;
 };
@@ -37,6 +39,9 @@ class Mapper {
   /// Stage 3: rebuilds the costmap and the 2D distance map from the window.
   void update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                       TaskRunner& runner);
+  /// Stage 2b: integrates the ingested scan into the TSDF (sparse, whole site). Does nothing
+  /// (and returns an empty update) when tsdf.enabled is false.
+  const TsdfUpdate& integrate_tsdf(TaskRunner& runner);
 
   /// The last ingested scan's surviving points, world frame, and the sensor origin.
   [[nodiscard]] const std::vector<Eigen::Vector3f>& points_W() const { return points_W_; }
@@ -44,6 +49,9 @@ class Mapper {
   [[nodiscard]] const OccupancyMap& occupancy() const { return map_; }
   [[nodiscard]] const CostmapLayers& costmap() const { return layers_; }
   [[nodiscard]] const MapperParams& params() const { return params_; }
+  [[nodiscard]] const TsdfLayer& tsdf() const { return tsdf_; }
+  /// For loading a saved map into the mapper (the layer must match tsdf params).
+  [[nodiscard]] TsdfLayer& tsdf() { return tsdf_; }
 
  private:
   MapperParams params_;
@@ -53,6 +61,9 @@ class Mapper {
   FilterScratch filter_scratch_;
   Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();
   Eigen::Isometry3d T_W_B_ = Eigen::Isometry3d::Identity();  ///< of the last ingested scan
+  TsdfIntegrator tsdf_integrator_;
+  TsdfLayer tsdf_;
+  TsdfUpdate no_tsdf_update_;
 };
 
 }  // namespace tarmac::core

@@ -1,0 +1,178 @@
+#pragma once
+/// @file The TSDF: a sparse truncated signed distance field on OpenVDB, covering the whole site,
+/// and its integrator.
+///
+/// Curless & Levoy, "A Volumetric Method for Building Complex Models from Range Images",
+/// SIGGRAPH 1996: each voxel keeps a signed distance d and a weight w; an observation d_obs
+/// with weight 1 updates them as d ← (w·d + d_obs)/(w + 1), w ← min(w + 1, max_weight).
+/// The distance is projective, measured along each LiDAR ray: for a return at range r and a
+/// voxel centre c, d_obs = r − |c − o| (o the sensor origin): positive in front of the surface,
+/// negative behind it. Only voxels whose centre lies within ±truncation_m of a return are touched
+/// (Vizzo et al., "VDBFusion", Sensors 22(3) 2022, §3: O(points · 2·trunc/voxel) voxels per scan).
+///
+/// Lattice: voxel i covers [i·v, (i+1)·v) along each axis of the world frame, centre (i + ½)·v,
+/// the same lattice as the occupancy map. Blocks are OpenVDB leaves of 8³ voxels; block b covers
+/// voxels [8·b, 8·b + 8).
+///
+/// OpenVDB stays inside core/src (pimpl): this header is cheap to include.
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "tarmac/core/result.hpp"
+#include "tarmac/core/task_runner.hpp"
+
+namespace tarmac::core {
+
+/// TSDF configuration (YAML section `tsdf`).
+struct TsdfParams {
+  bool enabled = true;         ///< false: the mapper skips the TSDF stage
+  float voxel_size_m = 0.10f;  ///< edge of a voxel, m
+  float truncation_m = 0.30f;  ///< half-width of the band around each return, m (>= voxel size)
+  /// Weight cap: a voxel at the cap follows new observations as an exponential moving average
+  /// with factor 1/(max_weight + 1), so a surface that moved is re-learnt (weights count scans).
+  float max_weight = 64.f;
+  float max_range_m = 50.0f;  ///< returns farther than this are not integrated, m
+  /// Space carving: also update every voxel from the sensor to the band with +truncation_m
+  /// (free space), at a cost proportional to range/voxel per ray. Off by default (VDBFusion's
+  /// default too).
+  bool space_carving = false;
+
+  [[nodiscard]] Status validate() const;
+};
+
+/// Integer voxel coordinates on the world lattice (same convention as VoxelIndex).
+using TsdfVoxelIndex = Eigen::Vector3i;
+/// Integer block (8³ voxels) coordinates: block b holds voxels [8·b, 8·b + 8).
+using BlockIndex = Eigen::Vector3i;
+
+/// Voxels per block edge and per block.
+inline constexpr int kTsdfBlockEdge = 8;
+inline constexpr int kTsdfBlockVoxels = 512;
+
+/// One observed voxel.
+struct TsdfVoxel {
+  float distance_m = 0.0f;  ///< signed, in [−truncation, +truncation]
+  float weight = 0.0f;      ///< > 0 for an observed voxel
+};
+
+/// Read-only view of one block's storage. Voxel (i, j, k) of the block (each 0..7, the voxel
+/// 8·block + (i, j, k)) is voxels[(i·8 + j)·8 + k] (x slowest: OpenVDB's leaf order).
+/// weight == 0 means never observed (its distance is then +truncation).
+struct TsdfBlockView {
+  BlockIndex block;
+  const TsdfVoxel* voxels = nullptr;  ///< kTsdfBlockVoxels values
+};
+
+/// Offset of voxel (i, j, k) inside its block (see TsdfBlockView).
+constexpr int tsdf_voxel_offset(int i, int j, int k) {
+  return (i * kTsdfBlockEdge + j) * kTsdfBlockEdge + k;
+}
+
+/// The TSDF map: one OpenVDB grid of (distance, weight) pairs (Vec2SGrid).
+/// Move-only. Not thread-safe: one writer, or any number of readers.
+class TsdfLayer {
+ public:
+  /// @pre voxel_size_m > 0, truncation_m > 0.
+  TsdfLayer(float voxel_size_m, float truncation_m);
+  ~TsdfLayer();
+  TsdfLayer(TsdfLayer&&) noexcept;
+  TsdfLayer& operator=(TsdfLayer&&) noexcept;
+  TsdfLayer(const TsdfLayer&) = delete;
+  TsdfLayer& operator=(const TsdfLayer&) = delete;
+
+  [[nodiscard]] float voxel_size_m() const { return voxel_size_m_; }
+  [[nodiscard]] float truncation_m() const { return truncation_m_; }
+
+  /// The observed voxel at `v`, or nothing when it was never observed.
+  [[nodiscard]] std::optional<TsdfVoxel> voxel(const TsdfVoxelIndex& v) const;
+  /// Voxel containing a world point.
+  [[nodiscard]] TsdfVoxelIndex voxel_of(const Eigen::Vector3d& p_W) const;
+  /// Centre of a voxel in the world frame, m.
+  [[nodiscard]] Eigen::Vector3d center_of(const TsdfVoxelIndex& v) const;
+
+  /// Blocks allocated, voxels observed, and the memory of the grid (OpenVDB's memUsage).
+  [[nodiscard]] std::size_t block_count() const;
+  [[nodiscard]] std::size_t voxel_count() const;
+  [[nodiscard]] std::size_t memory_bytes() const;
+
+  /// Calls fn for every block, in ascending (x, y, z) block order.
+  void for_each_block(const std::function<void(const TsdfBlockView&)>& fn) const;
+  /// The block at `b`, or nothing when it is not allocated.
+  [[nodiscard]] std::optional<TsdfBlockView> find_block(const BlockIndex& b) const;
+
+  /// FNV-1a 64 over every block in ascending order (coordinates, distances, weights): equal
+  /// digests mean bit-identical maps.
+  [[nodiscard]] std::uint64_t digest() const;
+
+  /// Drops every voxel.
+  void clear();
+
+  /// OpenVDB grids (defined in core/src/tsdf_grids.hpp, for the core's own .cpp files only).
+  /// Mutable access drops the integrator's leaf-pointer cache (the tree may change).
+  struct Grids;
+  [[nodiscard]] Grids& grids();
+  [[nodiscard]] const Grids& grids() const { return *grids_; }
+
+ private:
+  friend class TsdfIntegrator;  // writes voxels through its leaf cache, not through grids()
+  float voxel_size_m_;
+  float truncation_m_;
+  std::unique_ptr<Grids> grids_;
+};
+
+/// What one scan changed.
+struct TsdfUpdate {
+  std::uint64_t rays = 0;           ///< returns integrated (within max range)
+  std::uint64_t samples = 0;        ///< (ray, voxel) pairs inside the band, before merging
+  std::uint64_t voxel_updates = 0;  ///< voxels updated (each at most once per scan)
+  std::uint64_t blocks_created = 0;
+  /// Every block this scan updated, in ascending (x, y, z) order.
+  std::vector<BlockIndex> blocks;
+};
+
+/// Integrates scans into a TsdfLayer. Holds only scratch buffers, reused across scans (after
+/// warm-up nothing it owns allocates; OpenVDB allocates new blocks).
+///
+/// Determinism: rays are cut into a fixed number of chunks; their band samples are binned by
+/// block into a fixed number of partitions (a hash of the block coordinates), each partition
+/// owning disjoint blocks. Within a partition, the samples of a voxel are merged in ray order
+/// (mean of the scan's observations of that voxel) and applied once. So the result is
+/// bit-identical for any runner and any thread count.
+class TsdfIntegrator {
+ public:
+  /// @pre params.validate().ok()
+  explicit TsdfIntegrator(const TsdfParams& params);
+  ~TsdfIntegrator();
+  TsdfIntegrator(TsdfIntegrator&&) noexcept;
+  TsdfIntegrator& operator=(TsdfIntegrator&&) noexcept;
+  TsdfIntegrator(const TsdfIntegrator&) = delete;
+  TsdfIntegrator& operator=(const TsdfIntegrator&) = delete;
+
+  /// Integrates one scan: returns `points_W` (world frame) seen from `origin_W`. Non-finite
+  /// points and returns beyond max_range_m are skipped.
+  /// @pre layer.voxel_size_m() and truncation_m() equal the params'.
+  /// @return what changed; valid until the next call.
+  const TsdfUpdate& integrate(const Eigen::Vector3d& origin_W,
+                              std::span<const Eigen::Vector3f> points_W, TsdfLayer& layer,
+                              TaskRunner& runner);
+
+  [[nodiscard]] const TsdfParams& params() const { return params_; }
+
+  /// A layer matching the params.
+  [[nodiscard]] TsdfLayer make_layer() const;
+
+ private:
+  struct Scratch;
+  TsdfParams params_;
+  std::unique_ptr<Scratch> scratch_;
+  TsdfUpdate update_;
+};
+
+}  // namespace tarmac::core

@@ -1,0 +1,43 @@
+#pragma once
+/// @file The OpenVDB side of TsdfLayer, for the core's own TSDF .cpp files only (never include it
+/// from a public header: an OpenVDB translation unit costs ~12 s and ~650 MB to compile).
+
+#include <openvdb/openvdb.h>
+
+#include "tarmac/core/tsdf_integrator.hpp"
+
+namespace tarmac::core {
+
+/// One grid of (signed distance m, weight) pairs: a voxel's two values share a cache line, which
+/// halves the memory traffic of integration against two grids (in files: two float grids,
+/// tsdf_io.cpp). Background (never observed):
+/// (+truncation, 0).
+using TsdfTree = openvdb::Vec2STree;
+using TsdfGrid = openvdb::Grid<TsdfTree>;
+
+/// Leaf pointers by packed block key (open addressing, at most half full), so that integration
+/// finds a block's leaf without walking the tree. One table per integration partition: the task
+/// of partition p is the only user of table p. Emptied whenever the tree may change outside the
+/// integrator (TsdfLayer::grids(), clear()).
+struct TsdfLeafCache {
+  struct Entry {
+    std::uint64_t key;  // ~0: empty
+    TsdfTree::LeafNodeType* leaf;
+    TsdfTree::ValueType* values;
+  };
+  std::vector<Entry> table;
+  std::size_t size = 0;
+};
+
+struct TsdfLayer::Grids {
+  TsdfGrid::Ptr tsdf;
+  std::vector<TsdfLeafCache> leaf_cache;
+};
+
+/// Index-to-world transform of the lattice: index i ↦ centre (i + ½)·v of voxel [i·v, (i+1)·v).
+openvdb::math::Transform::Ptr tsdf_transform(float voxel_size_m);
+
+/// An empty grid with the lattice transform.
+void make_tsdf_grids(float voxel_size_m, float truncation_m, TsdfLayer::Grids& grids);
+
+}  // namespace tarmac::core

@@ -1,0 +1,513 @@
+#include "tarmac/core/tsdf_integrator.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+
+#include "tsdf_grids.hpp"
+
+namespace tarmac::core {
+
+namespace {
+
+using Tree = TsdfTree;
+using Leaf = Tree::LeafNodeType;
+using Value = Tree::ValueType;  // (distance, weight)
+/// Unregistered accessor: used only within one integration phase, during which the tree's
+/// structure does not change.
+using FastAccessor = openvdb::tree::ValueAccessor<Tree, false>;
+
+static_assert(Leaf::DIM == kTsdfBlockEdge, "TSDF blocks are OpenVDB leaves");
+static_assert(Leaf::SIZE == kTsdfBlockVoxels, "TSDF blocks are OpenVDB leaves");
+static_assert(sizeof(Value) == sizeof(TsdfVoxel) && sizeof(TsdfVoxel) == 2 * sizeof(float),
+              "a leaf buffer is an array of TsdfVoxel");
+
+/// Ray chunks and block partitions: fixed, independent of the thread count (determinism).
+constexpr std::size_t kRayChunks = 32;
+constexpr std::size_t kPartitions = 16;
+/// Block coordinates are packed in 21 bits each: voxel indices must stay within ±2^23.
+constexpr int kBlockBias = 1 << 20;
+constexpr double kMaxVoxelIndex = static_cast<double>((1 << 23) - 16);
+constexpr std::uint64_t kEmptyKey = ~std::uint64_t{0};
+
+std::uint64_t pack_block(int bx, int by, int bz) {
+  return (static_cast<std::uint64_t>(bx + kBlockBias) << 42) |
+         (static_cast<std::uint64_t>(by + kBlockBias) << 21) |
+         static_cast<std::uint64_t>(bz + kBlockBias);
+}
+BlockIndex unpack_block(std::uint64_t key) {
+  constexpr std::uint64_t m = (std::uint64_t{1} << 21) - 1;
+  return {static_cast<int>((key >> 42) & m) - kBlockBias,
+          static_cast<int>((key >> 21) & m) - kBlockBias, static_cast<int>(key & m) - kBlockBias};
+}
+std::uint64_t mix(std::uint64_t key) {
+  return key * 0x9E3779B97F4A7C15ull;
+}
+std::size_t partition_of(std::uint64_t key) {
+  return static_cast<std::size_t>(mix(key) >> 60);
+}
+static_assert(kPartitions == 16, "partition_of takes the top 4 bits");
+
+/// One (ray, voxel) pair inside the band.
+struct Sample {
+  std::uint64_t block_key;
+  std::uint32_t offset;  // voxel inside the block, OpenVDB leaf order
+  float sdf_m;
+};
+
+/// One sample after grouping by block.
+struct GroupedSample {
+  std::uint32_t offset;
+  float sdf_m;
+};
+
+/// Per-partition state: blocks met this scan (open addressing), grouped samples, new leaves.
+struct Partition {
+  std::vector<std::uint64_t> table_keys;  // kEmptyKey = free
+  std::vector<std::uint32_t> table_slots;
+  std::vector<std::uint64_t> slot_keys;
+  std::vector<std::uint32_t> slot_hash_pos;
+  std::vector<std::uint32_t> slot_count;
+  std::vector<std::uint32_t> slot_start;
+  std::vector<std::uint32_t> sample_slot;
+  std::vector<GroupedSample> grouped;
+  std::vector<std::uint64_t> slot_lines;  // cache lines (8 voxels) of the block touched
+  std::vector<TsdfLeafCache::Entry> slot_entry;
+  std::vector<std::unique_ptr<Leaf>> new_leaves;
+  std::array<float, kTsdfBlockVoxels> sum{};
+  std::array<std::uint32_t, kTsdfBlockVoxels> count{};
+  std::vector<std::uint32_t> touched;
+  std::uint64_t voxel_updates = 0;
+
+  std::size_t home(std::uint64_t key) const {
+    return static_cast<std::size_t>(mix(key) >> 20) & (table_keys.size() - 1);
+  }
+
+  /// Slot of a block, numbered in first-touch order (independent of the table's size).
+  std::uint32_t slot_for(std::uint64_t key) {
+    const std::size_t mask = table_keys.size() - 1;
+    std::size_t h = home(key);
+    while (true) {
+      if (table_keys[h] == key) return table_slots[h];
+      if (table_keys[h] == kEmptyKey) break;
+      h = (h + 1) & mask;
+    }
+    const auto slot = static_cast<std::uint32_t>(slot_keys.size());
+    table_keys[h] = key;
+    table_slots[h] = slot;
+    slot_keys.push_back(key);
+    slot_hash_pos.push_back(static_cast<std::uint32_t>(h));
+    slot_count.push_back(0);
+    if (2 * slot_keys.size() > table_keys.size()) grow();  // at most half full
+    return slot;
+  }
+
+  /// Doubles the table (warm-up only: capacity is kept across scans).
+  void grow() {
+    const std::size_t cap = std::max<std::size_t>(1024, 2 * table_keys.size());
+    table_keys.assign(cap, kEmptyKey);
+    table_slots.assign(cap, 0);
+    for (std::uint32_t sl = 0; sl < slot_keys.size(); ++sl) {
+      std::size_t h = home(slot_keys[sl]);
+      while (table_keys[h] != kEmptyKey) h = (h + 1) & (cap - 1);
+      table_keys[h] = slot_keys[sl];
+      table_slots[h] = sl;
+      slot_hash_pos[sl] = static_cast<std::uint32_t>(h);
+    }
+  }
+
+  void reset_table() {
+    for (const std::uint32_t h : slot_hash_pos) table_keys[h] = kEmptyKey;
+    slot_keys.clear();
+    slot_hash_pos.clear();
+    slot_count.clear();
+  }
+};
+
+}  // namespace
+
+struct TsdfIntegrator::Scratch {
+  std::vector<std::vector<Sample>> bins =
+      std::vector<std::vector<Sample>>(kRayChunks * kPartitions);
+  std::vector<std::uint64_t> chunk_rays = std::vector<std::uint64_t>(kRayChunks);
+  std::vector<Partition> partitions = std::vector<Partition>(kPartitions);
+};
+
+// ---------------------------------------------------------------------------------------------
+// Params and layer
+
+Status TsdfParams::validate() const {
+  const auto bad = [](const std::string& key, const std::string& why) -> Status {
+    return Error{"tsdf.invalid", "tsdf." + key + ": " + why};
+  };
+  if (!(voxel_size_m >= 0.01f && voxel_size_m <= 2.0f)) {
+    return bad("voxel_size_m", "must be in [0.01, 2] m");
+  }
+  if (!(truncation_m >= voxel_size_m && truncation_m <= 32.0f * voxel_size_m)) {
+    return bad("truncation_m", "must be in [voxel_size_m, 32 * voxel_size_m]");
+  }
+  if (!(max_weight >= 1.0f && max_weight <= 1e6f)) return bad("max_weight", "must be in [1, 1e6]");
+  if (!(max_range_m > 0.0f && max_range_m <= 1000.0f)) {
+    return bad("max_range_m", "must be in (0, 1000] m");
+  }
+  return Ok{};
+}
+
+openvdb::math::Transform::Ptr tsdf_transform(float voxel_size_m) {
+  auto xform = openvdb::math::Transform::createLinearTransform(static_cast<double>(voxel_size_m));
+  xform->postTranslate(openvdb::Vec3d(0.5 * static_cast<double>(voxel_size_m)));
+  return xform;
+}
+
+void make_tsdf_grids(float voxel_size_m, float truncation_m, TsdfLayer::Grids& grids) {
+  grids.tsdf = TsdfGrid::create(Value(truncation_m, 0.0f));
+  grids.tsdf->setName("tsdf_weight");
+  grids.tsdf->setTransform(tsdf_transform(voxel_size_m));
+}
+
+TsdfLayer::TsdfLayer(float voxel_size_m, float truncation_m)
+    : voxel_size_m_(voxel_size_m), truncation_m_(truncation_m), grids_(std::make_unique<Grids>()) {
+  TARMAC_ASSERT(voxel_size_m > 0.0f && truncation_m > 0.0f, "TsdfLayer needs positive sizes");
+  make_tsdf_grids(voxel_size_m, truncation_m, *grids_);
+}
+TsdfLayer::~TsdfLayer() = default;
+TsdfLayer::TsdfLayer(TsdfLayer&&) noexcept = default;
+TsdfLayer& TsdfLayer::operator=(TsdfLayer&&) noexcept = default;
+
+std::optional<TsdfVoxel> TsdfLayer::voxel(const TsdfVoxelIndex& v) const {
+  const Value x = grids_->tsdf->tree().getValue(openvdb::Coord(v.x(), v.y(), v.z()));
+  if (!(x[1] > 0.0f)) return std::nullopt;
+  return TsdfVoxel{x[0], x[1]};
+}
+
+TsdfVoxelIndex TsdfLayer::voxel_of(const Eigen::Vector3d& p_W) const {
+  return (p_W / static_cast<double>(voxel_size_m_)).array().floor().cast<int>();
+}
+
+Eigen::Vector3d TsdfLayer::center_of(const TsdfVoxelIndex& v) const {
+  return (v.cast<double>().array() + 0.5) * static_cast<double>(voxel_size_m_);
+}
+
+std::size_t TsdfLayer::block_count() const {
+  return grids_->tsdf->tree().leafCount();
+}
+
+std::size_t TsdfLayer::voxel_count() const {
+  return grids_->tsdf->tree().activeLeafVoxelCount();
+}
+
+std::size_t TsdfLayer::memory_bytes() const {
+  return grids_->tsdf->memUsage();
+}
+
+void TsdfLayer::for_each_block(const std::function<void(const TsdfBlockView&)>& fn) const {
+  for (auto it = grids_->tsdf->tree().cbeginLeaf(); it; ++it) {
+    const openvdb::Coord o = it->origin();
+    fn(TsdfBlockView{BlockIndex(o.x() >> 3, o.y() >> 3, o.z() >> 3),
+                     reinterpret_cast<const TsdfVoxel*>(it->buffer().data())});
+  }
+}
+
+std::optional<TsdfBlockView> TsdfLayer::find_block(const BlockIndex& b) const {
+  const openvdb::Coord o(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge, b.z() * kTsdfBlockEdge);
+  const Leaf* leaf = grids_->tsdf->tree().probeConstLeaf(o);
+  if (leaf == nullptr) return std::nullopt;
+  return TsdfBlockView{b, reinterpret_cast<const TsdfVoxel*>(leaf->buffer().data())};
+}
+
+std::uint64_t TsdfLayer::digest() const {
+  // FNV-1a 64 over 32-bit words (coordinates, then distance and weight of every voxel).
+  std::uint64_t h = 1469598103934665603ull;
+  const auto word = [&h](std::uint32_t x) {
+    h ^= x;
+    h *= 1099511628211ull;
+  };
+  for_each_block([&](const TsdfBlockView& b) {
+    for (int a = 0; a < 3; ++a) word(static_cast<std::uint32_t>(b.block[a]));
+    for (int n = 0; n < kTsdfBlockVoxels; ++n) {
+      std::uint32_t d, w;
+      std::memcpy(&d, &b.voxels[n].distance_m, 4);
+      std::memcpy(&w, &b.voxels[n].weight, 4);
+      word(d);
+      word(w);
+    }
+  });
+  return h;
+}
+
+void TsdfLayer::clear() {
+  make_tsdf_grids(voxel_size_m_, truncation_m_, *grids_);
+  grids_->leaf_cache.clear();
+}
+
+TsdfLayer::Grids& TsdfLayer::grids() {
+  grids_->leaf_cache.clear();
+  return *grids_;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Integrator
+
+TsdfIntegrator::TsdfIntegrator(const TsdfParams& params)
+    : params_(params), scratch_(std::make_unique<Scratch>()) {
+  TARMAC_ASSERT(params.validate().ok(), "TsdfParams must be validated first");
+}
+TsdfIntegrator::~TsdfIntegrator() = default;
+TsdfIntegrator::TsdfIntegrator(TsdfIntegrator&&) noexcept = default;
+TsdfIntegrator& TsdfIntegrator::operator=(TsdfIntegrator&&) noexcept = default;
+
+TsdfLayer TsdfIntegrator::make_layer() const {
+  return TsdfLayer(params_.voxel_size_m, params_.truncation_m);
+}
+
+namespace {
+
+/// Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", Eurographics 1987:
+/// every voxel the segment origin + t·dir, t in [t0, t1], passes through, in order. For each,
+/// the projective signed distance r − |c − o| of its centre c; kept when within the band
+/// (carving: in front of the band clamped to +truncation).
+void band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double range, double t0,
+                  double t1, double v, double trunc, bool carve,
+                  std::vector<Sample>* bins /* kPartitions */) {
+  const Eigen::Vector3d q0 = (o + t0 * dir) / v;  // voxel units
+  Eigen::Vector3i idx = q0.array().floor().cast<int>();
+  int step[3];
+  double t_max[3], t_delta[3];
+  // A huge finite value for axes the ray does not cross (0 · kNever must stay 0 below).
+  constexpr double kNever = 1e300;
+  for (int a = 0; a < 3; ++a) {
+    if (dir[a] > 0.0) {
+      step[a] = 1;
+      t_delta[a] = v / dir[a];
+      t_max[a] = t0 + (idx[a] + 1 - q0[a]) * t_delta[a];
+    } else if (dir[a] < 0.0) {
+      step[a] = -1;
+      t_delta[a] = -v / dir[a];
+      t_max[a] = t0 + (q0[a] - idx[a]) * t_delta[a];
+    } else {
+      step[a] = 0;
+      t_delta[a] = 0.0;
+      t_max[a] = kNever;
+    }
+  }
+  // Traversal state in registers; the axis of the nearest boundary is chosen without branches
+  // (a branch there mispredicts about half of the time).
+  int ix = idx.x(), iy = idx.y(), iz = idx.z();
+  double tx = t_max[0], ty = t_max[1], tz = t_max[2];
+  const double half = 0.5 * v;
+  std::uint64_t last_key = kEmptyKey;
+  std::vector<Sample>* bin = nullptr;
+  while (true) {
+    const double cx = ix * v + half - o.x(), cy = iy * v + half - o.y(), cz = iz * v + half - o.z();
+    double sdf = range - std::sqrt(cx * cx + cy * cy + cz * cz);
+    if (carve && sdf > trunc) sdf = trunc;
+    if (sdf <= trunc && sdf >= -trunc) {
+      const std::uint64_t key = pack_block(ix >> 3, iy >> 3, iz >> 3);
+      if (key != last_key) {
+        last_key = key;
+        bin = &bins[partition_of(key)];
+      }
+      const auto offset = static_cast<std::uint32_t>(tsdf_voxel_offset(ix & 7, iy & 7, iz & 7));
+      bin->push_back(Sample{key, offset, static_cast<float>(sdf)});
+    }
+    const int xy = tx < ty, xz = tx < tz, yz = ty < tz;
+    const int bx = xy & xz, by = (1 - xy) & yz, bz = 1 - bx - by;
+    const double t_next = bx ? tx : (by ? ty : tz);
+    if (t_next > t1) break;
+    ix += bx * step[0];
+    iy += by * step[1];
+    iz += bz * step[2];
+    tx += bx * t_delta[0];
+    ty += by * t_delta[1];
+    tz += bz * t_delta[2];
+  }
+}
+
+}  // namespace
+
+const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
+                                            std::span<const Eigen::Vector3f> points_W,
+                                            TsdfLayer& layer, TaskRunner& runner) {
+  TARMAC_ASSERT(
+      layer.voxel_size_m() == params_.voxel_size_m && layer.truncation_m() == params_.truncation_m,
+      "TSDF layer and integrator must share voxel size and truncation");
+  Scratch& s = *scratch_;
+  {
+    std::vector<BlockIndex> keep = std::move(update_.blocks);  // keeps its capacity
+    keep.clear();
+    update_ = TsdfUpdate{};
+    update_.blocks = std::move(keep);
+  }
+  const double v = params_.voxel_size_m;
+  const double trunc = params_.truncation_m;
+  const double max_range = params_.max_range_m;
+  const bool carve = params_.space_carving;
+  const Eigen::Vector3d o = origin_W;
+  if (!o.allFinite() || (o.array().abs() / v).maxCoeff() > kMaxVoxelIndex / 2) return update_;
+
+  // 1. Band samples per ray chunk, binned by the partition owning their block.
+  const std::size_t n = points_W.size();
+  const std::size_t per_chunk = (n + kRayChunks - 1) / kRayChunks;
+  runner.parallel_for(kRayChunks, [&](std::size_t c) {
+    std::vector<Sample>* bins = &s.bins[c * kPartitions];
+    for (std::size_t p = 0; p < kPartitions; ++p) bins[p].clear();
+    std::uint64_t rays = 0;
+    const std::size_t end = std::min(n, (c + 1) * per_chunk);
+    for (std::size_t i = c * per_chunk; i < end; ++i) {
+      const Eigen::Vector3d p = points_W[i].cast<double>();
+      const Eigen::Vector3d d = p - o;
+      const double r = d.norm();
+      if (!std::isfinite(r) || r > max_range || r <= 0.0) continue;
+      ++rays;
+      const Eigen::Vector3d dir = d / r;
+      const double t0 = carve ? 0.0 : std::max(0.0, r - trunc);
+      band_samples(o, dir, r, t0, r + trunc, v, trunc, carve, bins);
+    }
+    s.chunk_rays[c] = rays;
+  });
+
+  // 2. Per partition: group samples by block (first-touch order, samples in ray order), merge
+  //    each voxel's samples (their mean) and apply one running-average update.
+  const float max_w = params_.max_weight;
+  const Value background(params_.truncation_m, 0.0f);
+  TsdfLayer::Grids& grids = *layer.grids_;
+  Tree& tree = grids.tsdf->tree();
+  grids.leaf_cache.resize(kPartitions);
+  runner.parallel_for(kPartitions, [&](std::size_t p) {
+    Partition& part = s.partitions[p];
+    std::size_t total = 0;
+    for (std::size_t c = 0; c < kRayChunks; ++c) total += s.bins[c * kPartitions + p].size();
+    if (part.table_keys.empty()) part.grow();
+    part.sample_slot.resize(total);
+    part.grouped.resize(total);
+    part.new_leaves.clear();
+    part.voxel_updates = 0;
+    std::size_t k = 0;
+    for (std::size_t c = 0; c < kRayChunks; ++c) {
+      std::uint64_t last = kEmptyKey;
+      std::uint32_t slot = 0;
+      for (const Sample& smp : s.bins[c * kPartitions + p]) {
+        if (smp.block_key != last) {
+          last = smp.block_key;
+          slot = part.slot_for(last);
+        }
+        part.slot_count[slot]++;
+        part.sample_slot[k++] = slot;
+      }
+    }
+    const std::size_t slots = part.slot_keys.size();
+    part.slot_start.resize(slots + 1);
+    std::uint32_t acc = 0;
+    for (std::size_t sl = 0; sl < slots; ++sl) {
+      part.slot_start[sl] = acc;
+      acc += part.slot_count[sl];
+    }
+    part.slot_start[slots] = acc;
+    // Scatter (stable: ray order within each block).
+    k = 0;
+    for (std::size_t sl = 0; sl < slots; ++sl) part.slot_count[sl] = part.slot_start[sl];
+    part.slot_lines.assign(slots, 0);
+    for (std::size_t c = 0; c < kRayChunks; ++c) {
+      for (const Sample& smp : s.bins[c * kPartitions + p]) {
+        const std::uint32_t slot = part.sample_slot[k++];
+        part.grouped[part.slot_count[slot]++] = {smp.offset, smp.sdf_m};
+        part.slot_lines[slot] |= std::uint64_t{1} << (smp.offset >> 3);
+      }
+    }
+    // The leaf of every block: from the leaf cache, else found in the tree read-only (its
+    // structure does not change in this step), else built aside and handed to the tree in
+    // step 3. The cache spares a walk down the tree (several dependent cache misses) per block.
+    part.slot_entry.resize(slots);
+    {
+      TsdfLeafCache& cache = grids.leaf_cache[p];
+      if (cache.table.size() < 2 * (cache.size + slots)) {
+        std::size_t cap = std::max<std::size_t>(1024, cache.table.size());
+        while (cap < 2 * (cache.size + slots)) cap *= 2;
+        std::vector<TsdfLeafCache::Entry> old = std::move(cache.table);
+        cache.table.assign(cap, TsdfLeafCache::Entry{kEmptyKey, nullptr, nullptr});
+        for (const auto& e : old) {
+          if (e.key == kEmptyKey) continue;
+          std::size_t h = static_cast<std::size_t>(mix(e.key) >> 24) & (cap - 1);
+          while (cache.table[h].key != kEmptyKey) h = (h + 1) & (cap - 1);
+          cache.table[h] = e;
+        }
+      }
+      const std::size_t mask = cache.table.size() - 1;
+      FastAccessor acc_tree(tree);
+      for (std::size_t sl = 0; sl < slots; ++sl) {
+        const std::uint64_t key = part.slot_keys[sl];
+        std::size_t h = static_cast<std::size_t>(mix(key) >> 24) & mask;
+        while (cache.table[h].key != key && cache.table[h].key != kEmptyKey) h = (h + 1) & mask;
+        if (cache.table[h].key != key) {
+          const BlockIndex b = unpack_block(key);
+          const openvdb::Coord origin(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge,
+                                      b.z() * kTsdfBlockEdge);
+          Leaf* leaf = acc_tree.probeLeaf(origin);
+          if (leaf == nullptr) {
+            part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
+            leaf = part.new_leaves.back().get();
+          }
+          cache.table[h] = TsdfLeafCache::Entry{key, leaf, leaf->buffer().data()};
+          ++cache.size;
+        }
+        part.slot_entry[sl] = cache.table[h];
+      }
+    }
+    // Apply, prefetching the touched cache lines of the blocks a few slots ahead: leaves are
+    // scattered in memory, so this step is bound by cache misses, not arithmetic.
+    constexpr std::size_t kAhead = 4;
+    const auto prefetch = [&](std::size_t sl) {
+      __builtin_prefetch(&part.slot_entry[sl].leaf->getValueMask(), 1);
+      std::uint64_t lines = part.slot_lines[sl];
+      while (lines != 0) {
+        const int l = __builtin_ctzll(lines);
+        lines &= lines - 1;
+        __builtin_prefetch(part.slot_entry[sl].values + 8 * l, 1);
+      }
+    };
+    for (std::size_t sl = 0; sl < std::min(slots, kAhead); ++sl) prefetch(sl);
+    for (std::size_t sl = 0; sl < slots; ++sl) {
+      if (sl + kAhead < slots) prefetch(sl + kAhead);
+      Leaf* leaf = part.slot_entry[sl].leaf;
+      Value* values = part.slot_entry[sl].values;
+      for (std::uint32_t g = part.slot_start[sl]; g < part.slot_start[sl + 1]; ++g) {
+        const GroupedSample gs = part.grouped[g];
+        if (part.count[gs.offset] == 0) part.touched.push_back(gs.offset);
+        part.sum[gs.offset] += gs.sdf_m;
+        part.count[gs.offset]++;
+      }
+      for (const std::uint32_t off : part.touched) {
+        const float obs = part.sum[off] / static_cast<float>(part.count[off]);
+        Value& x = values[off];
+        const float w = x[1];
+        // Weighted running average; the cap lets an old surface be re-learnt.
+        x[0] = (x[0] * w + obs) / (w + 1.0f);
+        x[1] = std::min(w + 1.0f, max_w);
+        leaf->setActiveState(off, true);
+        part.sum[off] = 0.0f;
+        part.count[off] = 0;
+      }
+      part.voxel_updates += part.touched.size();
+      part.touched.clear();
+    }
+  });
+
+  // 3. Serial: hand the new leaves to the tree, collect the changed blocks in partition order.
+  FastAccessor acc_tree(tree);
+  for (std::size_t p = 0; p < kPartitions; ++p) {
+    Partition& part = s.partitions[p];
+    for (auto& leaf : part.new_leaves) acc_tree.addLeaf(leaf.release());
+    update_.blocks_created += part.new_leaves.size();
+    update_.voxel_updates += part.voxel_updates;
+    for (const std::uint64_t key : part.slot_keys) update_.blocks.push_back(unpack_block(key));
+    update_.samples += part.grouped.size();
+    part.reset_table();
+  }
+  for (const std::uint64_t r : s.chunk_rays) update_.rays += r;
+  return update_;
+}
+
+}  // namespace tarmac::core
