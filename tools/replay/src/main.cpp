@@ -101,6 +101,7 @@ int main(int argc, char** argv) {
   options.lidar_topic = sensor->topic;
   options.frame_id = sensor->frame_id;
   options.T_base_sensor = sensor->T_base_sensor;
+  options.lidar_qos = cfg.dds.qos.lidar;
   options.pose_topic = cfg.pose.topic;
   options.pose_frame_id = cfg.pose.frame_id;
   if (cfg.pose.type != config::PoseType::kPoseWithCovarianceStamped) {

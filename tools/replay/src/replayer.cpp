@@ -52,7 +52,7 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   using PoseWriter =
       transport::Writer<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType>;
   if (!(options.rate_scale > 0.0)) return core::Error{"replay.options", "rate_scale must be > 0"};
-  auto clouds = CloudWriter::create(participant, options.lidar_topic, transport::qos::kLidar);
+  auto clouds = CloudWriter::create(participant, options.lidar_topic, options.lidar_qos);
   if (!clouds) return clouds.error();
   // Deep enough that a reliable pose reader never makes the replay block.
   transport::QosSpec pose_qos = transport::qos::kPose;
@@ -84,7 +84,7 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   events.reserve(2 * n);
   for (std::size_t k = 0; k < n; ++k) {
     events.push_back({stamps[k] + std::llround(jitter(rng)), k, false});
-    if (!(options.skip_poses_of_scan && k == options.skip_pose_index)) {
+    if (options.pose_count == 0 || k < options.pose_count) {
       events.push_back({stamps[k] + std::llround(jitter(rng)), k, true});
     }
   }

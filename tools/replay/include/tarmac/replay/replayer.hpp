@@ -20,6 +20,7 @@
 #include "tarmac/core/result.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/transport/participant.hpp"
+#include "tarmac/transport/qos.hpp"
 
 namespace tarmac::tools {
 
@@ -36,8 +37,11 @@ struct ReplayOptions {
   std::uint64_t seed = 1;            ///< jitter seed
   std::size_t max_scans = 0;         ///< 0: all
   double wait_for_readers_s = 10.0;  ///< wait this long for a matched reader on both topics
-  bool skip_poses_of_scan = false;   ///< test hook: publish no pose for scan `skip_pose_index`
-  std::size_t skip_pose_index = 0;
+  /// Poses are published for the first `pose_count` scans only (0: all); tests use it to starve
+  /// the daemon of poses.
+  std::size_t pose_count = 0;
+  /// QoS of the scan writer; must be compatible with the daemon's `dds.qos.lidar`.
+  transport::QosSpec lidar_qos = transport::qos::kLidar;
   /// Called after each scan is published (index, count); e.g. a progress bar.
   std::function<void(std::size_t, std::size_t)> progress;
 };
