@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -168,7 +169,7 @@ class Executor::Impl {
   }
 
   void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped);
-  void real_time_setup();
+  void real_time_setup(const RunHooks& hooks);
 
   config::Config config;
   transport::Participant participant;
@@ -204,7 +205,7 @@ class Executor::Impl {
   std::uint64_t cycle_index = 0;
 };
 
-void Executor::Impl::real_time_setup() {
+void Executor::Impl::real_time_setup(const RunHooks& hooks) {
   const auto& e = config.executor;
   if (!e.cpus.empty()) {
     if (auto why = pin_current_thread(e.cpus[0]); !why.empty()) {
@@ -230,7 +231,7 @@ void Executor::Impl::real_time_setup() {
   for (std::uint32_t i = 1; i < e.workers && !e.cpus.empty(); ++i) {
     worker_cpus.push_back(e.cpus[i % e.cpus.size()]);
   }
-  pool = std::make_unique<ThreadPool>(e.workers, worker_cpus);
+  pool = std::make_unique<ThreadPool>(e.workers, worker_cpus, hooks.on_thread_start);
   if (pool->pin_failures() > 0) {
     spdlog::warn("executor: {} of {} workers could not be pinned; they run unpinned",
                  pool->pin_failures(), worker_cpus.size());
@@ -419,9 +420,10 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
 Executor::Executor(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Executor::~Executor() = default;
 
-void Executor::run(const std::function<bool()>& stop_requested) {
+void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& hooks) {
   Impl& d = *impl_;
-  d.real_time_setup();
+  if (hooks.on_thread_start) hooks.on_thread_start();
+  d.real_time_setup(hooks);
   const std::int64_t period_ns = std::llround(1e9 / d.config.executor.rate_hz);
   // Ticks sit on multiples of the period of the stamp clock (CLOCK_REALTIME); the sleep runs on
   // CLOCK_MONOTONIC, so a wall-clock step does not distort the schedule.
@@ -447,9 +449,11 @@ void Executor::run(const std::function<bool()>& stop_requested) {
       late -= n * period_ns;
     }
     d.tick(tick_real, static_cast<double>(late) / 1e6, skipped);
+    if (hooks.on_tick_end) hooks.on_tick_end(d.cycle_index - 1);
     sd_notify(0, "WATCHDOG=1");
     if (d.cycle_index % status_every == 0) {
-      std::snprintf(status, sizeof status, "STATUS=%s", status_line().c_str());
+      std::memcpy(status, "STATUS=", 7);
+      format_status(status + 7, sizeof status - 7);
       sd_notify(0, status);
     }
     deadline += period_ns;
@@ -466,10 +470,15 @@ ExecutorTotals Executor::totals() const {
 }
 
 std::string Executor::status_line() const {
+  char buf[200];
+  format_status(buf, sizeof buf);
+  return buf;
+}
+
+void Executor::format_status(char* buf, std::size_t size) const {
   std::lock_guard lock(impl_->totals_mutex);
   const auto& d = *impl_;
-  char buf[200];
-  std::snprintf(buf, sizeof buf,
+  std::snprintf(buf, size,
                 "cycle p50 %.1f ms p99 %.1f ms (budget %.0f), jitter p99 %.2f ms, %llu scans, "
                 "%llu skipped, %llu over budget",
                 d.cycle_ms.percentile(0.5), d.cycle_ms.percentile(0.99), d.config.budgets.cycle_ms,
@@ -477,7 +486,6 @@ std::string Executor::status_line() const {
                 static_cast<unsigned long long>(d.totals.scans_integrated),
                 static_cast<unsigned long long>(d.totals.skipped_ticks),
                 static_cast<unsigned long long>(d.totals.overruns));
-  return buf;
 }
 
 core::Status Executor::save_map() const {

@@ -27,6 +27,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonNoPose = 134,
   kDomainDaemonOverrun = 135,
   kDomainDaemonProcess = 136,
+  kDomainDaemonAllocations = 137,
 };
 
 inline bool running_in_ci() {

@@ -1,5 +1,6 @@
 #include "conversions.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -256,10 +257,15 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
 
   const bool swap = msg.is_bigendian() != (std::endian::native == std::endian::big);
   const std::size_t n = width * height;
-  out.points_S.reserve(n);
-  if (intensity) out.intensity.reserve(n);
-  if (ring) out.ring.reserve(n);
-  if (time) out.time_offset_s.reserve(n);
+  // Grow geometrically: clouds are parsed into reused buffers, so a slowly growing scan size
+  // costs a few reallocations, not one per scan.
+  const auto grow = [n](auto& v) {
+    if (v.capacity() < n) v.reserve(std::max(n, v.capacity() + v.capacity() / 2));
+  };
+  grow(out.points_S);
+  if (intensity) grow(out.intensity);
+  if (ring) grow(out.ring);
+  if (time) grow(out.time_offset_s);
   const std::uint8_t* base = msg.data().data();
   for (std::size_t row = 0; row < height; ++row) {
     for (std::size_t col = 0; col < width; ++col) {

@@ -74,8 +74,8 @@ struct ExecutorConfig {
 struct BudgetConfig {
   double drain_ms = 5.0;       ///< take queued samples, parse, select
   double ingest_ms = 15.0;     ///< filters, all scans of the tick
-  double integrate_ms = 40.0;  ///< occupancy raycasting, all scans of the tick
-  double costmap_ms = 20.0;    ///< costmap + 2D ESDF, once per tick
+  double integrate_ms = 50.0;  ///< occupancy raycasting, all scans of the tick
+  double costmap_ms = 35.0;    ///< costmap + 2D ESDF, once per tick
   double publish_ms = 10.0;    ///< costmap, ESDF slice, reports
   double cycle_ms = 90.0;      ///< the whole tick
 };

@@ -27,6 +27,12 @@ struct ExecutorTotals {
   std::int64_t newest_stamp_ns = 0;
 };
 
+/// Instrumentation for tests and benchmarks; empty by default.
+struct RunHooks {
+  std::function<void()> on_thread_start;           ///< on the executor and each worker thread
+  std::function<void(std::uint64_t)> on_tick_end;  ///< on the executor thread, after each tick
+};
+
 class Executor {
  public:
   /// Creates the DDS participant, readers and writers and the mapper. Fails with the DDS or
@@ -39,7 +45,7 @@ class Executor {
   /// Runs ticks on the calling thread until `stop_requested()` returns true (checked once per
   /// tick, so a stop takes at most one period). Applies pinning / SCHED_FIFO / mlockall to the
   /// calling thread first (failures logged once) and starts the worker pool.
-  void run(const std::function<bool()>& stop_requested);
+  void run(const std::function<bool()>& stop_requested, const RunHooks& hooks = {});
 
   /// Writes the occupancy window to state.dir/state.map_file. Not for the cycle.
   core::Status save_map() const;
@@ -47,6 +53,8 @@ class Executor {
   [[nodiscard]] ExecutorTotals totals() const;
   /// One line for systemd's STATUS= and the logs.
   [[nodiscard]] std::string status_line() const;
+  /// The same into a caller's buffer (no allocation: the executor sends it every second).
+  void format_status(char* buf, std::size_t size) const;
 
   class Impl;
 
