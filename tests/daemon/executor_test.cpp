@@ -12,6 +12,7 @@
 
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
+#include "geometry_msgs.h"
 #include "nav_msgsPubSubTypes.h"
 #include "rtps_sniffer.hpp"
 #include "tarmac/config/config.hpp"
@@ -297,6 +298,70 @@ TEST_F(Daemon, TinyBudget_ProducesOverrunsInCycleReport) {
   }
   EXPECT_TRUE(found);
   EXPECT_GT(executor.get().totals().overruns, 0u);
+}
+
+std::int8_t cell_at(const transport::OccupancyGridMsg& g, double x_m, double y_m) {
+  const auto& info = g.info();
+  const auto ix =
+      static_cast<std::uint32_t>((x_m - info.origin().position().x()) / info.resolution());
+  const auto iy =
+      static_cast<std::uint32_t>((y_m - info.origin().position().y()) / info.resolution());
+  return g.data()[std::size_t{iy} * info.width() + ix];
+}
+
+TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
+  const auto cfg = test_config(test::kDomainDaemonZones, 2);
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainDaemonZones);
+  auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
+  ASSERT_TRUE(grids.ok());
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0;
+  options.max_scans = 4;
+  auto stats = tools::replay(participant, sequence(), options);
+  ASSERT_TRUE(stats.ok()) << stats.error().message;
+  transport::OccupancyGridMsg before;
+  ASSERT_TRUE(wait_for_costmap(*grids.value(), stats.value().last_stamp_ns, before));
+  // 5 m ahead of the vehicle on open apron: observed, not lethal before the zone.
+  const Eigen::Vector3d ahead = sequence().T_W_S[3].translation() + Eigen::Vector3d(5.0, 0, 0);
+  ASSERT_NE(cell_at(before, ahead.x(), ahead.y()), 100);
+
+  using ZoneWriter = transport::Writer<tarmac_msgs::msg::dds_::VirtualObstacleArray_PubSubType>;
+  auto zones = ZoneWriter::create(participant, cfg.outputs.virtual_obstacles_topic,
+                                  cfg.dds.qos.virtual_obstacles);
+  ASSERT_TRUE(zones.ok());
+  ASSERT_TRUE(zones.value()->wait_for_readers(1, 10s));
+  transport::VirtualObstacleArrayMsg msg;
+  tarmac_msgs::msg::dds_::VirtualObstacle_ zone;
+  zone.id("fuel-spill-1");
+  zone.kind(tarmac_msgs::msg::VirtualObstacle_Constants::KIND_FUEL_SPILL);
+  for (const auto& [dx, dy] : {std::pair{-1.0, -1.0}, {1.0, -1.0}, {1.0, 1.0}, {-1.0, 1.0}}) {
+    geometry_msgs::msg::dds_::Point_ p;
+    p.x(ahead.x() + dx);
+    p.y(ahead.y() + dy);
+    zone.polygon().push_back(p);
+  }
+  zone.min_z(-100.0);
+  zone.max_z(100.0);
+  msg.obstacles().push_back(zone);
+  const auto t_sent = std::chrono::steady_clock::now();
+  ASSERT_TRUE(zones.value()->write(msg));
+  // The next tick drains the zone and republishes the costmap (same stamp: no new scan).
+  const auto deadline = t_sent + 5s;
+  bool lethal = false;
+  std::vector<transport::OccupancyGridMsg> batch;
+  while (!lethal && std::chrono::steady_clock::now() < deadline) {
+    grids.value()->wait_for_sample(50ms);
+    batch.clear();
+    grids.value()->take_all(batch);
+    for (const auto& g : batch) lethal = lethal || cell_at(g, ahead.x(), ahead.y()) == 100;
+  }
+  const double elapsed_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_sent).count();
+  EXPECT_TRUE(lethal) << "zone cell never became lethal";
+  // One period to the next tick plus that tick's own work, with slack for a loaded machine.
+  EXPECT_LT(elapsed_ms, 1000.0 / cfg.executor.rate_hz + cfg.budgets.cycle_ms + 150.0);
 }
 
 }  // namespace

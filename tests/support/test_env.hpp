@@ -28,6 +28,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonOverrun = 135,
   kDomainDaemonProcess = 136,
   kDomainDaemonAllocations = 137,
+  kDomainDaemonZones = 138,
 };
 
 inline bool running_in_ci() {

@@ -27,7 +27,7 @@ std::atomic<bool> g_stop{false};
 void usage(std::FILE* to) {
   std::fprintf(to,
                "usage: tarmac-replay --dataset DIR [--rate-scale X] [--config FILE] [--scans N]\n"
-               "                     [--poses FILE] [--jitter-ms MS] [--sensor ID]\n"
+               "                     [--poses FILE] [--jitter-ms MS] [--sensor ID] [--loop N]\n"
                "  Publishes DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt\n"
                "  T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and\n"
                "  geometry_msgs/PoseWithCovarianceStamped on the topics of FILE (default: the\n"
@@ -38,7 +38,8 @@ void usage(std::FILE* to) {
                "  --scans N       first N scans only\n"
                "  --poses FILE    pose file in DIR (default poses.txt)\n"
                "  --jitter-ms MS  publish each message up to MS late, uniformly (tests)\n"
-               "  --sensor ID     which configured sensor the scans belong to (default: first)\n");
+               "  --sensor ID     which configured sensor the scans belong to (default: first)\n"
+               "  --loop N        replay the sequence N times, stamps continuing (soak tests)\n");
 }
 
 }  // namespace
@@ -57,6 +58,8 @@ int main(int argc, char** argv) {
       options.rate_scale = std::atof(argv[++i]);
     } else if (a == "--scans" && has_value) {
       options.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
+    } else if (a == "--loop" && has_value) {
+      options.loops = static_cast<std::size_t>(std::max(1, std::atoi(argv[++i])));
     } else if (a == "--poses" && has_value) {
       poses_file = argv[++i];
     } else if (a == "--jitter-ms" && has_value) {
@@ -134,8 +137,9 @@ int main(int argc, char** argv) {
     };
   }
   std::fprintf(stderr, "tarmac-replay: %zu scans from %s on %s (domain %u), x%.2f\n",
-               options.max_scans == 0 ? seq.value().scans.size()
-                                      : std::min(options.max_scans, seq.value().scans.size()),
+               options.loops * (options.max_scans == 0
+                                    ? seq.value().scans.size()
+                                    : std::min(options.max_scans, seq.value().scans.size())),
                dataset.c_str(), options.lidar_topic.c_str(), cfg.dds.participant.domain_id,
                options.rate_scale);
   auto stats = tools::replay(participant.value(), seq.value(), options, &g_stop);

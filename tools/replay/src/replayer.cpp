@@ -70,19 +70,25 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   const std::size_t n =
       options.max_scans == 0 ? seq.scans.size() : std::min(options.max_scans, seq.scans.size());
   ReplayStats stats;
-  if (n == 0) return stats;
+  if (n == 0 || options.loops == 0) return stats;
+  const std::size_t total = n * options.loops;
   const std::int64_t start = options.start_ns != 0
                                  ? options.start_ns
                                  : realtime_ns() + static_cast<std::int64_t>(options.lead_ms * 1e6);
-  std::vector<std::int64_t> stamps(n);
-  for (std::size_t k = 0; k < n; ++k) {
-    stamps[k] = start + std::llround((seq.times_s[k] - seq.times_s[0]) * 1e9 / options.rate_scale);
+  // A loop lasts the sequence plus one scan interval, so stamps keep their spacing across loops.
+  const double step_s =
+      n > 1 ? (seq.times_s[n - 1] - seq.times_s[0]) / static_cast<double>(n - 1) : 0.1;
+  const double loop_s = seq.times_s[n - 1] - seq.times_s[0] + step_s;
+  std::vector<std::int64_t> stamps(total);
+  for (std::size_t k = 0; k < total; ++k) {
+    const double t_s = seq.times_s[k % n] - seq.times_s[0] + static_cast<double>(k / n) * loop_s;
+    stamps[k] = start + std::llround(t_s * 1e9 / options.rate_scale);
   }
   std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<double> jitter(0.0, std::max(0.0, options.jitter_ms) * 1e6);
   std::vector<Event> events;
-  events.reserve(2 * n);
-  for (std::size_t k = 0; k < n; ++k) {
+  events.reserve(2 * total);
+  for (std::size_t k = 0; k < total; ++k) {
     events.push_back({stamps[k] + std::llround(jitter(rng)), k, false});
     if (options.pose_count == 0 || k < options.pose_count) {
       events.push_back({stamps[k] + std::llround(jitter(rng)), k, true});
@@ -99,11 +105,12 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
       transport::PoseStampedMsg msg;
       msg.header().stamp(transport::to_time_msg(stamps[e.scan]));
       msg.header().frame_id(options.pose_frame_id);
-      msg.pose().pose(transport::to_pose_msg(base_pose(seq.T_W_S[e.scan], options.T_base_sensor)));
+      msg.pose().pose(
+          transport::to_pose_msg(base_pose(seq.T_W_S[e.scan % n], options.T_base_sensor)));
       sleep_until_realtime(e.publish_ns);
       poses.value()->write(msg);
     } else {
-      if (auto read = read_kitti_scan(seq.scans[e.scan], cloud); !read) return read.error();
+      if (auto read = read_kitti_scan(seq.scans[e.scan % n], cloud); !read) return read.error();
       cloud.frame_id = options.frame_id;
       cloud.stamp_ns = stamps[e.scan];
       const auto msg = transport::to_point_cloud2(cloud);
@@ -112,13 +119,13 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
           std::max(stats.max_late_ms, static_cast<double>(realtime_ns() - e.publish_ns) / 1e6);
       clouds.value()->write(msg);
       ++published_scans;
-      if (options.progress) options.progress(published_scans, n);
+      if (options.progress) options.progress(published_scans, total);
     }
   }
   poses.value()->wait_for_acknowledgments(std::chrono::milliseconds(2000));
   stats.scans = published_scans;
   stats.first_stamp_ns = stamps.front();
-  stats.last_stamp_ns = stamps[n - 1];
+  stats.last_stamp_ns = stamps[total - 1];
   return stats;
 }
 

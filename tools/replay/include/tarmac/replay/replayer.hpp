@@ -36,6 +36,7 @@ struct ReplayOptions {
   double jitter_ms = 0.0;            ///< each message published up to this late (uniform)
   std::uint64_t seed = 1;            ///< jitter seed
   std::size_t max_scans = 0;         ///< 0: all
+  std::size_t loops = 1;             ///< replay the sequence this many times, stamps continuing
   double wait_for_readers_s = 10.0;  ///< wait this long for a matched reader on both topics
   /// Poses are published for the first `pose_count` scans only (0: all); tests use it to starve
   /// the daemon of poses.
