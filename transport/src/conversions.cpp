@@ -267,14 +267,30 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
   if (ring) grow(out.ring);
   if (time) grow(out.time_offset_s);
   const std::uint8_t* base = msg.data().data();
+  const bool native_float_xyz = !swap && x->datatype == pf::FLOAT32 && y->datatype == pf::FLOAT32 &&
+                                z->datatype == pf::FLOAT32;
+  const bool native_float_intensity = !swap && intensity && intensity->datatype == pf::FLOAT32;
   for (std::size_t row = 0; row < height; ++row) {
     for (std::size_t col = 0; col < width; ++col) {
       const std::uint8_t* p = base + row * row_step + col * point_step;
-      out.points_S.emplace_back(
-          static_cast<float>(read_as_double(p + x->offset, x->datatype, swap)),
-          static_cast<float>(read_as_double(p + y->offset, y->datatype, swap)),
-          static_cast<float>(read_as_double(p + z->offset, z->datatype, swap)));
-      if (intensity) {
+      if (native_float_xyz) {
+        // The common layout (float32 in this machine's byte order): plain loads, same values.
+        float v[3];
+        std::memcpy(&v[0], p + x->offset, 4);
+        std::memcpy(&v[1], p + y->offset, 4);
+        std::memcpy(&v[2], p + z->offset, 4);
+        out.points_S.emplace_back(v[0], v[1], v[2]);
+      } else {
+        out.points_S.emplace_back(
+            static_cast<float>(read_as_double(p + x->offset, x->datatype, swap)),
+            static_cast<float>(read_as_double(p + y->offset, y->datatype, swap)),
+            static_cast<float>(read_as_double(p + z->offset, z->datatype, swap)));
+      }
+      if (intensity && native_float_intensity) {
+        float v;
+        std::memcpy(&v, p + intensity->offset, 4);
+        out.intensity.push_back(v);
+      } else if (intensity) {
         out.intensity.push_back(
             static_cast<float>(read_as_double(p + intensity->offset, intensity->datatype, swap)));
       }

@@ -28,6 +28,7 @@ void usage(std::FILE* to) {
   std::fprintf(to,
                "usage: tarmac-replay --dataset DIR [--rate-scale X] [--config FILE] [--scans N]\n"
                "                     [--poses FILE] [--jitter-ms MS] [--sensor ID] [--loop N]\n"
+               "                     [--no-poses]\n"
                "  Publishes DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt\n"
                "  T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and\n"
                "  geometry_msgs/PoseWithCovarianceStamped on the topics of FILE (default: the\n"
@@ -39,7 +40,8 @@ void usage(std::FILE* to) {
                "  --poses FILE    pose file in DIR (default poses.txt)\n"
                "  --jitter-ms MS  publish each message up to MS late, uniformly (tests)\n"
                "  --sensor ID     which configured sensor the scans belong to (default: first)\n"
-               "  --loop N        replay the sequence N times, stamps continuing (soak tests)\n");
+               "  --loop N        replay the sequence N times, stamps continuing (soak tests)\n"
+               "  --no-poses      scans only (one replay per LiDAR, one of them with poses)\n");
 }
 
 }  // namespace
@@ -58,6 +60,8 @@ int main(int argc, char** argv) {
       options.rate_scale = std::atof(argv[++i]);
     } else if (a == "--scans" && has_value) {
       options.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
+    } else if (a == "--no-poses") {
+      options.publish_poses = false;
     } else if (a == "--loop" && has_value) {
       options.loops = static_cast<std::size_t>(std::max(1, std::atoi(argv[++i])));
     } else if (a == "--poses" && has_value) {

@@ -61,7 +61,8 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   if (!poses) return poses.error();
   const auto wait = std::chrono::milliseconds(
       static_cast<std::int64_t>(std::llround(options.wait_for_readers_s * 1000.0)));
-  if (!clouds.value()->wait_for_readers(1, wait) || !poses.value()->wait_for_readers(1, wait)) {
+  if (!clouds.value()->wait_for_readers(1, wait) ||
+      (options.publish_poses && !poses.value()->wait_for_readers(1, wait))) {
     return core::Error{"replay.no_reader", "no reader matched " + options.lidar_topic + " and " +
                                                options.pose_topic + " (is tarmacd running on " +
                                                "this domain?)"};
@@ -90,7 +91,7 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   events.reserve(2 * total);
   for (std::size_t k = 0; k < total; ++k) {
     events.push_back({stamps[k] + std::llround(jitter(rng)), k, false});
-    if (options.pose_count == 0 || k < options.pose_count) {
+    if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count)) {
       events.push_back({stamps[k] + std::llround(jitter(rng)), k, true});
     }
   }

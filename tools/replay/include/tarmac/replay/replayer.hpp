@@ -41,6 +41,8 @@ struct ReplayOptions {
   /// Poses are published for the first `pose_count` scans only (0: all); tests use it to starve
   /// the daemon of poses.
   std::size_t pose_count = 0;
+  /// false: scans only (another process publishes the poses, e.g. one replay per LiDAR).
+  bool publish_poses = true;
   /// QoS of the scan writer; must be compatible with the daemon's `dds.qos.lidar`.
   transport::QosSpec lidar_qos = transport::qos::kLidar;
   /// Called after each scan is published (index, count); e.g. a progress bar.
