@@ -28,7 +28,7 @@ void usage(std::FILE* to) {
   std::fprintf(to,
                "usage: tarmac-replay --dataset DIR [--rate-scale X] [--config FILE] [--scans N]\n"
                "                     [--poses FILE] [--jitter-ms MS] [--sensor ID] [--loop N]\n"
-               "                     [--no-poses]\n"
+               "                     [--no-poses] [--align-ms MS]\n"
                "  Publishes DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt\n"
                "  T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and\n"
                "  geometry_msgs/PoseWithCovarianceStamped on the topics of FILE (default: the\n"
@@ -41,7 +41,9 @@ void usage(std::FILE* to) {
                "  --jitter-ms MS  publish each message up to MS late, uniformly (tests)\n"
                "  --sensor ID     which configured sensor the scans belong to (default: first)\n"
                "  --loop N        replay the sequence N times, stamps continuing (soak tests)\n"
-               "  --no-poses      scans only (one replay per LiDAR, one of them with poses)\n");
+               "  --no-poses      scans only (one replay per LiDAR, one of them with poses)\n"
+               "  --align-ms MS   first stamp on a multiple of MS since the epoch, like a LiDAR\n"
+               "                  phase-locked to PTP (tarmacd ticks on the same grid)\n");
 }
 
 }  // namespace
@@ -60,6 +62,8 @@ int main(int argc, char** argv) {
       options.rate_scale = std::atof(argv[++i]);
     } else if (a == "--scans" && has_value) {
       options.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
+    } else if (a == "--align-ms" && has_value) {
+      options.align_ms = std::atof(argv[++i]);
     } else if (a == "--no-poses") {
       options.publish_poses = false;
     } else if (a == "--loop" && has_value) {

@@ -73,9 +73,13 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   ReplayStats stats;
   if (n == 0 || options.loops == 0) return stats;
   const std::size_t total = n * options.loops;
-  const std::int64_t start = options.start_ns != 0
-                                 ? options.start_ns
-                                 : realtime_ns() + static_cast<std::int64_t>(options.lead_ms * 1e6);
+  std::int64_t start = options.start_ns != 0
+                           ? options.start_ns
+                           : realtime_ns() + static_cast<std::int64_t>(options.lead_ms * 1e6);
+  if (options.start_ns == 0 && options.align_ms > 0.0) {
+    const auto grid = static_cast<std::int64_t>(std::llround(options.align_ms * 1e6));
+    start = (start / grid + 1) * grid;
+  }
   // A loop lasts the sequence plus one scan interval, so stamps keep their spacing across loops.
   const double step_s =
       n > 1 ? (seq.times_s[n - 1] - seq.times_s[0]) / static_cast<double>(n - 1) : 0.1;

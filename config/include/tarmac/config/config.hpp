@@ -63,6 +63,7 @@ struct ExecutorConfig {
   double input_delay_ms = 20.0;   ///< a tick takes scans stamped <= tick − this (jitter margin)
   double pose_wait_ms = 100.0;    ///< a scan waits this long past its eligibility for its pose
   double max_future_ms = 200.0;   ///< scans stamped later than tick + this are rejected
+  double phase_offset_ms = 0.0;   ///< ticks at k·period + this on the stamp clock, < period
   std::uint32_t workers = 2;      ///< threads running stages, including the executor thread
   std::vector<int> cpus;          ///< executor on cpus[0], worker i on cpus[(i+1) % n]; empty: any
   int realtime_priority = 10;     ///< SCHED_FIFO priority 1..99; 0: do not ask for real time

@@ -30,9 +30,12 @@ struct ReplayOptions {
   std::string pose_topic = "rt/tarmac/pose";
   std::string pose_frame_id = "map";
   Eigen::Isometry3d T_base_sensor = Eigen::Isometry3d::Identity();
-  double rate_scale = 1.0;           ///< > 1 replays faster
-  std::int64_t start_ns = 0;         ///< stamp of the first scan; 0: now + lead_ms
-  double lead_ms = 300.0;            ///< with start_ns == 0
+  double rate_scale = 1.0;    ///< > 1 replays faster
+  std::int64_t start_ns = 0;  ///< stamp of the first scan; 0: now + lead_ms
+  double lead_ms = 300.0;     ///< with start_ns == 0
+  /// With start_ns == 0 and > 0: the first stamp is put on a multiple of this (ms since the
+  /// epoch), as a LiDAR phase-locked to PTP would stamp its scans.
+  double align_ms = 0.0;
   double jitter_ms = 0.0;            ///< each message published up to this late (uniform)
   std::uint64_t seed = 1;            ///< jitter seed
   std::size_t max_scans = 0;         ///< 0: all
