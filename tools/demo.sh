@@ -31,8 +31,8 @@ for _ in $(seq 50); do grep -q "DDS up" out/daemon/tarmacd.log && break; sleep 0
 build/bin/tarmac-audit --config config/tarmac.yaml --idle-s 2 --timeout-s 120 \
   --json out/daemon/audit.json --png out/daemon/costmap.png > out/daemon/audit.txt &
 audit_pid=$!
-# Scans stamped on the 100 ms grid, as a LiDAR phase-locked to PTP would: tarmacd's ticks sit on
-# the same grid (executor.phase_offset_ms: 0), so each scan waits input_delay_ms for its tick.
+# Scans stamped on the 100 ms grid, as a LiDAR phase-locked to PTP would (executor.sensor_phase_ms:
+# 0): tarmacd ticks input_delay_ms after each, so no scan waits longer for its tick.
 build/bin/tarmac-replay --dataset out/sim --config config/tarmac.yaml --align-ms 100
 wait "$audit_pid"
 cat out/daemon/audit.txt

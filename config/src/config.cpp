@@ -337,7 +337,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<double>("input_delay_ms", e.input_delay_ms, 0.0, 5000.0);
     r.scalar<double>("pose_wait_ms", e.pose_wait_ms, 0.0, 10000.0);
     r.scalar<double>("max_future_ms", e.max_future_ms, 0.0, 60000.0);
-    r.scalar<double>("phase_offset_ms", e.phase_offset_ms, 0.0, 10000.0);
+    r.scalar<double>("sensor_phase_ms", e.sensor_phase_ms, 0.0, 10000.0);
     r.scalar<std::uint32_t>("workers", e.workers, 1, 64);
     r.int_list("cpus", e.cpus, 0, 1023);
     r.scalar<int>("realtime_priority", e.realtime_priority, 0, 99);
@@ -389,8 +389,8 @@ core::Status validate_daemon(const Config& c) {
     return err("budgets.cycle_ms", "exceeds the period of executor.rate_hz (" +
                                        std::to_string(1000.0 / c.executor.rate_hz) + " ms)");
   }
-  if (c.executor.phase_offset_ms >= 1000.0 / c.executor.rate_hz) {
-    return err("executor.phase_offset_ms", "must be below the period of executor.rate_hz");
+  if (c.executor.sensor_phase_ms >= 1000.0 / c.executor.rate_hz) {
+    return err("executor.sensor_phase_ms", "must be below the period of executor.rate_hz");
   }
   if (c.quotas.points_per_scan > c.quotas.points_per_cycle) {
     return err("quotas.points_per_scan", "must be <= quotas.points_per_cycle");
@@ -507,7 +507,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "input_delay_ms" << YAML::Value << e.input_delay_ms;
   out << YAML::Key << "pose_wait_ms" << YAML::Value << e.pose_wait_ms;
   out << YAML::Key << "max_future_ms" << YAML::Value << e.max_future_ms;
-  out << YAML::Key << "phase_offset_ms" << YAML::Value << e.phase_offset_ms;
+  out << YAML::Key << "sensor_phase_ms" << YAML::Value << e.sensor_phase_ms;
   out << YAML::Key << "workers" << YAML::Value << e.workers;
   out << YAML::Key << "cpus" << YAML::Value << YAML::Flow << e.cpus;
   out << YAML::Key << "realtime_priority" << YAML::Value << e.realtime_priority;

@@ -436,9 +436,10 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
   // CLOCK_MONOTONIC, so a wall-clock step does not distort the schedule.
   const std::int64_t real_now = realtime_ns();
   const std::int64_t mono_now = monotonic_ns();
-  // Tick k sits at k·period + phase offset, so LiDARs phase-locked to the same grid (PTP) wait
-  // exactly input_delay for their tick.
-  const std::int64_t offset_ns = ms_to_ns(d.config.executor.phase_offset_ms);
+  // Tick k sits at k·period + sensor phase + input delay: a LiDAR phase-locked to the grid (PTP)
+  // waits exactly input_delay for its tick. Unsynchronised sensors wait 0..period more.
+  const std::int64_t offset_ns =
+      ms_to_ns(d.config.executor.sensor_phase_ms + d.config.executor.input_delay_ms) % period_ns;
   std::int64_t tick_real = ((real_now - offset_ns) / period_ns + 1) * period_ns + offset_ns;
   std::int64_t deadline = mono_now + (tick_real - real_now);
   const auto status_every = static_cast<std::uint64_t>(std::max(1.0, d.config.executor.rate_hz));

@@ -122,8 +122,8 @@ TEST(Config, DaemonKeysNameTheirPathWhenWrong) {
             "budgets.integrat_ms: unknown key");
   EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: 20}\n"),
             "budgets.cycle_ms: exceeds the period of executor.rate_hz (50.000000 ms)");
-  EXPECT_EQ(error_of("version: 1\nexecutor: {phase_offset_ms: 100}\n"),
-            "executor.phase_offset_ms: must be below the period of executor.rate_hz");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {sensor_phase_ms: 100}\n"),
+            "executor.sensor_phase_ms: must be below the period of executor.rate_hz");
   EXPECT_EQ(error_of("version: 1\nquotas: {points_per_cycle: 10, points_per_scan: 20}\n"),
             "quotas.points_per_scan: must be <= quotas.points_per_cycle");
 }

@@ -59,11 +59,13 @@ struct PoseInputConfig {
 
 /// The fixed-rate executor (YAML `executor`).
 struct ExecutorConfig {
-  double rate_hz = 10.0;          ///< ticks per second
-  double input_delay_ms = 20.0;   ///< a tick takes scans stamped <= tick − this (jitter margin)
-  double pose_wait_ms = 100.0;    ///< a scan waits this long past its eligibility for its pose
-  double max_future_ms = 200.0;   ///< scans stamped later than tick + this are rejected
-  double phase_offset_ms = 0.0;   ///< ticks at k·period + this on the stamp clock, < period
+  double rate_hz = 10.0;         ///< ticks per second
+  double input_delay_ms = 20.0;  ///< a tick takes scans stamped <= tick − this (jitter margin)
+  double pose_wait_ms = 100.0;   ///< a scan waits this long past its eligibility for its pose
+  double max_future_ms = 200.0;  ///< scans stamped later than tick + this are rejected
+  /// Phase of the LiDARs' stamps on the period grid (PTP phase lock), < period. Ticks sit at
+  /// k·period + sensor_phase + input_delay, so such a scan waits exactly input_delay.
+  double sensor_phase_ms = 0.0;
   std::uint32_t workers = 2;      ///< threads running stages, including the executor thread
   std::vector<int> cpus;          ///< executor on cpus[0], worker i on cpus[(i+1) % n]; empty: any
   int realtime_priority = 10;     ///< SCHED_FIFO priority 1..99; 0: do not ask for real time
