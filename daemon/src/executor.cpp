@@ -159,6 +159,21 @@ class Executor::Impl {
       report.input_ages[i].input = config.sensors[i].id;
     }
     report.input_ages.back().input = "pose";
+    // Every reason the cycle can count, reported from the first tick (0 until it happens).
+    for (const char* r :
+         {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
+          "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite",
+          "points.too_close", "points.ego_vehicle", "points.isolated"}) {
+      drops.declare(r);
+    }
+    for (const char* r :
+         {"scan.unknown_frame", "scan.future", "scan.stale", "scan.late", "scan.duplicate_stamp",
+          "pointcloud.missing_xyz", "pointcloud.bad_datatype", "pointcloud.bad_count",
+          "pointcloud.field_outside_point", "pointcloud.bad_row_step", "pointcloud.bad_size",
+          "pose.unknown_frame", "pose.non_finite", "pose.bad_quaternion", "pose.out_of_order",
+          "pose.duplicate_stamp", "zones.polygon", "zones.non_finite", "zones.z_range"}) {
+      rejections.declare(r);
+    }
     report.drops.reserve(32);
     report.rejections.reserve(32);
     selected.reserve(config.quotas.max_pending_scans + 1);
@@ -287,6 +302,12 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     scheduler.release(sel.slot);
   }
 
+  {
+    std::lock_guard lock(totals_mutex);  // before the costmap goes out (tests read both)
+    totals.scans_integrated += selected.size();
+    totals.newest_stamp_ns = newest_stamp_ns;
+  }
+
   // ---- costmap + 2D ESDF, once per tick (when something changed) ----
   const bool update = !selected.empty() || zones_changed;
   const auto t_costmap0 = Clock::now();
@@ -348,19 +369,17 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   report.points_in = points_in;
   report.points_used = points_used;
   report.map_memory_bytes = mapper.occupancy().memory_bytes();
-  outputs->publish_report(report);
-
   {
+    // Before the report goes out, so whoever reads the report and then the totals agrees.
     std::lock_guard lock(totals_mutex);
     totals.ticks += 1;
     totals.skipped_ticks += skipped;
-    totals.scans_integrated += selected.size();
     totals.overruns += overrun ? 1 : 0;
-    totals.newest_stamp_ns = newest_stamp_ns;
     cycle_ms.add(cycle_duration);
     jitter_ms_window.add(jitter_ms);
     if (stamp_to_publish_ms >= 0.0) stamp_to_publish.add(stamp_to_publish_ms);
   }
+  outputs->publish_report(report);
 
   if (cycle_index % config.outputs.diagnostic_array_every == 0) {
     diag.stamp_ns = tick_ns;

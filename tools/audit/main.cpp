@@ -252,7 +252,7 @@ int main(int argc, char** argv) {
   for (const auto* list : {&last.drops, &last.rejections}) {
     std::string text;
     for (const auto& r : *list) {
-      text += " " + r.reason + "=" + std::to_string(r.total);
+      if (r.total > 0) text += " " + r.reason + "=" + std::to_string(r.total);
     }
     std::printf("%s (totals):%s\n", list == &last.drops ? "drops" : "rejections",
                 text.empty() ? " none" : text.c_str());

@@ -1,7 +1,7 @@
 #pragma once
 /// @file Counters by reason (drops, rejections) for the cycle report: this tick and since start.
-/// A reason's entry is created the first time it occurs (one allocation, ever); counting is
-/// RT-safe afterwards.
+/// Known reasons are declared up front; an undeclared one gets its entry the first time it occurs
+/// (one allocation, ever). Counting is RT-safe afterwards.
 
 #include <cstdint>
 #include <string_view>
@@ -24,6 +24,14 @@ class ReasonCounters {
       }
     }
     entries_.push_back(transport::ReasonReport{std::string(reason), n, n});
+  }
+  /// Registers a reason with zero counts, so it is reported (as 0) from the start and counting
+  /// it later never allocates.
+  void declare(std::string_view reason) {
+    for (const auto& e : entries_) {
+      if (e.reason == reason) return;
+    }
+    entries_.push_back(transport::ReasonReport{std::string(reason), 0, 0});
   }
   /// Zeroes the per-tick counts, keeps the totals.
   void begin_tick() {
