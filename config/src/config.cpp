@@ -358,6 +358,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<std::uint64_t>("points_per_cycle", q.points_per_cycle, 1, 100'000'000);
     r.scalar<std::uint64_t>("points_per_scan", q.points_per_scan, 1, 100'000'000);
     r.scalar<std::uint32_t>("max_pending_scans", q.max_pending_scans, 1, 1000);
+    r.scalar<std::uint64_t>("reserve_points_per_scan", q.reserve_points_per_scan, 0, 4'000'000);
   });
   root.map("outputs", [&](MapReader& r) {
     auto& o = c.outputs;
@@ -528,6 +529,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "points_per_cycle" << YAML::Value << qu.points_per_cycle;
   out << YAML::Key << "points_per_scan" << YAML::Value << qu.points_per_scan;
   out << YAML::Key << "max_pending_scans" << YAML::Value << qu.max_pending_scans;
+  out << YAML::Key << "reserve_points_per_scan" << YAML::Value << qu.reserve_points_per_scan;
   out << YAML::EndMap;
   const auto& ou = config.outputs;
   out << YAML::Key << "outputs" << YAML::Value << YAML::BeginMap;

@@ -139,6 +139,7 @@ class Executor::Impl {
     p.points_per_cycle = cfg.quotas.points_per_cycle;
     p.points_per_scan = cfg.quotas.points_per_scan;
     p.max_pending = cfg.quotas.max_pending_scans;
+    p.reserve_points = cfg.quotas.reserve_points_per_scan;
     return p;
   }
 

@@ -7,6 +7,10 @@ namespace tarmac::daemon {
 ScanScheduler::ScanScheduler(const SchedulerParams& params)
     : params_(params), slots_(params.max_pending + 1), newest_(params.max_age_ns.size(), 0) {
   order_.reserve(slots_.size());
+  for (auto& s : slots_) {
+    s.cloud.points_S.reserve(params.reserve_points);
+    s.cloud.intensity.reserve(params.reserve_points);
+  }
 }
 
 bool ScanScheduler::before(std::uint32_t a, std::uint32_t b) const {

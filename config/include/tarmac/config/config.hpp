@@ -91,7 +91,10 @@ struct QuotaConfig {
   /// A scan with more points is decimated to this many (every k-th point, deterministic).
   std::uint64_t points_per_scan = 262144;
   /// Scans held waiting (for their tick, pose or quota); beyond this the oldest is shed.
-  std::uint32_t max_pending_scans = 32;
+  std::uint32_t max_pending_scans = 8;
+  /// Points (xyz + intensity) reserved in each of the max_pending_scans + 1 scan buffers at
+  /// start, so the cycle does not allocate for scans up to this size.
+  std::uint64_t reserve_points_per_scan = 65536;
 };
 
 /// Output topics and frame (YAML `outputs`).

@@ -25,7 +25,8 @@ struct SchedulerParams {
   std::vector<std::int64_t> max_age_ns;  ///< per sensor
   std::uint64_t points_per_cycle = 500'000;
   std::uint64_t points_per_scan = 262'144;
-  std::uint32_t max_pending = 32;
+  std::uint32_t max_pending = 8;
+  std::uint64_t reserve_points = 0;  ///< reserved per slot (points, intensity) at construction
 };
 
 class ScanScheduler {
