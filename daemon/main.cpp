@@ -1,8 +1,11 @@
 // tarmacd: the mapping daemon's entry point (composition root).
 //
-// This build validates its config and brings up the DDS participant; the fixed-rate executor,
-// the stages and the systemd integration land with issue 5 ("tarmacd: deterministic fixed-rate
-// executor"). Until then running without --check-config says so and exits with code 3.
+// Validates the config, creates every DDS entity, tells systemd READY=1, then runs the fixed-rate
+// executor on this thread until SIGTERM or SIGINT: STOPPING=1, the occupancy window is saved to
+// the state directory, exit 0. SIGTERM/SIGINT are blocked in every thread and polled once per
+// tick, so a stop never interrupts a cycle half-way.
+
+#include <signal.h>
 
 #include <cstdio>
 #include <cstring>
@@ -10,7 +13,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include <systemd/sd-daemon.h>
+
 #include "tarmac/config/config.hpp"
+#include "tarmac/daemon/executor.hpp"
 #include "tarmac/transport/participant.hpp"
 
 namespace {
@@ -19,7 +25,6 @@ constexpr int kExitOk = 0;
 constexpr int kExitUsage = 64;   // EX_USAGE
 constexpr int kExitConfig = 78;  // EX_CONFIG
 constexpr int kExitDds = 69;     // EX_UNAVAILABLE
-constexpr int kExitNotYet = 3;
 
 void usage(std::FILE* out) {
   std::fprintf(out,
@@ -68,16 +73,49 @@ int main(int argc, char** argv) {
     return kExitOk;
   }
 
+  // Block the stop signals before any thread exists, so every thread inherits the mask and
+  // only the executor's poll sees them.
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGTERM);
+  sigaddset(&stop_signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
   spdlog::info("tarmacd {} starting, config {} (hash {})", TARMAC_VERSION, config_path, hash);
   spdlog::info("effective config:\n{}", tarmac::config::to_yaml(config.value()));
-  auto participant = tarmac::transport::Participant::create(config.value().dds.participant);
-  if (!participant) {
-    spdlog::error("DDS: {} [{}]", participant.error().message, participant.error().code);
-    return kExitDds;
+  auto executor = tarmac::daemon::Executor::create(config.value());
+  if (!executor) {
+    spdlog::error("startup: {} [{}]", executor.error().message, executor.error().code);
+    return executor.error().code.rfind("config.", 0) == 0 ? kExitConfig : kExitDds;
   }
-  spdlog::info("DDS participant up on domain {} (transport {})",
+  spdlog::info("DDS up on domain {} (transport {}); {} LiDAR input(s), poses on {}",
                config.value().dds.participant.domain_id,
-               tarmac::transport::to_string(config.value().dds.participant.transport));
-  spdlog::error("the executor is not built yet (issue 5); exiting");
-  return kExitNotYet;
+               tarmac::transport::to_string(config.value().dds.participant.transport),
+               config.value().sensors.size(), config.value().pose.topic);
+  sd_notify(0, "READY=1");
+
+  int stop_signal = 0;
+  executor.value()->run([&] {
+    sigset_t pending;
+    sigpending(&pending);
+    for (const int sig : {SIGTERM, SIGINT}) {
+      if (sigismember(&pending, sig) == 1) {
+        stop_signal = sig;
+        return true;
+      }
+    }
+    return false;
+  });
+  sd_notify(0, "STOPPING=1");
+  spdlog::info("tarmacd: {} received, stopping ({})", strsignal(stop_signal),
+               executor.value()->status_line());
+  if (config.value().state.save_on_exit) {
+    if (auto saved = executor.value()->save_map(); !saved) {
+      spdlog::error("state: map not saved: {} [{}]", saved.error().message, saved.error().code);
+    } else {
+      spdlog::info("state: occupancy window saved to {}/{}", config.value().state.dir,
+                   config.value().state.map_file);
+    }
+  }
+  return kExitOk;
 }

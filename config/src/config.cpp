@@ -1,5 +1,6 @@
 #include "tarmac/config/config.hpp"
 
+#include <cmath>
 #include <fstream>
 #include <limits>
 #include <set>
@@ -75,6 +76,47 @@ class MapReader {
       value.push_back(item.as<std::string>());
     }
   }
+
+  void int_list(const std::string& key, std::vector<int>& value, int min, int max) {
+    const YAML::Node child = take(key);
+    if (!child) return;
+    if (!child.IsSequence()) fail("type", join(key), "expected a list of integers");
+    value.clear();
+    for (std::size_t i = 0; i < child.size(); ++i) {
+      int parsed = 0;
+      const std::string item_path = join(key) + "[" + std::to_string(i) + "]";
+      if (!child[i].IsScalar() || !YAML::convert<int>::decode(child[i], parsed)) {
+        fail("type", item_path, "expected an integer, got '" + dump(child[i]) + "'");
+      }
+      if (parsed < min || parsed > max) {
+        fail("range", item_path,
+             "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " +
+                 std::to_string(parsed));
+      }
+      value.push_back(parsed);
+    }
+  }
+
+  /// True when `key` is present (and marks it as known).
+  bool has(const std::string& key) {
+    const YAML::Node child = take(key);
+    return static_cast<bool>(child);
+  }
+
+  /// A list of maps, each read by `read(MapReader&, index)`; paths are `key[i].sub`.
+  template <typename Fn>
+  void map_list(const std::string& key, Fn read) {
+    const YAML::Node child = take(key);
+    if (!child) return;
+    if (!child.IsSequence()) fail("type", join(key), "expected a list of maps");
+    for (std::size_t i = 0; i < child.size(); ++i) {
+      MapReader nested(child[i], join(key) + "[" + std::to_string(i) + "]");
+      read(nested, i);
+      nested.finish();
+    }
+  }
+
+  [[nodiscard]] const std::string& path() const { return path_; }
 
   /// A nested map, read by `read(MapReader&)`.
   template <typename Fn>
@@ -215,6 +257,163 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
   });
 }
 
+const std::vector<std::string> kPoseTypes = {"PoseWithCovarianceStamped", "Odometry"};
+
+constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+
+void read_extrinsic(MapReader& r, Eigen::Isometry3d& T) {
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  read_vector3(r, "translation_m", t);
+  const bool has_rpy = r.has("rpy_deg");
+  const bool has_quat = r.has("quaternion");
+  if (has_rpy && has_quat) {
+    fail("value", r.path() + ".quaternion", "give either rpy_deg or quaternion, not both");
+  }
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  if (has_rpy) {
+    double roll = 0, pitch = 0, yaw = 0;
+    r.map("rpy_deg", [&](MapReader& m) {
+      m.scalar<double>("roll", roll, -180.0, 180.0);
+      m.scalar<double>("pitch", pitch, -90.0, 90.0);
+      m.scalar<double>("yaw", yaw, -180.0, 180.0);
+    });
+    // ROS convention: R = Rz(yaw) · Ry(pitch) · Rx(roll).
+    R = (Eigen::AngleAxisd(yaw * kDegToRad, Eigen::Vector3d::UnitZ()) *
+         Eigen::AngleAxisd(pitch * kDegToRad, Eigen::Vector3d::UnitY()) *
+         Eigen::AngleAxisd(roll * kDegToRad, Eigen::Vector3d::UnitX()))
+            .toRotationMatrix();
+  }
+  if (has_quat) {
+    Eigen::Quaterniond q(1, 0, 0, 0);
+    r.map("quaternion", [&](MapReader& m) {
+      m.scalar<double>("x", q.x(), -1.0, 1.0);
+      m.scalar<double>("y", q.y(), -1.0, 1.0);
+      m.scalar<double>("z", q.z(), -1.0, 1.0);
+      m.scalar<double>("w", q.w(), -1.0, 1.0);
+    });
+    if (std::abs(q.norm() - 1.0) > 1e-3) {
+      fail("range", r.path() + ".quaternion",
+           "must be a unit quaternion (norm " + std::to_string(q.norm()) + ")");
+    }
+    R = q.normalized().toRotationMatrix();
+  }
+  T = Eigen::Isometry3d::Identity();
+  T.linear() = R;
+  T.translation() = t;
+}
+
+void read_sensors(MapReader& root, std::vector<SensorConfig>& sensors) {
+  if (!root.has("sensors")) return;
+  sensors.clear();
+  root.map_list("sensors", [&](MapReader& r, std::size_t i) {
+    SensorConfig s;
+    s.id.clear();
+    s.topic.clear();
+    s.frame_id.clear();
+    r.string("id", s.id);
+    if (s.id.empty()) fail("value", r.path() + ".id", "is required and must not be empty");
+    s.topic = "rt/tarmac/lidar/" + s.id + "/points";
+    s.frame_id = "lidar_" + s.id;
+    r.string("topic", s.topic);
+    r.string("frame_id", s.frame_id);
+    r.map("extrinsic", [&](MapReader& m) { read_extrinsic(m, s.T_base_sensor); });
+    r.scalar<double>("max_age_ms", s.max_age_ms, 1.0, 60000.0);
+    for (std::size_t j = 0; j < sensors.size(); ++j) {
+      const std::string at = "sensors[" + std::to_string(i) + "]";
+      if (sensors[j].id == s.id) fail("value", at + ".id", "duplicate id '" + s.id + "'");
+      if (sensors[j].topic == s.topic) {
+        fail("value", at + ".topic", "duplicate topic '" + s.topic + "'");
+      }
+    }
+    sensors.push_back(std::move(s));
+  });
+  if (sensors.empty()) fail("value", "sensors", "needs at least one sensor");
+  if (sensors.size() > 16) fail("range", "sensors", "at most 16 sensors");
+}
+
+void read_daemon(MapReader& root, Config& c) {
+  read_sensors(root, c.sensors);
+  root.map("pose", [&](MapReader& r) {
+    r.string("topic", c.pose.topic);
+    if (const int i = r.choice("type", kPoseTypes); i >= 0) {
+      c.pose.type = static_cast<PoseType>(i);
+    }
+    r.string("frame_id", c.pose.frame_id);
+    r.scalar<std::uint32_t>("buffer_size", c.pose.buffer_size, 2, 100000);
+    r.scalar<double>("max_gap_ms", c.pose.max_gap_ms, 1.0, 10000.0);
+    r.scalar<double>("max_age_ms", c.pose.max_age_ms, 1.0, 60000.0);
+  });
+  root.map("executor", [&](MapReader& r) {
+    auto& e = c.executor;
+    r.scalar<double>("rate_hz", e.rate_hz, 0.1, 1000.0);
+    r.scalar<double>("input_delay_ms", e.input_delay_ms, 0.0, 5000.0);
+    r.scalar<double>("pose_wait_ms", e.pose_wait_ms, 0.0, 10000.0);
+    r.scalar<double>("max_future_ms", e.max_future_ms, 0.0, 60000.0);
+    r.scalar<double>("sensor_phase_ms", e.sensor_phase_ms, 0.0, 10000.0);
+    r.scalar<std::uint32_t>("workers", e.workers, 1, 64);
+    r.int_list("cpus", e.cpus, 0, 1023);
+    r.scalar<int>("realtime_priority", e.realtime_priority, 0, 99);
+    r.scalar<bool>("lock_memory", e.lock_memory, false, true);
+    r.scalar<std::uint32_t>("queue_depth", e.queue_depth, 1, 1000);
+  });
+  root.map("budgets", [&](MapReader& r) {
+    auto& b = c.budgets;
+    r.scalar<double>("drain_ms", b.drain_ms, 0.001, 10000.0);
+    r.scalar<double>("ingest_ms", b.ingest_ms, 0.001, 10000.0);
+    r.scalar<double>("integrate_ms", b.integrate_ms, 0.001, 10000.0);
+    r.scalar<double>("costmap_ms", b.costmap_ms, 0.001, 10000.0);
+    r.scalar<double>("publish_ms", b.publish_ms, 0.001, 10000.0);
+    r.scalar<double>("cycle_ms", b.cycle_ms, 0.001, 10000.0);
+  });
+  root.map("quotas", [&](MapReader& r) {
+    auto& q = c.quotas;
+    r.scalar<std::uint64_t>("points_per_cycle", q.points_per_cycle, 1, 100'000'000);
+    r.scalar<std::uint64_t>("points_per_scan", q.points_per_scan, 1, 100'000'000);
+    r.scalar<std::uint32_t>("max_pending_scans", q.max_pending_scans, 1, 1000);
+    r.scalar<std::uint64_t>("reserve_points_per_scan", q.reserve_points_per_scan, 0, 4'000'000);
+  });
+  root.map("outputs", [&](MapReader& r) {
+    auto& o = c.outputs;
+    r.string("frame_id", o.frame_id);
+    r.string("costmap_topic", o.costmap_topic);
+    r.string("esdf_slice_topic", o.esdf_slice_topic);
+    r.string("cycle_report_topic", o.cycle_report_topic);
+    r.string("diagnostic_array_topic", o.diagnostic_array_topic);
+    r.string("virtual_obstacles_topic", o.virtual_obstacles_topic);
+    r.scalar<std::uint32_t>("diagnostic_array_every", o.diagnostic_array_every, 1, 100000);
+  });
+  root.map("state", [&](MapReader& r) {
+    r.string("dir", c.state.dir);
+    r.string("map_file", c.state.map_file);
+    r.scalar<bool>("save_on_exit", c.state.save_on_exit, false, true);
+  });
+}
+
+core::Status validate_daemon(const Config& c) {
+  const auto err = [](const std::string& path, const std::string& why) {
+    return core::Error{"config.value", path + ": " + why};
+  };
+  if (c.pose.topic.empty()) return err("pose.topic", "must not be empty");
+  for (const auto& s : c.sensors) {
+    if (s.topic == c.pose.topic) return err("pose.topic", "same topic as sensor " + s.id);
+  }
+  if (c.outputs.frame_id.empty()) return err("outputs.frame_id", "must not be empty");
+  if (c.budgets.cycle_ms > 1000.0 / c.executor.rate_hz) {
+    return err("budgets.cycle_ms", "exceeds the period of executor.rate_hz (" +
+                                       std::to_string(1000.0 / c.executor.rate_hz) + " ms)");
+  }
+  if (c.executor.sensor_phase_ms >= 1000.0 / c.executor.rate_hz) {
+    return err("executor.sensor_phase_ms", "must be below the period of executor.rate_hz");
+  }
+  if (c.quotas.points_per_scan > c.quotas.points_per_cycle) {
+    return err("quotas.points_per_scan", "must be <= quotas.points_per_cycle");
+  }
+  if (c.state.save_on_exit && c.state.map_file.empty()) {
+    return err("state.map_file", "must not be empty when state.save_on_exit is true");
+  }
+  return core::Ok{};
+}
+
 void emit_qos(YAML::Emitter& out, const char* name, const transport::QosSpec& q) {
   out << YAML::Key << name << YAML::Value << YAML::Flow << YAML::BeginMap;
   out << YAML::Key << "reliability" << YAML::Value << kReliability[static_cast<int>(q.reliability)];
@@ -241,6 +440,7 @@ core::Result<Config> load_config_string(const std::string& yaml_text) {
                              (root["version"] ? root["version"].as<std::string>() : "nothing")};
     }
     r.map("dds", [&](MapReader& m) { read_dds(m, config.dds); });
+    read_daemon(r, config);
     read_mapping(r, config.mapping);
     r.finish();
   } catch (const ConfigError& e) {
@@ -250,6 +450,7 @@ core::Result<Config> load_config_string(const std::string& yaml_text) {
   }
   if (auto valid = config.dds.participant.validate(); !valid) return valid.error();
   if (auto valid = config.mapping.validate(); !valid) return valid.error();
+  if (auto valid = validate_daemon(config); !valid) return valid.error();
   return config;
 }
 
@@ -284,6 +485,79 @@ std::string to_yaml(const Config& config) {
   emit_qos(out, "esdf_slice", config.dds.qos.esdf_slice);
   emit_qos(out, "diagnostics", config.dds.qos.diagnostics);
   out << YAML::EndMap << YAML::EndMap;
+  out << YAML::Key << "sensors" << YAML::Value << YAML::BeginSeq;
+  for (const auto& s : config.sensors) {
+    const Eigen::Quaterniond q(s.T_base_sensor.linear());
+    const Eigen::Vector3d t = s.T_base_sensor.translation();
+    out << YAML::BeginMap;
+    out << YAML::Key << "id" << YAML::Value << s.id;
+    out << YAML::Key << "topic" << YAML::Value << s.topic;
+    out << YAML::Key << "frame_id" << YAML::Value << s.frame_id;
+    out << YAML::Key << "extrinsic" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "translation_m" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
+        << "x" << YAML::Value << t.x() << YAML::Key << "y" << YAML::Value << t.y() << YAML::Key
+        << "z" << YAML::Value << t.z() << YAML::EndMap;
+    out << YAML::Key << "quaternion" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
+        << "x" << YAML::Value << q.x() << YAML::Key << "y" << YAML::Value << q.y() << YAML::Key
+        << "z" << YAML::Value << q.z() << YAML::Key << "w" << YAML::Value << q.w() << YAML::EndMap;
+    out << YAML::EndMap;
+    out << YAML::Key << "max_age_ms" << YAML::Value << s.max_age_ms;
+    out << YAML::EndMap;
+  }
+  out << YAML::EndSeq;
+  const auto& pi = config.pose;
+  out << YAML::Key << "pose" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "topic" << YAML::Value << pi.topic;
+  out << YAML::Key << "type" << YAML::Value << kPoseTypes[static_cast<int>(pi.type)];
+  out << YAML::Key << "frame_id" << YAML::Value << pi.frame_id;
+  out << YAML::Key << "buffer_size" << YAML::Value << pi.buffer_size;
+  out << YAML::Key << "max_gap_ms" << YAML::Value << pi.max_gap_ms;
+  out << YAML::Key << "max_age_ms" << YAML::Value << pi.max_age_ms;
+  out << YAML::EndMap;
+  const auto& e = config.executor;
+  out << YAML::Key << "executor" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "rate_hz" << YAML::Value << e.rate_hz;
+  out << YAML::Key << "input_delay_ms" << YAML::Value << e.input_delay_ms;
+  out << YAML::Key << "pose_wait_ms" << YAML::Value << e.pose_wait_ms;
+  out << YAML::Key << "max_future_ms" << YAML::Value << e.max_future_ms;
+  out << YAML::Key << "sensor_phase_ms" << YAML::Value << e.sensor_phase_ms;
+  out << YAML::Key << "workers" << YAML::Value << e.workers;
+  out << YAML::Key << "cpus" << YAML::Value << YAML::Flow << e.cpus;
+  out << YAML::Key << "realtime_priority" << YAML::Value << e.realtime_priority;
+  out << YAML::Key << "lock_memory" << YAML::Value << e.lock_memory;
+  out << YAML::Key << "queue_depth" << YAML::Value << e.queue_depth;
+  out << YAML::EndMap;
+  const auto& b = config.budgets;
+  out << YAML::Key << "budgets" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "drain_ms" << YAML::Value << b.drain_ms;
+  out << YAML::Key << "ingest_ms" << YAML::Value << b.ingest_ms;
+  out << YAML::Key << "integrate_ms" << YAML::Value << b.integrate_ms;
+  out << YAML::Key << "costmap_ms" << YAML::Value << b.costmap_ms;
+  out << YAML::Key << "publish_ms" << YAML::Value << b.publish_ms;
+  out << YAML::Key << "cycle_ms" << YAML::Value << b.cycle_ms;
+  out << YAML::EndMap;
+  const auto& qu = config.quotas;
+  out << YAML::Key << "quotas" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "points_per_cycle" << YAML::Value << qu.points_per_cycle;
+  out << YAML::Key << "points_per_scan" << YAML::Value << qu.points_per_scan;
+  out << YAML::Key << "max_pending_scans" << YAML::Value << qu.max_pending_scans;
+  out << YAML::Key << "reserve_points_per_scan" << YAML::Value << qu.reserve_points_per_scan;
+  out << YAML::EndMap;
+  const auto& ou = config.outputs;
+  out << YAML::Key << "outputs" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "frame_id" << YAML::Value << ou.frame_id;
+  out << YAML::Key << "costmap_topic" << YAML::Value << ou.costmap_topic;
+  out << YAML::Key << "esdf_slice_topic" << YAML::Value << ou.esdf_slice_topic;
+  out << YAML::Key << "cycle_report_topic" << YAML::Value << ou.cycle_report_topic;
+  out << YAML::Key << "diagnostic_array_topic" << YAML::Value << ou.diagnostic_array_topic;
+  out << YAML::Key << "virtual_obstacles_topic" << YAML::Value << ou.virtual_obstacles_topic;
+  out << YAML::Key << "diagnostic_array_every" << YAML::Value << ou.diagnostic_array_every;
+  out << YAML::EndMap;
+  out << YAML::Key << "state" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "dir" << YAML::Value << config.state.dir;
+  out << YAML::Key << "map_file" << YAML::Value << config.state.map_file;
+  out << YAML::Key << "save_on_exit" << YAML::Value << config.state.save_on_exit;
+  out << YAML::EndMap;
   const auto& m = config.mapping;
   const auto vec = [&](const char* key, const Eigen::Vector3d& v) {
     out << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "x"

@@ -5,11 +5,15 @@
 
 namespace tarmac::daemon {
 
-ThreadPool::ThreadPool(std::size_t threads, const std::vector<int>& cpus) {
+ThreadPool::ThreadPool(std::size_t threads, const std::vector<int>& cpus,
+                       const std::function<void()>& on_worker_start) {
   const std::size_t workers = threads > 1 ? threads - 1 : 0;
   workers_.reserve(workers);
   for (std::size_t i = 0; i < workers; ++i) {
-    workers_.emplace_back([this] { work_loop(); });
+    workers_.emplace_back([this, on_worker_start] {
+      if (on_worker_start) on_worker_start();
+      work_loop();
+    });
     if (i < cpus.size()) {
       cpu_set_t set;
       CPU_ZERO(&set);

@@ -89,5 +89,64 @@ TEST(Config, TsdfSectionAppliesAndIsValidated) {
             "tsdf.truncation_m: must be in [voxel_size_m, 32 * voxel_size_m]");
 }
 
+TEST(Config, ShippedDefaultsAreOneFrontLidarOnTheDesignTopics) {
+  const Config c;
+  ASSERT_EQ(c.sensors.size(), 1u);
+  EXPECT_EQ(c.sensors[0].id, "front");
+  EXPECT_EQ(c.sensors[0].frame_id, "lidar_front");
+  EXPECT_EQ(c.sensors[0].topic, "rt/tarmac/lidar/front/points");
+  EXPECT_TRUE(c.sensors[0].T_base_sensor.isApprox(Eigen::Isometry3d::Identity()));
+  EXPECT_EQ(c.pose.topic, "rt/tarmac/pose");
+  EXPECT_EQ(c.outputs.costmap_topic, "rt/tarmac/costmap");
+  EXPECT_EQ(c.executor.rate_hz, 10.0);
+}
+
+TEST(Config, SensorsListIsReadWithExtrinsicsAndDefaultsPerId) {
+  auto config = load_config_string(
+      "version: 1\n"
+      "sensors:\n"
+      "  - id: front\n"
+      "    extrinsic: {translation_m: {x: 1.5, z: 2.0}, rpy_deg: {yaw: 90}}\n"
+      "  - id: rear\n"
+      "    extrinsic: {quaternion: {x: 0, y: 0, z: 1, w: 0}}\n"
+      "    max_age_ms: 300\n");
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  const auto& s = config.value().sensors;
+  ASSERT_EQ(s.size(), 2u);
+  EXPECT_EQ(s[1].topic, "rt/tarmac/lidar/rear/points");
+  EXPECT_EQ(s[1].frame_id, "lidar_rear");
+  EXPECT_EQ(s[1].max_age_ms, 300.0);
+  const Eigen::Vector3d p = s[0].T_base_sensor * Eigen::Vector3d(1, 0, 0);
+  EXPECT_NEAR(p.x(), 1.5, 1e-12);  // yaw 90: sensor x is base y
+  EXPECT_NEAR(p.y(), 1.0, 1e-12);
+  EXPECT_NEAR(p.z(), 2.0, 1e-12);
+  EXPECT_NEAR((s[1].T_base_sensor * Eigen::Vector3d(1, 0, 0)).x(), -1.0, 1e-12);
+}
+
+TEST(Config, DaemonKeysNameTheirPathWhenWrong) {
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: front, frme_id: x}\n"),
+            "sensors[0].frme_id: unknown key");
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: a}\n  - {id: a}\n"),
+            "sensors[1].id: duplicate id 'a'");
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {frame_id: x}\n"),
+            "sensors[0].id: is required and must not be empty");
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: a, extrinsic: {quaternion: {x: 1, w: 1}}}\n"),
+            "sensors[0].extrinsic.quaternion: must be a unit quaternion (norm 1.414214)");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: 0}\n"),
+            "executor.rate_hz: must be in [0.1, 1000], got 0");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {cpus: [0, -1]}\n"),
+            "executor.cpus[1]: must be in [0, 1023], got -1");
+  EXPECT_EQ(error_of("version: 1\npose: {type: Twist}\n"),
+            "pose.type: must be one of {PoseWithCovarianceStamped, Odometry}, got 'Twist'");
+  EXPECT_EQ(error_of("version: 1\nbudgets: {integrat_ms: 3}\n"),
+            "budgets.integrat_ms: unknown key");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: 20}\n"),
+            "budgets.cycle_ms: exceeds the period of executor.rate_hz (50.000000 ms)");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {sensor_phase_ms: 100}\n"),
+            "executor.sensor_phase_ms: must be below the period of executor.rate_hz");
+  EXPECT_EQ(error_of("version: 1\nquotas: {points_per_cycle: 10, points_per_scan: 20}\n"),
+            "quotas.points_per_scan: must be <= quotas.points_per_cycle");
+}
+
 }  // namespace
 }  // namespace tarmac::config

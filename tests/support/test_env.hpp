@@ -19,6 +19,16 @@ enum Domain : std::uint32_t {
   kDomainSharedMemoryOnly = 113,
   kDomainCycloneInterop = 114,
   kDomainConfinement = 115,
+  // tarmacd integration tests (tests/daemon/): 130..139
+  kDomainDaemonWorkers1 = 130,
+  kDomainDaemonWorkers2 = 131,
+  kDomainDaemonWorkers4 = 132,
+  kDomainDaemonJitter = 133,
+  kDomainDaemonNoPose = 134,
+  kDomainDaemonOverrun = 135,
+  kDomainDaemonProcess = 136,
+  kDomainDaemonAllocations = 137,
+  kDomainDaemonZones = 138,
 };
 
 inline bool running_in_ci() {

@@ -1,8 +1,10 @@
 #include "conversions.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <optional>
 
 namespace tarmac::transport {
@@ -113,8 +115,14 @@ std::int64_t from_time_msg(const TimeMsg& time) {
 
 OccupancyGridMsg to_occupancy_grid(const core::Costmap& costmap, std::int64_t stamp_ns,
                                    const std::string& frame_id) {
-  const auto& g = costmap.geometry();
   OccupancyGridMsg msg;
+  fill_occupancy_grid(costmap, stamp_ns, frame_id, msg);
+  return msg;
+}
+
+void fill_occupancy_grid(const core::Costmap& costmap, std::int64_t stamp_ns,
+                         const std::string& frame_id, OccupancyGridMsg& msg) {
+  const auto& g = costmap.geometry();
   msg.header().stamp(to_time_msg(stamp_ns));
   msg.header().frame_id(frame_id);
   msg.info().map_load_time(to_time_msg(stamp_ns));
@@ -125,8 +133,7 @@ OccupancyGridMsg to_occupancy_grid(const core::Costmap& costmap, std::int64_t st
   msg.info().origin().position().y(g.origin_y_m);
   msg.info().origin().position().z(0.0);
   msg.info().origin().orientation().w(1.0);
-  msg.data(costmap.cells());
-  return msg;
+  msg.data().assign(costmap.cells().begin(), costmap.cells().end());
 }
 
 core::Result<core::Costmap> from_occupancy_grid(const OccupancyGridMsg& msg) {
@@ -250,19 +257,40 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
 
   const bool swap = msg.is_bigendian() != (std::endian::native == std::endian::big);
   const std::size_t n = width * height;
-  out.points_S.reserve(n);
-  if (intensity) out.intensity.reserve(n);
-  if (ring) out.ring.reserve(n);
-  if (time) out.time_offset_s.reserve(n);
+  // Grow geometrically: clouds are parsed into reused buffers, so a slowly growing scan size
+  // costs a few reallocations, not one per scan.
+  const auto grow = [n](auto& v) {
+    if (v.capacity() < n) v.reserve(std::max(n, v.capacity() + v.capacity() / 2));
+  };
+  grow(out.points_S);
+  if (intensity) grow(out.intensity);
+  if (ring) grow(out.ring);
+  if (time) grow(out.time_offset_s);
   const std::uint8_t* base = msg.data().data();
+  const bool native_float_xyz = !swap && x->datatype == pf::FLOAT32 && y->datatype == pf::FLOAT32 &&
+                                z->datatype == pf::FLOAT32;
+  const bool native_float_intensity = !swap && intensity && intensity->datatype == pf::FLOAT32;
   for (std::size_t row = 0; row < height; ++row) {
     for (std::size_t col = 0; col < width; ++col) {
       const std::uint8_t* p = base + row * row_step + col * point_step;
-      out.points_S.emplace_back(
-          static_cast<float>(read_as_double(p + x->offset, x->datatype, swap)),
-          static_cast<float>(read_as_double(p + y->offset, y->datatype, swap)),
-          static_cast<float>(read_as_double(p + z->offset, z->datatype, swap)));
-      if (intensity) {
+      if (native_float_xyz) {
+        // The common layout (float32 in this machine's byte order): plain loads, same values.
+        float v[3];
+        std::memcpy(&v[0], p + x->offset, 4);
+        std::memcpy(&v[1], p + y->offset, 4);
+        std::memcpy(&v[2], p + z->offset, 4);
+        out.points_S.emplace_back(v[0], v[1], v[2]);
+      } else {
+        out.points_S.emplace_back(
+            static_cast<float>(read_as_double(p + x->offset, x->datatype, swap)),
+            static_cast<float>(read_as_double(p + y->offset, y->datatype, swap)),
+            static_cast<float>(read_as_double(p + z->offset, z->datatype, swap)));
+      }
+      if (intensity && native_float_intensity) {
+        float v;
+        std::memcpy(&v, p + intensity->offset, 4);
+        out.intensity.push_back(v);
+      } else if (intensity) {
         out.intensity.push_back(
             static_cast<float>(read_as_double(p + intensity->offset, intensity->datatype, swap)));
       }
@@ -277,6 +305,177 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
     }
   }
   return core::Ok{};
+}
+
+PoseMsg to_pose_msg(const Eigen::Isometry3d& T) {
+  PoseMsg msg;
+  const Eigen::Quaterniond q(T.linear());
+  msg.position().x(T.translation().x());
+  msg.position().y(T.translation().y());
+  msg.position().z(T.translation().z());
+  msg.orientation().x(q.x());
+  msg.orientation().y(q.y());
+  msg.orientation().z(q.z());
+  msg.orientation().w(q.w());
+  return msg;
+}
+
+core::Result<Eigen::Isometry3d> from_pose_msg(const PoseMsg& msg) {
+  const auto& p = msg.position();
+  const auto& o = msg.orientation();
+  const Eigen::Vector3d t(p.x(), p.y(), p.z());
+  Eigen::Quaterniond q(o.w(), o.x(), o.y(), o.z());
+  if (!t.allFinite() || !q.coeffs().allFinite()) {
+    return core::Error{"pose.non_finite", "position or orientation is not finite"};
+  }
+  if (std::abs(q.norm() - 1.0) > 1e-3) {
+    return core::Error{"pose.bad_quaternion", "orientation is not a unit quaternion"};
+  }
+  q.normalize();
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = q.toRotationMatrix();
+  T.translation() = t;
+  return T;
+}
+
+void fill_distance_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
+                         std::int64_t stamp_ns, const std::string& frame_id,
+                         DistanceMapSliceMsg& msg) {
+  msg.header().stamp(to_time_msg(stamp_ns));
+  msg.header().frame_id(frame_id);
+  msg.resolution(static_cast<float>(geometry.resolution_m));
+  msg.width(geometry.width);
+  msg.height(geometry.height);
+  msg.origin().position().x(geometry.origin_x_m);
+  msg.origin().position().y(geometry.origin_y_m);
+  msg.origin().position().z(0.0);
+  msg.origin().orientation().w(1.0);
+  msg.unknown_value(std::numeric_limits<float>::quiet_NaN());
+  msg.distance().assign(field.distance_m.begin(), field.distance_m.end());
+  msg.gradient_x().assign(field.gradient_x.begin(), field.gradient_x.end());
+  msg.gradient_y().assign(field.gradient_y.begin(), field.gradient_y.end());
+}
+
+namespace {
+void fill_reasons(const std::vector<ReasonReport>& in,
+                  std::vector<tarmac_msgs::msg::dds_::ReasonCount_>& out) {
+  out.resize(in.size());
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    out[i].reason() = in[i].reason;
+    out[i].count(in[i].count);
+    out[i].total(in[i].total);
+  }
+}
+std::vector<ReasonReport> from_reasons(
+    const std::vector<tarmac_msgs::msg::dds_::ReasonCount_>& in) {
+  std::vector<ReasonReport> out;
+  for (const auto& r : in) out.push_back(ReasonReport{r.reason(), r.count(), r.total()});
+  return out;
+}
+}  // namespace
+
+void fill_cycle_report(const CycleReport& r, CycleReportMsg& msg) {
+  msg.header().stamp(to_time_msg(r.stamp_ns));
+  msg.header().frame_id() = r.frame_id;
+  msg.cycle_index(r.cycle_index);
+  msg.tick_time(to_time_msg(r.tick_ns));
+  msg.wake_jitter_ms(static_cast<float>(r.wake_jitter_ms));
+  msg.skipped_ticks(r.skipped_ticks);
+  msg.stages().resize(r.stages.size());
+  for (std::size_t i = 0; i < r.stages.size(); ++i) {
+    auto& s = msg.stages()[i];
+    s.name() = r.stages[i].name;
+    s.duration_ms(static_cast<float>(r.stages[i].duration_ms));
+    s.budget_ms(static_cast<float>(r.stages[i].budget_ms));
+    s.overrun(r.stages[i].overrun);
+    s.shed_items(r.stages[i].shed_items);
+  }
+  msg.cycle_duration_ms(static_cast<float>(r.cycle_duration_ms));
+  msg.cycle_budget_ms(static_cast<float>(r.cycle_budget_ms));
+  msg.overrun(r.overrun);
+  fill_reasons(r.drops, msg.drops());
+  fill_reasons(r.rejections, msg.rejections());
+  msg.input_ages().resize(r.input_ages.size());
+  for (std::size_t i = 0; i < r.input_ages.size(); ++i) {
+    auto& a = msg.input_ages()[i];
+    a.input() = r.input_ages[i].input;
+    a.age_ms(static_cast<float>(r.input_ages[i].age_ms));
+    a.stale(r.input_ages[i].stale);
+  }
+  msg.points_in(r.points_in);
+  msg.points_used(r.points_used);
+  msg.map_memory_bytes(r.map_memory_bytes);
+  msg.config_hash() = r.config_hash;
+}
+
+CycleReport from_cycle_report(const CycleReportMsg& msg) {
+  CycleReport r;
+  r.stamp_ns = from_time_msg(msg.header().stamp());
+  r.frame_id = msg.header().frame_id();
+  r.cycle_index = msg.cycle_index();
+  r.tick_ns = from_time_msg(msg.tick_time());
+  r.wake_jitter_ms = msg.wake_jitter_ms();
+  r.skipped_ticks = msg.skipped_ticks();
+  for (const auto& s : msg.stages()) {
+    r.stages.push_back(
+        StageReport{s.name(), s.duration_ms(), s.budget_ms(), s.overrun(), s.shed_items()});
+  }
+  r.cycle_duration_ms = msg.cycle_duration_ms();
+  r.cycle_budget_ms = msg.cycle_budget_ms();
+  r.overrun = msg.overrun();
+  r.drops = from_reasons(msg.drops());
+  r.rejections = from_reasons(msg.rejections());
+  for (const auto& a : msg.input_ages()) {
+    r.input_ages.push_back(InputAgeReport{a.input(), a.age_ms(), a.stale()});
+  }
+  r.points_in = msg.points_in();
+  r.points_used = msg.points_used();
+  r.map_memory_bytes = msg.map_memory_bytes();
+  r.config_hash = msg.config_hash();
+  return r;
+}
+
+void fill_diagnostic_array(const DiagnosticReport& report, DiagnosticArrayMsg& msg) {
+  msg.header().stamp(to_time_msg(report.stamp_ns));
+  msg.status().resize(1);
+  auto& s = msg.status()[0];
+  s.level(report.level);
+  s.name() = report.name;
+  s.message() = report.message;
+  s.hardware_id() = report.hardware_id;
+  s.values().resize(report.values.size());
+  for (std::size_t i = 0; i < report.values.size(); ++i) {
+    s.values()[i].key() = report.values[i].first;
+    s.values()[i].value() = report.values[i].second;
+  }
+}
+
+core::Result<std::vector<core::VirtualZone>> from_virtual_obstacles(
+    const VirtualObstacleArrayMsg& msg) {
+  namespace vo = tarmac_msgs::msg::VirtualObstacle_Constants;
+  std::vector<core::VirtualZone> zones;
+  for (const auto& o : msg.obstacles()) {
+    core::VirtualZone z;
+    z.id = o.id();
+    if (o.polygon().size() < 3) {
+      return core::Error{"zones.polygon", "zone '" + o.id() + "' has fewer than 3 vertices"};
+    }
+    for (const auto& p : o.polygon()) {
+      if (!std::isfinite(p.x()) || !std::isfinite(p.y())) {
+        return core::Error{"zones.non_finite", "zone '" + o.id() + "' has a non-finite vertex"};
+      }
+      z.polygon_W.emplace_back(p.x(), p.y());
+    }
+    if (std::isnan(o.min_z()) || std::isnan(o.max_z()) || o.min_z() > o.max_z()) {
+      return core::Error{"zones.z_range", "zone '" + o.id() + "' has an empty z range"};
+    }
+    z.min_z_m = o.min_z();
+    z.max_z_m = o.max_z();
+    z.expiry_ns = from_time_msg(o.expiry());
+    z.restricted = o.kind() == vo::KIND_RESTRICTED;
+    zones.push_back(std::move(z));
+  }
+  return zones;
 }
 
 }  // namespace tarmac::transport

@@ -6,18 +6,35 @@
 #include <cstdint>
 #include <string>
 
+#include <vector>
+
+#include <Eigen/Geometry>
+
 #include "builtin_interfaces.h"
+#include "diagnostic_msgs.h"
+#include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
+#include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/core/distance_field.hpp"
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/result.hpp"
+#include "tarmac/transport/cycle_report.hpp"
+#include "tarmac_msgs.h"
 
 namespace tarmac::transport {
 
 using TimeMsg = builtin_interfaces::msg::dds_::Time_;
 using PointCloud2Msg = sensor_msgs::msg::dds_::PointCloud2_;
 using OccupancyGridMsg = nav_msgs::msg::dds_::OccupancyGrid_;
+using PoseMsg = geometry_msgs::msg::dds_::Pose_;
+using PoseStampedMsg = geometry_msgs::msg::dds_::PoseWithCovarianceStamped_;
+using OdometryMsg = nav_msgs::msg::dds_::Odometry_;
+using DistanceMapSliceMsg = tarmac_msgs::msg::dds_::DistanceMapSlice_;
+using CycleReportMsg = tarmac_msgs::msg::dds_::CycleReport_;
+using VirtualObstacleArrayMsg = tarmac_msgs::msg::dds_::VirtualObstacleArray_;
+using DiagnosticArrayMsg = diagnostic_msgs::msg::dds_::DiagnosticArray_;
 
 /// ns since the epoch <-> builtin_interfaces/Time (sec may be negative; nanosec in [0, 1e9)).
 TimeMsg to_time_msg(std::int64_t stamp_ns);
@@ -26,6 +43,9 @@ std::int64_t from_time_msg(const TimeMsg& time);
 /// Costmap -> nav_msgs/OccupancyGrid in `frame_id`, origin at the grid corner, identity rotation.
 OccupancyGridMsg to_occupancy_grid(const core::Costmap& costmap, std::int64_t stamp_ns,
                                    const std::string& frame_id);
+/// Same, into an existing message (its buffers are reused: no allocation once sized).
+void fill_occupancy_grid(const core::Costmap& costmap, std::int64_t stamp_ns,
+                         const std::string& frame_id, OccupancyGridMsg& msg);
 /// nav_msgs/OccupancyGrid -> Costmap. Rejects sizes that do not match and rotated origins.
 core::Result<core::Costmap> from_occupancy_grid(const OccupancyGridMsg& msg);
 
@@ -39,5 +59,28 @@ PointCloud2Msg to_point_cloud2(const core::PointCloud& cloud);
 /// finite are kept (filters count them); the caller decides. Rejections carry a code
 /// "pointcloud.<reason>" and a message naming the offending field or size.
 core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out);
+
+/// Isometry -> geometry_msgs/Pose (unit quaternion from the rotation).
+PoseMsg to_pose_msg(const Eigen::Isometry3d& T);
+/// geometry_msgs/Pose -> isometry. Rejects non-finite values ("pose.non_finite") and quaternions
+/// whose norm is off by more than 1e-3 ("pose.bad_quaternion"); the quaternion is normalised.
+core::Result<Eigen::Isometry3d> from_pose_msg(const PoseMsg& msg);
+
+/// 2D distance field on `geometry` -> DistanceMapSlice (NaN where unknown, the sentinel says so;
+/// +inf where no obstacle is in the window). Reuses the message's buffers.
+void fill_distance_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
+                         std::int64_t stamp_ns, const std::string& frame_id,
+                         DistanceMapSliceMsg& msg);
+
+/// CycleReport -> tarmac_msgs/CycleReport, reusing the message's buffers.
+void fill_cycle_report(const CycleReport& report, CycleReportMsg& msg);
+/// tarmac_msgs/CycleReport -> CycleReport (tools and tests).
+CycleReport from_cycle_report(const CycleReportMsg& msg);
+void fill_diagnostic_array(const DiagnosticReport& report, DiagnosticArrayMsg& msg);
+
+/// VirtualObstacleArray -> zones (KIND_RESTRICTED -> restricted, every other kind -> no-go).
+/// Rejects polygons with fewer than 3 vertices or non-finite coordinates ("zones.*").
+core::Result<std::vector<core::VirtualZone>> from_virtual_obstacles(
+    const VirtualObstacleArrayMsg& msg);
 
 }  // namespace tarmac::transport

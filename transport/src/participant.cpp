@@ -51,6 +51,11 @@ fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
     case TransportMode::kLocalhost: {
       auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
       udp->interfaceWhiteList.emplace_back("127.0.0.1");
+      // Discovery goes to the initial peer's ports of participant ids 0..N-1 only (default 4).
+      // A machine runs tarmacd, replay, audit, echo, rviz and tests side by side: with more
+      // than 4 participants two late ones would never find each other. 32 costs 32 loopback
+      // datagrams per announcement.
+      udp->maxInitialPeersRange = 32;
       qos.transport().user_transports.push_back(udp);
       builtin.initialPeersList.push_back(udp_locator("127.0.0.1"));
       break;

@@ -5,6 +5,9 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
 
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/result.hpp"
@@ -31,9 +34,97 @@ struct DdsConfig {
   QosConfig qos;
 };
 
+/// One LiDAR input (YAML `sensors[i]`).
+struct SensorConfig {
+  std::string id = "front";                            ///< short name, unique; orders equal stamps
+  std::string topic = "rt/tarmac/lidar/front/points";  ///< PointCloud2 topic, ROS 2 wire form
+  std::string frame_id = "lidar_front";  ///< the only header.frame_id accepted on `topic`
+  /// Extrinsic: maps sensor-frame points into the vehicle base frame.
+  Eigen::Isometry3d T_base_sensor = Eigen::Isometry3d::Identity();
+  double max_age_ms = 500.0;  ///< a scan older than this at tick time is rejected as stale
+};
+
+/// Which message type carries the vehicle pose.
+enum class PoseType { kPoseWithCovarianceStamped, kOdometry };
+
+/// The pose input (YAML `pose`): T_map_base, stamped.
+struct PoseInputConfig {
+  std::string topic = transport::topics::kPose;
+  PoseType type = PoseType::kPoseWithCovarianceStamped;
+  std::string frame_id = "map";     ///< the only header.frame_id accepted
+  std::uint32_t buffer_size = 500;  ///< poses kept for interpolation (5 s at 100 Hz)
+  double max_gap_ms = 250.0;        ///< no interpolation across a larger gap between poses
+  double max_age_ms = 1000.0;       ///< pose input reported stale when its newest is older
+};
+
+/// The fixed-rate executor (YAML `executor`).
+struct ExecutorConfig {
+  double rate_hz = 10.0;         ///< ticks per second
+  double input_delay_ms = 20.0;  ///< a tick takes scans stamped <= tick − this (jitter margin)
+  double pose_wait_ms = 100.0;   ///< a scan waits this long past its eligibility for its pose
+  double max_future_ms = 200.0;  ///< scans stamped later than tick + this are rejected
+  /// Phase of the LiDARs' stamps on the period grid (PTP phase lock), < period. Ticks sit at
+  /// k·period + sensor_phase + input_delay, so such a scan waits exactly input_delay.
+  double sensor_phase_ms = 0.0;
+  std::uint32_t workers = 2;      ///< threads running stages, including the executor thread
+  std::vector<int> cpus;          ///< executor on cpus[0], worker i on cpus[(i+1) % n]; empty: any
+  int realtime_priority = 10;     ///< SCHED_FIFO priority 1..99; 0: do not ask for real time
+  bool lock_memory = true;        ///< mlockall(MCL_CURRENT | MCL_FUTURE)
+  std::uint32_t queue_depth = 8;  ///< per input: samples held between drains (oldest dropped)
+};
+
+/// Per-stage budgets (YAML `budgets`), ms of wall time per tick.
+struct BudgetConfig {
+  double drain_ms = 5.0;       ///< take queued samples, parse, select
+  double ingest_ms = 15.0;     ///< filters, all scans of the tick
+  double integrate_ms = 50.0;  ///< occupancy raycasting, all scans of the tick
+  double costmap_ms = 35.0;    ///< costmap + 2D ESDF, once per tick
+  double publish_ms = 10.0;    ///< costmap, ESDF slice, reports
+  double cycle_ms = 90.0;      ///< the whole tick
+};
+
+/// Deterministic work quotas (YAML `quotas`): decided from inputs, never from the clock.
+struct QuotaConfig {
+  /// Points integrated per tick at most. Scans are taken in (stamp, sensor) order while they
+  /// fit; the rest wait for the next tick (at least one scan per tick is always taken).
+  std::uint64_t points_per_cycle = 500000;
+  /// A scan with more points is decimated to this many (every k-th point, deterministic).
+  std::uint64_t points_per_scan = 262144;
+  /// Scans held waiting (for their tick, pose or quota); beyond this the oldest is shed.
+  std::uint32_t max_pending_scans = 8;
+  /// Points (xyz + intensity) reserved in each of the max_pending_scans + 1 scan buffers at
+  /// start, so the cycle does not allocate for scans up to this size.
+  std::uint64_t reserve_points_per_scan = 65536;
+};
+
+/// Output topics and frame (YAML `outputs`).
+struct OutputConfig {
+  std::string frame_id = "map";
+  std::string costmap_topic = transport::topics::kCostmap;
+  std::string esdf_slice_topic = transport::topics::kEsdfSlice;
+  std::string cycle_report_topic = transport::topics::kDiagnostics;
+  std::string diagnostic_array_topic = transport::topics::kDiagnosticArray;
+  std::string virtual_obstacles_topic = transport::topics::kVirtualObstacles;  ///< input
+  std::uint32_t diagnostic_array_every = 10;  ///< ticks between DiagnosticArray messages
+};
+
+/// Persistent state (YAML `state`).
+struct StateConfig {
+  std::string dir = "/var/lib/tarmac";  ///< systemd StateDirectory=tarmac
+  std::string map_file = "occupancy_window.bin";
+  bool save_on_exit = true;
+};
+
 struct Config {
   int version = kConfigVersion;
   DdsConfig dds;
+  std::vector<SensorConfig> sensors{SensorConfig{}};
+  PoseInputConfig pose;
+  ExecutorConfig executor;
+  BudgetConfig budgets;
+  QuotaConfig quotas;
+  OutputConfig outputs;
+  StateConfig state;
   core::MapperParams mapping;  ///< YAML sections filters, occupancy, costmap, tsdf
 };
 

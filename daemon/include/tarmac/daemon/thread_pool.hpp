@@ -19,7 +19,9 @@ class ThreadPool final : public core::TaskRunner {
  public:
   /// @param threads total concurrency including the calling thread (>= 1); threads − 1 workers
   ///        are started. @param cpus optional CPU per worker for pinning (logged by the caller).
-  explicit ThreadPool(std::size_t threads, const std::vector<int>& cpus = {});
+  /// @param on_worker_start runs first on each worker thread (instrumentation, e.g. tests).
+  explicit ThreadPool(std::size_t threads, const std::vector<int>& cpus = {},
+                      const std::function<void()>& on_worker_start = {});
   ~ThreadPool() override;
   ThreadPool(const ThreadPool&) = delete;
   ThreadPool& operator=(const ThreadPool&) = delete;

@@ -1,0 +1,66 @@
+#pragma once
+/// @file tarmacd's fixed-rate, time-triggered executor (DESIGN.md §3). One tick per period on
+/// absolute deadlines (next += period; sleep until next); a late wake skips the missed ticks
+/// (counted, never run in a burst). Each tick drains the DDS queues, selects scans by stamp
+/// (ScanScheduler), runs ingest + integrate per scan and the costmap once on the worker pool,
+/// publishes the costmap, the ESDF slice, a CycleReport (and now and then a DiagnosticArray),
+/// and pings the systemd watchdog. Wall time is measured and reported, never used to decide.
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tarmac/config/config.hpp"
+#include "tarmac/core/result.hpp"
+
+namespace tarmac::daemon {
+
+/// Totals since start, for the exit log and for tests.
+struct ExecutorTotals {
+  std::uint64_t ticks = 0;
+  std::uint64_t skipped_ticks = 0;
+  std::uint64_t scans_integrated = 0;
+  std::uint64_t overruns = 0;
+  std::int64_t newest_stamp_ns = 0;
+};
+
+/// Instrumentation for tests and benchmarks; empty by default.
+struct RunHooks {
+  std::function<void()> on_thread_start;           ///< on the executor and each worker thread
+  std::function<void(std::uint64_t)> on_tick_end;  ///< on the executor thread, after each tick
+};
+
+class Executor {
+ public:
+  /// Creates the DDS participant, readers and writers and the mapper. Fails with the DDS or
+  /// config error. After it returns, every DDS entity exists (READY=1 may be sent).
+  static core::Result<std::unique_ptr<Executor>> create(const config::Config& config);
+  ~Executor();
+  Executor(const Executor&) = delete;
+  Executor& operator=(const Executor&) = delete;
+
+  /// Runs ticks on the calling thread until `stop_requested()` returns true (checked once per
+  /// tick, so a stop takes at most one period). Applies pinning / SCHED_FIFO / mlockall to the
+  /// calling thread first (failures logged once) and starts the worker pool.
+  void run(const std::function<bool()>& stop_requested, const RunHooks& hooks = {});
+
+  /// Writes the occupancy window to state.dir/state.map_file. Not for the cycle.
+  core::Status save_map() const;
+
+  [[nodiscard]] ExecutorTotals totals() const;
+  /// One line for systemd's STATUS= and the logs.
+  [[nodiscard]] std::string status_line() const;
+  /// The same into a caller's buffer (no allocation: the executor sends it every second).
+  void format_status(char* buf, std::size_t size) const;
+
+  class Impl;
+
+ private:
+  explicit Executor(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tarmac::daemon

@@ -1,0 +1,55 @@
+#pragma once
+/// @file A time-indexed ring of vehicle poses (T_map_base) with interpolation: linear in
+/// translation, slerp in rotation. The executor looks up each scan's pose at the scan's stamp;
+/// nothing is extrapolated. Fixed capacity, no allocation after construction (RT-safe).
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "tarmac/transport/inputs.hpp"
+
+namespace tarmac::daemon {
+
+class PoseBuffer {
+ public:
+  enum class Insert { kOk, kOutOfOrder, kDuplicate };
+  enum class Lookup {
+    kOk,      ///< T_W_B filled
+    kNotYet,  ///< no pose at or after the stamp yet (it may still come)
+    kTooOld,  ///< the stamp lies before the oldest pose kept
+    kGap,     ///< the poses around the stamp are further apart than max_gap_ns
+  };
+
+  /// @pre capacity >= 2, max_gap_ns > 0
+  PoseBuffer(std::size_t capacity, std::int64_t max_gap_ns);
+
+  /// Appends a pose; stamps must increase strictly (older or equal ones are refused, so the
+  /// buffer stays sorted and a replayed sample cannot change an earlier answer). RT-safe.
+  Insert insert(const transport::PoseSample& sample);
+
+  /// T_W_B at `stamp_ns`: the sample itself when a pose has exactly that stamp, otherwise
+  /// interpolated between its neighbours. RT-safe.
+  Lookup lookup(std::int64_t stamp_ns, Eigen::Isometry3d& T_W_B) const;
+
+  [[nodiscard]] std::size_t size() const { return size_; }
+  [[nodiscard]] std::optional<std::int64_t> newest_stamp() const;
+
+ private:
+  [[nodiscard]] const transport::PoseSample& at(std::size_t i) const {  // 0 = oldest
+    return ring_[(head_ + i) % ring_.size()];
+  }
+
+  std::vector<transport::PoseSample> ring_;
+  std::size_t head_ = 0;  ///< index of the oldest sample
+  std::size_t size_ = 0;
+  std::int64_t max_gap_ns_;
+};
+
+/// Interpolates between two poses at fraction t in [0, 1] (translation lerp, rotation slerp).
+Eigen::Isometry3d interpolate(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, double t);
+
+}  // namespace tarmac::daemon

@@ -1,0 +1,557 @@
+#include "tarmac/daemon/executor.hpp"
+
+#include <time.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+
+#include <spdlog/spdlog.h>
+#include <systemd/sd-daemon.h>
+
+#include "tarmac/core/mapper.hpp"
+#include "tarmac/daemon/pose_buffer.hpp"
+#include "tarmac/daemon/realtime.hpp"
+#include "tarmac/daemon/reason_counters.hpp"
+#include "tarmac/daemon/scan_scheduler.hpp"
+#include "tarmac/daemon/thread_pool.hpp"
+#include "tarmac/transport/inputs.hpp"
+#include "tarmac/transport/outputs.hpp"
+
+namespace tarmac::daemon {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr std::int64_t kNsPerMs = 1'000'000;
+
+std::int64_t ms_to_ns(double ms) {
+  return static_cast<std::int64_t>(std::llround(ms * 1e6));
+}
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+std::int64_t monotonic_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+std::int64_t realtime_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+void sleep_until_monotonic(std::int64_t deadline_ns) {
+  timespec ts{};
+  ts.tv_sec = deadline_ns / 1'000'000'000;
+  ts.tv_nsec = deadline_ns % 1'000'000'000;
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+/// Fixed window of recent values with percentiles computed on a stack copy (no allocation).
+class RecentWindow {
+ public:
+  void add(double v) {
+    values_[next_ % values_.size()] = v;
+    ++next_;
+  }
+  [[nodiscard]] double percentile(double q) const {
+    const std::size_t n = std::min<std::size_t>(next_, values_.size());
+    if (n == 0) return 0.0;
+    std::array<double, 256> copy{};
+    std::copy_n(values_.begin(), n, copy.begin());
+    const auto k = static_cast<std::size_t>(std::ceil(q * static_cast<double>(n))) - 1;
+    const auto at = std::min(k, n - 1);
+    std::nth_element(copy.begin(), copy.begin() + static_cast<std::ptrdiff_t>(at),
+                     copy.begin() + static_cast<std::ptrdiff_t>(n));
+    return copy[at];
+  }
+
+ private:
+  std::array<double, 256> values_{};
+  std::size_t next_ = 0;
+};
+
+enum Stage : std::size_t { kDrain, kIngest, kIntegrate, kCostmap, kPublish, kStageCount };
+constexpr const char* kStageNames[kStageCount] = {"drain", "ingest", "integrate", "costmap",
+                                                  "publish"};
+
+}  // namespace
+
+class Executor::Impl {
+ public:
+  /// Parses each sensor's scans into the scheduler's slots.
+  class SensorSink final : public transport::ScanSink {
+   public:
+    SensorSink(Impl& owner, std::uint32_t sensor) : owner_(owner), sensor_(sensor) {}
+    core::PointCloud& slot() override { return owner_.scheduler.slot(owner_.drops); }
+    void commit() override { owner_.scheduler.commit(sensor_, owner_.tick_ns, owner_.rejections); }
+    void reject(std::string_view reason) override { owner_.rejections.add(reason); }
+
+   private:
+    Impl& owner_;
+    std::uint32_t sensor_;
+  };
+
+  class PoseSinkImpl final : public transport::PoseSink {
+   public:
+    explicit PoseSinkImpl(Impl& owner) : owner_(owner) {}
+    void pose(const transport::PoseSample& sample) override {
+      switch (owner_.poses.insert(sample)) {
+        case PoseBuffer::Insert::kOk: break;
+        case PoseBuffer::Insert::kOutOfOrder: owner_.rejections.add("pose.out_of_order"); break;
+        case PoseBuffer::Insert::kDuplicate: owner_.rejections.add("pose.duplicate_stamp"); break;
+      }
+    }
+    void reject(std::string_view reason) override { owner_.rejections.add(reason); }
+
+   private:
+    Impl& owner_;
+  };
+
+  Impl(const config::Config& cfg, transport::Participant p)
+      : config(cfg),
+        participant(std::move(p)),
+        hash(config::config_hash(cfg)),
+        poses(cfg.pose.buffer_size, ms_to_ns(cfg.pose.max_gap_ms)),
+        scheduler(scheduler_params(cfg)),
+        mapper(cfg.mapping),
+        pose_sink(*this) {}
+
+  static SchedulerParams scheduler_params(const config::Config& cfg) {
+    SchedulerParams p;
+    p.input_delay_ns = ms_to_ns(cfg.executor.input_delay_ms);
+    p.pose_wait_ns = ms_to_ns(cfg.executor.pose_wait_ms);
+    p.max_future_ns = ms_to_ns(cfg.executor.max_future_ms);
+    for (const auto& s : cfg.sensors) p.max_age_ns.push_back(ms_to_ns(s.max_age_ms));
+    p.points_per_cycle = cfg.quotas.points_per_cycle;
+    p.points_per_scan = cfg.quotas.points_per_scan;
+    p.max_pending = cfg.quotas.max_pending_scans;
+    p.reserve_points = cfg.quotas.reserve_points_per_scan;
+    return p;
+  }
+
+  void prepare_report() {
+    report.frame_id = config.outputs.frame_id;
+    report.config_hash = hash;
+    report.cycle_budget_ms = config.budgets.cycle_ms;
+    report.stages.resize(kStageCount);
+    const double budgets[kStageCount] = {config.budgets.drain_ms, config.budgets.ingest_ms,
+                                         config.budgets.integrate_ms, config.budgets.costmap_ms,
+                                         config.budgets.publish_ms};
+    for (std::size_t i = 0; i < kStageCount; ++i) {
+      report.stages[i].name = kStageNames[i];
+      report.stages[i].budget_ms = budgets[i];
+    }
+    report.input_ages.resize(config.sensors.size() + 1);
+    for (std::size_t i = 0; i < config.sensors.size(); ++i) {
+      report.input_ages[i].input = config.sensors[i].id;
+    }
+    report.input_ages.back().input = "pose";
+    // Every reason the cycle can count, reported from the first tick (0 until it happens).
+    for (const char* r :
+         {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
+          "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite",
+          "points.too_close", "points.ego_vehicle", "points.isolated"}) {
+      drops.declare(r);
+    }
+    for (const char* r :
+         {"scan.unknown_frame", "scan.future", "scan.stale", "scan.late", "scan.duplicate_stamp",
+          "pointcloud.missing_xyz", "pointcloud.bad_datatype", "pointcloud.bad_count",
+          "pointcloud.field_outside_point", "pointcloud.bad_row_step", "pointcloud.bad_size",
+          "pose.unknown_frame", "pose.non_finite", "pose.bad_quaternion", "pose.out_of_order",
+          "pose.duplicate_stamp", "zones.polygon", "zones.non_finite", "zones.z_range"}) {
+      rejections.declare(r);
+    }
+    report.drops.reserve(32);
+    report.rejections.reserve(32);
+    selected.reserve(config.quotas.max_pending_scans + 1);
+    overflow_seen.assign(config.sensors.size(), 0);
+    diag.name = "tarmacd: executor";
+    diag.hardware_id = config.dds.participant.name;
+    diag.values.resize(9);
+  }
+
+  void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped);
+  void real_time_setup(const RunHooks& hooks);
+
+  config::Config config;
+  transport::Participant participant;
+  std::string hash;
+  std::vector<std::unique_ptr<transport::ScanInput>> scans;
+  std::vector<SensorSink> sinks;
+  std::unique_ptr<transport::PoseInput> pose_input;
+  std::unique_ptr<transport::ZoneInput> zone_input;
+  std::unique_ptr<transport::MapOutputs> outputs;
+  std::vector<Eigen::Isometry3d> T_B_S;
+
+  PoseBuffer poses;
+  ScanScheduler scheduler;
+  core::Mapper mapper;
+  PoseSinkImpl pose_sink;
+  std::unique_ptr<ThreadPool> pool;
+  std::vector<core::VirtualZone> zones;
+  std::string zone_rejection;
+
+  ReasonCounters drops, rejections;
+  std::vector<ScanScheduler::Selected> selected;
+  std::vector<std::uint64_t> overflow_seen;
+  std::uint64_t pose_overflow_seen = 0;
+  transport::CycleReport report;
+  transport::DiagnosticReport diag;
+  std::int64_t tick_ns = 0;  // the current tick's time on the stamp clock
+  std::int64_t newest_stamp_ns = 0;
+  bool have_costmap = false;
+
+  mutable std::mutex totals_mutex;  // totals and windows are read by status_line() from main
+  ExecutorTotals totals;
+  RecentWindow cycle_ms, jitter_ms_window, stamp_to_publish;
+  std::uint64_t cycle_index = 0;
+};
+
+void Executor::Impl::real_time_setup(const RunHooks& hooks) {
+  const auto& e = config.executor;
+  if (!e.cpus.empty()) {
+    if (auto why = pin_current_thread(e.cpus[0]); !why.empty()) {
+      spdlog::warn("executor: pinning to CPU {} refused ({}); running unpinned", e.cpus[0], why);
+    }
+  }
+  if (e.realtime_priority > 0) {
+    if (auto why = set_fifo_priority(e.realtime_priority); !why.empty()) {
+      spdlog::warn("executor: SCHED_FIFO priority {} refused ({}); running SCHED_OTHER",
+                   e.realtime_priority, why);
+    } else {
+      spdlog::info("executor: SCHED_FIFO priority {} (workers inherit it)", e.realtime_priority);
+    }
+  }
+  if (e.lock_memory) {
+    if (auto why = lock_all_memory(); !why.empty()) {
+      spdlog::warn("executor: memory lock refused ({}); pages may fault in the cycle", why);
+    } else {
+      spdlog::info("executor: all memory locked (mlockall)");
+    }
+  }
+  std::vector<int> worker_cpus;
+  for (std::uint32_t i = 1; i < e.workers && !e.cpus.empty(); ++i) {
+    worker_cpus.push_back(e.cpus[i % e.cpus.size()]);
+  }
+  pool = std::make_unique<ThreadPool>(e.workers, worker_cpus, hooks.on_thread_start);
+  if (pool->pin_failures() > 0) {
+    spdlog::warn("executor: {} of {} workers could not be pinned; they run unpinned",
+                 pool->pin_failures(), worker_cpus.size());
+  }
+}
+
+void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped) {
+  const auto t_start = Clock::now();
+  tick_ns = tick_time_ns;
+  drops.begin_tick();
+  rejections.begin_tick();
+  double stage_ms[kStageCount] = {};
+  std::uint64_t shed[kStageCount] = {};
+
+  // ---- drain: queues -> scheduler slots, pose buffer, zones; then select by stamp ----
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    scans[i]->drain(sinks[i]);
+    const std::uint64_t overflow = scans[i]->overflow_drops();
+    drops.add("queue.scan_overflow", overflow - overflow_seen[i]);
+    overflow_seen[i] = overflow;
+  }
+  pose_input->drain(pose_sink);
+  const std::uint64_t pose_overflow = pose_input->overflow_drops();
+  drops.add("queue.pose_overflow", pose_overflow - pose_overflow_seen);
+  pose_overflow_seen = pose_overflow;
+  zone_rejection.clear();
+  const bool zones_changed = zone_input->take_latest(zones, zone_rejection);
+  if (!zone_rejection.empty()) rejections.add(zone_rejection);
+  const auto stats = scheduler.select(tick_ns, poses, selected, drops);
+  shed[kDrain] = stats.deferred_scans;
+  shed[kIngest] = stats.decimated_points;
+  const auto t_drained = Clock::now();
+  stage_ms[kDrain] = ms_between(t_start, t_drained);
+
+  // ---- ingest + integrate, scan by scan in (stamp, sensor) order ----
+  std::uint64_t points_in = 0, points_used = 0;
+  for (const auto& sel : selected) {
+    const core::PointCloud& cloud = scheduler.cloud(sel.slot);
+    const auto t0 = Clock::now();
+    const core::FilterCounts counts = mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor]);
+    const auto t1 = Clock::now();
+    mapper.integrate(*pool);
+    const auto t2 = Clock::now();
+    stage_ms[kIngest] += ms_between(t0, t1);
+    stage_ms[kIntegrate] += ms_between(t1, t2);
+    points_in += counts.input;
+    points_used += counts.kept;
+    drops.add("points.non_finite", counts.non_finite);
+    drops.add("points.too_close", counts.too_close);
+    drops.add("points.ego_vehicle", counts.ego_vehicle);
+    drops.add("points.isolated", counts.isolated);
+    newest_stamp_ns = std::max(newest_stamp_ns, cloud.stamp_ns);
+    scheduler.release(sel.slot);
+  }
+
+  {
+    std::lock_guard lock(totals_mutex);  // before the costmap goes out (tests read both)
+    totals.scans_integrated += selected.size();
+    totals.newest_stamp_ns = newest_stamp_ns;
+  }
+
+  // ---- costmap + 2D ESDF, once per tick (when something changed) ----
+  const bool update = !selected.empty() || zones_changed;
+  const auto t_costmap0 = Clock::now();
+  if (update) {
+    mapper.update_costmap(zones, newest_stamp_ns, *pool);
+    have_costmap = true;
+  }
+  const auto t_costmap1 = Clock::now();
+  stage_ms[kCostmap] = ms_between(t_costmap0, t_costmap1);
+
+  // ---- publish ----
+  if (update) {
+    const auto& layers = mapper.costmap();
+    outputs->publish_costmap(layers.costmap, newest_stamp_ns, config.outputs.frame_id);
+    outputs->publish_slice(layers.obstacle_distance, layers.costmap.geometry(), newest_stamp_ns,
+                           config.outputs.frame_id);
+  }
+  const auto t_published = Clock::now();
+  stage_ms[kPublish] = ms_between(t_costmap1, t_published);
+  // Measured, never used to decide: newest integrated scan stamp -> costmap handed to DDS.
+  double stamp_to_publish_ms = -1.0;
+  if (update && !selected.empty()) {
+    stamp_to_publish_ms = static_cast<double>(realtime_ns() - newest_stamp_ns) / 1e6;
+  }
+
+  // ---- report ----
+  const double cycle_duration = ms_between(t_start, t_published);
+  bool overrun = cycle_duration > config.budgets.cycle_ms;
+  for (std::size_t i = 0; i < kStageCount; ++i) {
+    auto& s = report.stages[i];
+    s.duration_ms = stage_ms[i];
+    s.overrun = stage_ms[i] > s.budget_ms;
+    s.shed_items = shed[i];
+    overrun = overrun || s.overrun;
+  }
+  report.stamp_ns = newest_stamp_ns;
+  report.cycle_index = cycle_index;
+  report.tick_ns = tick_ns;
+  report.wake_jitter_ms = jitter_ms;
+  report.skipped_ticks = skipped;
+  report.cycle_duration_ms = cycle_duration;
+  report.overrun = overrun;
+  report.drops.resize(drops.entries().size());
+  std::copy(drops.entries().begin(), drops.entries().end(), report.drops.begin());
+  report.rejections.resize(rejections.entries().size());
+  std::copy(rejections.entries().begin(), rejections.entries().end(), report.rejections.begin());
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    const std::int64_t newest = scheduler.newest_stamp(static_cast<std::uint32_t>(i));
+    auto& age = report.input_ages[i];
+    age.age_ms = newest == 0 ? -1.0 : static_cast<double>(tick_ns - newest) / kNsPerMs;
+    age.stale = newest == 0 || tick_ns - newest > ms_to_ns(config.sensors[i].max_age_ms);
+  }
+  {
+    const auto newest = poses.newest_stamp();
+    auto& age = report.input_ages.back();
+    age.age_ms = newest ? static_cast<double>(tick_ns - *newest) / kNsPerMs : -1.0;
+    age.stale = !newest || tick_ns - *newest > ms_to_ns(config.pose.max_age_ms);
+  }
+  report.points_in = points_in;
+  report.points_used = points_used;
+  report.map_memory_bytes = mapper.occupancy().memory_bytes();
+  {
+    // Before the report goes out, so whoever reads the report and then the totals agrees.
+    std::lock_guard lock(totals_mutex);
+    totals.ticks += 1;
+    totals.skipped_ticks += skipped;
+    totals.overruns += overrun ? 1 : 0;
+    cycle_ms.add(cycle_duration);
+    jitter_ms_window.add(jitter_ms);
+    if (stamp_to_publish_ms >= 0.0) stamp_to_publish.add(stamp_to_publish_ms);
+  }
+  outputs->publish_report(report);
+
+  if (cycle_index % config.outputs.diagnostic_array_every == 0) {
+    diag.stamp_ns = tick_ns;
+    diag.level = overrun ? 1 : 0;
+    diag.message = overrun ? "over budget" : "ok";
+    const auto put = [&](std::size_t i, const char* key, double v) {
+      diag.values[i].first = key;
+      char buf[32];
+      std::snprintf(buf, sizeof buf, "%.3f", v);
+      diag.values[i].second = buf;
+    };
+    put(0, "cycle_ms", cycle_duration);
+    put(1, "wake_jitter_ms", jitter_ms);
+    put(2, "integrate_ms", stage_ms[kIntegrate]);
+    put(3, "costmap_ms", stage_ms[kCostmap]);
+    put(4, "scans_integrated_total", static_cast<double>(totals.scans_integrated));
+    put(5, "drops_total", static_cast<double>(drops.total_sum()));
+    put(6, "rejections_total", static_cast<double>(rejections.total_sum()));
+    put(7, "skipped_ticks_total", static_cast<double>(totals.skipped_ticks));
+    put(8, "stamp_to_publish_p99_ms", stamp_to_publish.percentile(0.99));
+    outputs->publish_diagnostics(diag);
+  }
+  ++cycle_index;
+}
+
+core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& cfg) {
+  auto participant = transport::Participant::create(cfg.dds.participant);
+  if (!participant) return participant.error();
+  auto impl = std::make_unique<Impl>(cfg, std::move(participant).value());
+  const auto& q = cfg.dds.qos;
+  impl->sinks.reserve(cfg.sensors.size());
+  for (std::uint32_t i = 0; i < cfg.sensors.size(); ++i) {
+    const auto& s = cfg.sensors[i];
+    auto input = transport::ScanInput::create(impl->participant, s.topic, s.frame_id, q.lidar,
+                                              cfg.executor.queue_depth);
+    if (!input) return input.error();
+    impl->scans.push_back(std::move(input).value());
+    impl->sinks.emplace_back(*impl, i);
+    impl->T_B_S.push_back(s.T_base_sensor);
+  }
+  auto pose = transport::PoseInput::create(impl->participant, cfg.pose.topic,
+                                           cfg.pose.type == config::PoseType::kOdometry
+                                               ? transport::PoseMessage::kOdometry
+                                               : transport::PoseMessage::kPoseWithCovarianceStamped,
+                                           cfg.pose.frame_id, q.pose,
+                                           std::max<std::size_t>(cfg.executor.queue_depth, 64));
+  if (!pose) return pose.error();
+  impl->pose_input = std::move(pose).value();
+  auto zones = transport::ZoneInput::create(impl->participant, cfg.outputs.virtual_obstacles_topic,
+                                            q.virtual_obstacles);
+  if (!zones) return zones.error();
+  impl->zone_input = std::move(zones).value();
+  transport::OutputTopics topics{cfg.outputs.costmap_topic, cfg.outputs.esdf_slice_topic,
+                                 cfg.outputs.cycle_report_topic,
+                                 cfg.outputs.diagnostic_array_topic};
+  transport::OutputQos oq{q.costmap, q.esdf_slice, q.diagnostics, q.diagnostics};
+  auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
+  if (!outputs) return outputs.error();
+  impl->outputs = std::move(outputs).value();
+  impl->prepare_report();
+  return std::unique_ptr<Executor>(new Executor(std::move(impl)));
+}
+
+Executor::Executor(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Executor::~Executor() = default;
+
+void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& hooks) {
+  Impl& d = *impl_;
+  if (hooks.on_thread_start) hooks.on_thread_start();
+  d.real_time_setup(hooks);
+  const std::int64_t period_ns = std::llround(1e9 / d.config.executor.rate_hz);
+  // Ticks sit on multiples of the period of the stamp clock (CLOCK_REALTIME); the sleep runs on
+  // CLOCK_MONOTONIC, so a wall-clock step does not distort the schedule.
+  const std::int64_t real_now = realtime_ns();
+  const std::int64_t mono_now = monotonic_ns();
+  // Tick k sits at k·period + sensor phase + input delay: a LiDAR phase-locked to the grid (PTP)
+  // waits exactly input_delay for its tick. Unsynchronised sensors wait 0..period more.
+  const std::int64_t offset_ns =
+      ms_to_ns(d.config.executor.sensor_phase_ms + d.config.executor.input_delay_ms) % period_ns;
+  std::int64_t tick_real = ((real_now - offset_ns) / period_ns + 1) * period_ns + offset_ns;
+  std::int64_t deadline = mono_now + (tick_real - real_now);
+  const auto status_every = static_cast<std::uint64_t>(std::max(1.0, d.config.executor.rate_hz));
+  char status[320];
+  spdlog::info("executor: {} Hz, {} workers, input delay {} ms, pose wait {} ms",
+               d.config.executor.rate_hz, d.config.executor.workers,
+               d.config.executor.input_delay_ms, d.config.executor.pose_wait_ms);
+  while (!stop_requested()) {
+    sleep_until_monotonic(deadline);
+    std::int64_t late = monotonic_ns() - deadline;
+    std::uint32_t skipped = 0;
+    if (late >= period_ns) {
+      // Late by whole periods: those ticks are skipped (counted), never run in a burst.
+      const std::int64_t n = late / period_ns;
+      skipped = static_cast<std::uint32_t>(n);
+      deadline += n * period_ns;
+      tick_real += n * period_ns;
+      late -= n * period_ns;
+    }
+    d.tick(tick_real, static_cast<double>(late) / 1e6, skipped);
+    if (hooks.on_tick_end) hooks.on_tick_end(d.cycle_index - 1);
+    sd_notify(0, "WATCHDOG=1");
+    if (d.cycle_index % status_every == 0) {
+      std::memcpy(status, "STATUS=", 7);
+      format_status(status + 7, sizeof status - 7);
+      sd_notify(0, status);
+    }
+    deadline += period_ns;
+    tick_real += period_ns;
+  }
+  const auto t = totals();
+  spdlog::info("executor: stopped after {} ticks ({} skipped, {} over budget), {} scans integrated",
+               t.ticks, t.skipped_ticks, t.overruns, t.scans_integrated);
+}
+
+ExecutorTotals Executor::totals() const {
+  std::lock_guard lock(impl_->totals_mutex);
+  return impl_->totals;
+}
+
+std::string Executor::status_line() const {
+  char buf[256];
+  format_status(buf, sizeof buf);
+  return buf;
+}
+
+void Executor::format_status(char* buf, std::size_t size) const {
+  std::lock_guard lock(impl_->totals_mutex);
+  const auto& d = *impl_;
+  std::snprintf(buf, size,
+                "stamp->publish p50 %.1f p99 %.1f ms; cycle p50 %.1f p99 %.1f ms (budget %.0f); "
+                "jitter p99 %.2f ms; %llu scans, %llu skipped, %llu over budget",
+                d.stamp_to_publish.percentile(0.5), d.stamp_to_publish.percentile(0.99),
+                d.cycle_ms.percentile(0.5), d.cycle_ms.percentile(0.99), d.config.budgets.cycle_ms,
+                d.jitter_ms_window.percentile(0.99),
+                static_cast<unsigned long long>(d.totals.scans_integrated),
+                static_cast<unsigned long long>(d.totals.skipped_ticks),
+                static_cast<unsigned long long>(d.totals.overruns));
+}
+
+core::Status Executor::save_map() const {
+  const auto& st = impl_->config.state;
+  const std::filesystem::path dir = st.dir;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return core::Error{"state.io", st.dir + ": " + ec.message()};
+  const auto& map = impl_->mapper.occupancy();
+  std::vector<float> log_odds;
+  map.export_log_odds(log_odds);
+  const std::filesystem::path file = dir / st.map_file;
+  const std::filesystem::path tmp = file.string() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) return core::Error{"state.io", tmp.string() + ": cannot be written"};
+    // A self-describing header line, then float32 log-odds in window order (x fastest).
+    const auto dims = map.window_size();
+    const auto& min = map.window_min();
+    char header[256];
+    const int n =
+        std::snprintf(header, sizeof header,
+                      "tarmac occupancy window v1 voxel_size_m %.6f min_vox %d %d %d dims %d %d %d "
+                      "stamp_ns %lld float32-log-odds unknown=-1e9\n",
+                      map.params().voxel_size_m, min.x(), min.y(), min.z(), dims.x(), dims.y(),
+                      dims.z(), static_cast<long long>(impl_->newest_stamp_ns));
+    out.write(header, n);
+    out.write(reinterpret_cast<const char*>(log_odds.data()),
+              static_cast<std::streamsize>(log_odds.size() * sizeof(float)));
+    if (!out) return core::Error{"state.io", tmp.string() + ": write failed"};
+  }
+  std::filesystem::rename(tmp, file, ec);
+  if (ec) return core::Error{"state.io", file.string() + ": " + ec.message()};
+  return core::Ok{};
+}
+
+}  // namespace tarmac::daemon

@@ -1,0 +1,67 @@
+#include "tarmac/daemon/pose_buffer.hpp"
+
+#include "tarmac/core/assert.hpp"
+
+namespace tarmac::daemon {
+
+PoseBuffer::PoseBuffer(std::size_t capacity, std::int64_t max_gap_ns)
+    : ring_(capacity), max_gap_ns_(max_gap_ns) {
+  TARMAC_ASSERT(capacity >= 2 && max_gap_ns > 0, "PoseBuffer needs capacity >= 2 and a gap");
+}
+
+PoseBuffer::Insert PoseBuffer::insert(const transport::PoseSample& sample) {
+  if (size_ > 0) {
+    const std::int64_t newest = at(size_ - 1).stamp_ns;
+    if (sample.stamp_ns == newest) return Insert::kDuplicate;
+    if (sample.stamp_ns < newest) return Insert::kOutOfOrder;
+  }
+  if (size_ == ring_.size()) {
+    ring_[head_] = sample;  // overwrite the oldest
+    head_ = (head_ + 1) % ring_.size();
+  } else {
+    ring_[(head_ + size_) % ring_.size()] = sample;
+    ++size_;
+  }
+  return Insert::kOk;
+}
+
+std::optional<std::int64_t> PoseBuffer::newest_stamp() const {
+  if (size_ == 0) return std::nullopt;
+  return at(size_ - 1).stamp_ns;
+}
+
+PoseBuffer::Lookup PoseBuffer::lookup(std::int64_t stamp_ns, Eigen::Isometry3d& T_W_B) const {
+  if (size_ == 0 || at(size_ - 1).stamp_ns < stamp_ns) return Lookup::kNotYet;
+  if (stamp_ns < at(0).stamp_ns) return Lookup::kTooOld;
+  // First sample with stamp >= stamp_ns (binary search over the sorted ring).
+  std::size_t lo = 0, hi = size_ - 1;
+  while (lo < hi) {
+    const std::size_t mid = (lo + hi) / 2;
+    if (at(mid).stamp_ns < stamp_ns) {
+      lo = mid + 1;
+    } else {
+      hi = mid;
+    }
+  }
+  const auto& b = at(lo);
+  if (b.stamp_ns == stamp_ns) {
+    T_W_B = b.T_W_B;  // exact: no arithmetic, so a pose sampled at the scan stamp is used as is
+    return Lookup::kOk;
+  }
+  const auto& a = at(lo - 1);  // lo > 0: at(0).stamp_ns < stamp_ns here
+  const std::int64_t span = b.stamp_ns - a.stamp_ns;
+  if (span > max_gap_ns_) return Lookup::kGap;
+  const double t = static_cast<double>(stamp_ns - a.stamp_ns) / static_cast<double>(span);
+  T_W_B = interpolate(a.T_W_B, b.T_W_B, t);
+  return Lookup::kOk;
+}
+
+Eigen::Isometry3d interpolate(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, double t) {
+  const Eigen::Quaterniond qa(a.linear()), qb(b.linear());
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = qa.slerp(t, qb).toRotationMatrix();
+  T.translation() = (1.0 - t) * a.translation() + t * b.translation();
+  return T;
+}
+
+}  // namespace tarmac::daemon

@@ -1,0 +1,148 @@
+#include "tarmac/daemon/scan_scheduler.hpp"
+
+#include <algorithm>
+
+namespace tarmac::daemon {
+
+ScanScheduler::ScanScheduler(const SchedulerParams& params)
+    : params_(params), slots_(params.max_pending + 1), newest_(params.max_age_ns.size(), 0) {
+  order_.reserve(slots_.size());
+  for (auto& s : slots_) {
+    s.cloud.points_S.reserve(params.reserve_points);
+    s.cloud.intensity.reserve(params.reserve_points);
+  }
+}
+
+bool ScanScheduler::before(std::uint32_t a, std::uint32_t b) const {
+  const auto& sa = slots_[a];
+  const auto& sb = slots_[b];
+  if (sa.cloud.stamp_ns != sb.cloud.stamp_ns) return sa.cloud.stamp_ns < sb.cloud.stamp_ns;
+  return sa.sensor < sb.sensor;
+}
+
+core::PointCloud& ScanScheduler::slot(ReasonCounters& drops) {
+  std::uint32_t oldest = 0;
+  bool any_pending = false;
+  for (std::uint32_t i = 0; i < slots_.size(); ++i) {
+    if (slots_[i].state == State::kFree || slots_[i].state == State::kStaged) {
+      staged_ = i;
+      slots_[i].state = State::kStaged;
+      return slots_[i].cloud;
+    }
+    if (slots_[i].state == State::kPending && (!any_pending || before(i, oldest))) {
+      oldest = i;
+      any_pending = true;
+    }
+  }
+  TARMAC_ASSERT(any_pending, "scan slots exhausted by selected scans");
+  drops.add("scan.shed_pending_full");
+  staged_ = oldest;
+  slots_[oldest].state = State::kStaged;
+  return slots_[oldest].cloud;
+}
+
+void ScanScheduler::commit(std::uint32_t sensor, std::int64_t tick_ns, ReasonCounters& rejections) {
+  Slot& s = slots_[staged_];
+  TARMAC_ASSERT(s.state == State::kStaged, "commit without slot()");
+  s.state = State::kFree;
+  const std::int64_t stamp = s.cloud.stamp_ns;
+  if (stamp > tick_ns + params_.max_future_ns) {
+    rejections.add("scan.future");
+    return;
+  }
+  if (stamp < tick_ns - params_.max_age_ns[sensor]) {
+    rejections.add("scan.stale");
+    return;
+  }
+  if (have_last_ && (stamp < last_stamp_ || (stamp == last_stamp_ && sensor <= last_sensor_))) {
+    rejections.add("scan.late");  // its place in the order has already been integrated
+    return;
+  }
+  for (const auto& other : slots_) {
+    if (other.state == State::kPending && other.sensor == sensor && other.cloud.stamp_ns == stamp) {
+      rejections.add("scan.duplicate_stamp");
+      return;
+    }
+  }
+  s.sensor = sensor;
+  s.state = State::kPending;
+  newest_[sensor] = std::max(newest_[sensor], stamp);
+}
+
+std::size_t ScanScheduler::pending() const {
+  return static_cast<std::size_t>(std::count_if(
+      slots_.begin(), slots_.end(), [](const Slot& s) { return s.state == State::kPending; }));
+}
+
+void ScanScheduler::decimate(core::PointCloud& cloud, TickStats& stats) const {
+  const std::size_t n = cloud.size();
+  if (n <= params_.points_per_scan) return;
+  // Every k-th point, k the smallest stride that fits the quota: deterministic by index.
+  const std::size_t k = (n + params_.points_per_scan - 1) / params_.points_per_scan;
+  std::size_t w = 0;
+  for (std::size_t r = 0; r < n; r += k, ++w) {
+    cloud.points_S[w] = cloud.points_S[r];
+    if (cloud.has_intensity()) cloud.intensity[w] = cloud.intensity[r];
+    if (cloud.has_ring()) cloud.ring[w] = cloud.ring[r];
+    if (cloud.has_time()) cloud.time_offset_s[w] = cloud.time_offset_s[r];
+  }
+  cloud.points_S.resize(w);
+  if (cloud.has_intensity()) cloud.intensity.resize(w);
+  if (cloud.has_ring()) cloud.ring.resize(w);
+  if (cloud.has_time()) cloud.time_offset_s.resize(w);
+  stats.decimated_points += n - w;
+}
+
+ScanScheduler::TickStats ScanScheduler::select(std::int64_t tick_ns, const PoseBuffer& poses,
+                                               std::vector<Selected>& out, ReasonCounters& drops) {
+  TickStats stats;
+  out.clear();
+  order_.clear();
+  for (std::uint32_t i = 0; i < slots_.size(); ++i) {
+    if (slots_[i].state == State::kPending) order_.push_back(i);
+  }
+  std::sort(order_.begin(), order_.end(),
+            [this](std::uint32_t a, std::uint32_t b) { return before(a, b); });
+  const std::int64_t eligible_until = tick_ns - params_.input_delay_ns;
+  std::uint64_t points = 0;
+  for (std::size_t k = 0; k < order_.size(); ++k) {
+    const std::uint32_t i = order_[k];
+    Slot& s = slots_[i];
+    const std::int64_t stamp = s.cloud.stamp_ns;
+    if (stamp > eligible_until) break;  // the rest are later still
+    Selected sel;
+    sel.slot = i;
+    sel.sensor = s.sensor;
+    const auto found = poses.lookup(stamp, sel.T_W_B);
+    if (found == PoseBuffer::Lookup::kNotYet) {
+      if (eligible_until - stamp < params_.pose_wait_ns) break;  // wait, keep the order
+      drops.add("scan.pose_timeout");
+      s.state = State::kFree;
+      continue;
+    }
+    if (found == PoseBuffer::Lookup::kTooOld) {
+      drops.add("scan.pose_before_buffer");
+      s.state = State::kFree;
+      continue;
+    }
+    if (found == PoseBuffer::Lookup::kGap) {
+      drops.add("scan.pose_gap");
+      s.state = State::kFree;
+      continue;
+    }
+    decimate(s.cloud, stats);
+    if (!out.empty() && points + s.cloud.size() > params_.points_per_cycle) {
+      stats.deferred_scans = order_.size() - k;  // this one and every later one wait
+      break;
+    }
+    points += s.cloud.size();
+    s.state = State::kSelected;
+    have_last_ = true;
+    last_stamp_ = stamp;
+    last_sensor_ = s.sensor;
+    out.push_back(sel);
+  }
+  return stats;
+}
+
+}  // namespace tarmac::daemon

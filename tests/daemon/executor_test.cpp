@@ -1,0 +1,368 @@
+// tarmacd's executor end to end over loopback DDS: a simulated airside sequence is replayed as a
+// ROS 2 publisher would (PointCloud2 + PoseWithCovarianceStamped), the executor runs in this
+// process, and the received costmap is compared with the core run offline on the same sequence.
+// Every test has its own DDS domain and runs under the packet capture (nothing off loopback).
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "conversions.hpp"
+#include "dds_endpoints.hpp"
+#include "geometry_msgs.h"
+#include "nav_msgsPubSubTypes.h"
+#include "rtps_sniffer.hpp"
+#include "tarmac/config/config.hpp"
+#include "tarmac/core/mapper.hpp"
+#include "tarmac/daemon/executor.hpp"
+#include "tarmac/replay/replayer.hpp"
+#include "tarmac/sim/lidar.hpp"
+#include "tarmac/sim/scene.hpp"
+#include "tarmac/tools/array_io.hpp"
+#include "tarmac/tools/kitti.hpp"
+#include "tarmac_msgsPubSubTypes.h"
+#include "test_env.hpp"
+
+namespace tarmac::daemon {
+namespace {
+
+using namespace std::chrono_literals;
+using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
+using ReportReader = transport::Reader<tarmac_msgs::msg::dds_::CycleReport_PubSubType>;
+
+constexpr int kScans = 20;
+
+/// A small sequence (16 beams) generated once for the whole binary.
+const tools::KittiSequence& sequence() {
+  static const tools::KittiSequence seq = [] {
+    const auto dir = std::filesystem::temp_directory_path() /
+                     ("tarmac-executor-test-" + std::to_string(::getpid()));
+    sim::SequenceParams p;
+    p.scans = kScans;
+    p.lidar.beams = 16;
+    p.lidar.azimuth_steps = 512;
+    const auto written = sim::write_sequence(sim::Scene::airside_default(), p, dir);
+    EXPECT_TRUE(written.ok()) << written.error;
+    auto opened = tools::open_kitti(dir);
+    EXPECT_TRUE(opened.ok()) << (opened.ok() ? "" : opened.error().message);
+    return std::move(opened).value();
+  }();
+  return seq;
+}
+
+config::Config test_config(std::uint32_t domain, std::uint32_t workers) {
+  config::Config c;
+  c.dds.participant.domain_id = domain;
+  c.dds.participant.name = "tarmacd-test";
+  // Reliable scans: a lost sample would change the map, and this test is about determinism.
+  c.dds.qos.lidar = {transport::Reliability::kReliable, transport::Durability::kVolatile, 8};
+  c.executor.workers = workers;
+  c.executor.realtime_priority = 0;
+  c.executor.lock_memory = false;
+  c.executor.input_delay_ms = 40.0;
+  c.executor.pose_wait_ms = 200.0;
+  c.mapping.occupancy.window_x_vox = 200;  // 40 x 40 x 6 m keeps the test fast
+  c.mapping.occupancy.window_y_vox = 200;
+  c.mapping.occupancy.window_z_vox = 30;
+  c.state.save_on_exit = false;
+  return c;
+}
+
+/// The core run offline, scan by scan, on the poses as they travel over the wire (quaternions).
+std::string offline_costmap_digest(const config::Config& cfg, std::size_t scans,
+                                   std::int64_t last_stamp_ns) {
+  core::Mapper mapper(cfg.mapping);
+  core::SerialRunner runner;
+  const auto& seq = sequence();
+  const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
+  core::PointCloud cloud;
+  for (std::size_t k = 0; k < scans; ++k) {
+    EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
+    const auto wire =
+        transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(seq.T_W_S[k], T_B_S)));
+    mapper.ingest(cloud, wire.value(), T_B_S);
+    mapper.integrate(runner);
+  }
+  mapper.update_costmap({}, last_stamp_ns, runner);
+  const auto& cells = mapper.costmap().costmap.cells();
+  return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
+}
+
+std::string digest_of(const transport::OccupancyGridMsg& grid) {
+  return tools::digest(
+      {reinterpret_cast<const std::uint8_t*>(grid.data().data()), grid.data().size()});
+}
+
+/// The executor on its own thread, stopped and joined on destruction.
+class RunningExecutor {
+ public:
+  explicit RunningExecutor(const config::Config& cfg) {
+    auto created = Executor::create(cfg);
+    EXPECT_TRUE(created.ok()) << (created.ok() ? "" : created.error().message);
+    executor_ = std::move(created).value();
+    thread_ = std::thread([this] { executor_->run([this] { return stop_.load(); }); });
+  }
+  ~RunningExecutor() {
+    stop_ = true;
+    thread_.join();
+  }
+  Executor& get() { return *executor_; }
+
+ private:
+  std::unique_ptr<Executor> executor_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+transport::Participant peer(std::uint32_t domain) {
+  transport::ParticipantConfig pc;
+  pc.domain_id = domain;
+  pc.name = "executor-test-peer";
+  auto p = transport::Participant::create(pc);
+  EXPECT_TRUE(p.ok());
+  return std::move(p).value();
+}
+
+/// Waits for the costmap whose stamp is `stamp_ns`; returns false on timeout.
+bool wait_for_costmap(GridReader& reader, std::int64_t stamp_ns, transport::OccupancyGridMsg& out,
+                      std::chrono::seconds timeout = 20s) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  std::vector<transport::OccupancyGridMsg> batch;
+  while (std::chrono::steady_clock::now() < deadline) {
+    reader.wait_for_sample(100ms);
+    batch.clear();
+    reader.take_all(batch);
+    for (auto& g : batch) {
+      if (transport::from_time_msg(g.header().stamp()) == stamp_ns) {
+        out = std::move(g);
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+class Daemon : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto sniffer = test::RtpsSniffer::start();
+    TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable: " +
+                                             (sniffer.ok() ? "" : sniffer.error().message));
+    sniffer_ = std::move(sniffer).value();
+  }
+  void TearDown() override {
+    if (!sniffer_) return;
+    std::this_thread::sleep_for(200ms);
+    const auto counts = sniffer_->counts();
+    EXPECT_EQ(counts.off_host, 0u) << "RTPS left loopback: " << counts.first_off_host;
+    EXPECT_GT(counts.loopback, 0u) << "the capture saw no loopback RTPS either";
+  }
+
+  /// Replays the sequence into an executor with `workers` threads and returns the digest of the
+  /// costmap stamped with the last scan.
+  std::string replayed_digest(std::uint32_t domain, std::uint32_t workers, double jitter_ms) {
+    const auto cfg = test_config(domain, workers);
+    RunningExecutor executor(cfg);
+    auto participant = peer(domain);
+    auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
+    EXPECT_TRUE(grids.ok());
+    tools::ReplayOptions options;
+    options.lidar_qos = cfg.dds.qos.lidar;
+    options.rate_scale = 2.0;  // 20 Hz into a 10 Hz executor: two scans per tick
+    options.jitter_ms = jitter_ms;
+    options.seed = 7;
+    auto stats = tools::replay(participant, sequence(), options);
+    EXPECT_TRUE(stats.ok()) << (stats.ok() ? "" : stats.error().message);
+    if (!stats.ok()) return "";
+    EXPECT_EQ(stats.value().scans, static_cast<std::size_t>(kScans));
+    transport::OccupancyGridMsg grid;
+    EXPECT_TRUE(wait_for_costmap(*grids.value(), stats.value().last_stamp_ns, grid))
+        << "no costmap stamped with the last scan";
+    EXPECT_EQ(grid.header().frame_id(), "map");
+    // The totals are updated right after the tick publishes: give it a moment.
+    for (int i = 0; i < 50 && executor.get().totals().scans_integrated < kScans; ++i) {
+      std::this_thread::sleep_for(20ms);
+    }
+    EXPECT_EQ(executor.get().totals().scans_integrated, static_cast<std::uint64_t>(kScans));
+    last_stamp_ns_ = stats.value().last_stamp_ns;
+    return digest_of(grid);
+  }
+
+  std::unique_ptr<test::RtpsSniffer> sniffer_;
+  std::int64_t last_stamp_ns_ = 0;
+};
+
+TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_1Worker) {
+  const std::string got = replayed_digest(test::kDomainDaemonWorkers1, 1, 0.0);
+  const std::string want = offline_costmap_digest(test_config(0, 1), kScans, last_stamp_ns_);
+  EXPECT_EQ(got, want);
+  // The digest sees a single missing scan, so equality above means every scan made it.
+  EXPECT_NE(want, offline_costmap_digest(test_config(0, 1), kScans - 1, last_stamp_ns_));
+}
+
+TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_2Workers) {
+  const std::string got = replayed_digest(test::kDomainDaemonWorkers2, 2, 0.0);
+  EXPECT_EQ(got, offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_));
+}
+
+TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_4Workers) {
+  const std::string got = replayed_digest(test::kDomainDaemonWorkers4, 4, 0.0);
+  EXPECT_EQ(got, offline_costmap_digest(test_config(0, 4), kScans, last_stamp_ns_));
+}
+
+TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_WithRandomPublishJitter) {
+  // Every message up to 25 ms late, in random order between scan and pose: within the 40 ms
+  // input delay, so the integrated sequence (and the map) must not change.
+  const std::string got = replayed_digest(test::kDomainDaemonJitter, 2, 25.0);
+  EXPECT_EQ(got, offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_));
+}
+
+/// Collects CycleReports until `done(report)` or the timeout; returns the last one.
+transport::CycleReport wait_for_report(
+    ReportReader& reader, const std::function<bool(const transport::CycleReport&)>& done,
+    std::chrono::seconds timeout = 15s) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  std::vector<transport::CycleReportMsg> batch;
+  transport::CycleReport last;
+  while (std::chrono::steady_clock::now() < deadline) {
+    reader.wait_for_sample(100ms);
+    batch.clear();
+    reader.take_all(batch);
+    for (const auto& m : batch) {
+      last = transport::from_cycle_report(m);
+      if (done(last)) return last;
+    }
+  }
+  return last;
+}
+
+std::uint64_t total_of(const std::vector<transport::ReasonReport>& list, const std::string& r) {
+  for (const auto& e : list) {
+    if (e.reason == r) return e.total;
+  }
+  return 0;
+}
+
+TEST_F(Daemon, ScanWithoutPose_IsDroppedAndCounted) {
+  const auto cfg = test_config(test::kDomainDaemonNoPose, 2);
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainDaemonNoPose);
+  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 200);
+  ASSERT_TRUE(reports.ok());
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0;
+  options.max_scans = 8;
+  options.pose_count = 5;  // scans 5, 6, 7 never get a pose
+  auto stats = tools::replay(participant, sequence(), options);
+  ASSERT_TRUE(stats.ok()) << stats.error().message;
+  const auto last = wait_for_report(*reports.value(), [](const transport::CycleReport& r) {
+    return total_of(r.drops, "scan.pose_timeout") >= 3;
+  });
+  EXPECT_EQ(total_of(last.drops, "scan.pose_timeout"), 3u);
+  EXPECT_EQ(executor.get().totals().scans_integrated, 5u);
+  EXPECT_EQ(last.config_hash, config::config_hash(cfg));
+  bool pose_age_reported = false;
+  for (const auto& a : last.input_ages) pose_age_reported |= a.input == "pose";
+  EXPECT_TRUE(pose_age_reported);
+}
+
+TEST_F(Daemon, TinyBudget_ProducesOverrunsInCycleReport) {
+  auto cfg = test_config(test::kDomainDaemonOverrun, 2);
+  cfg.budgets.integrate_ms = 0.001;  // no scan integrates in 1 µs
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainDaemonOverrun);
+  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 200);
+  ASSERT_TRUE(reports.ok());
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0;
+  options.max_scans = 4;
+  ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
+  const auto last = wait_for_report(
+      *reports.value(), [](const transport::CycleReport& r) { return r.points_in > 0; });
+  ASSERT_GT(last.points_in, 0u) << "no report of a tick that integrated a scan";
+  EXPECT_TRUE(last.overrun);
+  bool found = false;
+  for (const auto& s : last.stages) {
+    if (s.name != "integrate") continue;
+    found = true;
+    EXPECT_TRUE(s.overrun);
+    EXPECT_GT(s.duration_ms, s.budget_ms);
+    EXPECT_FLOAT_EQ(s.budget_ms, 0.001f);
+  }
+  EXPECT_TRUE(found);
+  EXPECT_GT(executor.get().totals().overruns, 0u);
+}
+
+std::int8_t cell_at(const transport::OccupancyGridMsg& g, double x_m, double y_m) {
+  const auto& info = g.info();
+  const auto ix =
+      static_cast<std::uint32_t>((x_m - info.origin().position().x()) / info.resolution());
+  const auto iy =
+      static_cast<std::uint32_t>((y_m - info.origin().position().y()) / info.resolution());
+  return g.data()[std::size_t{iy} * info.width() + ix];
+}
+
+TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
+  const auto cfg = test_config(test::kDomainDaemonZones, 2);
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainDaemonZones);
+  auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
+  ASSERT_TRUE(grids.ok());
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0;
+  options.max_scans = 4;
+  auto stats = tools::replay(participant, sequence(), options);
+  ASSERT_TRUE(stats.ok()) << stats.error().message;
+  transport::OccupancyGridMsg before;
+  ASSERT_TRUE(wait_for_costmap(*grids.value(), stats.value().last_stamp_ns, before));
+  // 5 m ahead of the vehicle on open apron: observed, not lethal before the zone.
+  const Eigen::Vector3d ahead = sequence().T_W_S[3].translation() + Eigen::Vector3d(5.0, 0, 0);
+  ASSERT_NE(cell_at(before, ahead.x(), ahead.y()), 100);
+
+  using ZoneWriter = transport::Writer<tarmac_msgs::msg::dds_::VirtualObstacleArray_PubSubType>;
+  auto zones = ZoneWriter::create(participant, cfg.outputs.virtual_obstacles_topic,
+                                  cfg.dds.qos.virtual_obstacles);
+  ASSERT_TRUE(zones.ok());
+  ASSERT_TRUE(zones.value()->wait_for_readers(1, 10s));
+  transport::VirtualObstacleArrayMsg msg;
+  tarmac_msgs::msg::dds_::VirtualObstacle_ zone;
+  zone.id("fuel-spill-1");
+  zone.kind(tarmac_msgs::msg::VirtualObstacle_Constants::KIND_FUEL_SPILL);
+  for (const auto& [dx, dy] : {std::pair{-1.0, -1.0}, {1.0, -1.0}, {1.0, 1.0}, {-1.0, 1.0}}) {
+    geometry_msgs::msg::dds_::Point_ p;
+    p.x(ahead.x() + dx);
+    p.y(ahead.y() + dy);
+    zone.polygon().push_back(p);
+  }
+  zone.min_z(-100.0);
+  zone.max_z(100.0);
+  msg.obstacles().push_back(zone);
+  const auto t_sent = std::chrono::steady_clock::now();
+  ASSERT_TRUE(zones.value()->write(msg));
+  // The next tick drains the zone and republishes the costmap (same stamp: no new scan).
+  const auto deadline = t_sent + 5s;
+  bool lethal = false;
+  std::vector<transport::OccupancyGridMsg> batch;
+  while (!lethal && std::chrono::steady_clock::now() < deadline) {
+    grids.value()->wait_for_sample(50ms);
+    batch.clear();
+    grids.value()->take_all(batch);
+    for (const auto& g : batch) lethal = lethal || cell_at(g, ahead.x(), ahead.y()) == 100;
+  }
+  const double elapsed_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_sent).count();
+  EXPECT_TRUE(lethal) << "zone cell never became lethal";
+  // One period to the next tick plus that tick's own work, with slack for a loaded machine.
+  EXPECT_LT(elapsed_ms, 1000.0 / cfg.executor.rate_hz + cfg.budgets.cycle_ms + 150.0);
+}
+
+}  // namespace
+}  // namespace tarmac::daemon

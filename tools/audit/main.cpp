@@ -1,0 +1,305 @@
+// tarmac-audit: subscribes to tarmacd's CycleReport and costmap over localhost DDS and prints,
+// per stage, the last, p50, p99 and max duration against its budget and the overruns, plus the
+// end-to-end latency from scan stamp to costmap reception (the costmap's stamp is the newest
+// integrated scan's). Optionally writes the same as JSON and the last costmap as PNG.
+
+#include <signal.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "conversions.hpp"
+#include "dds_endpoints.hpp"
+#include "nav_msgsPubSubTypes.h"
+#include "tarmac/config/config.hpp"
+#include "tarmac/tools/array_io.hpp"
+#include "tarmac_msgsPubSubTypes.h"
+
+namespace {
+
+using namespace tarmac;
+using namespace std::chrono_literals;
+
+constexpr int kExitUsage = 64;
+constexpr int kExitUnavailable = 69;
+constexpr int kExitIo = 74;
+constexpr int kExitConfig = 78;
+
+std::atomic<bool> g_stop{false};
+
+void usage(std::FILE* to) {
+  std::fprintf(
+      to,
+      "usage: tarmac-audit [--config FILE] [--cycles N] [--idle-s S] [--timeout-s S]\n"
+      "                    [--json FILE] [--png FILE]\n"
+      "  Listens on the CycleReport and costmap topics of FILE (default config) and, at\n"
+      "  the end, prints a per-stage table (last, p50, p99, max vs budget, overruns) and\n"
+      "  the end-to-end latency scan stamp -> costmap received.\n"
+      "  --cycles N    stop after N cycle reports\n"
+      "  --idle-s S    stop S seconds after the last costmap (once one arrived)\n"
+      "  --timeout-s S stop after S seconds in any case (default 600)\n"
+      "  --json FILE   write the table as JSON\n"
+      "  --png FILE    write the last costmap as PNG (white free, black lethal, yellow to\n"
+      "                dark red inflated, slate unknown; north up)\n"
+      "  Stops on SIGINT/SIGTERM too. Exit 0 when at least one report arrived.\n");
+}
+
+std::int64_t realtime_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size()))) - 1;
+  return v[std::min(i, v.size() - 1)];
+}
+
+struct Series {
+  std::vector<double> ms;
+  double budget_ms = 0.0;
+  std::uint64_t overruns = 0;
+};
+
+std::vector<std::uint8_t> render(const transport::OccupancyGridMsg& grid) {
+  const std::uint32_t w = grid.info().width(), h = grid.info().height();
+  std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
+  for (std::uint32_t y = 0; y < h; ++y) {
+    for (std::uint32_t x = 0; x < w; ++x) {
+      const int c = grid.data()[std::size_t{y} * w + x];
+      std::uint8_t* px = &rgb[(std::size_t{h - 1 - y} * w + x) * 3];
+      if (c < 0) {
+        px[0] = 70, px[1] = 80, px[2] = 110;
+      } else if (c >= 100) {
+        px[0] = px[1] = px[2] = 0;
+      } else if (c == 99) {
+        px[0] = 180, px[1] = 0, px[2] = 0;
+      } else if (c > 0) {
+        px[0] = 255, px[1] = static_cast<std::uint8_t>(230 - 2 * c), px[2] = 60;
+      } else {
+        px[0] = px[1] = px[2] = 245;
+      }
+    }
+  }
+  return rgb;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string config_path, json_path, png_path;
+  std::uint64_t max_cycles = 0;
+  double idle_s = 0.0, timeout_s = 600.0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool has_value = i + 1 < argc;
+    if (a == "--config" && has_value) {
+      config_path = argv[++i];
+    } else if (a == "--cycles" && has_value) {
+      max_cycles = static_cast<std::uint64_t>(std::max(0, std::atoi(argv[++i])));
+    } else if (a == "--idle-s" && has_value) {
+      idle_s = std::atof(argv[++i]);
+    } else if (a == "--timeout-s" && has_value) {
+      timeout_s = std::atof(argv[++i]);
+    } else if (a == "--json" && has_value) {
+      json_path = argv[++i];
+    } else if (a == "--png" && has_value) {
+      png_path = argv[++i];
+    } else if (a == "--help" || a == "-h") {
+      usage(stdout);
+      return 0;
+    } else {
+      std::fprintf(stderr, "tarmac-audit: unexpected argument '%s'\n", a.c_str());
+      usage(stderr);
+      return kExitUsage;
+    }
+  }
+  config::Config cfg;
+  if (!config_path.empty()) {
+    auto loaded = config::load_config_file(config_path);
+    if (!loaded) {
+      std::fprintf(stderr, "tarmac-audit: invalid config: %s\n", loaded.error().message.c_str());
+      return kExitConfig;
+    }
+    cfg = std::move(loaded).value();
+  }
+  cfg.dds.participant.name = "tarmac-audit";
+  auto participant = transport::Participant::create(cfg.dds.participant);
+  if (!participant) {
+    std::fprintf(stderr, "tarmac-audit: %s\n", participant.error().message.c_str());
+    return kExitUnavailable;
+  }
+  using ReportReader = transport::Reader<tarmac_msgs::msg::dds_::CycleReport_PubSubType>;
+  using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
+  auto reports = ReportReader::create(participant.value(), cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 1000);
+  auto grids =
+      GridReader::create(participant.value(), cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 16);
+  if (!reports || !grids) {
+    std::fprintf(stderr, "tarmac-audit: cannot create readers\n");
+    return kExitUnavailable;
+  }
+  struct sigaction sa {};
+  sa.sa_handler = [](int) { g_stop = true; };
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+
+  std::map<std::string, Series> stages;
+  std::vector<std::string> stage_order;
+  Series cycle;
+  std::vector<double> e2e_ms, jitter_ms;
+  std::uint64_t n_reports = 0, skipped = 0, points_in = 0, points_used = 0;
+  std::int64_t last_costmap_stamp = 0;
+  transport::CycleReport last;
+  transport::OccupancyGridMsg last_grid;
+  bool have_grid = false;
+  std::vector<transport::CycleReportMsg> report_batch;
+  std::vector<transport::OccupancyGridMsg> grid_batch;
+  const auto t_start = std::chrono::steady_clock::now();
+  auto t_last_grid = t_start;
+  const bool tty = isatty(STDERR_FILENO) != 0;
+  while (!g_stop) {
+    // Woken by the costmap listener, so the reception time is taken within a few µs of arrival.
+    grids.value()->wait_for_sample(10ms);
+    const std::int64_t now = realtime_ns();
+    grid_batch.clear();
+    grids.value()->take_all(grid_batch);
+    for (auto& g : grid_batch) {
+      const std::int64_t stamp = transport::from_time_msg(g.header().stamp());
+      if (stamp != last_costmap_stamp) {
+        e2e_ms.push_back(static_cast<double>(now - stamp) / 1e6);
+        last_costmap_stamp = stamp;
+      }
+      last_grid = std::move(g);
+      have_grid = true;
+      t_last_grid = std::chrono::steady_clock::now();
+    }
+    report_batch.clear();
+    reports.value()->take_all(report_batch);
+    for (const auto& m : report_batch) {
+      last = transport::from_cycle_report(m);
+      ++n_reports;
+      skipped += last.skipped_ticks;
+      points_in += last.points_in;
+      points_used += last.points_used;
+      jitter_ms.push_back(last.wake_jitter_ms);
+      for (const auto& s : last.stages) {
+        auto [it, fresh] = stages.try_emplace(s.name);
+        if (fresh) stage_order.push_back(s.name);
+        it->second.ms.push_back(s.duration_ms);
+        it->second.budget_ms = s.budget_ms;
+        it->second.overruns += s.overrun ? 1 : 0;
+      }
+      cycle.ms.push_back(last.cycle_duration_ms);
+      cycle.budget_ms = last.cycle_budget_ms;
+      cycle.overruns += last.overrun ? 1 : 0;
+    }
+    if (tty && !report_batch.empty()) {
+      std::fprintf(stderr,
+                   "\rtarmac-audit: %llu cycles, cycle last %.2f ms p99 %.2f ms, e2e p99 %.1f ms "
+                   "(%zu costmaps)   ",
+                   static_cast<unsigned long long>(n_reports), last.cycle_duration_ms,
+                   percentile(cycle.ms, 0.99), percentile(e2e_ms, 0.99), e2e_ms.size());
+    }
+    const auto now_steady = std::chrono::steady_clock::now();
+    if (max_cycles > 0 && n_reports >= max_cycles) break;
+    if (idle_s > 0 && have_grid &&
+        std::chrono::duration<double>(now_steady - t_last_grid).count() > idle_s) {
+      break;
+    }
+    if (std::chrono::duration<double>(now_steady - t_start).count() > timeout_s) break;
+  }
+  if (tty) std::fprintf(stderr, "\n");
+  if (n_reports == 0) {
+    std::fprintf(stderr, "tarmac-audit: no CycleReport received on %s (domain %u)\n",
+                 cfg.outputs.cycle_report_topic.c_str(), cfg.dds.participant.domain_id);
+    return kExitUnavailable;
+  }
+
+  std::printf(
+      "tarmac-audit: %llu cycles (config %s), %llu skipped ticks, wake jitter p50 %.3f "
+      "ms p99 %.3f ms, %llu points in, %llu used\n",
+      static_cast<unsigned long long>(n_reports), last.config_hash.c_str(),
+      static_cast<unsigned long long>(skipped), percentile(jitter_ms, 0.5),
+      percentile(jitter_ms, 0.99), static_cast<unsigned long long>(points_in),
+      static_cast<unsigned long long>(points_used));
+  std::printf("%-22s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "last", "p50", "p99", "max",
+              "budget", "overruns");
+  const auto row = [](const std::string& name, const Series& s) {
+    const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
+    std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9.3f %9llu\n", name.c_str(),
+                s.ms.empty() ? 0.0 : s.ms.back(), percentile(s.ms, 0.5), percentile(s.ms, 0.99), mx,
+                s.budget_ms, static_cast<unsigned long long>(s.overruns));
+  };
+  for (const auto& name : stage_order) row(name, stages[name]);
+  row("cycle", cycle);
+  const double e2e_max = e2e_ms.empty() ? 0.0 : *std::max_element(e2e_ms.begin(), e2e_ms.end());
+  std::printf("%-22s %9.3f %9.3f %9.3f %9.3f   (%zu costmaps)\n", "scan stamp -> costmap",
+              e2e_ms.empty() ? 0.0 : e2e_ms.back(), percentile(e2e_ms, 0.5),
+              percentile(e2e_ms, 0.99), e2e_max, e2e_ms.size());
+  for (const auto* list : {&last.drops, &last.rejections}) {
+    std::string text;
+    for (const auto& r : *list) {
+      if (r.total > 0) text += " " + r.reason + "=" + std::to_string(r.total);
+    }
+    std::printf("%s (totals):%s\n", list == &last.drops ? "drops" : "rejections",
+                text.empty() ? " none" : text.c_str());
+  }
+  if (have_grid) {
+    const auto& d = last_grid.data();
+    std::printf("last costmap: %ux%u cells, stamp %.3f s, digest %s\n", last_grid.info().width(),
+                last_grid.info().height(), static_cast<double>(last_costmap_stamp) / 1e9,
+                tools::digest({reinterpret_cast<const std::uint8_t*>(d.data()), d.size()}).c_str());
+  }
+
+  if (!json_path.empty()) {
+    std::ofstream j(json_path);
+    j << "{\n  \"cycles\": " << n_reports << ",\n  \"skipped_ticks\": " << skipped
+      << ",\n  \"config_hash\": \"" << last.config_hash << "\",\n  \"stages_ms\": {\n";
+    const auto obj = [&](const std::string& name, const Series& s, bool comma) {
+      const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
+      j << "    \"" << name << "\": {\"last\": " << (s.ms.empty() ? 0.0 : s.ms.back())
+        << ", \"p50\": " << percentile(s.ms, 0.5) << ", \"p99\": " << percentile(s.ms, 0.99)
+        << ", \"max\": " << mx << ", \"budget\": " << s.budget_ms
+        << ", \"overruns\": " << s.overruns << "}" << (comma ? "," : "") << "\n";
+    };
+    for (const auto& name : stage_order) obj(name, stages[name], true);
+    obj("cycle", cycle, false);
+    j << "  },\n  \"e2e_latency_ms\": {\"samples\": " << e2e_ms.size()
+      << ", \"p50\": " << percentile(e2e_ms, 0.5) << ", \"p99\": " << percentile(e2e_ms, 0.99)
+      << ", \"max\": " << e2e_max
+      << "},\n  \"wake_jitter_ms\": {\"p50\": " << percentile(jitter_ms, 0.5)
+      << ", \"p99\": " << percentile(jitter_ms, 0.99) << "}\n}\n";
+    if (!j) {
+      std::fprintf(stderr, "tarmac-audit: %s: cannot be written\n", json_path.c_str());
+      return kExitIo;
+    }
+    std::printf("wrote %s\n", json_path.c_str());
+  }
+  if (!png_path.empty()) {
+    if (!have_grid) {
+      std::fprintf(stderr, "tarmac-audit: no costmap received, no PNG written\n");
+      return kExitUnavailable;
+    }
+    if (auto w = tools::write_png(png_path, render(last_grid), last_grid.info().width(),
+                                  last_grid.info().height());
+        !w) {
+      std::fprintf(stderr, "tarmac-audit: %s\n", w.error().message.c_str());
+      return kExitIo;
+    }
+    std::printf("wrote %s\n", png_path.c_str());
+  }
+  return 0;
+}

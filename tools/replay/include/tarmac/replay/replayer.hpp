@@ -1,0 +1,70 @@
+#pragma once
+/// @file Replays a KITTI-layout sequence over DDS as a ROS 2-style publisher would:
+/// sensor_msgs/PointCloud2 (points in the sensor frame) and geometry_msgs/PoseWithCovarianceStamped
+/// (T_map_base) on tarmac's default topics, each scan's pose stamped exactly like the scan.
+///
+/// The sequence's poses.txt holds T_world_sensor; the pose published is
+/// T_world_base = T_world_sensor · T_base_sensor⁻¹ with the extrinsic given in the options (the
+/// daemon's config), so the daemon recovers T_world_sensor. Stamps are re-based on this
+/// machine's clock: stamp_k = start + (t_k − t_0) / rate_scale, and scan k is published at its
+/// stamp (plus an optional random jitter, for determinism tests).
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include <Eigen/Geometry>
+
+#include "tarmac/core/result.hpp"
+#include "tarmac/tools/kitti.hpp"
+#include "tarmac/transport/participant.hpp"
+#include "tarmac/transport/qos.hpp"
+
+namespace tarmac::tools {
+
+struct ReplayOptions {
+  std::string lidar_topic = "rt/tarmac/lidar/front/points";
+  std::string frame_id = "lidar_front";
+  std::string pose_topic = "rt/tarmac/pose";
+  std::string pose_frame_id = "map";
+  Eigen::Isometry3d T_base_sensor = Eigen::Isometry3d::Identity();
+  double rate_scale = 1.0;    ///< > 1 replays faster
+  std::int64_t start_ns = 0;  ///< stamp of the first scan; 0: now + lead_ms
+  double lead_ms = 300.0;     ///< with start_ns == 0
+  /// With start_ns == 0 and > 0: the first stamp is put on a multiple of this (ms since the
+  /// epoch), as a LiDAR phase-locked to PTP would stamp its scans.
+  double align_ms = 0.0;
+  double jitter_ms = 0.0;            ///< each message published up to this late (uniform)
+  std::uint64_t seed = 1;            ///< jitter seed
+  std::size_t max_scans = 0;         ///< 0: all
+  std::size_t loops = 1;             ///< replay the sequence this many times, stamps continuing
+  double wait_for_readers_s = 10.0;  ///< wait this long for a matched reader on both topics
+  /// Poses are published for the first `pose_count` scans only (0: all); tests use it to starve
+  /// the daemon of poses.
+  std::size_t pose_count = 0;
+  /// false: scans only (another process publishes the poses, e.g. one replay per LiDAR).
+  bool publish_poses = true;
+  /// QoS of the scan writer; must be compatible with the daemon's `dds.qos.lidar`.
+  transport::QosSpec lidar_qos = transport::qos::kLidar;
+  /// Called after each scan is published (index, count); e.g. a progress bar.
+  std::function<void(std::size_t, std::size_t)> progress;
+};
+
+struct ReplayStats {
+  std::size_t scans = 0;
+  std::int64_t first_stamp_ns = 0;
+  std::int64_t last_stamp_ns = 0;
+  double max_late_ms = 0.0;  ///< worst publish time behind schedule (excluding jitter)
+};
+
+/// T_world_base for a scan whose sensor pose is T_W_S.
+Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometry3d& T_B_S);
+
+/// Publishes `seq` and returns when the last message is out (or `stop` became true).
+core::Result<ReplayStats> replay(const transport::Participant& participant,
+                                 const KittiSequence& seq, const ReplayOptions& options,
+                                 const std::atomic<bool>* stop = nullptr);
+
+}  // namespace tarmac::tools

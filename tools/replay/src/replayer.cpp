@@ -1,0 +1,137 @@
+#include "tarmac/replay/replayer.hpp"
+
+#include <time.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "conversions.hpp"
+#include "dds_endpoints.hpp"
+#include "geometry_msgsPubSubTypes.h"
+#include "sensor_msgsPubSubTypes.h"
+#include "tarmac/transport/qos.hpp"
+
+namespace tarmac::tools {
+
+namespace {
+
+std::int64_t realtime_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+void sleep_until_realtime(std::int64_t t_ns) {
+  timespec ts{};
+  ts.tv_sec = t_ns / 1'000'000'000;
+  ts.tv_nsec = t_ns % 1'000'000'000;
+  while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+struct Event {
+  std::int64_t publish_ns;
+  std::size_t scan;
+  bool is_pose;
+};
+
+}  // namespace
+
+Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometry3d& T_B_S) {
+  return T_W_S * T_B_S.inverse();
+}
+
+core::Result<ReplayStats> replay(const transport::Participant& participant,
+                                 const KittiSequence& seq, const ReplayOptions& options,
+                                 const std::atomic<bool>* stop) {
+  using CloudWriter = transport::Writer<sensor_msgs::msg::dds_::PointCloud2_PubSubType>;
+  using PoseWriter =
+      transport::Writer<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType>;
+  if (!(options.rate_scale > 0.0)) return core::Error{"replay.options", "rate_scale must be > 0"};
+  auto clouds = CloudWriter::create(participant, options.lidar_topic, options.lidar_qos);
+  if (!clouds) return clouds.error();
+  // Deep enough that a reliable pose reader never makes the replay block.
+  transport::QosSpec pose_qos = transport::qos::kPose;
+  pose_qos.history_depth = 100;
+  auto poses = PoseWriter::create(participant, options.pose_topic, pose_qos);
+  if (!poses) return poses.error();
+  const auto wait = std::chrono::milliseconds(
+      static_cast<std::int64_t>(std::llround(options.wait_for_readers_s * 1000.0)));
+  if (!clouds.value()->wait_for_readers(1, wait) ||
+      (options.publish_poses && !poses.value()->wait_for_readers(1, wait))) {
+    return core::Error{"replay.no_reader", "no reader matched " + options.lidar_topic + " and " +
+                                               options.pose_topic + " (is tarmacd running on " +
+                                               "this domain?)"};
+  }
+
+  const std::size_t n =
+      options.max_scans == 0 ? seq.scans.size() : std::min(options.max_scans, seq.scans.size());
+  ReplayStats stats;
+  if (n == 0 || options.loops == 0) return stats;
+  const std::size_t total = n * options.loops;
+  std::int64_t start = options.start_ns != 0
+                           ? options.start_ns
+                           : realtime_ns() + static_cast<std::int64_t>(options.lead_ms * 1e6);
+  if (options.start_ns == 0 && options.align_ms > 0.0) {
+    const auto grid = static_cast<std::int64_t>(std::llround(options.align_ms * 1e6));
+    start = (start / grid + 1) * grid;
+  }
+  // A loop lasts the sequence plus one scan interval, so stamps keep their spacing across loops.
+  const double step_s =
+      n > 1 ? (seq.times_s[n - 1] - seq.times_s[0]) / static_cast<double>(n - 1) : 0.1;
+  const double loop_s = seq.times_s[n - 1] - seq.times_s[0] + step_s;
+  std::vector<std::int64_t> stamps(total);
+  for (std::size_t k = 0; k < total; ++k) {
+    const double t_s = seq.times_s[k % n] - seq.times_s[0] + static_cast<double>(k / n) * loop_s;
+    stamps[k] = start + std::llround(t_s * 1e9 / options.rate_scale);
+  }
+  std::mt19937_64 rng(options.seed);
+  std::uniform_real_distribution<double> jitter(0.0, std::max(0.0, options.jitter_ms) * 1e6);
+  std::vector<Event> events;
+  events.reserve(2 * total);
+  for (std::size_t k = 0; k < total; ++k) {
+    events.push_back({stamps[k] + std::llround(jitter(rng)), k, false});
+    if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count)) {
+      events.push_back({stamps[k] + std::llround(jitter(rng)), k, true});
+    }
+  }
+  std::stable_sort(events.begin(), events.end(),
+                   [](const Event& a, const Event& b) { return a.publish_ns < b.publish_ns; });
+
+  core::PointCloud cloud;
+  std::size_t published_scans = 0;
+  for (const Event& e : events) {
+    if (stop != nullptr && stop->load()) break;
+    if (e.is_pose) {
+      transport::PoseStampedMsg msg;
+      msg.header().stamp(transport::to_time_msg(stamps[e.scan]));
+      msg.header().frame_id(options.pose_frame_id);
+      msg.pose().pose(
+          transport::to_pose_msg(base_pose(seq.T_W_S[e.scan % n], options.T_base_sensor)));
+      sleep_until_realtime(e.publish_ns);
+      poses.value()->write(msg);
+    } else {
+      if (auto read = read_kitti_scan(seq.scans[e.scan % n], cloud); !read) return read.error();
+      cloud.frame_id = options.frame_id;
+      cloud.stamp_ns = stamps[e.scan];
+      const auto msg = transport::to_point_cloud2(cloud);
+      sleep_until_realtime(e.publish_ns);
+      stats.max_late_ms =
+          std::max(stats.max_late_ms, static_cast<double>(realtime_ns() - e.publish_ns) / 1e6);
+      clouds.value()->write(msg);
+      ++published_scans;
+      if (options.progress) options.progress(published_scans, total);
+    }
+  }
+  poses.value()->wait_for_acknowledgments(std::chrono::milliseconds(2000));
+  stats.scans = published_scans;
+  stats.first_stamp_ns = stamps.front();
+  stats.last_stamp_ns = stamps[total - 1];
+  return stats;
+}
+
+}  // namespace tarmac::tools

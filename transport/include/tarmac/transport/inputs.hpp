@@ -1,0 +1,122 @@
+#pragma once
+/// @file tarmacd's DDS inputs, in core types: LiDAR scans (sensor_msgs/PointCloud2), vehicle poses
+/// (PoseWithCovarianceStamped or Odometry) and virtual obstacles. DDS listener threads only
+/// enqueue into bounded queues (overflow drops the oldest, counted); `drain` runs in the cycle,
+/// never blocks on DDS, converts and hands each sample to a sink owned by the caller.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/core/point_cloud.hpp"
+#include "tarmac/core/result.hpp"
+#include "tarmac/transport/participant.hpp"
+#include "tarmac/transport/qos.hpp"
+
+namespace tarmac::transport {
+
+/// Receives parsed scans. The caller owns the storage so that nothing is allocated per scan.
+class ScanSink {
+ public:
+  virtual ~ScanSink() = default;
+  /// A cloud to parse the next scan into (its capacity is reused).
+  virtual core::PointCloud& slot() = 0;
+  /// The last slot() now holds a valid scan of the expected frame.
+  virtual void commit() = 0;
+  /// A scan was rejected; `reason` is a stable code, e.g. "pointcloud.bad_size".
+  virtual void reject(std::string_view reason) = 0;
+};
+
+/// One LiDAR's PointCloud2 topic.
+class ScanInput {
+ public:
+  /// @param frame_id the only header.frame_id accepted ("scan.unknown_frame" otherwise).
+  static core::Result<std::unique_ptr<ScanInput>> create(const Participant& participant,
+                                                         const std::string& topic,
+                                                         const std::string& frame_id,
+                                                         const QosSpec& qos,
+                                                         std::size_t queue_depth);
+  ~ScanInput();
+  ScanInput(const ScanInput&) = delete;
+  ScanInput& operator=(const ScanInput&) = delete;
+
+  /// Parses every queued scan into the sink, oldest first. Returns the number taken.
+  /// RT-safe after warm-up except for the rejection path (error text).
+  std::size_t drain(ScanSink& sink);
+  /// Samples dropped by queue overflow since creation.
+  [[nodiscard]] std::uint64_t overflow_drops() const;
+  [[nodiscard]] std::size_t matched_writers() const;
+
+  class Impl;
+
+ private:
+  explicit ScanInput(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// One stamped vehicle pose: T_map_base.
+struct PoseSample {
+  std::int64_t stamp_ns = 0;
+  Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
+};
+
+class PoseSink {
+ public:
+  virtual ~PoseSink() = default;
+  virtual void pose(const PoseSample& sample) = 0;
+  virtual void reject(std::string_view reason) = 0;
+};
+
+enum class PoseMessage { kPoseWithCovarianceStamped, kOdometry };
+
+class PoseInput {
+ public:
+  /// @param frame_id the only header.frame_id accepted ("pose.unknown_frame" otherwise).
+  static core::Result<std::unique_ptr<PoseInput>> create(const Participant& participant,
+                                                         const std::string& topic, PoseMessage type,
+                                                         const std::string& frame_id,
+                                                         const QosSpec& qos,
+                                                         std::size_t queue_depth);
+  ~PoseInput();
+  PoseInput(const PoseInput&) = delete;
+  PoseInput& operator=(const PoseInput&) = delete;
+
+  /// Converts every queued pose into the sink, oldest first. Returns the number taken.
+  std::size_t drain(PoseSink& sink);
+  [[nodiscard]] std::uint64_t overflow_drops() const;
+  [[nodiscard]] std::size_t matched_writers() const;
+
+  class Impl;
+
+ private:
+  explicit PoseInput(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// tarmac_msgs/VirtualObstacleArray: the newest array replaces every zone.
+class ZoneInput {
+ public:
+  static core::Result<std::unique_ptr<ZoneInput>> create(const Participant& participant,
+                                                         const std::string& topic,
+                                                         const QosSpec& qos);
+  ~ZoneInput();
+  ZoneInput(const ZoneInput&) = delete;
+  ZoneInput& operator=(const ZoneInput&) = delete;
+
+  /// When a new array arrived, replaces `zones` with it and returns true (allocates: zones
+  /// change rarely). A malformed array is rejected whole (`rejected` gets its code).
+  bool take_latest(std::vector<core::VirtualZone>& zones, std::string& rejected);
+
+  class Impl;
+
+ private:
+  explicit ZoneInput(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tarmac::transport

@@ -1,0 +1,59 @@
+#pragma once
+/// @file tarmacd's DDS outputs, in core types: the costmap (nav_msgs/OccupancyGrid), the ESDF
+/// slice (tarmac_msgs/DistanceMapSlice), the per-tick tarmac_msgs/CycleReport and a
+/// diagnostic_msgs/DiagnosticArray. Each writer keeps its message and refills it, so publishing
+/// does not allocate on our side after the first tick (Fast DDS serialises into its own pool).
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "tarmac/core/distance_field.hpp"
+#include "tarmac/core/grid2d.hpp"
+#include "tarmac/core/result.hpp"
+#include "tarmac/transport/cycle_report.hpp"
+#include "tarmac/transport/participant.hpp"
+#include "tarmac/transport/qos.hpp"
+
+namespace tarmac::transport {
+
+struct OutputTopics {
+  std::string costmap;
+  std::string esdf_slice;
+  std::string cycle_report;
+  std::string diagnostic_array;
+};
+
+struct OutputQos {
+  QosSpec costmap = qos::kCostmap;
+  QosSpec esdf_slice = qos::kEsdfSlice;
+  QosSpec cycle_report = qos::kDiagnostics;
+  QosSpec diagnostic_array = qos::kDiagnostics;
+};
+
+class MapOutputs {
+ public:
+  static core::Result<std::unique_ptr<MapOutputs>> create(const Participant& participant,
+                                                          const OutputTopics& topics,
+                                                          const OutputQos& qos);
+  ~MapOutputs();
+  MapOutputs(const MapOutputs&) = delete;
+  MapOutputs& operator=(const MapOutputs&) = delete;
+
+  /// Each returns false when Fast DDS refused the sample.
+  bool publish_costmap(const core::Costmap& costmap, std::int64_t stamp_ns,
+                       const std::string& frame_id);
+  /// `field` is a 2D field laid out on `geometry` (same cells as the costmap).
+  bool publish_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
+                     std::int64_t stamp_ns, const std::string& frame_id);
+  bool publish_report(const CycleReport& report);
+  bool publish_diagnostics(const DiagnosticReport& report);
+
+  class Impl;
+
+ private:
+  explicit MapOutputs(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tarmac::transport

@@ -1,0 +1,176 @@
+#include "tarmac/transport/inputs.hpp"
+
+#include "conversions.hpp"
+#include "dds_endpoints.hpp"
+#include "geometry_msgsPubSubTypes.h"
+#include "nav_msgsPubSubTypes.h"
+#include "sensor_msgsPubSubTypes.h"
+#include "tarmac_msgsPubSubTypes.h"
+
+namespace tarmac::transport {
+
+// ---- scans ----
+
+class ScanInput::Impl {
+ public:
+  using Reader = transport::Reader<sensor_msgs::msg::dds_::PointCloud2_PubSubType>;
+  std::unique_ptr<Reader> reader;
+  std::string frame_id;
+  std::vector<PointCloud2Msg> batch;  // capacity kept across drains
+};
+
+core::Result<std::unique_ptr<ScanInput>> ScanInput::create(const Participant& participant,
+                                                           const std::string& topic,
+                                                           const std::string& frame_id,
+                                                           const QosSpec& qos,
+                                                           std::size_t queue_depth) {
+  auto reader = Impl::Reader::create(participant, topic, qos, queue_depth);
+  if (!reader) return reader.error();
+  auto impl = std::make_unique<Impl>();
+  impl->reader = std::move(reader).value();
+  impl->frame_id = frame_id;
+  impl->batch.reserve(queue_depth);
+  return std::unique_ptr<ScanInput>(new ScanInput(std::move(impl)));
+}
+
+ScanInput::ScanInput(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ScanInput::~ScanInput() = default;
+
+std::size_t ScanInput::drain(ScanSink& sink) {
+  auto& batch = impl_->batch;
+  batch.clear();
+  const std::size_t n = impl_->reader->take_all(batch);
+  for (auto& msg : batch) {
+    if (msg.header().frame_id() != impl_->frame_id) {
+      sink.reject("scan.unknown_frame");
+      continue;
+    }
+    core::PointCloud& cloud = sink.slot();
+    if (auto parsed = from_point_cloud2(msg, cloud); !parsed) {
+      sink.reject(parsed.error().code);
+      continue;
+    }
+    sink.commit();
+  }
+  batch.clear();
+  return n;
+}
+
+std::uint64_t ScanInput::overflow_drops() const {
+  return impl_->reader->dropped();
+}
+std::size_t ScanInput::matched_writers() const {
+  return impl_->reader->matched_writers();
+}
+
+// ---- poses ----
+
+class PoseInput::Impl {
+ public:
+  using StampedReader =
+      transport::Reader<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType>;
+  using OdometryReader = transport::Reader<nav_msgs::msg::dds_::Odometry_PubSubType>;
+  std::unique_ptr<StampedReader> stamped;
+  std::unique_ptr<OdometryReader> odometry;
+  std::string frame_id;
+  std::vector<PoseStampedMsg> stamped_batch;
+  std::vector<OdometryMsg> odometry_batch;
+
+  void convert(const std_msgs::msg::dds_::Header_& header, const PoseMsg& pose, PoseSink& sink) {
+    if (header.frame_id() != frame_id) {
+      sink.reject("pose.unknown_frame");
+      return;
+    }
+    auto T = from_pose_msg(pose);
+    if (!T) {
+      sink.reject(T.error().code);
+      return;
+    }
+    sink.pose(PoseSample{from_time_msg(header.stamp()), T.value()});
+  }
+};
+
+core::Result<std::unique_ptr<PoseInput>> PoseInput::create(
+    const Participant& participant, const std::string& topic, PoseMessage type,
+    const std::string& frame_id, const QosSpec& qos, std::size_t queue_depth) {
+  auto impl = std::make_unique<Impl>();
+  impl->frame_id = frame_id;
+  if (type == PoseMessage::kPoseWithCovarianceStamped) {
+    auto reader = Impl::StampedReader::create(participant, topic, qos, queue_depth);
+    if (!reader) return reader.error();
+    impl->stamped = std::move(reader).value();
+    impl->stamped_batch.reserve(queue_depth);
+  } else {
+    auto reader = Impl::OdometryReader::create(participant, topic, qos, queue_depth);
+    if (!reader) return reader.error();
+    impl->odometry = std::move(reader).value();
+    impl->odometry_batch.reserve(queue_depth);
+  }
+  return std::unique_ptr<PoseInput>(new PoseInput(std::move(impl)));
+}
+
+PoseInput::PoseInput(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+PoseInput::~PoseInput() = default;
+
+std::size_t PoseInput::drain(PoseSink& sink) {
+  std::size_t n = 0;
+  if (impl_->stamped) {
+    auto& batch = impl_->stamped_batch;
+    batch.clear();
+    n = impl_->stamped->take_all(batch);
+    for (const auto& m : batch) impl_->convert(m.header(), m.pose().pose(), sink);
+    batch.clear();
+  } else {
+    auto& batch = impl_->odometry_batch;
+    batch.clear();
+    n = impl_->odometry->take_all(batch);
+    for (const auto& m : batch) impl_->convert(m.header(), m.pose().pose(), sink);
+    batch.clear();
+  }
+  return n;
+}
+
+std::uint64_t PoseInput::overflow_drops() const {
+  return impl_->stamped ? impl_->stamped->dropped() : impl_->odometry->dropped();
+}
+std::size_t PoseInput::matched_writers() const {
+  return impl_->stamped ? impl_->stamped->matched_writers() : impl_->odometry->matched_writers();
+}
+
+// ---- virtual obstacles ----
+
+class ZoneInput::Impl {
+ public:
+  using Reader = transport::Reader<tarmac_msgs::msg::dds_::VirtualObstacleArray_PubSubType>;
+  std::unique_ptr<Reader> reader;
+  std::vector<VirtualObstacleArrayMsg> batch;
+};
+
+core::Result<std::unique_ptr<ZoneInput>> ZoneInput::create(const Participant& participant,
+                                                           const std::string& topic,
+                                                           const QosSpec& qos) {
+  auto reader = Impl::Reader::create(participant, topic, qos, 4);
+  if (!reader) return reader.error();
+  auto impl = std::make_unique<Impl>();
+  impl->reader = std::move(reader).value();
+  return std::unique_ptr<ZoneInput>(new ZoneInput(std::move(impl)));
+}
+
+ZoneInput::ZoneInput(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ZoneInput::~ZoneInput() = default;
+
+bool ZoneInput::take_latest(std::vector<core::VirtualZone>& zones, std::string& rejected) {
+  auto& batch = impl_->batch;
+  batch.clear();
+  if (impl_->reader->take_all(batch) == 0) return false;
+  auto converted = from_virtual_obstacles(batch.back());
+  batch.clear();
+  if (!converted) {
+    rejected = converted.error().code;
+    return false;
+  }
+  zones = std::move(converted).value();
+  return true;
+}
+
+}  // namespace tarmac::transport

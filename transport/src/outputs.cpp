@@ -1,0 +1,73 @@
+#include "tarmac/transport/outputs.hpp"
+
+#include "conversions.hpp"
+#include "dds_endpoints.hpp"
+#include "diagnostic_msgsPubSubTypes.h"
+#include "nav_msgsPubSubTypes.h"
+#include "tarmac_msgsPubSubTypes.h"
+
+namespace tarmac::transport {
+
+class MapOutputs::Impl {
+ public:
+  std::unique_ptr<Writer<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>> costmap;
+  std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapSlice_PubSubType>> slice;
+  std::unique_ptr<Writer<tarmac_msgs::msg::dds_::CycleReport_PubSubType>> report;
+  std::unique_ptr<Writer<diagnostic_msgs::msg::dds_::DiagnosticArray_PubSubType>> diagnostics;
+  // Kept and refilled: their buffers are reused from tick to tick.
+  OccupancyGridMsg costmap_msg;
+  DistanceMapSliceMsg slice_msg;
+  CycleReportMsg report_msg;
+  DiagnosticArrayMsg diagnostics_msg;
+};
+
+core::Result<std::unique_ptr<MapOutputs>> MapOutputs::create(const Participant& participant,
+                                                             const OutputTopics& topics,
+                                                             const OutputQos& qos) {
+  auto impl = std::make_unique<Impl>();
+  auto costmap =
+      decltype(impl->costmap)::element_type::create(participant, topics.costmap, qos.costmap);
+  if (!costmap) return costmap.error();
+  impl->costmap = std::move(costmap).value();
+  auto slice =
+      decltype(impl->slice)::element_type::create(participant, topics.esdf_slice, qos.esdf_slice);
+  if (!slice) return slice.error();
+  impl->slice = std::move(slice).value();
+  auto report = decltype(impl->report)::element_type::create(participant, topics.cycle_report,
+                                                             qos.cycle_report);
+  if (!report) return report.error();
+  impl->report = std::move(report).value();
+  auto diagnostics = decltype(impl->diagnostics)::element_type::create(
+      participant, topics.diagnostic_array, qos.diagnostic_array);
+  if (!diagnostics) return diagnostics.error();
+  impl->diagnostics = std::move(diagnostics).value();
+  return std::unique_ptr<MapOutputs>(new MapOutputs(std::move(impl)));
+}
+
+MapOutputs::MapOutputs(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+MapOutputs::~MapOutputs() = default;
+
+bool MapOutputs::publish_costmap(const core::Costmap& costmap, std::int64_t stamp_ns,
+                                 const std::string& frame_id) {
+  fill_occupancy_grid(costmap, stamp_ns, frame_id, impl_->costmap_msg);
+  return impl_->costmap->write(impl_->costmap_msg);
+}
+
+bool MapOutputs::publish_slice(const core::DistanceField& field,
+                               const core::GridGeometry2D& geometry, std::int64_t stamp_ns,
+                               const std::string& frame_id) {
+  fill_distance_slice(field, geometry, stamp_ns, frame_id, impl_->slice_msg);
+  return impl_->slice->write(impl_->slice_msg);
+}
+
+bool MapOutputs::publish_report(const CycleReport& report) {
+  fill_cycle_report(report, impl_->report_msg);
+  return impl_->report->write(impl_->report_msg);
+}
+
+bool MapOutputs::publish_diagnostics(const DiagnosticReport& report) {
+  fill_diagnostic_array(report, impl_->diagnostics_msg);
+  return impl_->diagnostics->write(impl_->diagnostics_msg);
+}
+
+}  // namespace tarmac::transport
