@@ -177,10 +177,11 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
 }
 
 std::size_t OccupancyMap::memory_bytes() const {
-  std::size_t bytes =
-      log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() +
-      scan_ground_z_.capacity() * sizeof(float) + scan_ground_min_.capacity() * sizeof(float) +
-      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t);
+  std::size_t bytes = log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() +
+                      scan_ground_z_.capacity() * sizeof(float) +
+                      scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
+                      hit_bits_.capacity() * sizeof(std::uint64_t) +
+                      hit_slots_.capacity() * sizeof(std::uint32_t);
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_blocks_) bytes += d.capacity();
   return bytes;
@@ -268,12 +269,13 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const double clear_range = params_.clearing_range_m;
 
   // 1. Hits first, so that a voxel hit by any ray of this scan is never also cleared by it.
-  //    First the scan's own ground: the lowest return (along up_W) per window column, then the
-  //    lowest within ground_radius_m (a separable square min filter, rows then columns).
+  //    First the scan's own ground: the lowest return (along up_W) per window column; only the
+  //    columns this scan touched are reset next time.
   const int nx = dims_.x(), ny = dims_.y();
   constexpr float kNone = std::numeric_limits<float>::infinity();
   const Eigen::Vector3f up = up_W.normalized().cast<float>();
-  std::fill(scan_ground_z_.begin(), scan_ground_z_.end(), kNone);
+  for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
+  scan_ground_cols_.clear();
   const auto in_range = [&](const Eigen::Vector3f& p) {
     return p.allFinite() && (p.cast<double>() - origin_W).norm() <= max_range;
   };
@@ -281,29 +283,12 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     if (!in_range(p)) continue;
     const VoxelIndex v = voxel_of(p.cast<double>());
     if (!in_window(v)) continue;
-    float& g = scan_ground_z_[static_cast<std::size_t>(v.y() - min_.y()) * nx + (v.x() - min_.x())];
+    const auto c = static_cast<std::uint32_t>((v.y() - min_.y()) * nx + (v.x() - min_.x()));
+    float& g = scan_ground_z_[c];
+    if (g == kNone) scan_ground_cols_.push_back(c);
     g = std::min(g, up.dot(p));
   }
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
-  scan_ground_min_.resize(scan_ground_z_.size());
-  for (int y = 0; y < ny; ++y) {  // along x into scan_ground_min_
-    const float* in = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
-    float* out = &scan_ground_min_[static_cast<std::size_t>(y) * nx];
-    for (int x = 0; x < nx; ++x) {
-      float m = kNone;
-      for (int u = std::max(0, x - r); u <= std::min(nx - 1, x + r); ++u) m = std::min(m, in[u]);
-      out[x] = m;
-    }
-  }
-  for (int x = 0; x < nx; ++x) {  // along y back into scan_ground_z_
-    for (int y = 0; y < ny; ++y) {
-      float m = kNone;
-      for (int u = std::max(0, y - r); u <= std::min(ny - 1, y + r); ++u) {
-        m = std::min(m, scan_ground_min_[static_cast<std::size_t>(u) * nx + x]);
-      }
-      scan_ground_z_[static_cast<std::size_t>(y) * nx + x] = m;
-    }
-  }
   hit_slots_.clear();
   for (const auto& p : points_W) {
     if (!in_range(p)) continue;
@@ -313,11 +298,17 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       ++stats.outside_window;
       continue;
     }
-    // Rise above the lowest return of this scan nearby (an object cannot hide the ground
-    // around it).
-    const float ground_z =
-        scan_ground_z_[static_cast<std::size_t>(v.y() - min_.y()) * nx + (v.x() - min_.x())];
+    // Rise above the lowest return of this scan within ground_radius_m (an object cannot hide
+    // the ground around it).
+    const int cx = v.x() - min_.x(), cy = v.y() - min_.y();
     const float h = up.dot(p);
+    float ground_z = h;
+    for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
+      const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
+      for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
+        ground_z = std::min(ground_z, row[x]);
+      }
+    }
     const auto rise =
         static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
     const std::size_t s = slot(v);

@@ -129,10 +129,10 @@ class OccupancyMap {
   float l_hit_, l_miss_, l_min_, l_max_;
   std::vector<float> log_odds_;
   std::vector<std::uint8_t> rise_cm_;  ///< see ring_layer_rise_cm()
-  /// Per scan: lowest return height per window column, then within ground_radius_m (m along
-  /// the up axis, +inf where none).
+  /// Per scan: lowest return height per window column (m along the up axis, +inf where none)
+  /// and the columns that hold one (reset next scan).
   std::vector<float> scan_ground_z_;
-  std::vector<float> scan_ground_min_;
+  std::vector<std::uint32_t> scan_ground_cols_;
   /// Per-scan marks, one bit per window voxel in slot order: the voxels this scan's returns hit,
   /// and, per ray task, the voxels its rays passed through. A bit set costs far less memory
   /// traffic than a list of visits (a 400×400×40 window is 0.8 MB of bits, cache-resident), and
