@@ -153,14 +153,37 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   const Eigen::Vector3d base_W = T_W_B.translation();
   const Eigen::Vector3d up_W = T_W_B.linear().col(2);
   const double up_z = std::max(up_W.z(), 0.1);  // a vehicle on its side has no ground plane
-  // Expected ground layer (window layers, voxel bottom) at a map-frame (x, y).
-  const auto plane_layer = [&](double x_m, double y_m) {
-    const double z_m =
-        base_W.z() - (up_W.x() * (x_m - base_W.x()) + up_W.y() * (y_m - base_W.y())) / up_z;
-    return static_cast<float>(std::floor(z_m / v) - wmin.z());
-  };
+  // The plane's height is taken from the data, not from the base frame's origin (base_link may
+  // sit at the axle, or at the sensor when the extrinsic is identity): the median offset from
+  // the plane through the base of the coarse cells within kPriorRadiusM, most of which are ground.
+  constexpr double kPriorRadiusM = 20.0;
   const auto coarse_center = [&](int cx, int cy) {
     return Eigen::Vector2d((wmin.x() + (cx + 0.5) * g) * v, (wmin.y() + (cy + 0.5) * g) * v);
+  };
+  const auto plane_through_base = [&](double x_m, double y_m) {
+    const double z_m =
+        base_W.z() - (up_W.x() * (x_m - base_W.x()) + up_W.y() * (y_m - base_W.y())) / up_z;
+    return static_cast<float>(z_m / v - wmin.z());
+  };
+  auto& offsets = out.ground_offsets;
+  offsets.clear();
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) {
+      const float c = coarse[static_cast<std::size_t>(cy) * gx + cx];
+      const Eigen::Vector2d center = coarse_center(cx, cy);
+      if (std::isnan(c) || (center - base_W.head<2>()).norm() > kPriorRadiusM) continue;
+      offsets.push_back(c - plane_through_base(center.x(), center.y()));
+    }
+  }
+  float offset = 0.0f;
+  if (!offsets.empty()) {
+    const auto mid = offsets.begin() + static_cast<std::ptrdiff_t>(offsets.size() / 2);
+    std::nth_element(offsets.begin(), mid, offsets.end());
+    offset = *mid;
+  }
+  // Expected ground layer (window layers, voxel bottom) at a map-frame (x, y).
+  const auto plane_layer = [&](double x_m, double y_m) {
+    return std::floor(plane_through_base(x_m, y_m) + offset);
   };
   const float step_vox = static_cast<float>(params.max_ground_step_m / v);
   auto& filtered = out.coarse_filtered;

@@ -76,6 +76,7 @@ struct CostmapLayers {
   std::vector<std::int16_t> lowest_occupied;  ///< per cell, window layer or −1
   std::vector<std::int16_t> ground_layer;     ///< per cell, window layer of the ground voxel
   std::vector<float> coarse_ground, coarse_filtered, coarse_next;  ///< ground estimate scratch
+  std::vector<float> ground_offsets;       ///< coarse cells' offsets from the vehicle's plane
   std::vector<std::uint8_t> any_known;     ///< per cell: some envelope voxel observed
   std::vector<std::uint8_t> any_obstacle;  ///< per cell: some envelope voxel is an obstacle
   std::vector<std::uint16_t> ground_scan;  ///< per cell: scan of those returns
