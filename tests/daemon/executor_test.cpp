@@ -18,6 +18,7 @@
 #include "rtps_sniffer.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/daemon/executor.hpp"
 #include "tarmac/replay/replayer.hpp"
 #include "tarmac/sim/lidar.hpp"
@@ -356,6 +357,44 @@ TEST_F(Daemon, TinyBudget_ProducesOverrunsInCycleReport) {
   }
   EXPECT_TRUE(tsdf_found);
   EXPECT_EQ(total_of(last.drops, "scan.tsdf_shed_quota"), 0u);
+}
+
+TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
+  auto cfg = test_config(test::kDomainDaemonPeriodicSave, 2);
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("tarmac-periodic-save-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  cfg.state.dir = dir.string();
+  cfg.state.save_period_s = 0.3;  // every 3 ticks at 10 Hz
+  {
+    RunningExecutor executor(cfg);
+    auto participant = peer(test::kDomainDaemonPeriodicSave);
+    tools::ReplayOptions options;
+    options.lidar_qos = cfg.dds.qos.lidar;
+    options.rate_scale = 2.0;
+    options.max_scans = 4;
+    ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
+    for (int i = 0; i < 100 && executor.get().totals().scans_integrated < 4; ++i) {
+      std::this_thread::sleep_for(20ms);
+    }
+    ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
+    // One save may be in flight with a snapshot from before the last scan: wait for two more.
+    const std::uint64_t saves_then = executor.get().totals().tsdf_saves;
+    for (int i = 0; i < 100 && executor.get().totals().tsdf_saves < saves_then + 2; ++i) {
+      std::this_thread::sleep_for(50ms);
+    }
+    executor.stop();
+    const auto t = executor.get().totals();
+    EXPECT_GE(t.tsdf_saves, saves_then + 2);
+    EXPECT_EQ(t.tsdf_save_failures, 0u);
+    // The last periodic save saw every scan (it ran after they were integrated).
+    const auto saved = core::load_tsdf(dir / cfg.state.tsdf_file);
+    ASSERT_TRUE(saved.ok()) << saved.error().message;
+    EXPECT_EQ(saved.value().layer.digest(), executor.get().tsdf().digest());
+    EXPECT_GT(saved.value().layer.voxel_count(), 0u);
+    EXPECT_EQ(saved.value().info.frame_id, cfg.outputs.frame_id);
+  }
+  std::filesystem::remove_all(dir);
 }
 
 std::int8_t cell_at(const transport::OccupancyGridMsg& g, double x_m, double y_m) {

@@ -32,6 +32,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonStateLoad = 139,
   kDomainDaemonStateRefuse = 140,
   kDomainDaemonTsdfShed = 141,
+  kDomainDaemonPeriodicSave = 142,
 };
 
 inline bool running_in_ci() {
