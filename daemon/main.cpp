@@ -1,9 +1,11 @@
 // tarmacd: the mapping daemon's entry point (composition root).
 //
 // Validates the config, creates every DDS entity, tells systemd READY=1, then runs the fixed-rate
-// executor on this thread until SIGTERM or SIGINT: STOPPING=1, the occupancy window is saved to
-// the state directory, exit 0. SIGTERM/SIGINT are blocked in every thread and polled once per
-// tick, so a stop never interrupts a cycle half-way.
+// executor on this thread until SIGTERM or SIGINT: STOPPING=1, the occupancy window and the TSDF
+// are saved to the state directory, exit 0. The saved TSDF is loaded before READY=1 (a file
+// tsdf_io refuses is logged, moved aside, and the daemon starts with an empty TSDF). SIGTERM/SIGINT
+// are blocked in every thread and polled once per tick, so a stop never interrupts a cycle
+// half-way.
 
 #include <signal.h>
 
@@ -92,6 +94,7 @@ int main(int argc, char** argv) {
                config.value().dds.participant.domain_id,
                tarmac::transport::to_string(config.value().dds.participant.transport),
                config.value().sensors.size(), config.value().pose.topic);
+  executor.value()->load_tsdf();  // logs what it found; never fails the start
   sd_notify(0, "READY=1");
 
   int stop_signal = 0;
@@ -115,6 +118,14 @@ int main(int argc, char** argv) {
     } else {
       spdlog::info("state: occupancy window saved to {}/{}", config.value().state.dir,
                    config.value().state.map_file);
+    }
+    if (config.value().mapping.tsdf.enabled) {
+      if (auto saved = executor.value()->save_tsdf(); !saved) {
+        spdlog::error("state: TSDF not saved: {} [{}]", saved.error().message, saved.error().code);
+      } else {
+        spdlog::info("state: TSDF saved to {}/{} ({} voxels)", config.value().state.dir,
+                     config.value().state.tsdf_file, executor.value()->tsdf().voxel_count());
+      }
     }
   }
   return kExitOk;

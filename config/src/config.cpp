@@ -361,6 +361,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<double>("drain_ms", b.drain_ms, 0.001, 10000.0);
     r.scalar<double>("ingest_ms", b.ingest_ms, 0.001, 10000.0);
     r.scalar<double>("integrate_ms", b.integrate_ms, 0.001, 10000.0);
+    r.scalar<double>("tsdf_ms", b.tsdf_ms, 0.001, 10000.0);
     r.scalar<double>("costmap_ms", b.costmap_ms, 0.001, 10000.0);
     r.scalar<double>("publish_ms", b.publish_ms, 0.001, 10000.0);
     r.scalar<double>("cycle_ms", b.cycle_ms, 0.001, 10000.0);
@@ -371,6 +372,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<std::uint64_t>("points_per_scan", q.points_per_scan, 1, 100'000'000);
     r.scalar<std::uint32_t>("max_pending_scans", q.max_pending_scans, 1, 1000);
     r.scalar<std::uint64_t>("reserve_points_per_scan", q.reserve_points_per_scan, 0, 4'000'000);
+    r.scalar<std::uint64_t>("tsdf_points_per_cycle", q.tsdf_points_per_cycle, 0, 100'000'000);
   });
   root.map("outputs", [&](MapReader& r) {
     auto& o = c.outputs;
@@ -386,6 +388,9 @@ void read_daemon(MapReader& root, Config& c) {
     r.string("dir", c.state.dir);
     r.string("map_file", c.state.map_file);
     r.scalar<bool>("save_on_exit", c.state.save_on_exit, false, true);
+    r.string("tsdf_file", c.state.tsdf_file);
+    r.scalar<bool>("load_on_start", c.state.load_on_start, false, true);
+    r.scalar<double>("save_period_s", c.state.save_period_s, 0.0, 86400.0);
   });
 }
 
@@ -410,6 +415,13 @@ core::Status validate_daemon(const Config& c) {
   }
   if (c.state.save_on_exit && c.state.map_file.empty()) {
     return err("state.map_file", "must not be empty when state.save_on_exit is true");
+  }
+  if (c.mapping.tsdf.enabled && c.state.tsdf_file.empty() &&
+      (c.state.save_on_exit || c.state.load_on_start || c.state.save_period_s > 0.0)) {
+    return err("state.tsdf_file", "must not be empty when the TSDF is saved or loaded");
+  }
+  if (c.state.save_period_s > 0.0 && c.state.save_period_s * c.executor.rate_hz < 1.0) {
+    return err("state.save_period_s", "shorter than one executor period");
   }
   return core::Ok{};
 }
@@ -532,6 +544,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "drain_ms" << YAML::Value << b.drain_ms;
   out << YAML::Key << "ingest_ms" << YAML::Value << b.ingest_ms;
   out << YAML::Key << "integrate_ms" << YAML::Value << b.integrate_ms;
+  out << YAML::Key << "tsdf_ms" << YAML::Value << b.tsdf_ms;
   out << YAML::Key << "costmap_ms" << YAML::Value << b.costmap_ms;
   out << YAML::Key << "publish_ms" << YAML::Value << b.publish_ms;
   out << YAML::Key << "cycle_ms" << YAML::Value << b.cycle_ms;
@@ -542,6 +555,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "points_per_scan" << YAML::Value << qu.points_per_scan;
   out << YAML::Key << "max_pending_scans" << YAML::Value << qu.max_pending_scans;
   out << YAML::Key << "reserve_points_per_scan" << YAML::Value << qu.reserve_points_per_scan;
+  out << YAML::Key << "tsdf_points_per_cycle" << YAML::Value << qu.tsdf_points_per_cycle;
   out << YAML::EndMap;
   const auto& ou = config.outputs;
   out << YAML::Key << "outputs" << YAML::Value << YAML::BeginMap;
@@ -557,6 +571,9 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "dir" << YAML::Value << config.state.dir;
   out << YAML::Key << "map_file" << YAML::Value << config.state.map_file;
   out << YAML::Key << "save_on_exit" << YAML::Value << config.state.save_on_exit;
+  out << YAML::Key << "tsdf_file" << YAML::Value << config.state.tsdf_file;
+  out << YAML::Key << "load_on_start" << YAML::Value << config.state.load_on_start;
+  out << YAML::Key << "save_period_s" << YAML::Value << config.state.save_period_s;
   out << YAML::EndMap;
   const auto& m = config.mapping;
   const auto vec = [&](const char* key, const Eigen::Vector3d& v) {

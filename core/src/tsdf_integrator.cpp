@@ -243,6 +243,12 @@ void TsdfLayer::clear() {
   grids_->leaf_cache.clear();
 }
 
+TsdfLayer TsdfLayer::clone() const {
+  TsdfLayer copy(voxel_size_m_, truncation_m_);
+  copy.grids_->tsdf = grids_->tsdf->deepCopy();
+  return copy;
+}
+
 TsdfLayer::Grids& TsdfLayer::grids() {
   grids_->leaf_cache.clear();
   return *grids_;

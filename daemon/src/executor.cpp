@@ -7,16 +7,22 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <thread>
+
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
 
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/daemon/pose_buffer.hpp"
 #include "tarmac/daemon/realtime.hpp"
 #include "tarmac/daemon/reason_counters.hpp"
@@ -84,9 +90,9 @@ class RecentWindow {
   std::size_t next_ = 0;
 };
 
-enum Stage : std::size_t { kDrain, kIngest, kIntegrate, kCostmap, kPublish, kStageCount };
-constexpr const char* kStageNames[kStageCount] = {"drain", "ingest", "integrate", "costmap",
-                                                  "publish"};
+enum Stage : std::size_t { kDrain, kIngest, kIntegrate, kTsdf, kCostmap, kPublish, kStageCount };
+constexpr const char* kStageNames[kStageCount] = {"drain", "ingest",  "integrate",
+                                                  "tsdf",  "costmap", "publish"};
 
 }  // namespace
 
@@ -148,9 +154,9 @@ class Executor::Impl {
     report.config_hash = hash;
     report.cycle_budget_ms = config.budgets.cycle_ms;
     report.stages.resize(kStageCount);
-    const double budgets[kStageCount] = {config.budgets.drain_ms, config.budgets.ingest_ms,
-                                         config.budgets.integrate_ms, config.budgets.costmap_ms,
-                                         config.budgets.publish_ms};
+    const double budgets[kStageCount] = {config.budgets.drain_ms,     config.budgets.ingest_ms,
+                                         config.budgets.integrate_ms, config.budgets.tsdf_ms,
+                                         config.budgets.costmap_ms,   config.budgets.publish_ms};
     for (std::size_t i = 0; i < kStageCount; ++i) {
       report.stages[i].name = kStageNames[i];
       report.stages[i].budget_ms = budgets[i];
@@ -164,7 +170,7 @@ class Executor::Impl {
     for (const char* r :
          {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
           "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite",
-          "points.too_close", "points.ego_vehicle", "points.isolated"}) {
+          "points.too_close", "points.ego_vehicle", "points.isolated", "scan.tsdf_shed_quota"}) {
       drops.declare(r);
     }
     for (const char* r :
@@ -181,11 +187,28 @@ class Executor::Impl {
     overflow_seen.assign(config.sensors.size(), 0);
     diag.name = "tarmacd: executor";
     diag.hardware_id = config.dds.participant.name;
-    diag.values.resize(9);
+    diag.values.resize(10);
   }
 
   void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped);
   void real_time_setup(const RunHooks& hooks);
+
+  [[nodiscard]] std::filesystem::path tsdf_path() const {
+    return std::filesystem::path(config.state.dir) / config.state.tsdf_file;
+  }
+  [[nodiscard]] core::TsdfMapInfo tsdf_info() const {
+    core::TsdfMapInfo info;
+    info.frame_id = config.outputs.frame_id;  // the lattice lives in the pose / map frame
+    info.config_hash = hash;
+    info.stamp_ns = newest_stamp_ns;
+    return info;
+  }
+  /// Periodic save: between ticks, on the executor thread, copies the TSDF and hands the copy
+  /// to the saver thread (skipped, counted, when the previous copy is still being written).
+  void snapshot_tsdf();
+  void saver_loop();
+  void start_saver();
+  void stop_saver();
 
   config::Config config;
   transport::Participant participant;
@@ -219,6 +242,17 @@ class Executor::Impl {
   ExecutorTotals totals;
   RecentWindow cycle_ms, jitter_ms_window, stamp_to_publish;
   std::uint64_t cycle_index = 0;
+
+  // The periodic TSDF saver: a SCHED_OTHER, unpinned, niced thread started by run() before the
+  // real-time setup. The executor only swaps a pointer under saver_mutex (never while the saver
+  // writes: the saver takes the snapshot out first and writes it without the lock).
+  std::thread saver;
+  std::mutex saver_mutex;
+  std::condition_variable saver_wake;
+  std::unique_ptr<core::TsdfLayer> saver_snapshot;  // guarded by saver_mutex
+  core::TsdfMapInfo saver_info;                     // guarded by saver_mutex
+  bool saver_stop = false;                          // guarded by saver_mutex
+  std::atomic<bool> saver_busy{false};
 };
 
 void Executor::Impl::real_time_setup(const RunHooks& hooks) {
@@ -283,7 +317,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   stage_ms[kDrain] = ms_between(t_start, t_drained);
 
   // ---- ingest + integrate, scan by scan in (stamp, sensor) order ----
-  std::uint64_t points_in = 0, points_used = 0;
+  std::uint64_t points_in = 0, points_used = 0, tsdf_points = 0, tsdf_scans = 0;
+  const bool tsdf_enabled = config.mapping.tsdf.enabled;
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
     const auto t0 = Clock::now();
@@ -293,6 +328,20 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     const auto t2 = Clock::now();
     stage_ms[kIngest] += ms_between(t0, t1);
     stage_ms[kIntegrate] += ms_between(t1, t2);
+    if (tsdf_enabled) {
+      // Shed first (DESIGN.md §3), by the points quota only: the same scans skip the TSDF
+      // whatever the machine's speed.
+      const std::uint64_t n = mapper.points_W().size();
+      if (tsdf_points + n <= config.quotas.tsdf_points_per_cycle) {
+        tsdf_points += n;
+        mapper.integrate_tsdf(*pool);
+        ++tsdf_scans;
+        stage_ms[kTsdf] += ms_between(t2, Clock::now());
+      } else {
+        ++shed[kTsdf];
+        drops.add("scan.tsdf_shed_quota");
+      }
+    }
     points_in += counts.input;
     points_used += counts.kept;
     drops.add("points.non_finite", counts.non_finite);
@@ -306,6 +355,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   {
     std::lock_guard lock(totals_mutex);  // before the costmap goes out (tests read both)
     totals.scans_integrated += selected.size();
+    totals.tsdf_scans += tsdf_scans;
+    totals.tsdf_shed_scans += shed[kTsdf];
     totals.newest_stamp_ns = newest_stamp_ns;
   }
 
@@ -401,6 +452,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     put(6, "rejections_total", static_cast<double>(rejections.total_sum()));
     put(7, "skipped_ticks_total", static_cast<double>(totals.skipped_ticks));
     put(8, "stamp_to_publish_p99_ms", stamp_to_publish.percentile(0.99));
+    put(9, "tsdf_ms", stage_ms[kTsdf]);
     outputs->publish_diagnostics(diag);
   }
   ++cycle_index;
@@ -450,7 +502,11 @@ Executor::~Executor() = default;
 void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& hooks) {
   Impl& d = *impl_;
   if (hooks.on_thread_start) hooks.on_thread_start();
+  const bool periodic_save = d.config.mapping.tsdf.enabled && d.config.state.save_period_s > 0.0;
+  if (periodic_save) d.start_saver();  // before real_time_setup: not pinned, not SCHED_FIFO
   d.real_time_setup(hooks);
+  const auto save_every = static_cast<std::uint64_t>(
+      std::max(1.0, std::round(d.config.state.save_period_s * d.config.executor.rate_hz)));
   const std::int64_t period_ns = std::llround(1e9 / d.config.executor.rate_hz);
   // Ticks sit on multiples of the period of the stamp clock (CLOCK_REALTIME); the sleep runs on
   // CLOCK_MONOTONIC, so a wall-clock step does not distort the schedule.
@@ -481,6 +537,7 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
     }
     d.tick(tick_real, static_cast<double>(late) / 1e6, skipped);
     if (hooks.on_tick_end) hooks.on_tick_end(d.cycle_index - 1);
+    if (periodic_save && d.cycle_index % save_every == 0) d.snapshot_tsdf();
     sd_notify(0, "WATCHDOG=1");
     if (d.cycle_index % status_every == 0) {
       std::memcpy(status, "STATUS=", 7);
@@ -490,6 +547,7 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
     deadline += period_ns;
     tick_real += period_ns;
   }
+  if (periodic_save) d.stop_saver();  // an in-flight save completes before run() returns
   const auto t = totals();
   spdlog::info("executor: stopped after {} ticks ({} skipped, {} over budget), {} scans integrated",
                t.ticks, t.skipped_ticks, t.overruns, t.scans_integrated);
@@ -552,6 +610,134 @@ core::Status Executor::save_map() const {
   std::filesystem::rename(tmp, file, ec);
   if (ec) return core::Error{"state.io", file.string() + ": " + ec.message()};
   return core::Ok{};
+}
+
+}  // namespace tarmac::daemon
+
+namespace tarmac::daemon {
+
+void Executor::Impl::start_saver() {
+  saver = std::thread([this] { saver_loop(); });
+}
+
+void Executor::Impl::stop_saver() {
+  {
+    std::lock_guard lock(saver_mutex);
+    saver_stop = true;
+  }
+  saver_wake.notify_one();
+  saver.join();
+}
+
+void Executor::Impl::snapshot_tsdf() {
+  if (saver_busy.load()) {
+    std::lock_guard lock(totals_mutex);
+    ++totals.tsdf_saves_skipped;
+    spdlog::warn("state: periodic TSDF save skipped, the previous one is still being written");
+    return;
+  }
+  const auto t0 = Clock::now();
+  auto copy = std::make_unique<core::TsdfLayer>(mapper.tsdf().clone());
+  const double copy_ms = ms_between(t0, Clock::now());
+  saver_busy = true;
+  {
+    std::lock_guard lock(saver_mutex);
+    saver_snapshot = std::move(copy);
+    saver_info = tsdf_info();
+  }
+  saver_wake.notify_one();
+  spdlog::debug("state: TSDF snapshot for the periodic save copied in {:.1f} ms", copy_ms);
+}
+
+void Executor::Impl::saver_loop() {
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 10);  // best effort: below the cycle
+  std::unique_lock lock(saver_mutex);
+  while (true) {
+    saver_wake.wait(lock, [this] { return saver_stop || saver_snapshot != nullptr; });
+    if (saver_snapshot == nullptr) return;  // stop requested, nothing pending
+    std::unique_ptr<core::TsdfLayer> layer = std::move(saver_snapshot);
+    const core::TsdfMapInfo info = saver_info;
+    lock.unlock();
+    const auto t0 = Clock::now();
+    std::error_code ec;
+    std::filesystem::create_directories(config.state.dir, ec);
+    const core::Status saved = core::save_tsdf(tsdf_path(), *layer, info);
+    const double ms = ms_between(t0, Clock::now());
+    {
+      std::lock_guard totals_lock(totals_mutex);
+      ++(saved ? totals.tsdf_saves : totals.tsdf_save_failures);
+    }
+    if (saved) {
+      spdlog::info("state: periodic TSDF save to {} ({} voxels) in {:.0f} ms", tsdf_path().string(),
+                   layer->voxel_count(), ms);
+    } else {
+      spdlog::error("state: periodic TSDF save failed: {} [{}]", saved.error().message,
+                    saved.error().code);
+    }
+    layer.reset();
+    saver_busy = false;
+    lock.lock();
+  }
+}
+
+core::Status Executor::save_tsdf() const {
+  const Impl& d = *impl_;
+  std::error_code ec;
+  std::filesystem::create_directories(d.config.state.dir, ec);
+  if (ec) return core::Error{"state.io", d.config.state.dir + ": " + ec.message()};
+  return core::save_tsdf(d.tsdf_path(), d.mapper.tsdf(), d.tsdf_info());
+}
+
+const core::TsdfLayer& Executor::tsdf() const {
+  return impl_->mapper.tsdf();
+}
+
+TsdfLoadResult Executor::load_tsdf() {
+  Impl& d = *impl_;
+  TsdfLoadResult result;
+  if (!d.config.mapping.tsdf.enabled || !d.config.state.load_on_start) return result;
+  const std::filesystem::path file = d.tsdf_path();
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec)) {
+    result.kind = TsdfLoadResult::Kind::kAbsent;
+    spdlog::info("state: no saved TSDF at {}; starting with an empty TSDF", file.string());
+    return result;
+  }
+  const auto& t = d.config.mapping.tsdf;
+  core::Status checked = core::Ok{};
+  core::Result<core::LoadedTsdf> loaded = core::Error{"tsdf_io.open", "not read"};
+  try {
+    loaded = core::load_tsdf(file);
+    checked = loaded ? core::check_tsdf_matches(loaded.value().info, d.config.outputs.frame_id,
+                                                t.voxel_size_m, t.truncation_m)
+                     : core::Status(loaded.error());
+  } catch (const std::exception& e) {
+    checked = core::Error{"tsdf_io.corrupt", file.string() + ": " + e.what()};
+  }
+  if (!checked) {
+    result.kind = TsdfLoadResult::Kind::kRefused;
+    result.error = checked.error().code + ": " + checked.error().message;
+    // Kept aside for inspection, and so the save on exit does not overwrite the evidence.
+    const std::filesystem::path aside = file.string() + ".refused";
+    std::filesystem::rename(file, aside, ec);
+    spdlog::error("state: saved TSDF {} refused ({}); starting with an empty TSDF ({})",
+                  file.string(), result.error,
+                  ec ? "could not be moved aside: " + ec.message() : "moved to " + aside.string());
+    return result;
+  }
+  auto& map = loaded.value();
+  if (map.info.config_hash != d.hash) {
+    spdlog::warn(
+        "state: saved TSDF was built with config {} (now {}); frame, voxel size and "
+        "truncation match, so it is used",
+        map.info.config_hash, d.hash);
+  }
+  result.kind = TsdfLoadResult::Kind::kLoaded;
+  result.voxels = map.layer.voxel_count();
+  d.mapper.tsdf() = std::move(map.layer);
+  spdlog::info("state: TSDF loaded from {}: {} voxels in {} blocks (saved at stamp {} ns)",
+               file.string(), result.voxels, d.mapper.tsdf().block_count(), map.info.stamp_ns);
+  return result;
 }
 
 }  // namespace tarmac::daemon

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -17,6 +18,7 @@
 #include "rtps_sniffer.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/daemon/executor.hpp"
 #include "tarmac/replay/replayer.hpp"
 #include "tarmac/sim/lidar.hpp"
@@ -91,6 +93,24 @@ std::string offline_costmap_digest(const config::Config& cfg, std::size_t scans,
   return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
 }
 
+/// The TSDF the core builds offline on the same scans (no quota shedding).
+std::uint64_t offline_tsdf_digest(const config::Config& cfg, std::size_t scans) {
+  core::Mapper mapper(cfg.mapping);
+  core::SerialRunner runner;
+  const auto& seq = sequence();
+  const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
+  core::PointCloud cloud;
+  for (std::size_t k = 0; k < scans; ++k) {
+    EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
+    const auto wire =
+        transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(seq.T_W_S[k], T_B_S)));
+    mapper.ingest(cloud, wire.value(), T_B_S);
+    mapper.integrate(runner);
+    mapper.integrate_tsdf(runner);
+  }
+  return mapper.tsdf().digest();
+}
+
 std::string digest_of(const transport::OccupancyGridMsg& grid) {
   return tools::digest(
       {reinterpret_cast<const std::uint8_t*>(grid.data().data()), grid.data().size()});
@@ -105,9 +125,11 @@ class RunningExecutor {
     executor_ = std::move(created).value();
     thread_ = std::thread([this] { executor_->run([this] { return stop_.load(); }); });
   }
-  ~RunningExecutor() {
+  ~RunningExecutor() { stop(); }
+  /// Stops and joins the executor (then its map may be read).
+  void stop() {
     stop_ = true;
-    thread_.join();
+    if (thread_.joinable()) thread_.join();
   }
   Executor& get() { return *executor_; }
 
@@ -163,8 +185,10 @@ class Daemon : public ::testing::Test {
 
   /// Replays the sequence into an executor with `workers` threads and returns the digest of the
   /// costmap stamped with the last scan.
-  std::string replayed_digest(std::uint32_t domain, std::uint32_t workers, double jitter_ms) {
-    const auto cfg = test_config(domain, workers);
+  std::string replayed_digest(std::uint32_t domain, std::uint32_t workers, double jitter_ms,
+                              const std::function<void(config::Config&)>& tweak = {}) {
+    auto cfg = test_config(domain, workers);
+    if (tweak) tweak(cfg);
     RunningExecutor executor(cfg);
     auto participant = peer(domain);
     auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
@@ -188,11 +212,18 @@ class Daemon : public ::testing::Test {
     }
     EXPECT_EQ(executor.get().totals().scans_integrated, static_cast<std::uint64_t>(kScans));
     last_stamp_ns_ = stats.value().last_stamp_ns;
+    executor.stop();
+    totals_ = executor.get().totals();
+    tsdf_digest_ = executor.get().tsdf().digest();
+    tsdf_voxels_ = executor.get().tsdf().voxel_count();
     return digest_of(grid);
   }
 
   std::unique_ptr<test::RtpsSniffer> sniffer_;
   std::int64_t last_stamp_ns_ = 0;
+  ExecutorTotals totals_;
+  std::uint64_t tsdf_digest_ = 0;
+  std::size_t tsdf_voxels_ = 0;
 };
 
 TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_1Worker) {
@@ -201,6 +232,10 @@ TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_1Worker) {
   EXPECT_EQ(got, want);
   // The digest sees a single missing scan, so equality above means every scan made it.
   EXPECT_NE(want, offline_costmap_digest(test_config(0, 1), kScans - 1, last_stamp_ns_));
+  // The TSDF stage too: bit-identical to the core offline, every scan integrated.
+  EXPECT_EQ(totals_.tsdf_scans, static_cast<std::uint64_t>(kScans));
+  EXPECT_GT(tsdf_voxels_, 0u);
+  EXPECT_EQ(tsdf_digest_, offline_tsdf_digest(test_config(0, 1), kScans));
 }
 
 TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_2Workers) {
@@ -211,6 +246,7 @@ TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_2Workers) {
 TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_4Workers) {
   const std::string got = replayed_digest(test::kDomainDaemonWorkers4, 4, 0.0);
   EXPECT_EQ(got, offline_costmap_digest(test_config(0, 4), kScans, last_stamp_ns_));
+  EXPECT_EQ(tsdf_digest_, offline_tsdf_digest(test_config(0, 4), kScans));
 }
 
 TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_WithRandomPublishJitter) {
@@ -218,6 +254,18 @@ TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_WithRandomPublishJitter) {
   // input delay, so the integrated sequence (and the map) must not change.
   const std::string got = replayed_digest(test::kDomainDaemonJitter, 2, 25.0);
   EXPECT_EQ(got, offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_));
+  EXPECT_EQ(tsdf_digest_, offline_tsdf_digest(test_config(0, 2), kScans));
+}
+
+TEST_F(Daemon, TsdfQuota_ShedsTheTsdfStageFirst_OccupancyAndCostmapUnchanged) {
+  // A TSDF quota below one scan's points: every scan skips the TSDF (counted), none is deferred
+  // or decimated, and the costmap is still the offline core's, bit for bit.
+  const std::string got = replayed_digest(test::kDomainDaemonTsdfShed, 2, 0.0,
+                                          [](auto& c) { c.quotas.tsdf_points_per_cycle = 1; });
+  EXPECT_EQ(got, offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_));
+  EXPECT_EQ(totals_.tsdf_shed_scans, static_cast<std::uint64_t>(kScans));
+  EXPECT_EQ(totals_.tsdf_scans, 0u);
+  EXPECT_EQ(tsdf_voxels_, 0u);
 }
 
 /// Collects CycleReports until `done(report)` or the timeout; returns the last one.
@@ -298,6 +346,55 @@ TEST_F(Daemon, TinyBudget_ProducesOverrunsInCycleReport) {
   }
   EXPECT_TRUE(found);
   EXPECT_GT(executor.get().totals().overruns, 0u);
+  // The TSDF stage is reported like the others, with its own budget.
+  bool tsdf_found = false;
+  for (const auto& s : last.stages) {
+    if (s.name != "tsdf") continue;
+    tsdf_found = true;
+    EXPECT_FLOAT_EQ(s.budget_ms, static_cast<float>(cfg.budgets.tsdf_ms));
+    EXPECT_GT(s.duration_ms, 0.0);
+    EXPECT_EQ(s.shed_items, 0u);
+  }
+  EXPECT_TRUE(tsdf_found);
+  EXPECT_EQ(total_of(last.drops, "scan.tsdf_shed_quota"), 0u);
+}
+
+TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
+  auto cfg = test_config(test::kDomainDaemonPeriodicSave, 2);
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("tarmac-periodic-save-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  cfg.state.dir = dir.string();
+  cfg.state.save_period_s = 0.3;  // every 3 ticks at 10 Hz
+  {
+    RunningExecutor executor(cfg);
+    auto participant = peer(test::kDomainDaemonPeriodicSave);
+    tools::ReplayOptions options;
+    options.lidar_qos = cfg.dds.qos.lidar;
+    options.rate_scale = 2.0;
+    options.max_scans = 4;
+    ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
+    for (int i = 0; i < 100 && executor.get().totals().scans_integrated < 4; ++i) {
+      std::this_thread::sleep_for(20ms);
+    }
+    ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
+    // One save may be in flight with a snapshot from before the last scan: wait for two more.
+    const std::uint64_t saves_then = executor.get().totals().tsdf_saves;
+    for (int i = 0; i < 100 && executor.get().totals().tsdf_saves < saves_then + 2; ++i) {
+      std::this_thread::sleep_for(50ms);
+    }
+    executor.stop();
+    const auto t = executor.get().totals();
+    EXPECT_GE(t.tsdf_saves, saves_then + 2);
+    EXPECT_EQ(t.tsdf_save_failures, 0u);
+    // The last periodic save saw every scan (it ran after they were integrated).
+    const auto saved = core::load_tsdf(dir / cfg.state.tsdf_file);
+    ASSERT_TRUE(saved.ok()) << saved.error().message;
+    EXPECT_EQ(saved.value().layer.digest(), executor.get().tsdf().digest());
+    EXPECT_GT(saved.value().layer.voxel_count(), 0u);
+    EXPECT_EQ(saved.value().info.frame_id, cfg.outputs.frame_id);
+  }
+  std::filesystem::remove_all(dir);
 }
 
 std::int8_t cell_at(const transport::OccupancyGridMsg& g, double x_m, double y_m) {

@@ -1,7 +1,8 @@
 // tarmacd as systemd runs it: an AF_UNIX datagram socket stands in for systemd's notify socket
 // (NOTIFY_SOCKET, WATCHDOG_USEC); the test observes READY=1, WATCHDOG=1, STATUS=, then sends
-// SIGTERM and expects STOPPING=1, the saved map and exit status 0. The daemon's DDS stays on
-// loopback (packet capture) on its own domain.
+// SIGTERM and expects STOPPING=1, the saved map and exit status 0. The state tests restart it on
+// a saved TSDF (loaded), and on a corrupt, truncated or mismatched one (refused, still READY=1).
+// The daemon's DDS stays on loopback (packet capture) on its own domain.
 
 #include <signal.h>
 #include <sys/socket.h>
@@ -19,6 +20,9 @@
 #include <gtest/gtest.h>
 
 #include "rtps_sniffer.hpp"
+#include "tarmac/core/task_runner.hpp"
+#include "tarmac/core/tsdf_integrator.hpp"
+#include "tarmac/core/tsdf_io.hpp"
 #include "test_env.hpp"
 
 namespace {
@@ -132,11 +136,170 @@ TEST(Tarmacd, Notify_ReadyWatchdogStatusThenStoppingAndExit0OnSigterm) {
   std::string header;
   std::getline(map, header);
   EXPECT_EQ(header.rfind("tarmac occupancy window v1", 0), 0u) << header;
+  // And the TSDF, in a file tsdf_io accepts, made in the pose frame with the config's lattice.
+  const auto tsdf = tarmac::core::load_tsdf(dir / "state" / "tsdf.vdb");
+  ASSERT_TRUE(tsdf.ok()) << tsdf.error().message << "\n" << log;
+  EXPECT_TRUE(tarmac::core::check_tsdf_matches(tsdf.value().info, "map", 0.1f, 0.3f).ok());
 
   std::this_thread::sleep_for(200ms);
   const auto counts = sniffer.value()->counts();
   EXPECT_EQ(counts.off_host, 0u) << "RTPS left loopback: " << counts.first_off_host;
   EXPECT_GT(counts.loopback, 0u);
+  fs::remove_all(dir);
+}
+
+/// One run of tarmacd in `dir` (config `dir`/tarmac.yaml): waits for READY=1, sends SIGTERM,
+/// waits for the exit. Kills it after 10 s without an exit.
+struct DaemonRun {
+  bool ready = false;
+  bool exited = false;
+  int exit_code = -1;
+  std::string log;
+};
+
+DaemonRun run_tarmacd_until_ready(const fs::path& dir) {
+  DaemonRun run;
+  NotifySocket notify(dir / "notify.sock");
+  EXPECT_TRUE(notify.bound());
+  const fs::path config = dir / "tarmac.yaml";
+  const pid_t pid = fork();
+  EXPECT_GE(pid, 0);
+  if (pid == 0) {
+    setenv("NOTIFY_SOCKET", (dir / "notify.sock").c_str(), 1);
+    const std::string log = (dir / "tarmacd.log").string();
+    freopen(log.c_str(), "w", stdout);
+    freopen(log.c_str(), "a", stderr);
+    execl(TARMAC_TARMACD, TARMAC_TARMACD, "--config", config.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  run.ready = notify.wait_for("READY=1", 15s);
+  kill(pid, SIGTERM);
+  int wstatus = 0;
+  pid_t waited = 0;
+  for (int i = 0; i < 100 && waited == 0; ++i) {
+    waited = waitpid(pid, &wstatus, WNOHANG);
+    if (waited == 0) std::this_thread::sleep_for(100ms);
+  }
+  if (waited == 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, &wstatus, 0);
+  }
+  run.exited = waited != 0 && WIFEXITED(wstatus);
+  run.exit_code = run.exited ? WEXITSTATUS(wstatus) : -1;
+  std::ifstream log_in(dir / "tarmacd.log");
+  run.log.assign(std::istreambuf_iterator<char>(log_in), std::istreambuf_iterator<char>());
+  return run;
+}
+
+/// A fresh directory with a config (no real time, so the runs stay light) on `domain`.
+fs::path state_test_dir(const std::string& name, std::uint32_t domain) {
+  const fs::path dir = fs::temp_directory_path() / (name + "-" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir / "state");
+  std::ofstream out(dir / "tarmac.yaml");
+  out << "version: 1\ndds: {domain_id: " << domain << "}\nexecutor: {realtime_priority: 0, "
+      << "lock_memory: false}\nstate: {dir: " << (dir / "state").string() << "}\n";
+  return dir;
+}
+
+/// A small TSDF (a wall 5 m ahead) on the shipped lattice: voxel 0.1 m, truncation 0.3 m.
+tarmac::core::TsdfLayer small_tsdf(float voxel_size_m = 0.1f) {
+  tarmac::core::TsdfParams params;
+  params.voxel_size_m = voxel_size_m;
+  tarmac::core::TsdfIntegrator integrator(params);
+  auto layer = integrator.make_layer();
+  std::vector<Eigen::Vector3f> wall;
+  for (int i = -20; i <= 20; ++i) {
+    for (int k = 0; k <= 10; ++k) wall.emplace_back(5.0f, 0.1f * i, 0.1f * k);
+  }
+  tarmac::core::SerialRunner runner;
+  integrator.integrate(Eigen::Vector3d(0, 0, 1), wall, layer, runner);
+  return layer;
+}
+
+tarmac::core::TsdfMapInfo map_info() {
+  tarmac::core::TsdfMapInfo info;
+  info.frame_id = "map";  // outputs.frame_id, the frame the daemon saves in
+  info.config_hash = "test";
+  return info;
+}
+
+TEST(TarmacdState, SavedTsdf_IsLoadedOnStartAndSavedAgainOnSigterm) {
+  auto sniffer = tarmac::test::RtpsSniffer::start();
+  TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
+  const fs::path dir = state_test_dir("tarmacd-state-load", tarmac::test::kDomainDaemonStateLoad);
+  const auto layer = small_tsdf();
+  ASSERT_GT(layer.voxel_count(), 0u);
+  ASSERT_TRUE(tarmac::core::save_tsdf(dir / "state" / "tsdf.vdb", layer, map_info()).ok());
+
+  const DaemonRun run = run_tarmacd_until_ready(dir);
+  EXPECT_TRUE(run.ready) << run.log;
+  ASSERT_TRUE(run.exited) << run.log;
+  EXPECT_EQ(run.exit_code, 0) << run.log;
+  const std::string loaded = "state: TSDF loaded from " + (dir / "state" / "tsdf.vdb").string() +
+                             ": " + std::to_string(layer.voxel_count()) + " voxels";
+  EXPECT_NE(run.log.find(loaded), std::string::npos) << run.log;
+  // No scan arrived: the map saved on the way out is the one loaded, bit for bit.
+  const auto saved = tarmac::core::load_tsdf(dir / "state" / "tsdf.vdb");
+  ASSERT_TRUE(saved.ok()) << saved.error().message;
+  EXPECT_EQ(saved.value().layer.digest(), layer.digest());
+  EXPECT_EQ(saved.value().info.frame_id, "map");
+
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
+  fs::remove_all(dir);
+}
+
+TEST(TarmacdState, CorruptTruncatedOrMismatchedTsdf_IsRefusedAndTheDaemonStillComesUp) {
+  auto sniffer = tarmac::test::RtpsSniffer::start();
+  TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
+  const fs::path dir =
+      state_test_dir("tarmacd-state-refuse", tarmac::test::kDomainDaemonStateRefuse);
+  const fs::path file = dir / "state" / "tsdf.vdb";
+  const fs::path good = dir / "good.vdb";
+  ASSERT_TRUE(tarmac::core::save_tsdf(good, small_tsdf(), map_info()).ok());
+  std::string bytes;
+  {
+    std::ifstream in(good, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_GT(bytes.size(), 100u);
+  struct Case {
+    const char* name;
+    std::string code;  // the tsdf_io error the log names
+  };
+  for (const Case& c : {Case{"corrupt", "tsdf_io.corrupt"}, Case{"truncated", "tsdf_io.truncated"},
+                        Case{"mismatched", "tsdf_io.mismatch"}}) {
+    SCOPED_TRACE(c.name);
+    fs::remove(file.string() + ".refused");
+    if (c.code == "tsdf_io.mismatch") {
+      ASSERT_TRUE(tarmac::core::save_tsdf(file, small_tsdf(0.2f), map_info()).ok());
+    } else {
+      std::string damaged = bytes;
+      if (c.code == "tsdf_io.corrupt") {
+        damaged[damaged.size() / 2] = static_cast<char>(damaged[damaged.size() / 2] ^ 0x5a);
+      } else {
+        damaged.resize(damaged.size() / 2);
+      }
+      std::ofstream out(file, std::ios::binary | std::ios::trunc);
+      out.write(damaged.data(), static_cast<std::streamsize>(damaged.size()));
+    }
+    const DaemonRun run = run_tarmacd_until_ready(dir);
+    EXPECT_TRUE(run.ready) << run.log;
+    ASSERT_TRUE(run.exited) << run.log;
+    EXPECT_EQ(run.exit_code, 0) << run.log;
+    EXPECT_NE(run.log.find("state: saved TSDF " + file.string() + " refused (" + c.code),
+              std::string::npos)
+        << run.log;
+    EXPECT_NE(run.log.find("starting with an empty TSDF"), std::string::npos) << run.log;
+    // The refused file is kept aside; the one written on exit is a valid (empty) map.
+    EXPECT_TRUE(fs::exists(file.string() + ".refused"));
+    const auto saved = tarmac::core::load_tsdf(file);
+    ASSERT_TRUE(saved.ok()) << saved.error().message;
+    EXPECT_EQ(saved.value().layer.voxel_count(), 0u);
+  }
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
   fs::remove_all(dir);
 }
 

@@ -19,7 +19,7 @@ enum Domain : std::uint32_t {
   kDomainSharedMemoryOnly = 113,
   kDomainCycloneInterop = 114,
   kDomainConfinement = 115,
-  // tarmacd integration tests (tests/daemon/): 130..139
+  // tarmacd integration tests (tests/daemon/): 130..149
   kDomainDaemonWorkers1 = 130,
   kDomainDaemonWorkers2 = 131,
   kDomainDaemonWorkers4 = 132,
@@ -29,6 +29,10 @@ enum Domain : std::uint32_t {
   kDomainDaemonProcess = 136,
   kDomainDaemonAllocations = 137,
   kDomainDaemonZones = 138,
+  kDomainDaemonStateLoad = 139,
+  kDomainDaemonStateRefuse = 140,
+  kDomainDaemonTsdfShed = 141,
+  kDomainDaemonPeriodicSave = 142,
 };
 
 inline bool running_in_ci() {

@@ -78,6 +78,7 @@ struct BudgetConfig {
   double drain_ms = 5.0;       ///< take queued samples, parse, select
   double ingest_ms = 15.0;     ///< filters, all scans of the tick
   double integrate_ms = 50.0;  ///< occupancy raycasting, all scans of the tick
+  double tsdf_ms = 30.0;       ///< TSDF integration, all scans of the tick that run it
   double costmap_ms = 35.0;    ///< costmap + 2D ESDF, once per tick
   double publish_ms = 10.0;    ///< costmap, ESDF slice, reports
   double cycle_ms = 90.0;      ///< the whole tick
@@ -95,6 +96,11 @@ struct QuotaConfig {
   /// Points (xyz + intensity) reserved in each of the max_pending_scans + 1 scan buffers at
   /// start, so the cycle does not allocate for scans up to this size.
   std::uint64_t reserve_points_per_scan = 65536;
+  /// Filtered points integrated into the TSDF per tick at most (DESIGN.md §3: TSDF is shed
+  /// before occupancy). Scans are taken in (stamp, sensor) order; a scan whose points would
+  /// exceed the quota skips the TSDF stage (occupancy still integrates it), counted as
+  /// "scan.tsdf_shed_quota". 0 sheds every scan's TSDF.
+  std::uint64_t tsdf_points_per_cycle = 500000;
 };
 
 /// Output topics and frame (YAML `outputs`).
@@ -113,6 +119,11 @@ struct StateConfig {
   std::string dir = "/var/lib/tarmac";  ///< systemd StateDirectory=tarmac
   std::string map_file = "occupancy_window.bin";
   bool save_on_exit = true;
+  std::string tsdf_file = "tsdf.vdb";  ///< the TSDF (tsdf_io .vdb) in dir, when tsdf.enabled
+  bool load_on_start = true;           ///< load tsdf_file at start when present (else empty map)
+  /// Seconds between periodic TSDF saves (0: only on exit). The executor copies the TSDF between
+  /// ticks; a low-priority thread writes the copy.
+  double save_period_s = 300.0;
 };
 
 struct Config {

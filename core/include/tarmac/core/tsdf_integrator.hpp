@@ -114,6 +114,10 @@ class TsdfLayer {
   /// Drops every voxel.
   void clear();
 
+  /// A deep copy (every block copied; the integrator's leaf cache is not): a snapshot another
+  /// thread can save while this layer keeps integrating. Costs a copy of memory_bytes().
+  [[nodiscard]] TsdfLayer clone() const;
+
   /// OpenVDB grids (defined in core/src/tsdf_grids.hpp, for the core's own .cpp files only).
   /// Mutable access drops the integrator's leaf-pointer cache (the tree may change).
   struct Grids;

@@ -15,6 +15,7 @@
 
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/result.hpp"
+#include "tarmac/core/tsdf_integrator.hpp"
 
 namespace tarmac::daemon {
 
@@ -25,6 +26,19 @@ struct ExecutorTotals {
   std::uint64_t scans_integrated = 0;
   std::uint64_t overruns = 0;
   std::int64_t newest_stamp_ns = 0;
+  std::uint64_t tsdf_scans = 0;       ///< scans integrated into the TSDF
+  std::uint64_t tsdf_shed_scans = 0;  ///< scans whose TSDF stage was shed by the points quota
+  std::uint64_t tsdf_saves = 0;       ///< periodic TSDF saves written (not the one on exit)
+  std::uint64_t tsdf_save_failures = 0;
+  std::uint64_t tsdf_saves_skipped = 0;  ///< periodic saves skipped: the previous still writing
+};
+
+/// What load_tsdf() found in the state directory.
+struct TsdfLoadResult {
+  enum class Kind { kDisabled, kAbsent, kLoaded, kRefused };
+  Kind kind = Kind::kDisabled;
+  std::size_t voxels = 0;  ///< observed voxels loaded
+  std::string error;       ///< kRefused: the tsdf_io error ("code: message")
 };
 
 /// Instrumentation for tests and benchmarks; empty by default.
@@ -49,6 +63,16 @@ class Executor {
 
   /// Writes the occupancy window to state.dir/state.map_file. Not for the cycle.
   core::Status save_map() const;
+  /// Writes the TSDF to state.dir/state.tsdf_file with tsdf_io (atomic: .tmp, fsync, rename).
+  /// Not for the cycle, and not while run() runs (call it after run() returns).
+  core::Status save_tsdf() const;
+  /// Before run(): loads state.dir/state.tsdf_file into the mapper when tsdf.enabled and
+  /// state.load_on_start. A file that tsdf_io refuses (truncated, corrupt, other format, other
+  /// frame / voxel size / truncation) is renamed to <file>.refused and the map starts empty.
+  /// Logs one line either way; never throws.
+  TsdfLoadResult load_tsdf();
+  /// The TSDF layer, for tests: only while run() is not running.
+  [[nodiscard]] const core::TsdfLayer& tsdf() const;
 
   [[nodiscard]] ExecutorTotals totals() const;
   /// One line for systemd's STATUS= and the logs.
