@@ -1,6 +1,7 @@
 #include "tarmac/core/costmap_builder.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -137,11 +138,21 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   // Coarse ground buffers live in `out` and keep their capacity: no allocation after warm-up.
   auto& coarse = out.coarse_ground;
   coarse.assign(static_cast<std::size_t>(gx) * gy, kNoGround);
+  // Per coarse cell, the minimum over its g×g columns (an integer, so the order is irrelevant);
+  // walked in blocks of g columns so no cell needs a division.
   for (int y = 0; y < ny; ++y) {
-    for (int x = 0; x < nx; ++x) {
-      const int z = lowest[static_cast<std::size_t>(y) * nx + x];
-      float& c = coarse[static_cast<std::size_t>(y / g) * gx + x / g];
-      if (z >= 0 && (std::isnan(c) || z < c)) c = static_cast<float>(z);
+    const std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+    float* coarse_row = &coarse[static_cast<std::size_t>(y / g) * gx];
+    for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
+      int m = std::numeric_limits<int>::max();
+      for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
+        const int z = low[x];
+        m = z >= 0 ? std::min(m, z) : m;
+      }
+      float& c = coarse_row[cx];
+      if (m != std::numeric_limits<int>::max() && (std::isnan(c) || m < c)) {
+        c = static_cast<float>(m);
+      }
     }
   }
 
@@ -211,36 +222,61 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       if (c - lowest > step_vox) filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
     }
   }
-  auto& next = out.coarse_next;
-  next.assign(filtered.begin(), filtered.end());
-  for (int iteration = 0; iteration < std::max(gx, gy); ++iteration) {
-    bool changed = false;
+  // Fill gaps from neighbours. Defined as passes that each give every gap cell next to a filled
+  // cell the mean of its filled neighbours (in the fixed neighbour order below). A gap cell is
+  // therefore filled in pass L − 1, L its chessboard distance to the nearest cell filled
+  // before the first pass, from its neighbours nearer than L. So L comes from a two-pass
+  // chamfer transform (exact for the chessboard metric), then the cells are filled level by
+  // level: the same values, with one neighbourhood evaluation per gap cell instead of one per
+  // gap cell and pass.
+  auto& level = out.coarse_next;  // chessboard level per coarse cell, +inf when unreachable
+  const float kUnreached = std::numeric_limits<float>::infinity();
+  level.resize(filtered.size());
+  for (std::size_t i = 0; i < filtered.size(); ++i) {
+    level[i] = std::isnan(filtered[i]) ? kUnreached : 0.0f;
+  }
+  const auto relax = [&](int cx, int cy, const int(*offsets)[2]) {
+    float& l = level[static_cast<std::size_t>(cy) * gx + cx];
+    for (int k = 0; k < 4; ++k) {
+      const int ux = cx + offsets[k][0], uy = cy + offsets[k][1];
+      if (ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+      l = std::min(l, level[static_cast<std::size_t>(uy) * gx + ux] + 1.0f);
+    }
+  };
+  constexpr int kBefore[4][2] = {{-1, 0}, {-1, -1}, {0, -1}, {1, -1}};
+  constexpr int kAfter[4][2] = {{1, 0}, {1, 1}, {0, 1}, {-1, 1}};
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) relax(cx, cy, kBefore);
+  }
+  float max_level = 0.0f;
+  for (int cy = gy - 1; cy >= 0; --cy) {
+    for (int cx = gx - 1; cx >= 0; --cx) {
+      relax(cx, cy, kAfter);
+      const float l = level[static_cast<std::size_t>(cy) * gx + cx];
+      if (l != kUnreached) max_level = std::max(max_level, l);
+    }
+  }
+  for (float pass = 1.0f; pass <= max_level; pass += 1.0f) {
     for (int cy = 0; cy < gy; ++cy) {
       for (int cx = 0; cx < gx; ++cx) {
         const std::size_t i = static_cast<std::size_t>(cy) * gx + cx;
-        next[i] = filtered[i];
-        if (!std::isnan(filtered[i])) continue;
+        if (level[i] != pass) continue;
         float sum = 0.0f;
         int count = 0;
         for (int dy = -1; dy <= 1; ++dy) {
           for (int dx = -1; dx <= 1; ++dx) {
             const int ux = cx + dx, uy = cy + dy;
             if (ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
-            const float n = filtered[static_cast<std::size_t>(uy) * gx + ux];
-            if (!std::isnan(n)) {
-              sum += n;
+            const std::size_t u = static_cast<std::size_t>(uy) * gx + ux;
+            if (level[u] < pass) {  // filled in an earlier pass (or before the first)
+              sum += filtered[u];
               ++count;
             }
           }
         }
-        if (count > 0) {
-          next[i] = sum / static_cast<float>(count);
-          changed = true;
-        }
+        filtered[i] = sum / static_cast<float>(count);  // count >= 1: a neighbour is nearer
       }
     }
-    filtered.swap(next);
-    if (!changed) break;
   }
   for (int cy = 0; cy < gy; ++cy) {
     for (int cx = 0; cx < gx; ++cx) {
@@ -265,19 +301,27 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   auto& any_obstacle = out.any_obstacle;
   any_known.resize(geometry.cell_count());
   any_obstacle.resize(geometry.cell_count());
+  // The rounded estimate per coarse cell, once per coarse cell instead of once per column
+  // (coarse_next is free after the fill; whole layers are exact in float).
+  auto& estimates = out.coarse_next;
+  for (std::size_t i = 0; i < filtered.size(); ++i) {
+    estimates[i] = static_cast<float>(std::lround(filtered[i]));
+  }
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
     // The column's ground: its lowest occupied voxel if within one voxel of the estimate.
     for (int y = y0; y < y1; ++y) {
-      for (int x = 0; x < nx; ++x) {
-        const std::size_t i = static_cast<std::size_t>(y) * nx + x;
-        const int estimate =
-            static_cast<int>(std::lround(filtered[static_cast<std::size_t>(y / g) * gx + x / g]));
-        const int low = lowest[i];
-        const int ground = low >= 0 && std::abs(low - estimate) <= 1 ? low : estimate;
-        ground_layer[i] = static_cast<std::int16_t>(ground);
-        out.ground_z_m.cells()[i] = static_cast<float>((wmin.z() + ground + 0.5) * v);
+      const float* estimate_row = &estimates[static_cast<std::size_t>(y / g) * gx];
+      for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
+        const int estimate = static_cast<int>(estimate_row[cx]);
+        for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
+          const std::size_t i = static_cast<std::size_t>(y) * nx + x;
+          const int low = lowest[i];
+          const int ground = low >= 0 && std::abs(low - estimate) <= 1 ? low : estimate;
+          ground_layer[i] = static_cast<std::int16_t>(ground);
+          out.ground_z_m.cells()[i] = static_cast<float>((wmin.z() + ground + 0.5) * v);
+        }
       }
     }
     // Layer by layer, only through the layers some column's envelope reaches: a voxel counts
@@ -380,15 +424,36 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   const std::int8_t unknown_value = params.unknown_cost == UnknownCost::kLethal ? kCostLethal
                                     : params.unknown_cost == UnknownCost::kFree ? kCostFree
                                                                                 : kCostUnknown;
+  // Free cells within the inflation radius cost an exp each. Their distances are few distinct
+  // values, sqrt(k)·v for integer squared distances k in cells (computed as the transform does),
+  // so their values are tabulated once per call; a distance that does not match its table entry
+  // bit for bit is costed directly, so the result never depends on the table.
+  // (A fixed capacity on the stack, so the cycle does not allocate; beyond it, direct costs.)
+  constexpr std::size_t kTableCapacity = 2048;
+  std::array<float, kTableCapacity> table_distance;
+  std::array<std::int8_t, kTableCapacity> table_value;
+  const double inflation_cells = params.inflation_radius_m / v;
+  const std::size_t table_size =
+      std::min(kTableCapacity,
+               static_cast<std::size_t>(std::min(inflation_cells * inflation_cells, 1e9)) + 2);
+  for (std::size_t k = 0; k < table_size; ++k) {
+    table_distance[k] = static_cast<float>(std::sqrt(static_cast<double>(k)) * v);
+    table_value[k] = to_occupancy_value(nav2_cost(table_distance[k], params));
+  }
+  const auto free_value = [&](float distance) {
+    if (distance > params.inflation_radius_m) return std::int8_t{0};
+    const double r = distance / v;
+    const auto k = static_cast<std::size_t>(std::max(0.0, std::round(r * r)));
+    if (k < table_size && table_distance[k] == distance) return table_value[k];
+    return to_occupancy_value(nav2_cost(distance, params));
+  };
   auto& cells = out.costmap.cells();
   for (std::size_t i = 0; i < cells.size(); ++i) {
     switch (static_cast<ColumnClass>(classes[i])) {
       case ColumnClass::kObstacle:
       case ColumnClass::kVirtual: cells[i] = kCostLethal; break;
       case ColumnClass::kUnknown: cells[i] = unknown_value; break;
-      case ColumnClass::kFree:
-        cells[i] = to_occupancy_value(nav2_cost(out.obstacle_distance.distance_m[i], params));
-        break;
+      case ColumnClass::kFree: cells[i] = free_value(out.obstacle_distance.distance_m[i]); break;
     }
   }
 }

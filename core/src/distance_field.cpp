@@ -12,6 +12,10 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr std::size_t kTasksPerPass = 16;
+/// Lines along y and z are processed this many adjacent ones at a time: their cells are
+/// contiguous in memory (64 bytes of floats), so the gathers and scatters read and write whole
+/// cache lines instead of one float per line.
+constexpr int kBlock = 16;
 
 /// 1D squared distance transform of f (FH Algorithm 1) with the argmin of each output.
 /// f[q] = +inf means "no site here". Writes d[q] = min_p (q − p)² + f[p] and arg[q] = p
@@ -65,6 +69,27 @@ void edt_1d(const float* f, int n, float* d, std::int32_t* arg, std::int32_t* v,
   }
 }
 
+/// edt_1d for an input that is 0 at sites and +inf elsewhere (the first pass), without
+/// parabolas: the envelope of zero-height parabolas breaks exactly at the midpoints between
+/// consecutive sites, and edt_1d keeps a midpoint cell with the left site. So each cell takes
+/// its nearest site, the left one on a tie. Same d and arg as edt_1d, bit for bit.
+void nearest_site_1d(const std::uint8_t* site, int n, float* d, std::int32_t* arg) {
+  int left = -1;
+  for (int q = 0; q < n; ++q) {
+    if (site[q] != 0) left = q;
+    arg[q] = left;
+  }
+  int right = -1;
+  for (int q = n - 1; q >= 0; --q) {
+    if (site[q] != 0) right = q;
+    const int l = arg[q];
+    const int p = l < 0 || (right >= 0 && right - q < q - l) ? right : l;
+    arg[q] = p;
+    const float dq = static_cast<float>(q - p);
+    d[q] = p < 0 ? kInf : dq * dq;
+  }
+}
+
 }  // namespace
 
 void compute_distance_field(const std::vector<CellState>& states, const Eigen::Vector3i& dims,
@@ -79,24 +104,50 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
   out.gradient_x.resize(n);
   out.gradient_y.resize(n);
   out.gradient_z.resize(n);
+  const int passes = nz == 1 ? 2 : 3;
+  // The last pass writes the output directly; it needs no squared distances or sites stored.
   s.sq.resize(n);
-  for (int a = 0; a < 3; ++a) s.site[a].resize(a < 2 || nz > 1 ? n : 0);
+  for (int a = 0; a < 3; ++a) s.site[a].resize(a < passes - 1 ? n : 0);
   const int longest = std::max({nx, ny, nz});
-  const auto ensure = [&](auto& lines) {
+  const std::size_t line_len = static_cast<std::size_t>(longest) + 1;
+  const auto ensure = [&](auto& lines, std::size_t size) {
     lines.resize(kTasksPerPass);
-    for (auto& l : lines) l.resize(static_cast<std::size_t>(longest) + 1);
+    for (auto& l : lines) l.resize(size);
   };
-  ensure(s.line_f);
-  ensure(s.line_v);
-  ensure(s.line_arg);
-  ensure(s.line_z);
-  ensure(s.line_d);
-  ensure(s.line_s[0]);
-  ensure(s.line_s[1]);
+  ensure(s.line_f, line_len * kBlock);
+  ensure(s.line_v, line_len);
+  ensure(s.line_arg, line_len * kBlock);
+  ensure(s.line_z, line_len);
+  ensure(s.line_d, line_len * kBlock);
+  ensure(s.line_s[0], line_len * kBlock);
+  ensure(s.line_s[1], line_len * kBlock);
 
-  const auto is_site = [&](CellState c) {
-    return c == CellState::kOccupied ||
-           (c == CellState::kUnknown && policy == UnknownPolicy::kUnknownIsOccupied);
+  const bool unknown_is_site = policy == UnknownPolicy::kUnknownIsOccupied;
+  const bool report_unknown = policy == UnknownPolicy::kReportUnknown;
+
+  // Metres and gradient of cell i at (x, y, z) from its squared distance and nearest site.
+  const auto finish = [&](std::size_t i, int x, int y, int zz, float sq, std::int32_t sx,
+                          std::int32_t sy, std::int32_t sz) {
+    float& dist = out.distance_m[i];
+    float& gx = out.gradient_x[i];
+    float& gy = out.gradient_y[i];
+    float& gz = out.gradient_z[i];
+    gx = gy = gz = 0.0f;
+    if (report_unknown && states[i] == CellState::kUnknown) {
+      dist = std::nanf("");
+      return;
+    }
+    if (sq == kInf) {
+      dist = kInf;
+      return;
+    }
+    const double r = std::sqrt(static_cast<double>(sq));
+    dist = static_cast<float>(r * cell_size_m);
+    if (r > 0.0) {
+      gx = static_cast<float>((x - sx) / r);
+      gy = static_cast<float>((y - sy) / r);
+      if (passes == 3) gz = static_cast<float>((zz - sz) / r);
+    }
   };
 
   // Pass along x builds, per cell, the squared distance to the nearest site in its row and that
@@ -104,13 +155,35 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
   // from the cell it came from, its y is the argmin. The pass along z does the same for x and y.
   // So each pass carries only the coordinates of the axes before it.
   const std::size_t plane = static_cast<std::size_t>(nx) * ny;
-  const int lens[3] = {nx, ny, nz};
-  const std::size_t strides[3] = {1, static_cast<std::size_t>(nx), plane};
-  const int passes = nz == 1 ? 2 : 3;
-  for (int axis = 0; axis < passes; ++axis) {
-    const int len = lens[axis];
-    const std::size_t stride = strides[axis];
-    const std::size_t lines = n / static_cast<std::size_t>(len);
+  const std::size_t rows = static_cast<std::size_t>(ny) * nz;
+  runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
+    auto* site = reinterpret_cast<std::uint8_t*>(s.line_v[task].data());
+    const std::size_t first = rows * task / kTasksPerPass;
+    const std::size_t last = rows * (task + 1) / kTasksPerPass;
+    for (std::size_t row = first; row < last; ++row) {
+      const std::size_t base = row * static_cast<std::size_t>(nx);
+      const CellState* st = states.data() + base;
+      for (int q = 0; q < nx; ++q) {
+        site[q] = static_cast<std::uint8_t>((st[q] == CellState::kOccupied) |
+                                            (unknown_is_site & (st[q] == CellState::kUnknown)));
+      }
+      nearest_site_1d(site, nx, s.sq.data() + base, s.site[0].data() + base);
+    }
+  });
+
+  // Passes along y and z: kBlock adjacent lines at a time (adjacent along x for y, along the
+  // xy plane for z), gathered into per-task line buffers, transformed, scattered back.
+  for (int axis = 1; axis < passes; ++axis) {
+    const bool last_pass = axis == passes - 1;
+    const int len = axis == 1 ? ny : nz;
+    const std::size_t stride = axis == 1 ? static_cast<std::size_t>(nx) : plane;
+    // Groups of lines: along y, kBlock columns of one z plane (a plane's columns are split into
+    // ceil(nx / kBlock) groups); along z, kBlock xy cells.
+    const std::size_t groups_per_plane = axis == 1
+                                             ? (static_cast<std::size_t>(nx) + kBlock - 1) / kBlock
+                                             : (plane + kBlock - 1) / kBlock;
+    const std::size_t line_span = axis == 1 ? static_cast<std::size_t>(nx) : plane;
+    const std::size_t groups = groups_per_plane * (axis == 1 ? static_cast<std::size_t>(nz) : 1);
     runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
       float* f = s.line_f[task].data();
       float* d = s.line_d[task].data();
@@ -118,68 +191,51 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
       std::int32_t* v = s.line_v[task].data();
       float* z = s.line_z[task].data();
       std::int32_t* carried[2] = {s.line_s[0][task].data(), s.line_s[1][task].data()};
-      const std::size_t first = lines * task / kTasksPerPass;
-      const std::size_t last = lines * (task + 1) / kTasksPerPass;
-      for (std::size_t line = first; line < last; ++line) {
-        // The line's first cell: line enumerates the other two axes.
-        const std::size_t base = axis == 0   ? line * static_cast<std::size_t>(nx)
-                                 : axis == 1 ? (line / nx) * plane + (line % nx)
-                                             : line;
-        if (axis == 0) {
-          for (int q = 0; q < len; ++q) f[q] = is_site(states[base + q]) ? 0.0f : kInf;
-        } else {
-          for (int q = 0; q < len; ++q) {
-            const std::size_t i = base + q * stride;
-            f[q] = s.sq[i];
-            for (int a = 0; a < axis; ++a) carried[a][q] = s.site[a][i];
-          }
-        }
-        edt_1d(f, len, d, arg, v, z);
+      const std::size_t first = groups * task / kTasksPerPass;
+      const std::size_t last = groups * (task + 1) / kTasksPerPass;
+      for (std::size_t group = first; group < last; ++group) {
+        const std::size_t outer = group / groups_per_plane;  // z plane for axis 1, 0 for axis 2
+        const std::size_t start = (group % groups_per_plane) * kBlock;
+        const int width = static_cast<int>(std::min<std::size_t>(kBlock, line_span - start));
+        const std::size_t base = outer * plane + start;  // first cell of the group's first line
+        // Gather: line b of the group into f[b * len ...], carried sites likewise.
         for (int q = 0; q < len; ++q) {
           const std::size_t i = base + q * stride;
-          s.sq[i] = d[q];
-          const std::int32_t from = arg[q];
-          for (int a = 0; a < axis; ++a) s.site[a][i] = from < 0 ? -1 : carried[a][from];
-          s.site[axis][i] = from;
+          for (int b = 0; b < width; ++b) f[b * len + q] = s.sq[i + b];
+          for (int a = 0; a < axis; ++a) {
+            for (int b = 0; b < width; ++b) carried[a][b * len + q] = s.site[a][i + b];
+          }
+        }
+        for (int b = 0; b < width; ++b) {
+          edt_1d(f + b * len, len, d + b * len, arg + b * len, v, z);
+        }
+        for (int q = 0; q < len; ++q) {
+          const std::size_t i = base + q * stride;
+          if (!last_pass) {
+            for (int b = 0; b < width; ++b) {
+              const std::int32_t from = arg[b * len + q];
+              s.sq[i + b] = d[b * len + q];
+              s.site[0][i + b] = from < 0 ? -1 : carried[0][b * len + from];
+              s.site[1][i + b] = from;
+            }
+            continue;
+          }
+          for (int b = 0; b < width; ++b) {
+            const std::int32_t from = arg[b * len + q];
+            const std::int32_t sx = from < 0 ? -1 : carried[0][b * len + from];
+            const std::int32_t sy = axis == 1 ? from : (from < 0 ? -1 : carried[1][b * len + from]);
+            const std::int32_t sz = axis == 2 ? from : 0;
+            // Cell coordinates: the group's line b at position q along the axis.
+            const std::size_t cell = start + b;  // index within the plane (axis 2) or row (1)
+            const int x = axis == 1 ? static_cast<int>(cell) : static_cast<int>(cell % nx);
+            const int y = axis == 1 ? q : static_cast<int>(cell / nx);
+            const int zz = axis == 1 ? static_cast<int>(outer) : q;
+            finish(i + b, x, y, zz, d[b * len + q], sx, sy, sz);
+          }
         }
       }
     });
   }
-
-  // Metres and gradients from the nearest site, row by row.
-  const std::size_t rows = static_cast<std::size_t>(ny) * nz;
-  runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
-    const std::size_t first = rows * task / kTasksPerPass;
-    const std::size_t last = rows * (task + 1) / kTasksPerPass;
-    for (std::size_t row = first; row < last; ++row) {
-      const int y = static_cast<int>(row % ny);
-      const int zz = static_cast<int>(row / ny);
-      const std::size_t base = row * static_cast<std::size_t>(nx);
-      for (int x = 0; x < nx; ++x) {
-        const std::size_t i = base + x;
-        float& dist = out.distance_m[i];
-        float& gx = out.gradient_x[i];
-        float& gy = out.gradient_y[i];
-        float& gz = out.gradient_z[i];
-        gx = gy = gz = 0.0f;
-        if (states[i] == CellState::kUnknown && policy == UnknownPolicy::kReportUnknown) {
-          dist = std::nanf("");
-          continue;
-        }
-        if (s.sq[i] == kInf) {
-          dist = kInf;
-          continue;
-        }
-        const double r = std::sqrt(static_cast<double>(s.sq[i]));
-        dist = static_cast<float>(r * cell_size_m);
-        if (r > 0.0) {
-          gx = static_cast<float>((x - s.site[0][i]) / r);
-          gy = static_cast<float>((y - s.site[1][i]) / r);
-          if (passes == 3) gz = static_cast<float>((zz - s.site[2][i]) / r);
-        }
-      }
-    }
-  });
 }
 
 }  // namespace tarmac::core
