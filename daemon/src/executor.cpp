@@ -1,5 +1,7 @@
 #include "tarmac/daemon/executor.hpp"
 
+#include "tarmac/daemon/clock.hpp"
+
 #include <time.h>
 
 #include <algorithm>
@@ -47,23 +49,15 @@ double ms_between(Clock::time_point a, Clock::time_point b) {
 }
 
 std::int64_t monotonic_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+  return clock_now_ns(CLOCK_MONOTONIC);
 }
 
 std::int64_t realtime_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+  return clock_now_ns(CLOCK_REALTIME);
 }
 
 void sleep_until_monotonic(std::int64_t deadline_ns) {
-  timespec ts{};
-  ts.tv_sec = deadline_ns / 1'000'000'000;
-  ts.tv_nsec = deadline_ns % 1'000'000'000;
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
+  clock_sleep_until_ns(CLOCK_MONOTONIC, deadline_ns);
 }
 
 /// Fixed window of recent values with percentiles computed on a stack copy (no allocation).

@@ -13,6 +13,7 @@
 #include "dds_endpoints.hpp"
 #include "geometry_msgsPubSubTypes.h"
 #include "sensor_msgsPubSubTypes.h"
+#include "tarmac/daemon/clock.hpp"
 #include "tarmac/transport/qos.hpp"
 
 namespace tarmac::tools {
@@ -20,17 +21,11 @@ namespace tarmac::tools {
 namespace {
 
 std::int64_t realtime_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+  return daemon::clock_now_ns(CLOCK_REALTIME);
 }
 
 void sleep_until_realtime(std::int64_t t_ns) {
-  timespec ts{};
-  ts.tv_sec = t_ns / 1'000'000'000;
-  ts.tv_nsec = t_ns % 1'000'000'000;
-  while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
+  daemon::clock_sleep_until_ns(CLOCK_REALTIME, t_ns);
 }
 
 struct Event {
