@@ -107,9 +107,9 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   const GridGeometry2D geometry{wmin.x() * v, wmin.y() * v, v, static_cast<std::uint32_t>(nx),
                                 static_cast<std::uint32_t>(ny)};
   if (!(out.costmap.geometry() == geometry)) {
-    out.costmap = Costmap(geometry, kCostUnknown);
-    out.ground_z_m = Grid2D<float>(geometry, kNoGround);
-    out.column_class = Grid2D<std::uint8_t>(geometry, 0);
+    out.costmap.reset(geometry, kCostUnknown);
+    out.ground_z_m.reset(geometry, kNoGround);
+    out.column_class.reset(geometry, 0);
   }
   out.esdf_input.resize(geometry.cell_count());
 

@@ -155,6 +155,10 @@ Status OccupancyParams::validate() const {
   return Ok{};
 }
 
+namespace {
+constexpr std::size_t kReservedHitSlots = std::size_t{1} << 17;
+}  // namespace
+
 OccupancyMap::OccupancyMap(const OccupancyParams& params)
     : params_(params),
       dims_(params.window_x_vox, params.window_y_vox, params.window_z_vox),
@@ -174,6 +178,11 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   hit_bits_.assign(words, 0);
   free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
   dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>(blocks, 0));
+  // Reserved up front so scans do not grow them in the cycle (DESIGN.md §3): every window column
+  // can hold a ground return; the hit list takes a 64-beam scan's distinct return voxels (a
+  // scan with more grows it once, then keeps the capacity).
+  scan_ground_cols_.reserve(static_cast<std::size_t>(dims_.x()) * dims_.y());
+  hit_slots_.reserve(kReservedHitSlots);
 }
 
 std::size_t OccupancyMap::memory_bytes() const {

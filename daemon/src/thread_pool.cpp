@@ -57,7 +57,7 @@ void ThreadPool::work_loop() {
   }
 }
 
-void ThreadPool::parallel_for(std::size_t count, const std::function<void(std::size_t)>& fn) {
+void ThreadPool::parallel_for(std::size_t count, core::TaskFn fn) {
   if (count == 0) return;
   if (workers_.empty() || count == 1) {
     for (std::size_t i = 0; i < count; ++i) fn(i);

@@ -11,7 +11,7 @@ namespace {
 /// Small runner that runs tasks in reverse order: results must not depend on task order.
 class ReverseRunner final : public TaskRunner {
  public:
-  void parallel_for(std::size_t count, const std::function<void(std::size_t)>& fn) override {
+  void parallel_for(std::size_t count, TaskFn fn) override {
     for (std::size_t i = count; i-- > 0;) fn(i);
   }
   [[nodiscard]] std::size_t concurrency() const override { return 4; }

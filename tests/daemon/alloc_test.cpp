@@ -1,7 +1,7 @@
 // Counts heap allocations made on the executor's threads (executor + workers) per tick, with
 // scans flowing, after warm-up, and attributes each one by its call stack to its owner: tarmac's
-// daemon/transport code ("ours", must be zero), the mapping core, Fast DDS, or other. Its own
-// binary: it replaces the global operator new.
+// daemon/transport code ("ours") and the mapping core (both must be zero), Fast DDS, or other. Its
+// own binary: it replaces the global operator new.
 
 #include <cxxabi.h>
 #include <execinfo.h>
@@ -287,6 +287,7 @@ TEST(Allocations, SteadyStateTicks_AllocateNothingOnTheExecutorThreads) {
   }
   ASSERT_LT(g_n_stacks.load(), kMaxStacks) << "more allocations than stacks recorded";
   EXPECT_EQ(by_owner["ours"], 0u) << "tarmac's daemon/transport code allocates in the cycle";
+  EXPECT_EQ(by_owner["core"], 0u) << "the mapping core allocates in the cycle";
   EXPECT_EQ(by_owner["other"], 0u) << "allocations of unknown owner in the cycle";
 }
 

@@ -73,10 +73,9 @@ config::Config test_config(std::uint32_t domain, std::uint32_t workers) {
   return c;
 }
 
-/// The core run offline, scan by scan, on the poses as they travel over the wire (quaternions).
-std::string offline_costmap_digest(const config::Config& cfg, std::size_t scans,
-                                   std::int64_t last_stamp_ns) {
-  core::Mapper mapper(cfg.mapping);
+/// Runs the core offline, scan by scan, on the poses as they travel over the wire
+/// (quaternions), with the TSDF stage when `tsdf` (no quota shedding).
+void run_offline(core::Mapper& mapper, const config::Config& cfg, std::size_t scans, bool tsdf) {
   core::SerialRunner runner;
   const auto& seq = sequence();
   const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
@@ -87,27 +86,24 @@ std::string offline_costmap_digest(const config::Config& cfg, std::size_t scans,
         transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(seq.T_W_S[k], T_B_S)));
     mapper.ingest(cloud, wire.value(), T_B_S);
     mapper.integrate(runner);
+    if (tsdf) mapper.integrate_tsdf(runner);
   }
+}
+
+std::string offline_costmap_digest(const config::Config& cfg, std::size_t scans,
+                                   std::int64_t last_stamp_ns) {
+  core::Mapper mapper(cfg.mapping);
+  run_offline(mapper, cfg, scans, false);
+  core::SerialRunner runner;
   mapper.update_costmap({}, last_stamp_ns, runner);
   const auto& cells = mapper.costmap().costmap.cells();
   return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
 }
 
-/// The TSDF the core builds offline on the same scans (no quota shedding).
+/// The TSDF the core builds offline on the same scans.
 std::uint64_t offline_tsdf_digest(const config::Config& cfg, std::size_t scans) {
   core::Mapper mapper(cfg.mapping);
-  core::SerialRunner runner;
-  const auto& seq = sequence();
-  const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
-  core::PointCloud cloud;
-  for (std::size_t k = 0; k < scans; ++k) {
-    EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
-    const auto wire =
-        transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(seq.T_W_S[k], T_B_S)));
-    mapper.ingest(cloud, wire.value(), T_B_S);
-    mapper.integrate(runner);
-    mapper.integrate_tsdf(runner);
-  }
+  run_offline(mapper, cfg, scans, true);
   return mapper.tsdf().digest();
 }
 

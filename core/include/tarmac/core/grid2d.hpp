@@ -67,6 +67,12 @@ class Grid2D {
 
   /// Sets every cell to `value`, keeping capacity.
   void fill(T value) { std::fill(cells_.begin(), cells_.end(), value); }
+  /// Gives the grid a new geometry and fills it, keeping the storage when the cell count does
+  /// not grow (a rolling window moves its origin every few cycles: no allocation for that).
+  void reset(const GridGeometry2D& geometry, T value) {
+    geometry_ = geometry;
+    cells_.assign(geometry.cell_count(), value);
+  }
 
  private:
   GridGeometry2D geometry_;

@@ -26,7 +26,7 @@ class ThreadPool final : public core::TaskRunner {
   ThreadPool(const ThreadPool&) = delete;
   ThreadPool& operator=(const ThreadPool&) = delete;
 
-  void parallel_for(std::size_t count, const std::function<void(std::size_t)>& fn) override;
+  void parallel_for(std::size_t count, core::TaskFn fn) override;
   [[nodiscard]] std::size_t concurrency() const override { return workers_.size() + 1; }
 
   /// Number of workers whose CPU pinning failed (0 when none requested).
@@ -39,7 +39,7 @@ class ThreadPool final : public core::TaskRunner {
   std::vector<std::thread> workers_;
   std::mutex mutex_;
   std::condition_variable wake_, done_;
-  const std::function<void(std::size_t)>* job_ = nullptr;
+  const core::TaskFn* job_ = nullptr;
   std::size_t count_ = 0, next_ = 0, finished_ = 0;
   std::uint64_t generation_ = 0;
   bool stop_ = false;
