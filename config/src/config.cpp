@@ -318,6 +318,7 @@ void read_sensors(MapReader& root, std::vector<SensorConfig>& sensors) {
     r.string("frame_id", s.frame_id);
     r.map("extrinsic", [&](MapReader& m) { read_extrinsic(m, s.T_base_sensor); });
     r.scalar<double>("max_age_ms", s.max_age_ms, 1.0, 60000.0);
+    r.scalar<bool>("deskew", s.deskew, false, true);
     for (std::size_t j = 0; j < sensors.size(); ++j) {
       const std::string at = "sensors[" + std::to_string(i) + "]";
       if (sensors[j].id == s.id) fail("value", at + ".id", "duplicate id '" + s.id + "'");
@@ -514,6 +515,7 @@ std::string to_yaml(const Config& config) {
         << "z" << YAML::Value << q.z() << YAML::Key << "w" << YAML::Value << q.w() << YAML::EndMap;
     out << YAML::EndMap;
     out << YAML::Key << "max_age_ms" << YAML::Value << s.max_age_ms;
+    out << YAML::Key << "deskew" << YAML::Value << s.deskew;
     out << YAML::EndMap;
   }
   out << YAML::EndSeq;

@@ -18,10 +18,15 @@ Mapper::Mapper(const MapperParams& params)
 }
 
 FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
-                            const Eigen::Isometry3d& T_B_S) {
+                            const Eigen::Isometry3d& T_B_S, const ScanMotion* motion) {
   const Eigen::Isometry3d T_W_S = T_W_B * T_B_S;
   sensor_W_ = T_W_S.translation();
   T_W_B_ = T_W_B;
+  if (motion != nullptr && cloud.has_time() && cloud.consistent() && motion->t1_s > motion->t0_s) {
+    deskewed_.stamp_ns = cloud.stamp_ns;
+    deskew_points(cloud, *motion, T_W_B, T_B_S, deskewed_.points_S);
+    return filter_scan(deskewed_, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_);
+  }
   return filter_scan(cloud, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_);
 }
 

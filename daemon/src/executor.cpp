@@ -135,7 +135,10 @@ class Executor::Impl {
     p.input_delay_ns = ms_to_ns(cfg.executor.input_delay_ms);
     p.pose_wait_ns = ms_to_ns(cfg.executor.pose_wait_ms);
     p.max_future_ns = ms_to_ns(cfg.executor.max_future_ms);
-    for (const auto& s : cfg.sensors) p.max_age_ns.push_back(ms_to_ns(s.max_age_ms));
+    for (const auto& s : cfg.sensors) {
+      p.max_age_ns.push_back(ms_to_ns(s.max_age_ms));
+      p.deskew.push_back(s.deskew);
+    }
     p.points_per_cycle = cfg.quotas.points_per_cycle;
     p.points_per_scan = cfg.quotas.points_per_scan;
     p.max_pending = cfg.quotas.max_pending_scans;
@@ -161,10 +164,10 @@ class Executor::Impl {
     }
     report.input_ages.back().input = "pose";
     // Every reason the cycle can count, reported from the first tick (0 until it happens).
-    for (const char* r :
-         {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
-          "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite",
-          "points.too_close", "points.ego_vehicle", "points.isolated", "scan.tsdf_shed_quota"}) {
+    for (const char* r : {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
+                          "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap",
+                          "points.non_finite", "points.too_close", "points.ego_vehicle",
+                          "points.isolated", "scan.tsdf_shed_quota", "scan.deskew_span"}) {
       drops.declare(r);
     }
     for (const char* r :
@@ -316,7 +319,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
     const auto t0 = Clock::now();
-    const core::FilterCounts counts = mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor]);
+    const core::FilterCounts counts =
+        mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], sel.deskew ? &sel.motion : nullptr);
     const auto t1 = Clock::now();
     mapper.integrate(*pool);
     const auto t2 = Clock::now();

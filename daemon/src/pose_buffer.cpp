@@ -1,6 +1,7 @@
 #include "tarmac/daemon/pose_buffer.hpp"
 
 #include "tarmac/core/assert.hpp"
+#include "tarmac/core/deskew.hpp"
 
 namespace tarmac::daemon {
 
@@ -52,16 +53,8 @@ PoseBuffer::Lookup PoseBuffer::lookup(std::int64_t stamp_ns, Eigen::Isometry3d& 
   const std::int64_t span = b.stamp_ns - a.stamp_ns;
   if (span > max_gap_ns_) return Lookup::kGap;
   const double t = static_cast<double>(stamp_ns - a.stamp_ns) / static_cast<double>(span);
-  T_W_B = interpolate(a.T_W_B, b.T_W_B, t);
+  T_W_B = core::interpolate_pose(a.T_W_B, b.T_W_B, t);
   return Lookup::kOk;
-}
-
-Eigen::Isometry3d interpolate(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, double t) {
-  const Eigen::Quaterniond qa(a.linear()), qb(b.linear());
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = qa.slerp(t, qb).toRotationMatrix();
-  T.translation() = (1.0 - t) * a.translation() + t * b.translation();
-  return T;
 }
 
 }  // namespace tarmac::daemon

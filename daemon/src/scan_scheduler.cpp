@@ -1,6 +1,8 @@
 #include "tarmac/daemon/scan_scheduler.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 
 namespace tarmac::daemon {
 
@@ -93,6 +95,25 @@ void ScanScheduler::decimate(core::PointCloud& cloud, TickStats& stats) const {
   stats.decimated_points += n - w;
 }
 
+namespace {
+
+/// Earliest and latest finite point time of `cloud` (s from its stamp); false when the sweep has
+/// no extent (all equal, or none finite): nothing to compensate.
+bool time_span(const core::PointCloud& cloud, double& t0_s, double& t1_s) {
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (const float t : cloud.time_offset_s) {
+    if (!std::isfinite(t)) continue;
+    lo = std::min(lo, t);
+    hi = std::max(hi, t);
+  }
+  if (!(hi > lo)) return false;
+  t0_s = lo;
+  t1_s = hi;
+  return true;
+}
+
+}  // namespace
+
 ScanScheduler::TickStats ScanScheduler::select(std::int64_t tick_ns, const PoseBuffer& poses,
                                                std::vector<Selected>& out, ReasonCounters& drops) {
   TickStats stats;
@@ -113,7 +134,26 @@ ScanScheduler::TickStats ScanScheduler::select(std::int64_t tick_ns, const PoseB
     Selected sel;
     sel.slot = i;
     sel.sensor = s.sensor;
-    const auto found = poses.lookup(stamp, sel.T_W_B);
+    // The pose at the stamp, then (deskew) at the sweep's first and last point time; the first
+    // lookup that fails decides, with the same rules for all three.
+    PoseBuffer::Lookup found = poses.lookup(stamp, sel.T_W_B);
+    double t0_s = 0.0, t1_s = 0.0;
+    if (found == PoseBuffer::Lookup::kOk && s.sensor < params_.deskew.size() &&
+        params_.deskew[s.sensor] && s.cloud.has_time() && time_span(s.cloud, t0_s, t1_s)) {
+      if (static_cast<std::int64_t>((t1_s - t0_s) * 1e9) > params_.max_sweep_ns) {
+        drops.add("scan.deskew_span");
+      } else {
+        sel.deskew = true;
+        sel.motion.t0_s = t0_s;
+        sel.motion.t1_s = t1_s;
+        found = poses.lookup(stamp + static_cast<std::int64_t>(std::llround(t0_s * 1e9)),
+                             sel.motion.T_W_B_0);
+        if (found == PoseBuffer::Lookup::kOk) {
+          found = poses.lookup(stamp + static_cast<std::int64_t>(std::llround(t1_s * 1e9)),
+                               sel.motion.T_W_B_1);
+        }
+      }
+    }
     if (found == PoseBuffer::Lookup::kNotYet) {
       if (eligible_until - stamp < params_.pose_wait_ns) break;  // wait, keep the order
       drops.add("scan.pose_timeout");

@@ -94,6 +94,50 @@ TEST(ScanScheduler, Select_ScanWithoutPoseWaitsThenIsDroppedAndCounted) {
   EXPECT_EQ(got[0].first, 550 * kMs);
 }
 
+TEST(ScanScheduler, Deskew_WaitsForThePoseAtTheLastPointAndCarriesBothEnds) {
+  SchedulerParams p = params(1);
+  p.deskew = {true};
+  Harness h(p);
+  h.pose_at(0);
+  h.pose_at(500 * kMs);
+  // A 100 ms sweep stamped at its start: points from 0 to +100 ms.
+  const auto add_sweep = [&](std::int64_t stamp_ns, float span_s) {
+    core::PointCloud& c = h.scheduler.slot(h.drops);
+    c.clear();
+    c.stamp_ns = stamp_ns;
+    for (int i = 0; i <= 10; ++i) {
+      c.points_S.emplace_back(1.f, 0.f, 0.f);
+      c.time_offset_s.push_back(span_s * static_cast<float>(i) / 10.f);
+    }
+    h.scheduler.commit(0, stamp_ns, h.rejections);
+  };
+  add_sweep(450 * kMs, 0.1f);  // its last point, at 550 ms, is after the newest pose
+  std::vector<ScanScheduler::Selected> out;
+  h.scheduler.select(560 * kMs, h.poses, out, h.drops);  // within its pose wait
+  EXPECT_TRUE(out.empty()) << "selected before the pose at its last point arrived";
+  transport::PoseSample later;
+  later.stamp_ns = 600 * kMs;
+  later.T_W_B.translation() = Eigen::Vector3d(6.0, 0.0, 0.0);  // 10 m/s from 0 at 0 ms
+  h.poses.insert(later);
+  h.scheduler.select(561 * kMs, h.poses, out, h.drops);
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_TRUE(out[0].deskew);
+  EXPECT_FLOAT_EQ(static_cast<float>(out[0].motion.t0_s), 0.0f);
+  EXPECT_FLOAT_EQ(static_cast<float>(out[0].motion.t1_s), 0.1f);
+  // Poses interpolated at 450 ms (stamp = first point) and 550 ms (last point).
+  EXPECT_NEAR(out[0].T_W_B.translation().x(), 0.0, 1e-12);  // 0..500 ms are both at the origin
+  EXPECT_NEAR(out[0].motion.T_W_B_0.translation().x(), 0.0, 1e-12);
+  EXPECT_NEAR(out[0].motion.T_W_B_1.translation().x(), 3.0, 1e-6);
+  h.scheduler.release(out[0].slot);
+
+  // Times that span seconds are not sweep offsets: integrated without deskew, counted.
+  add_sweep(560 * kMs, 5.0f);
+  h.scheduler.select(590 * kMs, h.poses, out, h.drops);
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_FALSE(out[0].deskew);
+  EXPECT_EQ(h.drops.total("scan.deskew_span"), 1u);
+}
+
 TEST(ScanScheduler, Commit_RejectsFutureStaleAndLateStamps) {
   Harness h(params());
   const std::int64_t t = 10'000 * kMs;

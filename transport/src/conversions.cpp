@@ -35,6 +35,16 @@ struct FieldSlot {
   std::uint8_t datatype = 0;
 };
 
+/// A per-point time as seconds from the scan stamp, whatever the driver's convention: integer
+/// fields are nanoseconds from the stamp (Ouster's uint32 `t`); floating-point fields are
+/// seconds, from the stamp (Velodyne's `time`) or, when they are epoch times (Hesai's and
+/// Livox's float64 `timestamp`, > 1e8 s), absolute.
+float time_offset_s(double value, std::uint8_t datatype, double stamp_s) {
+  if (datatype != pf::FLOAT32 && datatype != pf::FLOAT64) return static_cast<float>(value * 1e-9);
+  if (std::abs(value) > 1e8) return static_cast<float>(value - stamp_s);
+  return static_cast<float>(value);
+}
+
 /// Reads a numeric field of any datatype as double, honouring the message's endianness.
 double read_as_double(const std::uint8_t* p, std::uint8_t datatype, bool swap) {
   std::uint8_t raw[8];
@@ -205,6 +215,7 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
   out.clear();
   out.frame_id = msg.header().frame_id();
   out.stamp_ns = from_time_msg(msg.header().stamp());
+  const double stamp_s = static_cast<double>(out.stamp_ns) * 1e-9;
 
   std::optional<FieldSlot> x, y, z, intensity, ring, time;
   for (const auto& f : msg.fields()) {
@@ -299,8 +310,8 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
         out.ring.push_back(r >= 0.0 && r <= 65535.0 ? static_cast<std::uint16_t>(r) : 0);
       }
       if (time) {
-        out.time_offset_s.push_back(
-            static_cast<float>(read_as_double(p + time->offset, time->datatype, swap)));
+        out.time_offset_s.push_back(time_offset_s(
+            read_as_double(p + time->offset, time->datatype, swap), time->datatype, stamp_s));
       }
     }
   }

@@ -42,6 +42,9 @@ struct SensorConfig {
   /// Extrinsic: maps sensor-frame points into the vehicle base frame.
   Eigen::Isometry3d T_base_sensor = Eigen::Isometry3d::Identity();
   double max_age_ms = 500.0;  ///< a scan older than this at tick time is rejected as stale
+  /// Motion-compensate scans with per-point times (PointCloud2 field time / t / timestamp)
+  /// using the poses at their first and last point; such scans also wait for those poses.
+  bool deskew = true;
 };
 
 /// Which message type carries the vehicle pose.

@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 
 #include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/core/deskew.hpp"
 #include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/scan_filter.hpp"
@@ -31,9 +32,11 @@ class Mapper {
   explicit Mapper(const MapperParams& params);
 
   /// Stage 1: filters `cloud` (sensor frame) and keeps the survivors in the world frame.
-  /// T_W_B is the vehicle base pose, T_B_S the sensor's extrinsic.
+  /// T_W_B is the vehicle base pose at the scan stamp, T_B_S the sensor's extrinsic. With
+  /// `motion` and per-point times in `cloud`, the points are first motion-compensated into the
+  /// sensor frame at the stamp (deskew_points); without either, the sweep is taken as rigid.
   FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
-                      const Eigen::Isometry3d& T_B_S);
+                      const Eigen::Isometry3d& T_B_S, const ScanMotion* motion = nullptr);
   /// Stage 2: moves the window with the vehicle and integrates the ingested scan.
   OccupancyUpdateStats integrate(TaskRunner& runner);
   /// Stage 3: rebuilds the costmap and the 2D distance map from the window.
@@ -59,6 +62,7 @@ class Mapper {
   CostmapLayers layers_;
   std::vector<Eigen::Vector3f> points_W_;
   FilterScratch filter_scratch_;
+  PointCloud deskewed_;  ///< the scan after deskew (points only), reused
   Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();
   Eigen::Isometry3d T_W_B_ = Eigen::Isometry3d::Identity();  ///< of the last ingested scan
   TsdfIntegrator tsdf_integrator_;

@@ -49,7 +49,4 @@ class PoseBuffer {
   std::int64_t max_gap_ns_;
 };
 
-/// Interpolates between two poses at fraction t in [0, 1] (translation lerp, rotation slerp).
-Eigen::Isometry3d interpolate(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, double t);
-
 }  // namespace tarmac::daemon

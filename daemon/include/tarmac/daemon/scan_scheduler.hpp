@@ -1,7 +1,8 @@
 #pragma once
 /// @file Which scans a tick integrates, decided from stamps and point counts only (DESIGN.md §3):
 /// scans wait in a fixed pool of slots; a tick takes those stamped <= tick − input delay, in
-/// (stamp, sensor) order, each with its pose interpolated at its stamp; a scan whose pose has not
+/// (stamp, sensor) order, each with its pose interpolated at its stamp (and, for deskew, at its
+/// first and last point time); a scan whose poses have not
 /// arrived waits (and holds back the later ones, so order is kept) until pose_wait has passed,
 /// then it is dropped; the points quota defers the rest to the next tick. The tick time is the
 /// schedule's deadline, never a clock reading, so for inputs that arrive within the input delay
@@ -12,6 +13,7 @@
 
 #include <Eigen/Geometry>
 
+#include "tarmac/core/deskew.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/daemon/pose_buffer.hpp"
 #include "tarmac/daemon/reason_counters.hpp"
@@ -23,6 +25,12 @@ struct SchedulerParams {
   std::int64_t pose_wait_ns = 100'000'000;
   std::int64_t max_future_ns = 200'000'000;
   std::vector<std::int64_t> max_age_ns;  ///< per sensor
+  /// Per sensor: motion-compensate scans that carry per-point times (empty: none). Such a scan
+  /// also waits for the poses at its earliest and latest point time.
+  std::vector<bool> deskew;
+  /// A scan whose point times span more than this is integrated without deskew (counted as
+  /// "scan.deskew_span"): no LiDAR sweeps that long, so the times are not offsets in seconds.
+  std::int64_t max_sweep_ns = 500'000'000;
   std::uint64_t points_per_cycle = 500'000;
   std::uint64_t points_per_scan = 262'144;
   std::uint32_t max_pending = 8;
@@ -35,6 +43,8 @@ class ScanScheduler {
     std::uint32_t slot = 0;
     std::uint32_t sensor = 0;
     Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
+    bool deskew = false;  ///< `motion` holds the poses at the sweep's first and last point
+    core::ScanMotion motion;
   };
   struct TickStats {
     std::uint64_t deferred_scans = 0;    ///< eligible but over the points quota: next tick
