@@ -82,6 +82,10 @@ class ErrorCollector final : public eprosima::fastdds::dds::LogConsumer {
     if (entry.kind != eprosima::fastdds::dds::Log::Kind::Error) return;
     std::lock_guard lock(mutex_);
     std::string text = entry.message;
+    for (char& c : text) {
+      if (c == '\n' || c == '\r') c = ' ';
+    }
+    while (!text.empty() && text.back() == ' ') text.pop_back();
     if (entry.context.category != nullptr) text = std::string(entry.context.category) + ": " + text;
     entries_.push_back(std::move(text));
     while (entries_.size() > kKept) entries_.pop_front();
