@@ -38,6 +38,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonStateRefuse = 140,
   kDomainDaemonTsdfShed = 141,
   kDomainDaemonPeriodicSave = 142,
+  kDomainDaemonSecurity = 143,
 };
 
 inline bool running_in_ci() {
