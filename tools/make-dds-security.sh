@@ -109,7 +109,7 @@ cat > governance.xml <<EOF
 EOF
 
 # ---- permissions: who may publish and subscribe what ----
-not_before=$(date -u +%Y-%m-%dT%H:%M:%S)
+not_before=$(date -u -d "-1 day" +%Y-%m-%dT%H:%M:%S)  # a day of slack for clock skew
 not_after=$(date -u -d "+$days days" +%Y-%m-%dT%H:%M:%S)
 topics() {  # topics TOPIC... -> <topics> element
   printf '<topics>'

@@ -3,6 +3,7 @@
 #include <arpa/inet.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <deque>
@@ -104,7 +105,7 @@ class ErrorCollector final : public eprosima::fastdds::dds::LogConsumer {
   std::deque<std::string> entries_;
 };
 
-ErrorCollector* g_collector = nullptr;  // owned by Fast DDS's Log once registered
+std::atomic<ErrorCollector*> g_collector{nullptr};  // owned by Fast DDS's Log once registered
 std::once_flag g_collector_once;
 
 void collect_dds_errors() {
@@ -219,9 +220,10 @@ void SecurityConfig::use_identity_dir(const std::string& dir) {
 }
 
 std::string take_dds_errors() {
-  if (g_collector == nullptr) return {};
+  ErrorCollector* collector = g_collector.load();
+  if (collector == nullptr) return {};
   eprosima::fastdds::dds::Log::Flush();
-  return g_collector->take();
+  return collector->take();
 }
 
 std::string security_refusal_hint(const ParticipantImpl& impl) {
