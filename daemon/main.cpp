@@ -90,9 +90,11 @@ int main(int argc, char** argv) {
     spdlog::error("startup: {} [{}]", executor.error().message, executor.error().code);
     return executor.error().code.rfind("config.", 0) == 0 ? kExitConfig : kExitDds;
   }
-  spdlog::info("DDS up on domain {} (transport {}); {} LiDAR input(s), poses on {}",
+  const auto& security = config.value().dds.participant.security;
+  spdlog::info("DDS up on domain {} (transport {}, security {}); {} LiDAR input(s), poses on {}",
                config.value().dds.participant.domain_id,
                tarmac::transport::to_string(config.value().dds.participant.transport),
+               security.enabled ? "on, identity " + security.identity_certificate : "off",
                config.value().sensors.size(), config.value().pose.topic);
   executor.value()->load_tsdf();  // logs what it found; never fails the start
   sd_notify(0, "READY=1");

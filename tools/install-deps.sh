@@ -9,7 +9,7 @@ packages=(
   libfastrtps-dev libfastcdr-dev libfoonathan-memory-dev fastddsgen fastdds-tools
   libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev libimath-dev zlib1g-dev
   libeigen3-dev libspdlog-dev libfmt-dev libyaml-cpp-dev libgtest-dev libgmock-dev
-  libsystemd-dev openssl cyclonedds-dev cyclonedds-tools liboctomap-dev libdynamicedt3d-dev
+  libsystemd-dev openssl libssl-dev cyclonedds-dev cyclonedds-tools liboctomap-dev libdynamicedt3d-dev
   libpng-dev iproute2 systemd clang-format
 )
 

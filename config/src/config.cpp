@@ -1,6 +1,7 @@
 #include "tarmac/config/config.hpp"
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <set>
@@ -174,7 +175,25 @@ void read_qos(MapReader& r, transport::QosSpec& qos) {
   r.scalar<std::uint32_t>("depth", qos.history_depth, 1, 10000);
 }
 
-void read_dds(MapReader& r, DdsConfig& dds) {
+/// `dds.security`. Relative paths are taken relative to `base_dir` (the config file's folder)
+/// when one is given, so a config and its security material can move together.
+void read_security(MapReader& r, transport::SecurityConfig& s, const std::string& base_dir) {
+  r.scalar<bool>("enabled", s.enabled, false, true);
+  const auto path = [&](const char* key, std::string& value) {
+    r.string(key, value);
+    if (!value.empty() && !base_dir.empty() && std::filesystem::path(value).is_relative()) {
+      value = (std::filesystem::path(base_dir) / value).lexically_normal().string();
+    }
+  };
+  path("identity_ca", s.identity_ca);
+  path("identity_certificate", s.identity_certificate);
+  path("private_key", s.private_key);
+  path("permissions_ca", s.permissions_ca);
+  path("governance", s.governance);
+  path("permissions", s.permissions);
+}
+
+void read_dds(MapReader& r, DdsConfig& dds, const std::string& base_dir) {
   auto& p = dds.participant;
   r.scalar<std::uint32_t>("domain_id", p.domain_id, 0, 232);
   r.string("participant_name", p.name);
@@ -185,6 +204,7 @@ void read_dds(MapReader& r, DdsConfig& dds) {
   r.string_list("initial_peers", p.initial_peers);
   r.scalar<std::uint32_t>("shm_segment_bytes", p.shm_segment_bytes, 1u << 16, 1u << 30);
   r.scalar<std::uint32_t>("shm_max_message_bytes", p.shm_max_message_bytes, 1u << 16, 1u << 30);
+  r.map("security", [&](MapReader& m) { read_security(m, p.security, base_dir); });
   r.map("qos", [&](MapReader& q) {
     q.map("lidar", [&](MapReader& m) { read_qos(m, dds.qos.lidar); });
     q.map("pose", [&](MapReader& m) { read_qos(m, dds.qos.pose); });
@@ -437,7 +457,8 @@ void emit_qos(YAML::Emitter& out, const char* name, const transport::QosSpec& q)
 
 }  // namespace
 
-core::Result<Config> load_config_string(const std::string& yaml_text) {
+namespace {
+core::Result<Config> load_config(const std::string& yaml_text, const std::string& base_dir) {
   Config config;
   try {
     const YAML::Node root = YAML::Load(yaml_text);
@@ -452,7 +473,7 @@ core::Result<Config> load_config_string(const std::string& yaml_text) {
                              ", the file says " +
                              (root["version"] ? root["version"].as<std::string>() : "nothing")};
     }
-    r.map("dds", [&](MapReader& m) { read_dds(m, config.dds); });
+    r.map("dds", [&](MapReader& m) { read_dds(m, config.dds, base_dir); });
     read_daemon(r, config);
     read_mapping(r, config.mapping);
     r.finish();
@@ -466,13 +487,20 @@ core::Result<Config> load_config_string(const std::string& yaml_text) {
   if (auto valid = validate_daemon(config); !valid) return valid.error();
   return config;
 }
+}  // namespace
+
+core::Result<Config> load_config_string(const std::string& yaml_text) {
+  return load_config(yaml_text, "");
+}
 
 core::Result<Config> load_config_file(const std::string& path) {
   std::ifstream in(path);
   if (!in) return core::Error{"config.io", path + ": cannot be read"};
   std::ostringstream text;
   text << in.rdbuf();
-  auto result = load_config_string(text.str());
+  std::string base_dir = std::filesystem::path(path).parent_path().string();
+  if (base_dir.empty()) base_dir = ".";
+  auto result = load_config(text.str(), base_dir);
   if (!result) return core::Error{result.error().code, path + ": " + result.error().message};
   return result;
 }
@@ -490,6 +518,16 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "initial_peers" << YAML::Value << YAML::Flow << p.initial_peers;
   out << YAML::Key << "shm_segment_bytes" << YAML::Value << p.shm_segment_bytes;
   out << YAML::Key << "shm_max_message_bytes" << YAML::Value << p.shm_max_message_bytes;
+  const auto& sec = p.security;
+  out << YAML::Key << "security" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "enabled" << YAML::Value << sec.enabled;
+  out << YAML::Key << "identity_ca" << YAML::Value << sec.identity_ca;
+  out << YAML::Key << "identity_certificate" << YAML::Value << sec.identity_certificate;
+  out << YAML::Key << "private_key" << YAML::Value << sec.private_key;
+  out << YAML::Key << "permissions_ca" << YAML::Value << sec.permissions_ca;
+  out << YAML::Key << "governance" << YAML::Value << sec.governance;
+  out << YAML::Key << "permissions" << YAML::Value << sec.permissions;
+  out << YAML::EndMap;
   out << YAML::Key << "qos" << YAML::Value << YAML::BeginMap;
   emit_qos(out, "lidar", config.dds.qos.lidar);
   emit_qos(out, "pose", config.dds.qos.pose);

@@ -1,5 +1,9 @@
 #include "tarmac/config/config.hpp"
 
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
 #include <gtest/gtest.h>
 
 #include "test_env.hpp"
@@ -146,6 +150,80 @@ TEST(Config, DaemonKeysNameTheirPathWhenWrong) {
             "executor.sensor_phase_ms: must be below the period of executor.rate_hz");
   EXPECT_EQ(error_of("version: 1\nquotas: {points_per_cycle: 10, points_per_scan: 20}\n"),
             "quotas.points_per_scan: must be <= quotas.points_per_cycle");
+}
+
+TEST(Config, SecurityIsOffByDefaultAndItsKeysNameTheirPath) {
+  EXPECT_FALSE(Config{}.dds.participant.security.enabled);
+  EXPECT_EQ(error_of("version: 1\ndds: {security: {enable: true}}\n"),
+            "dds.security.enable: unknown key");
+  EXPECT_EQ(error_of("version: 1\ndds: {security: {enabled: 2}}\n"),
+            "dds.security.enabled: expected a number, got '2'");
+  EXPECT_EQ(error_of("version: 1\ndds: {security: {enabled: true}}\n"),
+            "dds.security.identity_ca: must be set when dds.security.enabled is true");
+  EXPECT_EQ(
+      error_of("version: 1\ndds:\n  security: {enabled: true, identity_ca: /nonexistent/ca.pem}\n"),
+      "dds.security.identity_ca: '/nonexistent/ca.pem' does not exist");
+  // Disabled: paths are kept but not checked, so the switch is one key.
+  auto off =
+      load_config_string("version: 1\ndds: {security: {identity_ca: /nonexistent/ca.pem}}\n");
+  ASSERT_TRUE(off.ok()) << off.error().message;
+  EXPECT_EQ(off.value().dds.participant.security.identity_ca, "/nonexistent/ca.pem");
+}
+
+TEST(Config, SecurityPathsAreRelativeToTheConfigFileAndChecked) {
+  char pattern[] = "/tmp/tarmac-config-security-XXXXXX";
+  ASSERT_NE(mkdtemp(pattern), nullptr);
+  const std::filesystem::path dir = pattern;
+  std::filesystem::create_directories(dir / "dds" / "tarmacd");
+  const std::string cert = "-----BEGIN CERTIFICATE-----\nx\n-----END CERTIFICATE-----\n";
+  std::ofstream(dir / "dds/ca.cert.pem") << cert;
+  std::ofstream(dir / "dds/tarmacd/cert.pem") << cert;
+  std::ofstream(dir / "dds/tarmacd/key.pem") << "-----BEGIN PRIVATE KEY-----\nx\n";
+  std::ofstream(dir / "dds/governance.p7s") << "MIME-Version: 1.0\n";
+  std::ofstream(dir / "dds/permissions.p7s") << "MIME-Version: 1.0\n";
+  const std::string security =
+      "version: 1\n"
+      "dds:\n"
+      "  security:\n"
+      "    enabled: true\n"
+      "    identity_ca: dds/ca.cert.pem\n"
+      "    identity_certificate: dds/tarmacd/cert.pem\n"
+      "    private_key: dds/tarmacd/key.pem\n"
+      "    permissions_ca: " +
+      (dir / "dds/ca.cert.pem").string() +
+      "\n"
+      "    governance: dds/governance.p7s\n"
+      "    permissions: dds/permissions.p7s\n";
+  std::ofstream(dir / "tarmac.yaml") << security;
+  auto config = load_config_file((dir / "tarmac.yaml").string());
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  const auto& s = config.value().dds.participant.security;
+  EXPECT_TRUE(s.enabled);
+  EXPECT_EQ(s.identity_ca, (dir / "dds/ca.cert.pem").string());
+  EXPECT_EQ(s.identity_certificate, (dir / "dds/tarmacd/cert.pem").string());
+  EXPECT_EQ(s.private_key, (dir / "dds/tarmacd/key.pem").string());
+  EXPECT_EQ(s.permissions_ca, (dir / "dds/ca.cert.pem").string());
+  EXPECT_EQ(s.governance, (dir / "dds/governance.p7s").string());
+  EXPECT_EQ(s.permissions, (dir / "dds/permissions.p7s").string());
+  EXPECT_NE(to_yaml(config.value()).find("private_key: " + s.private_key), std::string::npos);
+  EXPECT_NE(config_hash(config.value()), config_hash(Config{}));
+
+  // A private key that is a certificate (swapped paths) is caught with the key path.
+  std::string swapped = security;
+  swapped.replace(swapped.find("dds/tarmacd/key.pem"), 19, "dds/tarmacd/cert.pem");
+  std::ofstream(dir / "swapped.yaml") << swapped;
+  auto bad = load_config_file((dir / "swapped.yaml").string());
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().code, "config.security");
+  EXPECT_EQ(bad.error().message, (dir / "swapped.yaml").string() + ": dds.security.private_key: '" +
+                                     (dir / "dds/tarmacd/cert.pem").string() +
+                                     "' is not a PEM private key (no 'PRIVATE KEY-----')");
+  // Relative to the file's folder, not to the working directory.
+  auto from_string = load_config_string(security);
+  ASSERT_FALSE(from_string.ok());
+  EXPECT_EQ(from_string.error().message,
+            "dds.security.identity_ca: 'dds/ca.cert.pem' does not exist");
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

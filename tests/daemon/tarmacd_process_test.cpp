@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -298,6 +299,77 @@ TEST(TarmacdState, CorruptTruncatedOrMismatchedTsdf_IsRefusedAndTheDaemonStillCo
     ASSERT_TRUE(saved.ok()) << saved.error().message;
     EXPECT_EQ(saved.value().layer.voxel_count(), 0u);
   }
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
+  fs::remove_all(dir);
+}
+
+/// DDS Security material from the shipped script into `dir`/dds; false when it fails.
+bool make_security_material(const fs::path& dir) {
+  const std::string command = "sh '" +
+                              (tarmac::test::source_dir() / "tools/make-dds-security.sh").string() +
+                              "' '" + (dir / "dds").string() + "' >/dev/null";
+  return std::system(command.c_str()) == 0;
+}
+
+/// `dds.security` with paths relative to the config file (its folder is `dir`).
+std::string security_block(const std::string& identity_dir) {
+  return "  security:\n"
+         "    enabled: true\n"
+         "    identity_ca: dds/ca.cert.pem\n"
+         "    identity_certificate: " +
+         identity_dir +
+         "/cert.pem\n"
+         "    private_key: " +
+         identity_dir +
+         "/key.pem\n"
+         "    permissions_ca: dds/ca.cert.pem\n"
+         "    governance: dds/governance.p7s\n"
+         "    permissions: dds/permissions.p7s\n";
+}
+
+TEST(TarmacdSecurity, SecuredDaemonComesUp_AndAForeignIdentityExits69NamingTheFile) {
+  auto sniffer = tarmac::test::RtpsSniffer::start();
+  TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
+  TARMAC_REQUIRE_OR_SKIP(std::system("command -v openssl >/dev/null") == 0, "openssl missing");
+  const fs::path dir = state_test_dir("tarmacd-security", tarmac::test::kDomainDaemonSecurity);
+  ASSERT_TRUE(make_security_material(dir));
+  ASSERT_TRUE(make_security_material(dir / "other"));
+  const auto write_config = [&](const std::string& identity_dir) {
+    std::ofstream out(dir / "tarmac.yaml");
+    out << "version: 1\ndds:\n  domain_id: " << tarmac::test::kDomainDaemonSecurity << "\n"
+        << security_block(identity_dir)
+        << "executor: {realtime_priority: 0, lock_memory: false}\nstate: {dir: "
+        << (dir / "state").string() << "}\n";
+  };
+
+  write_config("dds/tarmacd");
+  const DaemonRun run = run_tarmacd_until_ready(dir);
+  EXPECT_TRUE(run.ready) << run.log;
+  ASSERT_TRUE(run.exited) << run.log;
+  EXPECT_EQ(run.exit_code, 0) << run.log;
+  EXPECT_NE(run.log.find("security on, identity " + (dir / "dds/tarmacd/cert.pem").string()),
+            std::string::npos)
+      << run.log;
+
+  // An identity signed by another CA: refused by Fast DDS, explained, exit 69 (EX_UNAVAILABLE).
+  write_config("other/dds/tarmacd");
+  const std::string log = (dir / "refused.log").string();
+  const std::string command = std::string(TARMAC_TARMACD) + " --config '" +
+                              (dir / "tarmac.yaml").string() + "' > '" + log + "' 2>&1";
+  const int rc = std::system(command.c_str());
+  std::ifstream log_in(log);
+  const std::string text((std::istreambuf_iterator<char>(log_in)),
+                         std::istreambuf_iterator<char>());
+  ASSERT_TRUE(WIFEXITED(rc)) << text;
+  EXPECT_EQ(WEXITSTATUS(rc), 69) << text;
+  EXPECT_NE(text.find("dds.security.identity_certificate: '" +
+                      (dir / "other/dds/tarmacd/cert.pem").string() +
+                      "' does not verify against dds.security.identity_ca"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("[dds.security]"), std::string::npos) << text;
+
   std::this_thread::sleep_for(200ms);
   EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
   fs::remove_all(dir);

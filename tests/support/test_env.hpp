@@ -19,6 +19,11 @@ enum Domain : std::uint32_t {
   kDomainSharedMemoryOnly = 113,
   kDomainCycloneInterop = 114,
   kDomainConfinement = 115,
+  // DDS Security (tests/transport/security_test.cpp): 116..119
+  kDomainSecurityExchange = 116,
+  kDomainSecurityUnauthenticated = 117,
+  kDomainSecurityOtherCa = 118,
+  kDomainSecurityDenied = 119,
   // tarmacd integration tests (tests/daemon/): 130..149
   kDomainDaemonWorkers1 = 130,
   kDomainDaemonWorkers2 = 131,
@@ -33,6 +38,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonStateRefuse = 140,
   kDomainDaemonTsdfShed = 141,
   kDomainDaemonPeriodicSave = 142,
+  kDomainDaemonSecurity = 143,
 };
 
 inline bool running_in_ci() {

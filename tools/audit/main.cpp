@@ -41,7 +41,7 @@ void usage(std::FILE* to) {
   std::fprintf(
       to,
       "usage: tarmac-audit [--config FILE] [--cycles N] [--idle-s S] [--timeout-s S]\n"
-      "                    [--json FILE] [--png FILE]\n"
+      "                    [--json FILE] [--png FILE] [--identity DIR]\n"
       "  Listens on the CycleReport and costmap topics of FILE (default config) and, at\n"
       "  the end, prints a per-stage table (last, p50, p99, max vs budget, overruns) and\n"
       "  the end-to-end latency scan stamp -> costmap received.\n"
@@ -49,6 +49,8 @@ void usage(std::FILE* to) {
       "  --idle-s S    stop S seconds after the last costmap (once one arrived)\n"
       "  --timeout-s S stop after S seconds in any case (default 600)\n"
       "  --json FILE   write the table as JSON\n"
+      "  --identity DIR  DDS Security identity DIR/cert.pem, DIR/key.pem instead of the\n"
+      "                config's (dds.security; e.g. the 'monitor' of make-dds-security.sh)\n"
       "  --png FILE    write the last costmap as PNG (white free, black lethal, yellow to\n"
       "                dark red inflated, slate unknown; north up)\n"
       "  Stops on SIGINT/SIGTERM too. Exit 0 when at least one report arrived.\n");
@@ -99,7 +101,7 @@ std::vector<std::uint8_t> render(const transport::OccupancyGridMsg& grid) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string config_path, json_path, png_path;
+  std::string config_path, json_path, png_path, identity_dir;
   std::uint64_t max_cycles = 0;
   double idle_s = 0.0, timeout_s = 600.0;
   for (int i = 1; i < argc; ++i) {
@@ -107,6 +109,8 @@ int main(int argc, char** argv) {
     const bool has_value = i + 1 < argc;
     if (a == "--config" && has_value) {
       config_path = argv[++i];
+    } else if (a == "--identity" && has_value) {
+      identity_dir = argv[++i];
     } else if (a == "--cycles" && has_value) {
       max_cycles = static_cast<std::uint64_t>(std::max(0, std::atoi(argv[++i])));
     } else if (a == "--idle-s" && has_value) {
@@ -136,6 +140,7 @@ int main(int argc, char** argv) {
     cfg = std::move(loaded).value();
   }
   cfg.dds.participant.name = "tarmac-audit";
+  if (!identity_dir.empty()) cfg.dds.participant.security.use_identity_dir(identity_dir);
   auto participant = transport::Participant::create(cfg.dds.participant);
   if (!participant) {
     std::fprintf(stderr, "tarmac-audit: %s\n", participant.error().message.c_str());

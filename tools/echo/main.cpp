@@ -135,27 +135,31 @@ int echo(const transport::Participant& participant, const std::string& topic,
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string topic, config_path;
+  std::string topic, config_path, identity_dir;
   std::size_t count = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--config" && i + 1 < argc) {
       config_path = argv[++i];
+    } else if (a == "--identity" && i + 1 < argc) {
+      identity_dir = argv[++i];
     } else if (a == "--count" && i + 1 < argc) {
       count = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
     } else if (a == "--help" || a == "-h" || (!a.empty() && a[0] == '-')) {
       std::fprintf(a[0] == '-' && a != "--help" && a != "-h" ? stderr : stdout,
-                   "usage: tarmac-echo TOPIC [--config FILE] [--count N]\n"
+                   "usage: tarmac-echo TOPIC [--config FILE] [--count N] [--identity DIR]\n"
                    "  TOPIC: any topic of the config (costmap, esdf slice, cycle report,\n"
                    "  DiagnosticArray, pose, a sensor's points, virtual obstacles), e.g.\n"
-                   "  rt/tarmac/costmap. One line per sample until --count or SIGINT.\n");
+                   "  rt/tarmac/costmap. One line per sample until --count or SIGINT.\n"
+                   "  --identity DIR: DDS Security identity DIR/cert.pem, DIR/key.pem instead\n"
+                   "  of the config's (dds.security; e.g. make-dds-security.sh's 'monitor').\n");
       return a == "--help" || a == "-h" ? 0 : 64;
     } else {
       topic = a;
     }
   }
   if (topic.empty()) {
-    std::fprintf(stderr, "usage: tarmac-echo TOPIC [--config FILE] [--count N]\n");
+    std::fprintf(stderr, "usage: tarmac-echo TOPIC [--config FILE] [--count N] [--identity DIR]\n");
     return 64;
   }
   config::Config cfg;
@@ -168,6 +172,7 @@ int main(int argc, char** argv) {
     cfg = std::move(loaded).value();
   }
   cfg.dds.participant.name = "tarmac-echo";
+  if (!identity_dir.empty()) cfg.dds.participant.security.use_identity_dir(identity_dir);
   auto participant = transport::Participant::create(cfg.dds.participant);
   if (!participant) {
     std::fprintf(stderr, "tarmac-echo: %s\n", participant.error().message.c_str());

@@ -54,7 +54,8 @@ class Writer {
     fdds::DataWriter* writer =
         impl->publisher()->create_datawriter(topic.value(), to_writer_qos(qos));
     if (writer == nullptr) {
-      return core::Error{"dds.writer", "cannot create a writer on " + topic_name};
+      return core::Error{"dds.writer",
+                         "cannot create a writer on " + topic_name + security_refusal_hint(*impl)};
     }
     return std::unique_ptr<Writer>(new Writer(impl, writer));
   }
@@ -116,7 +117,8 @@ class Reader : private fdds::DataReaderListener {
     reader->reader_ = impl->subscriber()->create_datareader(
         topic.value(), to_reader_qos(qos), reader.get(), fdds::StatusMask::data_available());
     if (reader->reader_ == nullptr) {
-      return core::Error{"dds.reader", "cannot create a reader on " + topic_name};
+      return core::Error{"dds.reader",
+                         "cannot create a reader on " + topic_name + security_refusal_hint(*impl)};
     }
     return reader;
   }

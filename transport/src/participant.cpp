@@ -1,14 +1,26 @@
 #include "tarmac/transport/participant.hpp"
 
 #include <arpa/inet.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <mutex>
 
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
+#include <fastdds/dds/log/Log.hpp>
 
 #include "participant_impl.hpp"
+#include "security_check.hpp"
 #include "tarmac/transport/qos.hpp"
 
 namespace tarmac::transport {
@@ -34,9 +46,103 @@ Locator_t udp_locator(const std::string& address) {
   return locator;
 }
 
+core::Error security_error(const std::string& key, const std::string& why) {
+  return core::Error{"config.security", "dds.security." + key + ": " + why};
+}
+
+/// Checks one security file: set, a readable regular file, and (when `marker` is given) the
+/// kind of PEM block expected, so swapped paths are caught here rather than as a vague refusal.
+core::Status check_security_file(const std::string& key, const std::string& path,
+                                 const char* marker, const char* what) {
+  if (path.empty()) return security_error(key, "must be set when dds.security.enabled is true");
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (status.type() == std::filesystem::file_type::not_found) {
+    return security_error(key, "'" + path + "' does not exist");
+  }
+  if (ec) return security_error(key, "'" + path + "': " + ec.message());
+  if (!std::filesystem::is_regular_file(status)) {
+    return security_error(key, "'" + path + "' is not a regular file");
+  }
+  if (::access(path.c_str(), R_OK) != 0) {
+    return security_error(key, "cannot read '" + path + "': " + std::strerror(errno));
+  }
+  std::ifstream in(path);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (!in.good() && !in.eof()) return security_error(key, "cannot read '" + path + "'");
+  if (marker != nullptr && text.find(marker) == std::string::npos) {
+    return security_error(key, "'" + path + "' is not " + what + " (no '" + marker + "')");
+  }
+  return core::Ok{};
+}
+
+/// Keeps Fast DDS's recent error entries so a refusal can be explained in the returned error.
+class ErrorCollector final : public eprosima::fastdds::dds::LogConsumer {
+ public:
+  void Consume(const eprosima::fastdds::dds::Log::Entry& entry) override {
+    if (entry.kind != eprosima::fastdds::dds::Log::Kind::Error) return;
+    std::lock_guard lock(mutex_);
+    std::string text = entry.message;
+    for (char& c : text) {
+      if (c == '\n' || c == '\r') c = ' ';
+    }
+    while (!text.empty() && text.back() == ' ') text.pop_back();
+    if (entry.context.category != nullptr) text = std::string(entry.context.category) + ": " + text;
+    entries_.push_back(std::move(text));
+    while (entries_.size() > kKept) entries_.pop_front();
+  }
+  std::string take() {
+    std::lock_guard lock(mutex_);
+    std::string joined;
+    for (const auto& e : entries_) joined += (joined.empty() ? "" : "; ") + e;
+    entries_.clear();
+    return joined;
+  }
+
+ private:
+  static constexpr std::size_t kKept = 4;
+  std::mutex mutex_;
+  std::deque<std::string> entries_;
+};
+
+std::atomic<ErrorCollector*> g_collector{nullptr};  // owned by Fast DDS's Log once registered
+std::once_flag g_collector_once;
+
+void collect_dds_errors() {
+  std::call_once(g_collector_once, [] {
+    auto collector = std::make_unique<ErrorCollector>();
+    g_collector = collector.get();
+    // Appended to the consumers: Fast DDS still prints its own log as before.
+    eprosima::fastdds::dds::Log::RegisterConsumer(std::move(collector));
+  });
+}
+
+std::string file_uri(const std::string& path) {
+  // Fast DDS strips "file://" and opens the rest: absolute paths give "file:///...".
+  return "file://" + path;
+}
+
+void add_security_properties(const SecurityConfig& s, fdds::DomainParticipantQos& qos) {
+  auto& props = qos.properties().properties();
+  props.emplace_back("dds.sec.auth.plugin", "builtin.PKI-DH");
+  props.emplace_back("dds.sec.auth.builtin.PKI-DH.identity_ca", file_uri(s.identity_ca));
+  props.emplace_back("dds.sec.auth.builtin.PKI-DH.identity_certificate",
+                     file_uri(s.identity_certificate));
+  props.emplace_back("dds.sec.auth.builtin.PKI-DH.private_key", file_uri(s.private_key));
+  props.emplace_back("dds.sec.access.plugin", "builtin.Access-Permissions");
+  props.emplace_back("dds.sec.access.builtin.Access-Permissions.permissions_ca",
+                     file_uri(s.permissions_ca));
+  props.emplace_back("dds.sec.access.builtin.Access-Permissions.governance",
+                     file_uri(s.governance));
+  props.emplace_back("dds.sec.access.builtin.Access-Permissions.permissions",
+                     file_uri(s.permissions));
+  props.emplace_back("dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
+}
+
 fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
   fdds::DomainParticipantQos qos;
   qos.name(config.name);
+  if (config.security.enabled) add_security_properties(config.security, qos);
   // Only the transports chosen here: the built-in ones would bind every interface.
   qos.transport().use_builtin_transports = false;
 
@@ -84,6 +190,51 @@ const char* to_string(TransportMode mode) {
   return "?";
 }
 
+core::Status SecurityConfig::validate() const {
+  if (!enabled) return core::Ok{};
+  constexpr const char* kCert = "-----BEGIN CERTIFICATE-----";
+  constexpr const char* kCertWhat = "a PEM certificate";
+  if (auto ok = check_security_file("identity_ca", identity_ca, kCert, kCertWhat); !ok) return ok;
+  if (auto ok = check_security_file("identity_certificate", identity_certificate, kCert, kCertWhat);
+      !ok) {
+    return ok;
+  }
+  if (auto ok =
+          check_security_file("private_key", private_key, "PRIVATE KEY-----", "a PEM private key");
+      !ok) {
+    return ok;
+  }
+  if (auto ok = check_security_file("permissions_ca", permissions_ca, kCert, kCertWhat); !ok) {
+    return ok;
+  }
+  // Governance and permissions: S/MIME (openssl smime -sign) or PEM PKCS#7; Fast DDS checks.
+  if (auto ok = check_security_file("governance", governance, nullptr, nullptr); !ok) return ok;
+  if (auto ok = check_security_file("permissions", permissions, nullptr, nullptr); !ok) return ok;
+  return core::Ok{};
+}
+
+void SecurityConfig::use_identity_dir(const std::string& dir) {
+  enabled = true;
+  identity_certificate = (std::filesystem::path(dir) / "cert.pem").string();
+  private_key = (std::filesystem::path(dir) / "key.pem").string();
+}
+
+std::string take_dds_errors() {
+  ErrorCollector* collector = g_collector.load();
+  if (collector == nullptr) return {};
+  eprosima::fastdds::dds::Log::Flush();
+  return collector->take();
+}
+
+std::string security_refusal_hint(const ParticipantImpl& impl) {
+  if (!impl.config().security.enabled) return {};
+  std::string hint =
+      " (DDS Security is on: does the permissions file grant this topic to the participant's "
+      "identity?";
+  if (const std::string why = take_dds_errors(); !why.empty()) hint += " Fast DDS: " + why;
+  return hint + ")";
+}
+
 core::Status ParticipantConfig::validate() const {
   if (domain_id > 232) {
     return config_error("dds.domain_id", "must be 0..232, got " + std::to_string(domain_id));
@@ -112,7 +263,7 @@ core::Status ParticipantConfig::validate() const {
     if (!is_ipv4(address))
       return config_error("dds.initial_peers", "not an IPv4 address: " + address);
   }
-  return core::Ok{};
+  return security.validate();
 }
 
 core::Status QosSpec::validate() const {
@@ -124,8 +275,25 @@ core::Result<Participant> Participant::create(const ParticipantConfig& config) {
   if (auto valid = config.validate(); !valid) return valid.error();
 
   auto* factory = fdds::DomainParticipantFactory::get_instance();
+  if (config.security.enabled) {
+    collect_dds_errors();
+    take_dds_errors();  // only this creation's refusals below
+  }
   fdds::DomainParticipant* participant =
       factory->create_participant(config.domain_id, participant_qos(config));
+  if (participant == nullptr && config.security.enabled) {
+    const std::string logged = take_dds_errors();
+    std::string why = diagnose_security(config.security);
+    if (why.empty()) {
+      why =
+          "no fault found in the files (check the grant's validity dates and domains, and "
+          "the governance's domain rules); Fast DDS: " +
+          (logged.empty() ? std::string("no reason given") : logged);
+    }
+    return core::Error{"dds.security",
+                       "Fast DDS refused the DDS Security material of participant '" + config.name +
+                           "' on domain " + std::to_string(config.domain_id) + ": " + why};
+  }
   if (participant == nullptr) {
     return core::Error{"dds.participant", "Fast DDS refused to create a participant on domain " +
                                               std::to_string(config.domain_id) + " (transport " +

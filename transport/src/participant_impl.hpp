@@ -53,6 +53,15 @@ class ParticipantImpl {
   std::map<std::string, fdds::Topic*> topics_;
 };
 
+/// Error entries Fast DDS logged since the last call (its log is asynchronous: this flushes it
+/// first), joined with "; ", at most the last few. Collected only once a secured participant
+/// was created (the security plugins explain their refusals only there). Empty when none.
+std::string take_dds_errors();
+
+/// For an endpoint Fast DDS refused: with security on, the likely reason (a missing grant) and
+/// what Fast DDS said; empty otherwise.
+std::string security_refusal_hint(const ParticipantImpl& impl);
+
 /// Converts a QosSpec into Fast DDS writer/reader QoS.
 fdds::DataWriterQos to_writer_qos(const QosSpec& spec);
 fdds::DataReaderQos to_reader_qos(const QosSpec& spec);

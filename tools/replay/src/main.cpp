@@ -28,7 +28,7 @@ void usage(std::FILE* to) {
   std::fprintf(to,
                "usage: tarmac-replay --dataset DIR [--rate-scale X] [--config FILE] [--scans N]\n"
                "                     [--poses FILE] [--jitter-ms MS] [--sensor ID] [--loop N]\n"
-               "                     [--no-poses] [--align-ms MS]\n"
+               "                     [--no-poses] [--align-ms MS] [--identity DIR]\n"
                "  Publishes DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt\n"
                "  T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and\n"
                "  geometry_msgs/PoseWithCovarianceStamped on the topics of FILE (default: the\n"
@@ -43,13 +43,16 @@ void usage(std::FILE* to) {
                "  --loop N        replay the sequence N times, stamps continuing (soak tests)\n"
                "  --no-poses      scans only (one replay per LiDAR, one of them with poses)\n"
                "  --align-ms MS   first stamp on a multiple of MS since the epoch, like a LiDAR\n"
-               "                  phase-locked to PTP (tarmacd ticks on the same grid)\n");
+               "                  phase-locked to PTP (tarmacd ticks on the same grid)\n"
+               "  --identity DIR  DDS Security identity DIR/cert.pem, DIR/key.pem instead of\n"
+               "                  the config's (dds.security; e.g. make-dds-security.sh's\n"
+               "                  'publisher')\n");
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string dataset, config_path, poses_file = "poses.txt", sensor_id;
+  std::string dataset, config_path, poses_file = "poses.txt", sensor_id, identity_dir;
   tools::ReplayOptions options;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -74,6 +77,8 @@ int main(int argc, char** argv) {
       options.jitter_ms = std::atof(argv[++i]);
     } else if (a == "--sensor" && has_value) {
       sensor_id = argv[++i];
+    } else if (a == "--identity" && has_value) {
+      identity_dir = argv[++i];
     } else if (a == "--help" || a == "-h") {
       usage(stdout);
       return 0;
@@ -98,6 +103,7 @@ int main(int argc, char** argv) {
     cfg = std::move(loaded).value();
     cfg.dds.participant.name = "tarmac-replay";
   }
+  if (!identity_dir.empty()) cfg.dds.participant.security.use_identity_dir(identity_dir);
   const config::SensorConfig* sensor = &cfg.sensors.front();
   if (!sensor_id.empty()) {
     sensor = nullptr;

@@ -23,6 +23,27 @@ enum class TransportMode {
   kNetwork,
 };
 
+/// DDS Security (OMG DDS-Security 1.1 builtin plugins: PKI-DH authentication,
+/// Access-Permissions access control, AES-GCM-GMAC crypto). Off by default. When enabled, every
+/// path must name a readable file; tools/make-dds-security.sh creates a test set.
+struct SecurityConfig {
+  bool enabled = false;
+  std::string identity_ca;           ///< PEM: the CA that signs participants' identities
+  std::string identity_certificate;  ///< PEM: this participant's certificate, signed by it
+  std::string private_key;           ///< PEM: the certificate's private key
+  std::string permissions_ca;        ///< PEM: the CA that signs governance and permissions
+  std::string governance;            ///< S/MIME-signed governance XML (.p7s): domain rules
+  std::string permissions;           ///< S/MIME-signed permissions XML (.p7s): grants
+
+  /// "config.security" naming dds.security.<key> when a file is missing or unreadable.
+  [[nodiscard]] core::Status validate() const;
+
+  /// Takes the identity (certificate and key) from `dir`, laid out as tools/make-dds-security.sh
+  /// makes it: dir/cert.pem, dir/key.pem. For tools sharing one config file with tarmacd but
+  /// holding their own identity (`--identity DIR`). Enables security.
+  void use_identity_dir(const std::string& dir);
+};
+
 struct ParticipantConfig {
   std::uint32_t domain_id = 0;  ///< DDS domain, 0..232
   std::string name = "tarmac";  ///< participant name shown by discovery tools
@@ -35,6 +56,7 @@ struct ParticipantConfig {
   /// take ~30 ms; 32 MiB brings it under 1 ms (STACK.md).
   std::uint32_t shm_segment_bytes = 32u << 20;
   std::uint32_t shm_max_message_bytes = 4u << 20;
+  SecurityConfig security;  ///< off by default
 
   [[nodiscard]] core::Status validate() const;
 };
@@ -50,7 +72,10 @@ class ParticipantImpl;
 class Participant {
  public:
   /// Creates and enables the participant. Fails with code "dds.participant" when Fast DDS
-  /// refuses the configuration, "config.*" when the config itself is invalid.
+  /// refuses the configuration, "dds.security" when it refuses the security material (e.g. a
+  /// certificate not signed by the identity CA, a bad signature on governance or permissions,
+  /// no grant for the certificate's subject; the message carries Fast DDS's reason), "config.*"
+  /// when the config itself is invalid.
   static core::Result<Participant> create(const ParticipantConfig& config);
 
   [[nodiscard]] const ParticipantConfig& config() const;
