@@ -57,7 +57,7 @@ TEST(OccupancyMap, LogOddsArithmeticAndClamping) {
   float expected = 0.0f;
   for (int i = 0; i < 10; ++i) {
     integrate(map, scan);
-    expected = std::min(expected + std::log(0.7f / 0.3f), std::log(0.97f / 0.03f));
+    expected = std::min(expected + std::log(0.7f / 0.3f), std::log(0.85f / 0.15f));
     EXPECT_FLOAT_EQ(map.log_odds(hit), expected) << i;
   }
   EXPECT_FLOAT_EQ(map.log_odds(hit), map.max_log_odds());
