@@ -568,16 +568,24 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
           float& l = log_odds_[s];
           ++updates;
           if (l <= 0.0f) {  // free or unknown (kUnknown < 0): no static state
-            l = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);  // a miss only lowers
+            const float next = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);
+            // Reaching the lower clamp (observed free scan after scan): the sub-voxel heights
+            // of older returns are void too (a tug's edge hit once leaves no ghost).
+            if (next == l_min_ && l > l_min_) rise_cm_[s] = 0;
+            l = next;  // a miss only lowers
             continue;
           }
           std::uint8_t& st = state_[s];
           if ((st & kStatic) == 0) {
             l = std::max(l + l_miss_, l_min_);
-            if (l <= 0.0f) st = 0;  // reads free: the run of hits is broken
+            if (l <= 0.0f) {  // reads free: the run of hits is broken, the heights are void
+              st = 0;
+              rise_cm_[s] = 0;
+            }
           } else if ((st & kCount) + 1 >= demote) {
             st = 0;  // strong free evidence: leaves the static layer and reads free
             l = std::max(l_miss_, l_min_);
+            rise_cm_[s] = 0;
             demoted.push_back(static_cast<std::uint32_t>(s));
           } else {
             ++st;
