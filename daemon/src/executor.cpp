@@ -751,8 +751,8 @@ TsdfLoadResult Executor::load_tsdf() {
   d.mapper.tsdf() = std::move(map.layer);
   d.mapper.occupancy().import_static(map.occupancy.voxels);
   spdlog::info(
-      "state: static map loaded from {}: TSDF {} voxels in {} blocks, static occupancy {} voxels "
-      "(saved at stamp {} ns)",
+      "state: TSDF loaded from {}: {} voxels in {} blocks, static occupancy {} voxels (saved at "
+      "stamp {} ns)",
       file.string(), result.voxels, d.mapper.tsdf().block_count(), result.static_voxels,
       map.info.stamp_ns);
   return result;
