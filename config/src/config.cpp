@@ -249,6 +249,8 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     r.scalar<double>("max_range_m", o.max_range_m, 0.1, 1000.0);
     r.scalar<double>("clearing_range_m", o.clearing_range_m, 0.0, 1000.0);
     r.scalar<double>("ground_radius_m", o.ground_radius_m, 0.0, 10.0);
+    r.scalar<int>("static_promote_scans", o.static_promote_scans, 0, 127);
+    r.scalar<int>("static_demote_scans", o.static_demote_scans, 1, 127);
   });
   root.map("costmap", [&](MapReader& r) {
     auto& c = p.costmap;
@@ -644,6 +646,8 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "max_range_m" << YAML::Value << o.max_range_m;
   out << YAML::Key << "clearing_range_m" << YAML::Value << o.clearing_range_m;
   out << YAML::Key << "ground_radius_m" << YAML::Value << o.ground_radius_m;
+  out << YAML::Key << "static_promote_scans" << YAML::Value << o.static_promote_scans;
+  out << YAML::Key << "static_demote_scans" << YAML::Value << o.static_demote_scans;
   out << YAML::EndMap;
   const auto& c = m.costmap;
   out << YAML::Key << "costmap" << YAML::Value << YAML::BeginMap;

@@ -5,10 +5,65 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <tuple>
+#include <unordered_map>
 
 namespace tarmac::core {
 
+/// The site-wide static layer: one 512-bit mask per 8×8×8 block of voxels that holds any.
+/// Sparse and OpenVDB-free (this file stays cheap to compile); only promotions, demotions and the
+/// window's entering slabs touch it, never the per-voxel hot loops.
+struct StaticStore {
+  static constexpr int kShift = 3;
+  static constexpr int kSide = 1 << kShift;
+  using Mask = std::array<std::uint64_t, 8>;  // bit (z·64 + y·8 + x) of the block
+  std::unordered_map<std::uint64_t, Mask> blocks;
+  std::size_t count = 0;
+
+  static std::uint64_t key(int bx, int by, int bz) {
+    constexpr std::uint64_t kBias = std::uint64_t{1} << 20;
+    constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
+    return ((static_cast<std::uint64_t>(bz) + kBias) & kMask) << 42 |
+           ((static_cast<std::uint64_t>(by) + kBias) & kMask) << 21 |
+           ((static_cast<std::uint64_t>(bx) + kBias) & kMask);
+  }
+  static int bit(const VoxelIndex& v) {
+    return ((v.z() & (kSide - 1)) << 6) | ((v.y() & (kSide - 1)) << 3) | (v.x() & (kSide - 1));
+  }
+  static std::uint64_t key_of(const VoxelIndex& v) {
+    return key(v.x() >> kShift, v.y() >> kShift, v.z() >> kShift);
+  }
+  bool contains(const VoxelIndex& v) const {
+    const auto it = blocks.find(key_of(v));
+    if (it == blocks.end()) return false;
+    const int b = bit(v);
+    return ((it->second[b >> 6] >> (b & 63)) & 1) != 0;
+  }
+  void insert(const VoxelIndex& v) {
+    Mask& m = blocks.try_emplace(key_of(v), Mask{}).first->second;
+    const int b = bit(v);
+    const std::uint64_t one = std::uint64_t{1} << (b & 63);
+    if ((m[b >> 6] & one) == 0) ++count;
+    m[b >> 6] |= one;
+  }
+  void erase(const VoxelIndex& v) {
+    const auto it = blocks.find(key_of(v));
+    if (it == blocks.end()) return;
+    const int b = bit(v);
+    const std::uint64_t one = std::uint64_t{1} << (b & 63);
+    if ((it->second[b >> 6] & one) == 0) return;
+    it->second[b >> 6] &= ~one;
+    --count;
+    if (std::all_of(it->second.begin(), it->second.end(), [](std::uint64_t w) { return w == 0; })) {
+      blocks.erase(it);
+    }
+  }
+};
+
 namespace {
+
+constexpr std::uint8_t kStatic = 0x80;
+constexpr std::uint8_t kCount = 0x7f;
 
 /// Non-negative remainder.
 int wrap(int i, int n) {
@@ -152,6 +207,12 @@ Status OccupancyParams::validate() const {
   if (!(window_below_m >= 0.0 && window_below_m <= window_z_vox * voxel_size_m)) {
     return bad("window_below_m", "must be within the window height");
   }
+  if (static_promote_scans < 0 || static_promote_scans > kCount) {
+    return bad("static_promote_scans", "must be in [0, 127]");
+  }
+  if (static_demote_scans < 1 || static_demote_scans > kCount) {
+    return bad("static_demote_scans", "must be in [1, 127]");
+  }
   return Ok{};
 }
 
@@ -171,6 +232,9 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   const std::size_t n = static_cast<std::size_t>(dims_.x()) * dims_.y() * dims_.z();
   log_odds_.assign(n, kUnknown);
   rise_cm_.assign(n, 0);
+  state_.assign(n, 0);
+  static_ = std::make_unique<StaticStore>();
+  demoted_.resize(kApplyTasks);
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
                         std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;
@@ -185,14 +249,20 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   hit_slots_.reserve(kReservedHitSlots);
 }
 
+OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
+OccupancyMap& OccupancyMap::operator=(OccupancyMap&&) noexcept = default;
+OccupancyMap::~OccupancyMap() = default;
+
 std::size_t OccupancyMap::memory_bytes() const {
-  std::size_t bytes = log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() +
-                      scan_ground_z_.capacity() * sizeof(float) +
-                      scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
-                      hit_bits_.capacity() * sizeof(std::uint64_t) +
-                      hit_slots_.capacity() * sizeof(std::uint32_t);
+  std::size_t bytes =
+      log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() + state_.capacity() +
+      static_->blocks.size() * (sizeof(StaticStore::Mask) + 32) +
+      scan_ground_z_.capacity() * sizeof(float) +
+      scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
+      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t);
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_blocks_) bytes += d.capacity();
+  for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
   return bytes;
 }
 
@@ -225,10 +295,12 @@ void OccupancyMap::clear_slab(int axis, int global_index) {
       if (axis == 0) {
         log_odds_[row + r] = kUnknown;
         rise_cm_[row + r] = 0;
+        state_[row + r] = 0;
       } else {
         const auto first = static_cast<std::ptrdiff_t>(row);
         std::fill_n(log_odds_.begin() + first, nx, kUnknown);
         std::fill_n(rise_cm_.begin() + first, nx, std::uint8_t{0});
+        std::fill_n(state_.begin() + first, nx, std::uint8_t{0});
       }
     }
   }
@@ -243,29 +315,110 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W) {
   if (!placed_) {
     min_ = target;
     placed_ = true;
+    restore_static(min_, min_ + dims_ - VoxelIndex::Ones());
     return;
   }
   // Axis by axis: the voxels entering along an axis occupy exactly the ring slabs of the voxels
-  // leaving, so clearing those slabs forgets the old content and nothing else.
+  // leaving, so clearing those slabs forgets the old content and nothing else; the static layer's
+  // voxels among the entering ones read static again.
   for (int a = 0; a < 3; ++a) {
     const int shift = target[a] - min_[a];
     if (shift == 0) continue;
+    VoxelIndex lo = min_, hi = min_ + dims_ - VoxelIndex::Ones();
     if (std::abs(shift) >= dims_[a]) {
       std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
       std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
+      std::fill(state_.begin(), state_.end(), std::uint8_t{0});
+      lo[a] = target[a];
+      hi[a] = target[a] + dims_[a] - 1;
     } else if (shift > 0) {
       for (int g = min_[a] + dims_[a]; g < target[a] + dims_[a]; ++g) clear_slab(a, g);
+      lo[a] = min_[a] + dims_[a];
+      hi[a] = target[a] + dims_[a] - 1;
     } else {
       for (int g = target[a]; g < min_[a]; ++g) clear_slab(a, g);
+      lo[a] = target[a];
+      hi[a] = min_[a] - 1;
     }
     min_[a] = target[a];
+    restore_static(lo, hi);
   }
 }
 
-void OccupancyMap::update(std::size_t s, bool hit) {
-  float& l = log_odds_[s];
-  const float base = l == kUnknown ? 0.0f : l;
-  l = std::clamp(base + (hit ? l_hit_ : l_miss_), l_min_, l_max_);
+void OccupancyMap::restore_static(const VoxelIndex& lo, const VoxelIndex& hi) {
+  if (static_->count == 0) return;
+  constexpr int kS = StaticStore::kShift;
+  for (int bz = lo.z() >> kS; bz <= hi.z() >> kS; ++bz) {
+    for (int by = lo.y() >> kS; by <= hi.y() >> kS; ++by) {
+      for (int bx = lo.x() >> kS; bx <= hi.x() >> kS; ++bx) {
+        const auto it = static_->blocks.find(StaticStore::key(bx, by, bz));
+        if (it == static_->blocks.end()) continue;
+        for (int w = 0; w < 8; ++w) {
+          for (std::uint64_t m = it->second[w]; m != 0; m &= m - 1) {
+            const int b = w * 64 + std::countr_zero(m);
+            const VoxelIndex v((bx << kS) | (b & 7), (by << kS) | ((b >> 3) & 7),
+                               (bz << kS) | (b >> 6));
+            if ((v.array() < lo.array()).any() || (v.array() > hi.array()).any()) continue;
+            const std::size_t s = slot(v);
+            state_[s] = kStatic;
+            log_odds_[s] = std::max(log_odds_[s], l_hit_);
+          }
+        }
+      }
+    }
+  }
+}
+
+VoxelIndex OccupancyMap::voxel_of_slot(std::size_t s) const {
+  const auto nx = static_cast<std::size_t>(dims_.x()), ny = static_cast<std::size_t>(dims_.y());
+  const int rings[3] = {static_cast<int>(s % nx), static_cast<int>((s / nx) % ny),
+                        static_cast<int>(s / (nx * ny))};
+  VoxelIndex v;
+  for (int a = 0; a < 3; ++a) v[a] = min_[a] + wrap(rings[a] - wrap(min_[a], dims_[a]), dims_[a]);
+  return v;
+}
+
+bool OccupancyMap::is_static(const VoxelIndex& v) const {
+  return static_->contains(v);
+}
+
+std::size_t OccupancyMap::static_count() const {
+  return static_->count;
+}
+
+void OccupancyMap::export_static(std::vector<VoxelIndex>& out) const {
+  out.clear();
+  out.reserve(static_->count);
+  for (const auto& [key, mask] : static_->blocks) {
+    const auto field = [&](int shift) {
+      return static_cast<int>(static_cast<std::int64_t>((key >> shift) & ((1u << 21) - 1)) -
+                              (std::int64_t{1} << 20));
+    };
+    const int bx = field(0), by = field(21), bz = field(42);
+    for (int w = 0; w < 8; ++w) {
+      for (std::uint64_t m = mask[w]; m != 0; m &= m - 1) {
+        const int b = w * 64 + std::countr_zero(m);
+        out.emplace_back((bx << 3) | (b & 7), (by << 3) | ((b >> 3) & 7), (bz << 3) | (b >> 6));
+      }
+    }
+  }
+  std::sort(out.begin(), out.end(), [](const VoxelIndex& a, const VoxelIndex& b) {
+    return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+  });
+}
+
+void OccupancyMap::import_static(std::span<const VoxelIndex> voxels) {
+  // Window voxels that were static and are not any more fall back to unknown (their dynamic
+  // content was the static floor, not an observation).
+  for (std::size_t s = 0; s < state_.size(); ++s) {
+    if ((state_[s] & kStatic) != 0) {
+      state_[s] = 0;
+      log_odds_[s] = kUnknown;
+    }
+  }
+  static_ = std::make_unique<StaticStore>();
+  for (const VoxelIndex& v : voxels) static_->insert(v);
+  if (placed_) restore_static(min_, min_ + dims_ - VoxelIndex::Ones());
 }
 
 OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
@@ -298,6 +451,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     g = std::min(g, up.dot(p));
   }
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+  const int promote = params_.static_promote_scans;
   hit_slots_.clear();
   for (const auto& p : points_W) {
     if (!in_range(p)) continue;
@@ -326,7 +480,20 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     if ((word & bit) == 0) {
       word |= bit;
       hit_slots_.push_back(static_cast<std::uint32_t>(s));
-      update(s, true);
+      float& l = log_odds_[s];
+      l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
+      std::uint8_t& st = state_[s];
+      if ((st & kStatic) != 0) {
+        st = kStatic;  // a return: the run of free observations restarts
+      } else if (l <= 0.0f || promote == 0) {
+        st = 0;  // not reading occupied yet: no run
+      } else if ((st & kCount) + 1 >= promote) {
+        st = kStatic;
+        static_->insert(v);
+        ++stats.promotions;
+      } else {
+        ++st;
+      }
       ++stats.hit_updates;
       rise_cm_[s] = rise;  // the latest scan's returns replace older ones
     } else {
@@ -374,12 +541,17 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   });
 
   // 3. Apply: fixed ranges of blocks, each voxel marked by any task and not hit gets one miss.
-  //    The marks are cleared as they are read, ready for the next scan.
+  //    The marks are cleared as they are read, ready for the next scan. Only voxels reading
+  //    occupied carry static-layer state (free space costs no extra memory access).
   const std::size_t n_blocks = dirty_blocks_[0].size();
   const std::size_t n_words = hit_bits_.size();
   std::array<std::uint64_t, kApplyTasks> task_updates{};
+  const int demote = params_.static_demote_scans;
+  const float l_floor = l_hit_;
   runner.parallel_for(kApplyTasks, [&](std::size_t task) {
     std::uint64_t updates = 0;
+    std::vector<std::uint32_t>& demoted = demoted_[task];
+    demoted.clear();
     const std::size_t b_begin = n_blocks * task / kApplyTasks;
     const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
     for (std::size_t b = b_begin; b < b_end; ++b) {
@@ -401,15 +573,43 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         while (marks != 0) {
           const int bit = std::countr_zero(marks);
           marks &= marks - 1;
-          float& l = log_odds_[(wi << 6) + static_cast<std::size_t>(bit)];
-          l = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);  // a miss only lowers
+          const std::size_t s = (wi << 6) + static_cast<std::size_t>(bit);
+          float& l = log_odds_[s];
           ++updates;
+          if (l <= 0.0f) {  // free or unknown (kUnknown < 0): no static state
+            const float next = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);
+            // Reaching the lower clamp (observed free scan after scan): the sub-voxel heights
+            // of older returns are void too (a tug's edge hit once leaves no ghost).
+            if (next == l_min_ && l > l_min_) rise_cm_[s] = 0;
+            l = next;  // a miss only lowers
+            continue;
+          }
+          std::uint8_t& st = state_[s];
+          if ((st & kStatic) == 0) {
+            l = std::max(l + l_miss_, l_min_);
+            if (l <= 0.0f) {  // reads free: the run of hits is broken, the heights are void
+              st = 0;
+              rise_cm_[s] = 0;
+            }
+          } else if ((st & kCount) + 1 >= demote) {
+            st = 0;  // strong free evidence: leaves the static layer and reads free
+            l = std::max(l_miss_, l_min_);
+            rise_cm_[s] = 0;
+            demoted.push_back(static_cast<std::uint32_t>(s));
+          } else {
+            ++st;
+            l = std::max(l + l_miss_, l_floor);
+          }
         }
       }
     }
     task_updates[task] = updates;
   });
   for (const std::uint32_t s : hit_slots_) hit_bits_[s >> 6] = 0;
+  for (const auto& demoted : demoted_) {
+    for (const std::uint32_t s : demoted) static_->erase(voxel_of_slot(s));
+    stats.demotions += demoted.size();
+  }
 
   stats.rays = n_rays;
   for (const auto v : task_visits) stats.voxel_visits += v;

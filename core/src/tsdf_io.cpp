@@ -3,11 +3,13 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <tuple>
 
 #include <openvdb/io/Stream.h>
 
@@ -115,7 +117,8 @@ bool merge_grids(const openvdb::FloatGrid& distance, const openvdb::FloatGrid& w
 
 }  // namespace
 
-Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, TsdfMapInfo info) {
+Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, TsdfMapInfo info,
+                 const StaticOccupancy* occupancy) {
   openvdb::initialize();
   info.voxel_size_m = layer.voxel_size_m();
   info.truncation_m = layer.truncation_m();
@@ -132,6 +135,18 @@ Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, Tsdf
     openvdb::FloatGrid::Ptr distance, weight;
     split_grids(layer, distance, weight);
     openvdb::GridCPtrVec grids{distance, weight};
+    if (occupancy != nullptr && occupancy->voxel_size_m > 0.0f) {
+      meta.insertMeta("tarmac.static_voxel_size_m",
+                      openvdb::FloatMetadata(occupancy->voxel_size_m));
+      auto mask = openvdb::BoolGrid::create(false);
+      mask->setName("static_occupancy");
+      mask->setTransform(tsdf_transform(occupancy->voxel_size_m));
+      openvdb::tree::ValueAccessor<openvdb::BoolTree> acc(mask->tree());
+      for (const Eigen::Vector3i& v : occupancy->voxels) {
+        acc.setValueOn(openvdb::Coord(v.x(), v.y(), v.z()), true);
+      }
+      grids.push_back(mask);
+    }
     openvdb::io::File out(tmp.string());
     // Blosc is ~10x faster than zlib here; integrity comes from the trailer's checksum.
     const std::uint32_t codec = openvdb::io::Archive::hasBloscCompression()
@@ -197,7 +212,10 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file) {
 
   openvdb::initialize();
   TsdfMapInfo info;
+  StaticOccupancy occupancy;
   openvdb::FloatGrid::Ptr distance, weight;
+  openvdb::BoolGrid::Ptr mask;
+  bool has_static_meta = false;
   try {
     std::istringstream stream(std::move(data));
     openvdb::io::Stream vdb(stream, /*delayLoad=*/false);
@@ -217,9 +235,12 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file) {
         !read_meta<openvdb::Int64Metadata>(*meta, "tarmac.stamp_ns", info.stamp_ns)) {
       return Error{"tsdf_io.format", name + ": incomplete tarmac metadata"};
     }
+    has_static_meta = read_meta<openvdb::FloatMetadata>(*meta, "tarmac.static_voxel_size_m",
+                                                        occupancy.voxel_size_m);
     for (const auto& g : *vdb.getGrids()) {
       if (g->getName() == "tsdf") distance = openvdb::gridPtrCast<openvdb::FloatGrid>(g);
       if (g->getName() == "weight") weight = openvdb::gridPtrCast<openvdb::FloatGrid>(g);
+      if (g->getName() == "static_occupancy") mask = openvdb::gridPtrCast<openvdb::BoolGrid>(g);
     }
   } catch (const std::exception& e) {
     return Error{"tsdf_io.corrupt", name + ": OpenVDB cannot parse it: " + e.what()};
@@ -254,11 +275,38 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file) {
       return Error{"tsdf_io.corrupt", name + ": invalid weight"};
     }
   }
+  if (has_static_meta != (mask != nullptr)) {
+    return Error{"tsdf_io.corrupt",
+                 name +
+                     ": bool grid 'static_occupancy' and tarmac.static_voxel_size_m must come "
+                     "together"};
+  }
+  if (mask) {
+    if (!(occupancy.voxel_size_m >= 0.02f && occupancy.voxel_size_m <= 2.0f)) {
+      return Error{"tsdf_io.corrupt", name + ": implausible static occupancy voxel size"};
+    }
+    if (mask->tree().hasActiveTiles() ||
+        mask->transform() != *tsdf_transform(occupancy.voxel_size_m)) {
+      return Error{"tsdf_io.corrupt",
+                   name + ": 'static_occupancy' has tiles or a transform unlike its voxel size"};
+    }
+    occupancy.voxels.reserve(mask->tree().activeVoxelCount());
+    for (auto it = mask->tree().cbeginValueOn(); it; ++it) {
+      const openvdb::Coord c = it.getCoord();
+      occupancy.voxels.emplace_back(c.x(), c.y(), c.z());
+    }
+    std::sort(occupancy.voxels.begin(), occupancy.voxels.end(),
+              [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+                return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+              });
+  } else {
+    occupancy.voxel_size_m = 0.0f;
+  }
   TsdfLayer layer(info.voxel_size_m, info.truncation_m);
   if (!merge_grids(*distance, *weight, layer)) {
     return Error{"tsdf_io.corrupt", name + ": 'weight' lacks a block that 'tsdf' has"};
   }
-  return LoadedTsdf{std::move(layer), std::move(info)};
+  return LoadedTsdf{std::move(layer), std::move(info), std::move(occupancy)};
 }
 
 Status check_tsdf_matches(const TsdfMapInfo& info, const std::string& frame_id, float voxel_size_m,
@@ -271,6 +319,16 @@ Status check_tsdf_matches(const TsdfMapInfo& info, const std::string& frame_id, 
     std::ostringstream os;
     os << "map voxel " << info.voxel_size_m << " m / truncation " << info.truncation_m
        << " m, expected " << voxel_size_m << " m / " << truncation_m << " m";
+    return Error{"tsdf_io.mismatch", os.str()};
+  }
+  return Ok{};
+}
+
+Status check_static_occupancy_matches(const StaticOccupancy& occupancy, float voxel_size_m) {
+  if (occupancy.voxel_size_m != 0.0f && occupancy.voxel_size_m != voxel_size_m) {
+    std::ostringstream os;
+    os << "static occupancy voxel " << occupancy.voxel_size_m << " m, expected " << voxel_size_m
+       << " m";
     return Error{"tsdf_io.mismatch", os.str()};
   }
   return Ok{};

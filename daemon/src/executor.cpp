@@ -200,6 +200,13 @@ class Executor::Impl {
     info.stamp_ns = newest_stamp_ns;
     return info;
   }
+  /// The occupancy window's static layer, saved in the same .vdb as the TSDF.
+  [[nodiscard]] core::StaticOccupancy static_occupancy() const {
+    core::StaticOccupancy s;
+    s.voxel_size_m = static_cast<float>(config.mapping.occupancy.voxel_size_m);
+    mapper.occupancy().export_static(s.voxels);
+    return s;
+  }
   /// Periodic save: between ticks, on the executor thread, copies the TSDF and hands the copy
   /// to the saver thread (skipped, counted, when the previous copy is still being written).
   void snapshot_tsdf();
@@ -247,6 +254,7 @@ class Executor::Impl {
   std::mutex saver_mutex;
   std::condition_variable saver_wake;
   std::unique_ptr<core::TsdfLayer> saver_snapshot;  // guarded by saver_mutex
+  core::StaticOccupancy saver_static;               // guarded by saver_mutex
   core::TsdfMapInfo saver_info;                     // guarded by saver_mutex
   bool saver_stop = false;                          // guarded by saver_mutex
   std::atomic<bool> saver_busy{false};
@@ -636,11 +644,13 @@ void Executor::Impl::snapshot_tsdf() {
   }
   const auto t0 = Clock::now();
   auto copy = std::make_unique<core::TsdfLayer>(mapper.tsdf().clone());
+  core::StaticOccupancy static_copy = static_occupancy();
   const double copy_ms = ms_between(t0, Clock::now());
   saver_busy = true;
   {
     std::lock_guard lock(saver_mutex);
     saver_snapshot = std::move(copy);
+    saver_static = std::move(static_copy);
     saver_info = tsdf_info();
   }
   saver_wake.notify_one();
@@ -654,12 +664,13 @@ void Executor::Impl::saver_loop() {
     saver_wake.wait(lock, [this] { return saver_stop || saver_snapshot != nullptr; });
     if (saver_snapshot == nullptr) return;  // stop requested, nothing pending
     std::unique_ptr<core::TsdfLayer> layer = std::move(saver_snapshot);
+    const core::StaticOccupancy occupancy = std::move(saver_static);
     const core::TsdfMapInfo info = saver_info;
     lock.unlock();
     const auto t0 = Clock::now();
     std::error_code ec;
     std::filesystem::create_directories(config.state.dir, ec);
-    const core::Status saved = core::save_tsdf(tsdf_path(), *layer, info);
+    const core::Status saved = core::save_tsdf(tsdf_path(), *layer, info, &occupancy);
     const double ms = ms_between(t0, Clock::now());
     {
       std::lock_guard totals_lock(totals_mutex);
@@ -683,7 +694,8 @@ core::Status Executor::save_tsdf() const {
   std::error_code ec;
   std::filesystem::create_directories(d.config.state.dir, ec);
   if (ec) return core::Error{"state.io", d.config.state.dir + ": " + ec.message()};
-  return core::save_tsdf(d.tsdf_path(), d.mapper.tsdf(), d.tsdf_info());
+  const core::StaticOccupancy occupancy = d.static_occupancy();
+  return core::save_tsdf(d.tsdf_path(), d.mapper.tsdf(), d.tsdf_info(), &occupancy);
 }
 
 const core::TsdfLayer& Executor::tsdf() const {
@@ -709,6 +721,13 @@ TsdfLoadResult Executor::load_tsdf() {
     checked = loaded ? core::check_tsdf_matches(loaded.value().info, d.config.outputs.frame_id,
                                                 t.voxel_size_m, t.truncation_m)
                      : core::Status(loaded.error());
+    if (checked) {
+      checked = core::check_static_occupancy_matches(
+          loaded.value().occupancy, static_cast<float>(d.config.mapping.occupancy.voxel_size_m));
+      if (!checked) {
+        checked = core::Error{checked.error().code, file.string() + ": " + checked.error().message};
+      }
+    }
   } catch (const std::exception& e) {
     checked = core::Error{"tsdf_io.corrupt", file.string() + ": " + e.what()};
   }
@@ -732,9 +751,14 @@ TsdfLoadResult Executor::load_tsdf() {
   }
   result.kind = TsdfLoadResult::Kind::kLoaded;
   result.voxels = map.layer.voxel_count();
+  result.static_voxels = map.occupancy.voxels.size();
   d.mapper.tsdf() = std::move(map.layer);
-  spdlog::info("state: TSDF loaded from {}: {} voxels in {} blocks (saved at stamp {} ns)",
-               file.string(), result.voxels, d.mapper.tsdf().block_count(), map.info.stamp_ns);
+  d.mapper.occupancy().import_static(map.occupancy.voxels);
+  spdlog::info(
+      "state: TSDF loaded from {}: {} voxels in {} blocks, static occupancy {} voxels (saved at "
+      "stamp {} ns)",
+      file.string(), result.voxels, d.mapper.tsdf().block_count(), result.static_voxels,
+      map.info.stamp_ns);
   return result;
 }
 

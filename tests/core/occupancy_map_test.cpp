@@ -57,7 +57,7 @@ TEST(OccupancyMap, LogOddsArithmeticAndClamping) {
   float expected = 0.0f;
   for (int i = 0; i < 10; ++i) {
     integrate(map, scan);
-    expected = std::min(expected + std::log(0.7f / 0.3f), std::log(0.97f / 0.03f));
+    expected = std::min(expected + std::log(0.7f / 0.3f), std::log(0.85f / 0.15f));
     EXPECT_FLOAT_EQ(map.log_odds(hit), expected) << i;
   }
   EXPECT_FLOAT_EQ(map.log_odds(hit), map.max_log_odds());
@@ -170,6 +170,128 @@ TEST(OccupancyMap, Scrolling_KeepsContentAndForgetsWhatLeft) {
   map.recenter(Eigen::Vector3d::Zero());
   EXPECT_EQ(map.log_odds(far_hit), OccupancyMap::kUnknown);
   EXPECT_FLOAT_EQ(map.log_odds(near_hit), map.hit_log_odds());
+}
+
+// A target voxel 3 m along x; a "present" scan returns from it, an "absent" scan's ray passes
+// through it to a return 1 m behind.
+struct Target {
+  Eigen::Vector3d origin{0.1, 0.1, 0.1};
+  Eigen::Vector3f at{3.1f, 0.1f, 0.1f};
+  Eigen::Vector3f behind{4.1f, 0.1f, 0.1f};
+  Scan present() const { return Scan{origin, {at}, {}}; }
+  Scan absent() const { return Scan{origin, {behind}, {}}; }
+};
+
+TEST(OccupancyMap, DynamicLayer_ClearsInFiveMissesFromTheClamp) {
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  const Target t;
+  const VoxelIndex v = map.voxel_of(t.at.cast<double>());
+  for (int i = 0; i < 10; ++i) integrate(map, t.present());  // < promotion: dynamic only
+  ASSERT_FLOAT_EQ(map.log_odds(v), map.max_log_odds());
+  EXPECT_FALSE(map.is_static(v));
+  // logit(0.85) = 1.735, logit(0.4) = -0.405: 4 misses leave 0.113, the 5th reads free.
+  for (int i = 1; i <= 5; ++i) {
+    integrate(map, t.absent());
+    EXPECT_EQ(map.log_odds(v) > 0.0f, i < 5) << i;
+  }
+}
+
+TEST(OccupancyMap, StaticLayer_PromotedAfterConsecutiveHitsAndOnlyStrongFreeEvidenceRemovesIt) {
+  OccupancyParams p = small_params();
+  p.static_promote_scans = 20;
+  p.static_demote_scans = 10;
+  OccupancyMap map(p);
+  map.recenter(Eigen::Vector3d::Zero());
+  const Target t;
+  const VoxelIndex v = map.voxel_of(t.at.cast<double>());
+  // A miss that leaves it occupied does not break the run; 19 hits are not enough.
+  for (int i = 0; i < 10; ++i) integrate(map, t.present());
+  integrate(map, t.absent());
+  for (int i = 0; i < 8; ++i) integrate(map, t.present());
+  EXPECT_FALSE(map.is_static(v));
+  EXPECT_EQ(integrate(map, t.present()).promotions, 0u);  // hit 19
+  EXPECT_EQ(integrate(map, t.present()).promotions, 1u);  // hit 20
+  EXPECT_TRUE(map.is_static(v));
+  EXPECT_EQ(map.static_count(), 1u);
+  // Nine free observations, a return, nine more: never cleared, never below one hit's log-odds.
+  for (int round = 0; round < 2; ++round) {
+    for (int i = 0; i < 9; ++i) {
+      integrate(map, t.absent());
+      ASSERT_TRUE(map.is_static(v));
+      ASSERT_GE(map.log_odds(v), map.hit_log_odds());
+    }
+    if (round == 0) integrate(map, t.present());
+  }
+  // The tenth consecutive free observation removes it, and it reads free at once.
+  // The same scan is the 20th consecutive hit of the voxel behind it: that one becomes static.
+  const VoxelIndex behind = map.voxel_of(t.behind.cast<double>());
+  EXPECT_FALSE(map.is_static(behind));
+  const auto stats = integrate(map, t.absent());
+  EXPECT_EQ(stats.demotions, 1u);
+  EXPECT_EQ(stats.promotions, 1u);
+  EXPECT_FALSE(map.is_static(v));
+  EXPECT_TRUE(map.is_static(behind));
+  EXPECT_EQ(map.static_count(), 1u);
+  EXPECT_LE(map.log_odds(v), 0.0f);
+}
+
+TEST(OccupancyMap, StaticLayer_ARunBrokenByReadingFreeStartsAgain) {
+  OccupancyMap map(small_params());  // 20 / 10
+  map.recenter(Eigen::Vector3d::Zero());
+  const Target t;
+  const VoxelIndex v = map.voxel_of(t.at.cast<double>());
+  for (int i = 0; i < 15; ++i) integrate(map, t.present());  // a tug's face: 15 scans
+  for (int i = 0; i < 5; ++i) integrate(map, t.absent());    // reads free
+  ASSERT_LE(map.log_odds(v), 0.0f);
+  // 1.735 − 5·0.405 = −0.29: the first hit brings it to +0.56, so it starts the new run.
+  for (int i = 0; i < 19; ++i) integrate(map, t.present());
+  EXPECT_FALSE(map.is_static(v));
+  integrate(map, t.present());
+  EXPECT_TRUE(map.is_static(v));
+}
+
+TEST(OccupancyMap, StaticLayer_SurvivesScrollingAwayAndBackAndImportExport) {
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  const Target t;
+  const VoxelIndex v = map.voxel_of(t.at.cast<double>());
+  for (int i = 0; i < 20; ++i) integrate(map, t.present());
+  ASSERT_TRUE(map.is_static(v));
+  map.recenter(Eigen::Vector3d(40.0, 0.0, 0.0));  // the window (20 m wide) leaves it
+  ASSERT_FALSE(map.in_window(v));
+  EXPECT_TRUE(map.is_static(v));
+  map.recenter(Eigen::Vector3d::Zero());  // back: it reads occupied without a new scan
+  EXPECT_FLOAT_EQ(map.log_odds(v), map.hit_log_odds());
+  EXPECT_EQ(map.log_odds(v + VoxelIndex(1, 0, 0)), OccupancyMap::kUnknown);  // unknown stays
+  std::vector<VoxelIndex> out;
+  map.export_static(out);
+  ASSERT_EQ(out, std::vector<VoxelIndex>{v});
+  // A fresh map given that layer: static inside the window at its first placement.
+  OccupancyMap fresh(small_params());
+  const std::vector<VoxelIndex> layer{v, VoxelIndex(-500, 7, -3)};
+  fresh.import_static(layer);
+  fresh.recenter(Eigen::Vector3d::Zero());
+  EXPECT_FLOAT_EQ(fresh.log_odds(v), fresh.hit_log_odds());
+  EXPECT_TRUE(fresh.is_static(VoxelIndex(-500, 7, -3)));
+  EXPECT_EQ(fresh.static_count(), 2u);
+  fresh.export_static(out);
+  EXPECT_EQ(out, (std::vector<VoxelIndex>{VoxelIndex(-500, 7, -3), v}));
+}
+
+TEST(OccupancyMap, StaticLayer_ZeroPromotionDisablesIt) {
+  OccupancyParams p = small_params();
+  p.static_promote_scans = 0;
+  OccupancyMap map(p);
+  map.recenter(Eigen::Vector3d::Zero());
+  const Target t;
+  for (int i = 0; i < 50; ++i) integrate(map, t.present());
+  EXPECT_EQ(map.static_count(), 0u);
+  p.static_promote_scans = 128;
+  EXPECT_FALSE(p.validate().ok());
+  p.static_promote_scans = 20;
+  p.static_demote_scans = 0;
+  EXPECT_FALSE(p.validate().ok());
 }
 
 TEST(OccupancyMap, Deterministic_ForOneTwoAndFourThreads) {

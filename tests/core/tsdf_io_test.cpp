@@ -1,8 +1,10 @@
 #include "tarmac/core/tsdf_io.hpp"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <tuple>
 
 #include <gtest/gtest.h>
 
@@ -153,6 +155,65 @@ TEST_F(TsdfIo, Load_RefusesForeignFilesAndMismatchedMaps) {
   EXPECT_EQ(check_tsdf_matches(i, "map", 0.1f, 0.4f).error().code, "tsdf_io.mismatch");
   EXPECT_EQ(check_tsdf_matches(i, "odom", 0.1f, 0.3f).error().code, "tsdf_io.mismatch");
   EXPECT_TRUE(check_tsdf_matches(i, "map", 0.1f, 0.3f).ok());
+}
+
+/// A static occupancy layer with voxels on both sides of 0 along every axis, unsorted.
+StaticOccupancy static_layer() {
+  StaticOccupancy s;
+  s.voxel_size_m = 0.2f;
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> d(-3000, 3000);
+  for (int i = 0; i < 5000; ++i) s.voxels.emplace_back(d(rng), d(rng), d(rng) / 100);
+  s.voxels.emplace_back(0, 0, 0);
+  s.voxels.emplace_back(-1, -1, -1);
+  return s;
+}
+
+TEST_F(TsdfIo, StaticOccupancy_RoundTripIsIdentical) {
+  const TsdfLayer layer = small_map();
+  StaticOccupancy occ = static_layer();
+  const fs::path f = dir_ / "map.vdb";
+  ASSERT_TRUE(save_tsdf(f, layer, info(), &occ).ok());
+  auto loaded = load_tsdf(f);
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded.value().layer.digest(), layer.digest());
+  std::sort(occ.voxels.begin(), occ.voxels.end(),
+            [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+              return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+            });
+  occ.voxels.erase(std::unique(occ.voxels.begin(), occ.voxels.end()), occ.voxels.end());
+  EXPECT_EQ(loaded.value().occupancy.voxel_size_m, 0.2f);
+  EXPECT_EQ(loaded.value().occupancy.voxels, occ.voxels);
+  EXPECT_TRUE(check_static_occupancy_matches(loaded.value().occupancy, 0.2f).ok());
+  // A TSDF saved without it loads with none (and matches any occupancy voxel size).
+  ASSERT_TRUE(save_tsdf(f, layer, info()).ok());
+  auto bare = load_tsdf(f);
+  ASSERT_TRUE(bare.ok());
+  EXPECT_EQ(bare.value().occupancy.voxel_size_m, 0.0f);
+  EXPECT_TRUE(bare.value().occupancy.voxels.empty());
+  EXPECT_TRUE(check_static_occupancy_matches(bare.value().occupancy, 0.1f).ok());
+}
+
+TEST_F(TsdfIo, StaticOccupancy_RefusesOtherVoxelSizeAndDamage) {
+  const TsdfLayer layer = small_map();
+  const StaticOccupancy occ = static_layer();
+  const fs::path f = dir_ / "map.vdb";
+  ASSERT_TRUE(save_tsdf(f, layer, info(), &occ).ok());
+  auto loaded = load_tsdf(f);
+  ASSERT_TRUE(loaded.ok());
+  const Status other = check_static_occupancy_matches(loaded.value().occupancy, 0.1f);
+  ASSERT_FALSE(other.ok());
+  EXPECT_EQ(other.error().code, "tsdf_io.mismatch");
+  EXPECT_NE(other.error().message.find("static occupancy voxel 0.2 m, expected 0.1 m"),
+            std::string::npos)
+      << other.error().message;
+  // One flipped byte in the middle of the file (the static grid is in the checksummed part).
+  std::string bytes = read_all(f);
+  bytes[bytes.size() / 2] ^= 0x10;
+  write_all(f, bytes);
+  auto damaged = load_tsdf(f);
+  ASSERT_FALSE(damaged.ok());
+  EXPECT_EQ(damaged.error().code, "tsdf_io.corrupt");
 }
 
 }  // namespace

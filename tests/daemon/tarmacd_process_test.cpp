@@ -10,12 +10,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -231,7 +233,15 @@ TEST(TarmacdState, SavedTsdf_IsLoadedOnStartAndSavedAgainOnSigterm) {
   const fs::path dir = state_test_dir("tarmacd-state-load", tarmac::test::kDomainDaemonStateLoad);
   const auto layer = small_tsdf();
   ASSERT_GT(layer.voxel_count(), 0u);
-  ASSERT_TRUE(tarmac::core::save_tsdf(dir / "state" / "tsdf.vdb", layer, map_info()).ok());
+  tarmac::core::StaticOccupancy occupancy;  // on the shipped occupancy lattice (0.2 m)
+  occupancy.voxel_size_m = 0.2f;
+  for (int i = -50; i < 50; ++i) occupancy.voxels.emplace_back(3 * i, -i, i % 7);
+  std::sort(occupancy.voxels.begin(), occupancy.voxels.end(),
+            [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+              return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+            });
+  ASSERT_TRUE(
+      tarmac::core::save_tsdf(dir / "state" / "tsdf.vdb", layer, map_info(), &occupancy).ok());
 
   const DaemonRun run = run_tarmacd_until_ready(dir);
   EXPECT_TRUE(run.ready) << run.log;
@@ -240,11 +250,14 @@ TEST(TarmacdState, SavedTsdf_IsLoadedOnStartAndSavedAgainOnSigterm) {
   const std::string loaded = "state: TSDF loaded from " + (dir / "state" / "tsdf.vdb").string() +
                              ": " + std::to_string(layer.voxel_count()) + " voxels";
   EXPECT_NE(run.log.find(loaded), std::string::npos) << run.log;
+  EXPECT_NE(run.log.find("static occupancy 100 voxels"), std::string::npos) << run.log;
   // No scan arrived: the map saved on the way out is the one loaded, bit for bit.
   const auto saved = tarmac::core::load_tsdf(dir / "state" / "tsdf.vdb");
   ASSERT_TRUE(saved.ok()) << saved.error().message;
   EXPECT_EQ(saved.value().layer.digest(), layer.digest());
   EXPECT_EQ(saved.value().info.frame_id, "map");
+  EXPECT_EQ(saved.value().occupancy.voxel_size_m, 0.2f);
+  EXPECT_EQ(saved.value().occupancy.voxels, occupancy.voxels);
 
   std::this_thread::sleep_for(200ms);
   EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
@@ -270,11 +283,17 @@ TEST(TarmacdState, CorruptTruncatedOrMismatchedTsdf_IsRefusedAndTheDaemonStillCo
     std::string code;  // the tsdf_io error the log names
   };
   for (const Case& c : {Case{"corrupt", "tsdf_io.corrupt"}, Case{"truncated", "tsdf_io.truncated"},
-                        Case{"mismatched", "tsdf_io.mismatch"}}) {
+                        Case{"mismatched", "tsdf_io.mismatch"},
+                        Case{"static occupancy of another voxel size", "tsdf_io.mismatch"}}) {
     SCOPED_TRACE(c.name);
     fs::remove(file.string() + ".refused");
-    if (c.code == "tsdf_io.mismatch") {
+    if (std::string(c.name) == "mismatched") {
       ASSERT_TRUE(tarmac::core::save_tsdf(file, small_tsdf(0.2f), map_info()).ok());
+    } else if (c.code == "tsdf_io.mismatch") {
+      tarmac::core::StaticOccupancy other;
+      other.voxel_size_m = 0.1f;  // the occupancy window is at 0.2 m
+      other.voxels.emplace_back(1, 2, 3);
+      ASSERT_TRUE(tarmac::core::save_tsdf(file, small_tsdf(), map_info(), &other).ok());
     } else {
       std::string damaged = bytes;
       if (c.code == "tsdf_io.corrupt") {

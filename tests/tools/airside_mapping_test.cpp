@@ -4,6 +4,8 @@
 // on its path 2 m ahead, the 10 cm debris 9 m ahead and the jet bridge 14 m ahead.
 
 #include <cstdio>
+#include <functional>
+#include <random>
 
 #include <gtest/gtest.h>
 
@@ -11,6 +13,7 @@
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
+#include "tarmac/tools/clearing.hpp"
 
 namespace tarmac {
 namespace {
@@ -115,6 +118,119 @@ TEST(AirsideMapping, BaseFrameAtTheSensor_GroundStillFoundFromTheData) {
   // The ground prior takes only its tilt from the base frame; its height comes from the data, so
   // a base frame 2 m up (identity extrinsic) does not put the envelope into the wing.
   expect_envelope_rule(drive(0.0, 38.0, true));
+}
+
+/// Drives the default sequence in the level frame for `scans` scans. `perturb` may edit each
+/// scan's returns (sensor frame) before mapping; `after` sees the mapper after each costmap.
+void drive_sequence(int scans, const core::MapperParams& params,
+                    const std::function<void(std::vector<sim::LidarReturn>&)>& perturb,
+                    const std::function<void(int, double, const core::Mapper&)>& after) {
+  const sim::Scene scene = sim::Scene::airside_default();
+  const sim::SequenceParams seq;
+  const sim::Lidar lidar(seq.lidar);
+  core::Mapper mapper(params);
+  daemon::ThreadPool pool(2);
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.translation().z() = seq.path.sensor_height_m;
+  std::vector<sim::LidarReturn> returns;
+  core::PointCloud cloud;
+  for (int i = 0; i < scans; ++i) {
+    const double t_s = seq.stamp_s(i);
+    lidar.scan(scene, seq.path.T_W_S(t_s), t_s, nullptr, returns);
+    if (perturb) perturb(returns);
+    cloud.clear();
+    for (const auto& r : returns) cloud.points_S.push_back(r.point_S.cast<float>());
+    mapper.ingest(cloud, seq.path.T_W_base(t_s), T_B_S);
+    mapper.integrate(pool);
+    mapper.update_costmap({}, 0, pool);
+    after(i, t_s, mapper);
+  }
+}
+
+TEST(AirsideMapping, MovingTug_ClearsFastAndLeavesNoGhost) {
+  // The tug crosses the path at 2 m/s until 6 s, then parks clear of it. 200 scans: the whole
+  // drive; the truth is the tug's box per scan, as tarmac-sim writes it (dynamic_boxes.txt).
+  const sim::Scene scene = sim::Scene::airside_default();
+  const sim::SequenceParams seq;
+  const int tug = scene.find("tug")->id;
+  tools::DynamicTruth truth;
+  constexpr int kScans = 200;
+  for (int i = 0; i < kScans; ++i) {
+    const sim::Aabb b = scene.bounds_at(tug, seq.stamp_s(i));
+    truth.boxes.push_back({i, tug, b.min_W, b.max_W});
+  }
+  tools::ClearingTracker tracker(truth);
+  drive_sequence(kScans, core::MapperParams{}, nullptr,
+                 [&](int i, double t_s, const core::Mapper& m) {
+                   tracker.observe(i, t_s, m.costmap().column_class);
+                 });
+  const tools::ClearingReport r = tracker.report();
+  std::printf(
+      "tug: %zu path cells, %zu measured, %zu cleared; p50 %.2f s p90 %.2f s max %.2f s; "
+      "%zu ghosts\n",
+      r.path_cells, r.measured, r.cleared, r.p50_s, r.p90_s, r.max_s, r.ghost_cells);
+  EXPECT_GT(r.measured, 200u);       // the map saw the tug along its path
+  EXPECT_EQ(r.cleared, r.measured);  // every cell it left read free afterwards
+  EXPECT_EQ(r.ghost_cells, 0u);      // and none blocks at the end
+  EXPECT_LE(r.p50_s, 0.5 + 1e-9);    // median time-to-clear within 5 scans at 10 Hz
+}
+
+/// cone_right (20, -1.5) under dropout: in each scan, each of its returns passes through it to
+/// the ground behind with probability `drop_p` (fixed seed; a miss through its voxels, the worst
+/// kind of dropout), and every one does from scan `removed_at` on (the cone was taken away).
+/// Returns the first scan at which the cone's cells stop blocking after they blocked for 1 s
+/// (10 consecutive scans), or -1; `seen_1s` tells whether they ever did.
+int cone_cleared_at(double drop_p, int removed_at, int scans, bool& seen_1s) {
+  const sim::Scene scene = sim::Scene::airside_default();
+  const int cone = scene.find("cone_right")->id;
+  std::mt19937 rng(42);
+  std::bernoulli_distribution drop(drop_p);
+  int scan = 0, blocked_run = 0, cleared_at = -1;
+  seen_1s = false;
+  drive_sequence(
+      scans, core::MapperParams{},
+      [&](std::vector<sim::LidarReturn>& returns) {
+        for (auto& r : returns) {
+          if (r.object_id != cone || !(scan >= removed_at || drop(rng))) continue;
+          const Eigen::Vector3d dir = r.point_S.normalized();
+          r.point_S = dir * (2.0 / -dir.z());  // sensor 2 m up: the ground behind the cone
+        }
+        ++scan;
+      },
+      [&](int i, double, const core::Mapper& m) {
+        const auto& grid = m.costmap().column_class;
+        bool blocked = false;
+        for (double x = 19.85; x <= 20.15; x += 0.1) {
+          for (double y = -1.65; y <= -1.35; y += 0.1) {
+            const auto c = grid.geometry().cell_of(x, y);
+            blocked = blocked || (c && grid.at(c->x(), c->y()) ==
+                                           static_cast<std::uint8_t>(ColumnClass::kObstacle));
+          }
+        }
+        blocked_run = blocked ? blocked_run + 1 : 0;
+        if (blocked_run >= 10) seen_1s = true;
+        if (seen_1s && !blocked && cleared_at < 0) cleared_at = i;
+      });
+  return cleared_at;
+}
+
+TEST(AirsideMapping, StaticConeWithDroppedReturns_NeverCleared) {
+  // A third of its returns dropped, from first sight (20 m ahead) until the vehicle is 10 m past
+  // it (x = 30 m, scan 100).
+  bool seen = false;
+  EXPECT_EQ(cone_cleared_at(1.0 / 3.0, 1 << 30, 101, seen), -1);
+  EXPECT_TRUE(seen);
+}
+
+TEST(AirsideMapping, RemovedCone_ClearedOnStrongFreeEvidence) {
+  // The same cone, seen without dropout, is taken away at 4 s (scan 40, vehicle 8 m before it):
+  // static_demote_scans (10) free observations of its voxels remove it, the dynamic ones need 5.
+  bool seen = false;
+  const int cleared = cone_cleared_at(0.0, 40, 101, seen);
+  ASSERT_TRUE(seen);
+  std::printf("removed cone: cleared at scan %d\n", cleared);
+  EXPECT_GT(cleared, 40);
+  EXPECT_LE(cleared, 40 + core::OccupancyParams{}.static_demote_scans + 1) << cleared;
 }
 
 }  // namespace

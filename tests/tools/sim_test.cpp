@@ -425,7 +425,8 @@ TEST(WriteSequence, SameArguments_ByteIdenticalOutput) {
   ASSERT_TRUE(write_sequence(scene, params, b.path).ok());
   params.seed = 8;
   ASSERT_TRUE(write_sequence(scene, params, c.path).ok());
-  for (const char* name : {"poses.txt", "times.txt", "scene.json", "README.txt"}) {
+  for (const char* name :
+       {"poses.txt", "times.txt", "scene.json", "README.txt", "dynamic_boxes.txt"}) {
     EXPECT_EQ(read_bytes(a.path / name), read_bytes(b.path / name)) << name;
   }
   for (int i = 0; i < 6; ++i) {

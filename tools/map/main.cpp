@@ -19,6 +19,7 @@
 #include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/array_io.hpp"
+#include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/tools/mesh_io.hpp"
 
@@ -295,6 +296,18 @@ int main(int argc, char** argv) {
     prior.emplace(std::move(loaded).value());
   }
 
+  // Moving objects' ground truth (tarmac-sim's dynamic_boxes.txt): dynamic-clearing figures.
+  std::optional<tools::ClearingTracker> clearing;
+  if (const auto truth_file = std::filesystem::path(opt.dataset) / "dynamic_boxes.txt";
+      std::filesystem::exists(truth_file)) {
+    auto truth = tools::read_dynamic_truth(truth_file);
+    if (!truth) {
+      std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
+      return kExitData;
+    }
+    clearing.emplace(std::move(truth).value());
+  }
+
   daemon::ThreadPool pool(opt.threads);
   core::Mapper mapper(params);
   Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
@@ -305,7 +318,8 @@ int main(int argc, char** argv) {
       t_cost{"costmap+esdf2d", {}}, t_tsdf{"tsdf", {}}, t_total{"pipeline", {}};
   std::uint64_t tsdf_samples = 0, tsdf_updates = 0;
   std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
-                dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0;
+                dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0, promotions = 0,
+                demotions = 0;
   const bool tty = isatty(STDERR_FILENO) != 0;
   core::PointCloud cloud;
   for (std::size_t k = 0; k < n; ++k) {
@@ -328,6 +342,11 @@ int main(int argc, char** argv) {
       tsdf_updates += up.voxel_updates;
     });
     const double c_ms = timed_ms([&] { mapper.update_costmap({}, cloud.stamp_ns, pool); });
+    if (clearing) {
+      clearing->observe(static_cast<int>(k), s.times_s[k], mapper.costmap().column_class);
+    }
+    promotions += occ.promotions;
+    demotions += occ.demotions;
     t_filter.ms.push_back(f_ms);
     t_occ.ms.push_back(o_ms);
     t_cost.ms.push_back(c_ms);
@@ -469,6 +488,24 @@ int main(int argc, char** argv) {
     tj << ",\n  \"tsdf_mesh_ms\": " << tsdf_out.mesh_ms
        << ",\n  \"tsdf_save_ms\": " << tsdf_out.save_ms;
     if (prior) tj << ",\n  \"tsdf_changes_ms\": " << tsdf_out.changes_ms;
+  }
+  std::printf("static layer: %zu voxels at the end (%llu promotions, %llu demotions)\n",
+              occ_map.static_count(), static_cast<unsigned long long>(promotions),
+              static_cast<unsigned long long>(demotions));
+  tj << ",\n  \"static_voxels\": " << occ_map.static_count()
+     << ",\n  \"static_promotions\": " << promotions << ",\n  \"static_demotions\": " << demotions;
+  if (clearing) {
+    const tools::ClearingReport r = clearing->report();
+    std::printf(
+        "dynamic clearing: %zu path cells, %zu measured, %zu cleared, %zu not cleared; "
+        "time-to-clear p50 %.2f s, p90 %.2f s, max %.2f s; ghost cells at the end %zu\n",
+        r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
+        r.ghost_cells);
+    tj << ",\n  \"dynamic_clearing\": {\"path_cells\": " << r.path_cells
+       << ", \"measured\": " << r.measured << ", \"cleared\": " << r.cleared
+       << ", \"not_cleared\": " << r.not_cleared << ", \"time_to_clear_p50_s\": " << r.p50_s
+       << ", \"time_to_clear_p90_s\": " << r.p90_s << ", \"time_to_clear_max_s\": " << r.max_s
+       << ", \"ghost_cells\": " << r.ghost_cells << "}";
   }
   tj << "\n}\n";
   if (params.tsdf.enabled) {

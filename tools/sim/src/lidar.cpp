@@ -75,7 +75,11 @@ std::string readme(const SequenceParams& p) {
   s += "  poses.txt         per scan, row-major 3x4 T_world_sensor (12 numbers)\n";
   s += "  times.txt         per scan, stamp in s (scan i at i / rate)\n";
   s += "  scene.json        the scene in the scene frame (x along the apron, y left, z up, m,\n";
-  s += "                    ground z = 0) and T_world_scene (rotation about x by the tilt)\n\n";
+  s += "                    ground z = 0) and T_world_scene (rotation about x by the tilt)\n";
+  s += "  dynamic_boxes.txt moving objects' ground truth: a '# T_world_scene' line (12 numbers,\n";
+  s += "                    row-major 3x4), then per scan and moving object 'scan id min_x min_y\n";
+  s += "                    min_z max_x max_y max_z': its axis-aligned box in the scene frame at\n";
+  s += "                    the scan's stamp, m\n\n";
   s += "Each scan is one revolution taken at its stamp (no motion distortion). Beams that hit\n";
   s += "nothing within the maximum range give no point.\n\n";
   s += "Parameters:\n";
@@ -264,6 +268,7 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
   std::vector<LidarReturn> returns;
   std::vector<std::size_t> points_per_scan;
   std::string poses, times, bytes;
+  std::string boxes = "# T_world_scene " + pose_line(T_O_W);
   const int n = params.scan_count();
   for (int i = 0; i < n; ++i) {
     const double t_s = params.stamp_s(i);
@@ -280,10 +285,20 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
     if (!write_file(scans_dir / scan_name(i), bytes, result.error)) return result;
     poses += pose_line(T_O_W * T_W_S);
     times += number(t_s) + "\n";
+    for (const Object& o : scene.objects()) {
+      if (!o.dynamic()) continue;
+      const Aabb b = scene.bounds_at(o.id, t_s);
+      boxes += std::to_string(i) + ' ' + std::to_string(o.id);
+      for (const Eigen::Vector3d* c : {&b.min_W, &b.max_W}) {
+        for (int a = 0; a < 3; ++a) boxes += ' ' + number((*c)[a]);
+      }
+      boxes += '\n';
+    }
     points_per_scan.push_back(returns.size());
   }
   if (!write_file(out_dir / "poses.txt", poses, result.error) ||
-      !write_file(out_dir / "times.txt", times, result.error)) {
+      !write_file(out_dir / "times.txt", times, result.error) ||
+      !write_file(out_dir / "dynamic_boxes.txt", boxes, result.error)) {
     return result;
   }
 

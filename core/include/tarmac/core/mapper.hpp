@@ -50,6 +50,8 @@ class Mapper {
   [[nodiscard]] const std::vector<Eigen::Vector3f>& points_W() const { return points_W_; }
   [[nodiscard]] const Eigen::Vector3d& sensor_W() const { return sensor_W_; }
   [[nodiscard]] const OccupancyMap& occupancy() const { return map_; }
+  /// For loading a saved static occupancy layer (OccupancyMap::import_static).
+  [[nodiscard]] OccupancyMap& occupancy() { return map_; }
   [[nodiscard]] const CostmapLayers& costmap() const { return layers_; }
   [[nodiscard]] const MapperParams& params() const { return params_; }
   [[nodiscard]] const TsdfLayer& tsdf() const { return tsdf_; }

@@ -1,9 +1,19 @@
 #pragma once
 /// @file The hot local occupancy map: a dense rolling (ring-buffer) voxel window that follows the
 /// vehicle without copying, holding clamped log-odds per voxel (OctoMap's sensor model:
-/// Hornung et al., "OctoMap", Autonomous Robots 2013).
+/// Hornung et al., "OctoMap", Autonomous Robots 2013), in two layers:
+///  - dynamic: the log-odds themselves, with a low upper clamp so that a voxel the object left
+///    reads free after a few misses (clamp_max 0.85 with prob_miss 0.4: 5 scans, 0.5 s at 10 Hz);
+///  - static: a voxel observed occupied in static_promote_scans consecutive hits (never reading
+///    free in between) joins it; while static, misses do not lower it below one hit's log-odds, and
+///    it leaves only after static_demote_scans consecutive observations as free space with no
+///    return in it. The static layer is site-wide and sparse (it survives the window scrolling
+///    away and back, and is what the daemon persists).
+/// The window's log-odds are the combined result (static voxels read occupied), so the costmap
+/// and the ESDF read one array. Unknown stays unknown: only rays change a voxel.
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -26,7 +36,9 @@ struct OccupancyParams {
   float prob_hit = 0.7f;
   float prob_miss = 0.4f;
   float clamp_min = 0.12f;
-  float clamp_max = 0.97f;
+  /// Upper clamp of the dynamic layer: ceil(logit(clamp_max) / −logit(prob_miss)) misses clear a
+  /// voxel (0.85 / 0.4: 5, i.e. 0.5 s at 10 Hz; OctoMap's 0.97 needs 9).
+  float clamp_max = 0.85f;
   /// Returns farther than this do not mark; their ray clears free space up to clearing_range_m.
   double max_range_m = 50.0;
   /// How far a beam with no return (or beyond max range) clears free space.
@@ -37,6 +49,14 @@ struct OccupancyParams {
   /// marked from the scans taken within about 8 m of it; larger radii met road camber and
   /// noise on real data, tests/data).
   double ground_radius_m = 0.4;
+  /// Static layer: consecutive scans hitting a voxel (it reading occupied throughout) that make it
+  /// static, 0 disables the layer, 0..127. Must exceed the scans a moving object covers one voxel
+  /// for (the simulator's tug: 3 m long at 2 m/s, 16 scans at 10 Hz): default 20 (2 s at 10 Hz).
+  int static_promote_scans = 20;
+  /// Consecutive scans observing a static voxel as free (a ray through it, no return in it) that
+  /// remove it, 1..127: default 10 (1 s at 10 Hz), so sporadic misses (grazing rays, dropped
+  /// returns) never clear a building or a parked aircraft.
+  int static_demote_scans = 10;
 
   [[nodiscard]] Status validate() const;
 };
@@ -51,7 +71,11 @@ struct OccupancyUpdateStats {
   std::uint64_t miss_updates = 0;    ///< voxels updated as free
   std::uint64_t voxel_visits = 0;    ///< voxels stepped through, including repeats
   std::uint64_t outside_window = 0;  ///< returns whose voxel lies outside the window
+  std::uint64_t promotions = 0;      ///< voxels that joined the static layer
+  std::uint64_t demotions = 0;       ///< voxels that left it
 };
+
+struct StaticStore;
 
 /// The rolling window. Move-only (tens of MB). Not thread-safe: one writer.
 class OccupancyMap {
@@ -60,8 +84,9 @@ class OccupancyMap {
   static constexpr float kUnknown = -1.0e9f;
 
   explicit OccupancyMap(const OccupancyParams& params);
-  OccupancyMap(OccupancyMap&&) noexcept = default;
-  OccupancyMap& operator=(OccupancyMap&&) noexcept = default;
+  OccupancyMap(OccupancyMap&&) noexcept;
+  OccupancyMap& operator=(OccupancyMap&&) noexcept;
+  ~OccupancyMap();
   OccupancyMap(const OccupancyMap&) = delete;
   OccupancyMap& operator=(const OccupancyMap&) = delete;
 
@@ -118,10 +143,24 @@ class OccupancyMap {
   /// Copies the window into `out` in window order (z slowest, x fastest) starting at window_min().
   void export_log_odds(std::vector<float>& out) const;
 
+  /// True when the voxel belongs to the static layer (inside or outside the window).
+  [[nodiscard]] bool is_static(const VoxelIndex& v) const;
+  /// Voxels of the static layer, site-wide.
+  [[nodiscard]] std::size_t static_count() const;
+  /// The static layer's voxels, sorted by (z, y, x), into `out` (for persistence and tests).
+  void export_static(std::vector<VoxelIndex>& out) const;
+  /// Replaces the static layer by `voxels` (a loaded map): those inside the window read occupied
+  /// at once, the others when the window reaches them. Forgets the dynamic content of voxels that
+  /// left the static layer by this call.
+  void import_static(std::span<const VoxelIndex> voxels);
+
  private:
   [[nodiscard]] std::size_t slot(const VoxelIndex& v) const;
   void clear_slab(int axis, int global_index);
-  void update(std::size_t slot, bool hit);
+  /// Makes the voxels of the static layer inside [lo, hi] (world indices, inclusive, within the
+  /// window) read static.
+  void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
+  [[nodiscard]] VoxelIndex voxel_of_slot(std::size_t slot) const;
 
   OccupancyParams params_;
   Eigen::Vector3i dims_;
@@ -129,6 +168,12 @@ class OccupancyMap {
   float l_hit_, l_miss_, l_min_, l_max_;
   std::vector<float> log_odds_;
   std::vector<std::uint8_t> rise_cm_;  ///< see ring_layer_rise_cm()
+  /// Static layer state per voxel, slot order: bit 7 static; bits 0..6 the consecutive hits
+  /// (not static) or consecutive free observations (static). Non-zero only where the log-odds
+  /// read occupied, so the apply pass reads it only for occupied voxels.
+  std::vector<std::uint8_t> state_;
+  std::unique_ptr<StaticStore> static_;  ///< the site-wide static layer (sparse bit blocks)
+  std::vector<std::vector<std::uint32_t>> demoted_;  ///< per apply task, slots demoted this scan
   /// Per scan: lowest return height per window column (m along the up axis, +inf where none)
   /// and the columns that hold one (reset next scan).
   std::vector<float> scan_ground_z_;

@@ -12,6 +12,9 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
+
+#include <Eigen/Core>
 
 #include "tarmac/core/result.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
@@ -30,14 +33,24 @@ struct TsdfMapInfo {
   std::int64_t stamp_ns = 0;  ///< time of the save (the caller's clock), ns since the epoch
 };
 
-/// Writes `layer` to `file`: first to `file` + ".tmp", flushed to disk, then renamed over
-/// `file`, so a crash mid-save leaves the previous file intact. `info.voxel_size_m` and
-/// `truncation_m` are taken from the layer. Errors: "tsdf_io.write".
-Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, TsdfMapInfo info);
+/// The static occupancy layer (OccupancyMap::export_static) on its own lattice: voxel i covers
+/// [i·v, (i+1)·v). Stored as the active voxels of bool grid "static_occupancy" with metadata
+/// "tarmac.static_voxel_size_m". voxel_size_m 0: absent.
+struct StaticOccupancy {
+  float voxel_size_m = 0.0f;
+  std::vector<Eigen::Vector3i> voxels;  ///< sorted by (z, y, x) when loaded
+};
+
+/// Writes `layer` (and `occupancy`, when not null) to `file`: first to `file` + ".tmp", flushed
+/// to disk, then renamed over `file`, so a crash mid-save leaves the previous file intact.
+/// `info.voxel_size_m` and `truncation_m` are taken from the layer. Errors: "tsdf_io.write".
+Status save_tsdf(const std::filesystem::path& file, const TsdfLayer& layer, TsdfMapInfo info,
+                 const StaticOccupancy* occupancy = nullptr);
 
 struct LoadedTsdf {
   TsdfLayer layer;
   TsdfMapInfo info;
+  StaticOccupancy occupancy;  ///< empty (voxel_size_m 0) when the file holds none
 };
 
 /// Reads a file written by save_tsdf. Errors: "tsdf_io.open" (cannot be read),
@@ -49,5 +62,8 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file);
 /// truncation (the caller refuses such a map and starts empty).
 Status check_tsdf_matches(const TsdfMapInfo& info, const std::string& frame_id, float voxel_size_m,
                           float truncation_m);
+
+/// "tsdf_io.mismatch" when the file holds a static occupancy layer of another voxel size.
+Status check_static_occupancy_matches(const StaticOccupancy& occupancy, float voxel_size_m);
 
 }  // namespace tarmac::core

@@ -37,8 +37,9 @@ struct ExecutorTotals {
 struct TsdfLoadResult {
   enum class Kind { kDisabled, kAbsent, kLoaded, kRefused };
   Kind kind = Kind::kDisabled;
-  std::size_t voxels = 0;  ///< observed voxels loaded
-  std::string error;       ///< kRefused: the tsdf_io error ("code: message")
+  std::size_t voxels = 0;         ///< observed voxels loaded
+  std::size_t static_voxels = 0;  ///< static occupancy voxels loaded
+  std::string error;              ///< kRefused: the tsdf_io error ("code: message")
 };
 
 /// Instrumentation for tests and benchmarks; empty by default.
@@ -63,10 +64,12 @@ class Executor {
 
   /// Writes the occupancy window to state.dir/state.map_file. Not for the cycle.
   core::Status save_map() const;
-  /// Writes the TSDF to state.dir/state.tsdf_file with tsdf_io (atomic: .tmp, fsync, rename).
+  /// Writes the static map (the TSDF and the occupancy's static layer) to
+  /// state.dir/state.tsdf_file with tsdf_io (atomic: .tmp, fsync, rename).
   /// Not for the cycle, and not while run() runs (call it after run() returns).
   core::Status save_tsdf() const;
-  /// Before run(): loads state.dir/state.tsdf_file into the mapper when tsdf.enabled and
+  /// Before run(): loads state.dir/state.tsdf_file (TSDF and static occupancy, whose voxel size
+  /// must match occupancy.voxel_size_m) into the mapper when tsdf.enabled and
   /// state.load_on_start. A file that tsdf_io refuses (truncated, corrupt, other format, other
   /// frame / voxel size / truncation) is renamed to <file>.refused and the map starts empty.
   /// Logs one line either way; never throws.
