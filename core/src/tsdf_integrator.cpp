@@ -58,6 +58,25 @@ struct Sample {
   float sdf_m;
 };
 
+/// Band samples of one (ray chunk, partition), stored without initialisation (a vector would
+/// zero what it grows into) and read back in order.
+struct SampleBin {
+  std::unique_ptr<Sample[]> data;
+  std::size_t capacity = 0;
+  std::size_t count = 0;
+
+  const Sample* begin() const { return data.get(); }
+  const Sample* end() const { return data.get() + count; }
+  std::size_t size() const { return count; }
+  void grow(std::size_t min_capacity) {
+    const std::size_t cap = std::max({min_capacity, 2 * capacity, std::size_t{1024}});
+    auto bigger = std::make_unique_for_overwrite<Sample[]>(cap);
+    std::copy(begin(), end(), bigger.get());
+    data = std::move(bigger);
+    capacity = cap;
+  }
+};
+
 /// One sample after grouping by block.
 struct GroupedSample {
   std::uint32_t offset;
@@ -130,8 +149,7 @@ struct Partition {
 }  // namespace
 
 struct TsdfIntegrator::Scratch {
-  std::vector<std::vector<Sample>> bins =
-      std::vector<std::vector<Sample>>(kRayChunks * kPartitions);
+  std::vector<SampleBin> bins = std::vector<SampleBin>(kRayChunks * kPartitions);
   std::vector<std::uint64_t> chunk_rays = std::vector<std::uint64_t>(kRayChunks);
   std::vector<Partition> partitions = std::vector<Partition>(kPartitions);
 };
@@ -271,13 +289,42 @@ TsdfLayer TsdfIntegrator::make_layer() const {
 
 namespace {
 
+/// The bins of one ray chunk (one per partition). `room` is a lower bound of the free samples of
+/// every bin, so a ray checks capacity once instead of once per sample.
+struct ChunkBins {
+  SampleBin* bins;  // kPartitions
+  std::size_t room = 0;
+
+  void begin() {
+    room = std::numeric_limits<std::size_t>::max();
+    for (std::size_t p = 0; p < kPartitions; ++p) {
+      bins[p].count = 0;
+      room = std::min(room, bins[p].capacity);
+    }
+  }
+  /// Makes room for `need` more samples in every bin.
+  void reserve(std::size_t need) {
+    if (room >= need) return;
+    room = std::numeric_limits<std::size_t>::max();
+    for (std::size_t p = 0; p < kPartitions; ++p) {
+      SampleBin& bin = bins[p];
+      if (bin.capacity - bin.count < need) bin.grow(bin.count + need);
+      room = std::min(room, bin.capacity - bin.count);
+    }
+  }
+};
+
 /// Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", Eurographics 1987:
 /// every voxel the segment origin + t·dir, t in [t0, t1], passes through, in order. For each,
 /// the projective signed distance r − |c − o| of its centre c; kept when within the band
-/// (carving: in front of the band clamped to +truncation).
-void band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double range, double t0,
-                  double t1, double v, double trunc, bool carve,
-                  std::vector<Sample>* bins /* kPartitions */) {
+/// (carving: in front of the band clamped to +truncation). The centre offset c − o is kept per
+/// axis and moved by ±v on each step (one add instead of a convert, multiply and two adds).
+/// @return the samples written.
+/// kCarve: the segment may be long (sensor to band), so each sample checks its bin's capacity;
+/// otherwise the caller has reserved room for the whole segment.
+template <bool kCarve>
+std::size_t band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double range,
+                         double t0, double t1, double v, double trunc, ChunkBins& out) {
   const Eigen::Vector3d q0 = (o + t0 * dir) / v;  // voxel units
   Eigen::Vector3i idx = q0.array().floor().cast<int>();
   int step[3];
@@ -304,32 +351,40 @@ void band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double r
   int ix = idx.x(), iy = idx.y(), iz = idx.z();
   double tx = t_max[0], ty = t_max[1], tz = t_max[2];
   const double half = 0.5 * v;
+  double cx = ix * v + half - o.x(), cy = iy * v + half - o.y(), cz = iz * v + half - o.z();
+  const double vx = step[0] * v, vy = step[1] * v, vz = step[2] * v;
   std::uint64_t last_key = kEmptyKey;
-  std::vector<Sample>* bin = nullptr;
+  SampleBin* bin = nullptr;
+  std::size_t written = 0;
   while (true) {
-    const double cx = ix * v + half - o.x(), cy = iy * v + half - o.y(), cz = iz * v + half - o.z();
     double sdf = range - std::sqrt(cx * cx + cy * cy + cz * cz);
-    if (carve && sdf > trunc) sdf = trunc;
+    if (kCarve && sdf > trunc) sdf = trunc;
     if (sdf <= trunc && sdf >= -trunc) {
       const std::uint64_t key = pack_block(ix >> 3, iy >> 3, iz >> 3);
       if (key != last_key) {
         last_key = key;
-        bin = &bins[partition_of(key)];
+        bin = &out.bins[partition_of(key)];
       }
+      if (kCarve && bin->count == bin->capacity) bin->grow(bin->count + 1);
       const auto offset = static_cast<std::uint32_t>(tsdf_voxel_offset(ix & 7, iy & 7, iz & 7));
-      bin->push_back(Sample{key, offset, static_cast<float>(sdf)});
+      bin->data[bin->count++] = Sample{key, offset, static_cast<float>(sdf)};
+      ++written;
     }
-    const int xy = tx < ty, xz = tx < tz, yz = ty < tz;
-    const int bx = xy & xz, by = (1 - xy) & yz, bz = 1 - bx - by;
+    const bool xy = tx < ty, xz = tx < tz, yz = ty < tz;
+    const bool bx = xy & xz, by = !xy & yz, bz = !bx & !by;
     const double t_next = bx ? tx : (by ? ty : tz);
     if (t_next > t1) break;
-    ix += bx * step[0];
-    iy += by * step[1];
-    iz += bz * step[2];
-    tx += bx * t_delta[0];
-    ty += by * t_delta[1];
-    tz += bz * t_delta[2];
+    ix += bx ? step[0] : 0;
+    iy += by ? step[1] : 0;
+    iz += bz ? step[2] : 0;
+    tx += bx ? t_delta[0] : 0.0;
+    ty += by ? t_delta[1] : 0.0;
+    tz += bz ? t_delta[2] : 0.0;
+    cx += bx ? vx : 0.0;
+    cy += by ? vy : 0.0;
+    cz += bz ? vz : 0.0;
   }
+  return written;
 }
 
 }  // namespace
@@ -358,8 +413,8 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
   const std::size_t n = points_W.size();
   const std::size_t per_chunk = (n + kRayChunks - 1) / kRayChunks;
   runner.parallel_for(kRayChunks, [&](std::size_t c) {
-    std::vector<Sample>* bins = &s.bins[c * kPartitions];
-    for (std::size_t p = 0; p < kPartitions; ++p) bins[p].clear();
+    ChunkBins out{&s.bins[c * kPartitions]};
+    out.begin();
     std::uint64_t rays = 0;
     const std::size_t end = std::min(n, (c + 1) * per_chunk);
     for (std::size_t i = c * per_chunk; i < end; ++i) {
@@ -370,7 +425,16 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       ++rays;
       const Eigen::Vector3d dir = d / r;
       const double t0 = carve ? 0.0 : std::max(0.0, r - trunc);
-      band_samples(o, dir, r, t0, r + trunc, v, trunc, carve, bins);
+      const double t1 = r + trunc;
+      if (carve) {
+        band_samples<true>(o, dir, r, t0, t1, v, trunc, out);
+        out.room = 0;  // unknown: the next reserve() recomputes it
+      } else {
+        // A segment of length L crosses at most L/v + 1 boundaries per axis: at most
+        // 3·(L/v + 1) + 1 voxels.
+        out.reserve(3 * static_cast<std::size_t>((t1 - t0) / v) + 7);
+        out.room -= band_samples<false>(o, dir, r, t0, t1, v, trunc, out);
+      }
     }
     s.chunk_rays[c] = rays;
   });

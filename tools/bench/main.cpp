@@ -267,6 +267,8 @@ int main(int argc, char** argv) {
         "  map: %zu blocks, %zu voxels, %.1f MiB over %.0f m^2 mapped -> %.2f MiB per 1000 m^2\n",
         tsdf.block_count(), tsdf.voxel_count(), mib, area_m2,
         area_m2 > 0 ? mib / area_m2 * 1000.0 : 0.0);
+    std::printf("  digest %016llx; VDBFusion algorithm: %zu voxels\n",
+                static_cast<unsigned long long>(tsdf.digest()), vdbfusion.voxel_count());
   }
   if (opt.tsdf_only) return 0;
 
