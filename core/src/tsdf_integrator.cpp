@@ -98,7 +98,7 @@ struct Partition {
   std::vector<std::unique_ptr<Leaf>> new_leaves;
   std::array<float, kTsdfBlockVoxels> sum{};
   std::array<std::uint32_t, kTsdfBlockVoxels> count{};
-  std::vector<std::uint32_t> touched;
+  std::array<std::uint32_t, kTsdfBlockVoxels> touched{};
   std::uint64_t voxel_updates = 0;
 
   std::size_t home(std::uint64_t key) const {
@@ -526,30 +526,50 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
         part.slot_entry[sl] = cache.table[h];
       }
     }
-    // Apply, prefetching the touched cache lines of the blocks a few slots ahead: leaves are
-    // scattered in memory, so this step is bound by cache misses, not arithmetic.
-    constexpr std::size_t kAhead = 4;
-    const auto prefetch = [&](std::size_t sl) {
-      __builtin_prefetch(&part.slot_entry[sl].leaf->getValueMask(), 1);
-      std::uint64_t lines = part.slot_lines[sl];
-      while (lines != 0) {
-        const int l = __builtin_ctzll(lines);
-        lines &= lines - 1;
-        __builtin_prefetch(part.slot_entry[sl].values + 8 * l, 1);
+    // Apply, prefetching the touched cache lines of the blocks ahead: leaves are scattered in
+    // memory, so this step is bound by cache misses, not arithmetic. The prefetch runs a fixed
+    // number of cache lines ahead (not slots: a slot touches 1 to 64 lines, and prefetching
+    // more lines than the core can keep in flight drops them).
+    constexpr std::size_t kLinesAhead = 24;
+    std::size_t pf_slot = 0, issued = 0, consumed = 0;
+    std::uint64_t pf_lines = 0;
+    if (slots > 0) {
+      pf_lines = part.slot_lines[0];
+      __builtin_prefetch(&part.slot_entry[0].leaf->getValueMask(), 1);
+    }
+    const auto prefetch_until = [&](std::size_t target) {
+      while (issued < target) {
+        if (pf_lines == 0) {
+          if (++pf_slot >= slots) return;
+          pf_lines = part.slot_lines[pf_slot];
+          __builtin_prefetch(&part.slot_entry[pf_slot].leaf->getValueMask(), 1);
+          continue;
+        }
+        const int l = __builtin_ctzll(pf_lines);
+        pf_lines &= pf_lines - 1;
+        __builtin_prefetch(part.slot_entry[pf_slot].values + 8 * l, 1);
+        ++issued;
       }
     };
-    for (std::size_t sl = 0; sl < std::min(slots, kAhead); ++sl) prefetch(sl);
+    std::uint32_t* touched = part.touched.data();
     for (std::size_t sl = 0; sl < slots; ++sl) {
-      if (sl + kAhead < slots) prefetch(sl + kAhead);
+      consumed += static_cast<std::size_t>(__builtin_popcountll(part.slot_lines[sl]));
+      prefetch_until(consumed + kLinesAhead);
       Leaf* leaf = part.slot_entry[sl].leaf;
       Value* values = part.slot_entry[sl].values;
+      std::size_t nt = 0;
+      // The voxels of the block, each once in first-touch order (branch-free: whether a sample
+      // is a voxel's first is unpredictable).
       for (std::uint32_t g = part.slot_start[sl]; g < part.slot_start[sl + 1]; ++g) {
         const GroupedSample gs = part.grouped[g];
-        if (part.count[gs.offset] == 0) part.touched.push_back(gs.offset);
+        const std::uint32_t c = part.count[gs.offset];
+        touched[nt] = gs.offset;
+        nt += c == 0;
         part.sum[gs.offset] += gs.sdf_m;
-        part.count[gs.offset]++;
+        part.count[gs.offset] = c + 1;
       }
-      for (const std::uint32_t off : part.touched) {
+      for (std::size_t t = 0; t < nt; ++t) {
+        const std::uint32_t off = touched[t];
         const float obs = part.sum[off] / static_cast<float>(part.count[off]);
         Value& x = values[off];
         const float w = x[1];
@@ -560,8 +580,7 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
         part.sum[off] = 0.0f;
         part.count[off] = 0;
       }
-      part.voxel_updates += part.touched.size();
-      part.touched.clear();
+      part.voxel_updates += nt;
     }
   });
 
