@@ -91,7 +91,10 @@ struct Partition {
   std::vector<std::uint32_t> slot_hash_pos;
   std::vector<std::uint32_t> slot_count;
   std::vector<std::uint32_t> slot_start;
-  std::vector<std::uint32_t> sample_slot;
+  /// Runs of consecutive samples of one block (a ray crosses a block in a run): the slot of
+  /// each run, and its length. Slot lookups and scatter bookkeeping are per run, not per sample.
+  std::vector<std::uint32_t> run_slot;
+  std::vector<std::uint32_t> run_length;
   std::vector<GroupedSample> grouped;
   std::vector<std::uint64_t> slot_lines;  // cache lines (8 voxels) of the block touched
   std::vector<TsdfLeafCache::Entry> slot_entry;
@@ -451,21 +454,25 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     std::size_t total = 0;
     for (std::size_t c = 0; c < kRayChunks; ++c) total += s.bins[c * kPartitions + p].size();
     if (part.table_keys.empty()) part.grow();
-    part.sample_slot.resize(total);
+    part.run_slot.resize(total);
+    part.run_length.resize(total);
     part.grouped.resize(total);
     part.new_leaves.clear();
     part.voxel_updates = 0;
-    std::size_t k = 0;
+    std::size_t runs = 0;
     for (std::size_t c = 0; c < kRayChunks; ++c) {
-      std::uint64_t last = kEmptyKey;
-      std::uint32_t slot = 0;
-      for (const Sample& smp : s.bins[c * kPartitions + p]) {
-        if (smp.block_key != last) {
-          last = smp.block_key;
-          slot = part.slot_for(last);
-        }
-        part.slot_count[slot]++;
-        part.sample_slot[k++] = slot;
+      const SampleBin& bin = s.bins[c * kPartitions + p];
+      for (std::size_t i = 0; i < bin.count;) {
+        const std::uint64_t key = bin.data[i].block_key;
+        std::size_t j = i + 1;
+        while (j < bin.count && bin.data[j].block_key == key) ++j;
+        const std::uint32_t slot = part.slot_for(key);
+        const auto len = static_cast<std::uint32_t>(j - i);
+        part.slot_count[slot] += len;
+        part.run_slot[runs] = slot;
+        part.run_length[runs] = len;
+        ++runs;
+        i = j;
       }
     }
     const std::size_t slots = part.slot_keys.size();
@@ -476,15 +483,25 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       acc += part.slot_count[sl];
     }
     part.slot_start[slots] = acc;
-    // Scatter (stable: ray order within each block).
-    k = 0;
+    // Scatter (stable: ray order within each block), run by run in the order counted.
     for (std::size_t sl = 0; sl < slots; ++sl) part.slot_count[sl] = part.slot_start[sl];
     part.slot_lines.assign(slots, 0);
-    for (std::size_t c = 0; c < kRayChunks; ++c) {
-      for (const Sample& smp : s.bins[c * kPartitions + p]) {
-        const std::uint32_t slot = part.sample_slot[k++];
-        part.grouped[part.slot_count[slot]++] = {smp.offset, smp.sdf_m};
-        part.slot_lines[slot] |= std::uint64_t{1} << (smp.offset >> 3);
+    {
+      std::size_t r = 0;
+      for (std::size_t c = 0; c < kRayChunks; ++c) {
+        const SampleBin& bin = s.bins[c * kPartitions + p];
+        for (std::size_t i = 0; i < bin.count; ++r) {
+          const std::uint32_t slot = part.run_slot[r];
+          GroupedSample* dst = &part.grouped[part.slot_count[slot]];
+          std::uint64_t lines = 0;
+          for (const std::size_t end = i + part.run_length[r]; i < end; ++i) {
+            const Sample& smp = bin.data[i];
+            *dst++ = {smp.offset, smp.sdf_m};
+            lines |= std::uint64_t{1} << (smp.offset >> 3);
+          }
+          part.slot_count[slot] += part.run_length[r];
+          part.slot_lines[slot] |= lines;
+        }
       }
     }
     // The leaf of every block: from the leaf cache, else found in the tree read-only (its
