@@ -524,9 +524,18 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       }
       const std::size_t mask = cache.table.size() - 1;
       FastAccessor acc_tree(tree);
+      // The table is larger than the L2 cache and probed at random: prefetch a few slots ahead.
+      constexpr std::size_t kProbeAhead = 8;
+      const auto home = [&](std::size_t sl) {
+        return static_cast<std::size_t>(mix(part.slot_keys[sl]) >> 24) & mask;
+      };
+      for (std::size_t sl = 0; sl < std::min(slots, kProbeAhead); ++sl) {
+        __builtin_prefetch(&cache.table[home(sl)]);
+      }
       for (std::size_t sl = 0; sl < slots; ++sl) {
+        if (sl + kProbeAhead < slots) __builtin_prefetch(&cache.table[home(sl + kProbeAhead)]);
         const std::uint64_t key = part.slot_keys[sl];
-        std::size_t h = static_cast<std::size_t>(mix(key) >> 24) & mask;
+        std::size_t h = home(sl);
         while (cache.table[h].key != key && cache.table[h].key != kEmptyKey) h = (h + 1) & mask;
         if (cache.table[h].key != key) {
           const BlockIndex b = unpack_block(key);
