@@ -58,6 +58,25 @@ struct Sample {
   float sdf_m;
 };
 
+/// Band samples of one (ray chunk, partition), stored without initialisation (a vector would
+/// zero what it grows into) and read back in order.
+struct SampleBin {
+  std::unique_ptr<Sample[]> data;
+  std::size_t capacity = 0;
+  std::size_t count = 0;
+
+  const Sample* begin() const { return data.get(); }
+  const Sample* end() const { return data.get() + count; }
+  std::size_t size() const { return count; }
+  void grow(std::size_t min_capacity) {
+    const std::size_t cap = std::max({min_capacity, 2 * capacity, std::size_t{1024}});
+    auto bigger = std::make_unique_for_overwrite<Sample[]>(cap);
+    std::copy(begin(), end(), bigger.get());
+    data = std::move(bigger);
+    capacity = cap;
+  }
+};
+
 /// One sample after grouping by block.
 struct GroupedSample {
   std::uint32_t offset;
@@ -72,14 +91,17 @@ struct Partition {
   std::vector<std::uint32_t> slot_hash_pos;
   std::vector<std::uint32_t> slot_count;
   std::vector<std::uint32_t> slot_start;
-  std::vector<std::uint32_t> sample_slot;
+  /// Runs of consecutive samples of one block (a ray crosses a block in a run): the slot of
+  /// each run, and its length. Slot lookups and scatter bookkeeping are per run, not per sample.
+  std::vector<std::uint32_t> run_slot;
+  std::vector<std::uint32_t> run_length;
   std::vector<GroupedSample> grouped;
   std::vector<std::uint64_t> slot_lines;  // cache lines (8 voxels) of the block touched
   std::vector<TsdfLeafCache::Entry> slot_entry;
   std::vector<std::unique_ptr<Leaf>> new_leaves;
   std::array<float, kTsdfBlockVoxels> sum{};
   std::array<std::uint32_t, kTsdfBlockVoxels> count{};
-  std::vector<std::uint32_t> touched;
+  std::array<std::uint32_t, kTsdfBlockVoxels> touched{};
   std::uint64_t voxel_updates = 0;
 
   std::size_t home(std::uint64_t key) const {
@@ -130,8 +152,7 @@ struct Partition {
 }  // namespace
 
 struct TsdfIntegrator::Scratch {
-  std::vector<std::vector<Sample>> bins =
-      std::vector<std::vector<Sample>>(kRayChunks * kPartitions);
+  std::vector<SampleBin> bins = std::vector<SampleBin>(kRayChunks * kPartitions);
   std::vector<std::uint64_t> chunk_rays = std::vector<std::uint64_t>(kRayChunks);
   std::vector<Partition> partitions = std::vector<Partition>(kPartitions);
 };
@@ -271,13 +292,42 @@ TsdfLayer TsdfIntegrator::make_layer() const {
 
 namespace {
 
+/// The bins of one ray chunk (one per partition). `room` is a lower bound of the free samples of
+/// every bin, so a ray checks capacity once instead of once per sample.
+struct ChunkBins {
+  SampleBin* bins;  // kPartitions
+  std::size_t room = 0;
+
+  void begin() {
+    room = std::numeric_limits<std::size_t>::max();
+    for (std::size_t p = 0; p < kPartitions; ++p) {
+      bins[p].count = 0;
+      room = std::min(room, bins[p].capacity);
+    }
+  }
+  /// Makes room for `need` more samples in every bin.
+  void reserve(std::size_t need) {
+    if (room >= need) return;
+    room = std::numeric_limits<std::size_t>::max();
+    for (std::size_t p = 0; p < kPartitions; ++p) {
+      SampleBin& bin = bins[p];
+      if (bin.capacity - bin.count < need) bin.grow(bin.count + need);
+      room = std::min(room, bin.capacity - bin.count);
+    }
+  }
+};
+
 /// Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", Eurographics 1987:
 /// every voxel the segment origin + t·dir, t in [t0, t1], passes through, in order. For each,
 /// the projective signed distance r − |c − o| of its centre c; kept when within the band
-/// (carving: in front of the band clamped to +truncation).
-void band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double range, double t0,
-                  double t1, double v, double trunc, bool carve,
-                  std::vector<Sample>* bins /* kPartitions */) {
+/// (carving: in front of the band clamped to +truncation). The centre offset c − o is kept per
+/// axis and moved by ±v on each step (one add instead of a convert, multiply and two adds).
+/// @return the samples written.
+/// kCarve: the segment may be long (sensor to band), so each sample checks its bin's capacity;
+/// otherwise the caller has reserved room for the whole segment.
+template <bool kCarve>
+std::size_t band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double range,
+                         double t0, double t1, double v, double trunc, ChunkBins& out) {
   const Eigen::Vector3d q0 = (o + t0 * dir) / v;  // voxel units
   Eigen::Vector3i idx = q0.array().floor().cast<int>();
   int step[3];
@@ -304,32 +354,40 @@ void band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double r
   int ix = idx.x(), iy = idx.y(), iz = idx.z();
   double tx = t_max[0], ty = t_max[1], tz = t_max[2];
   const double half = 0.5 * v;
+  double cx = ix * v + half - o.x(), cy = iy * v + half - o.y(), cz = iz * v + half - o.z();
+  const double vx = step[0] * v, vy = step[1] * v, vz = step[2] * v;
   std::uint64_t last_key = kEmptyKey;
-  std::vector<Sample>* bin = nullptr;
+  SampleBin* bin = nullptr;
+  std::size_t written = 0;
   while (true) {
-    const double cx = ix * v + half - o.x(), cy = iy * v + half - o.y(), cz = iz * v + half - o.z();
     double sdf = range - std::sqrt(cx * cx + cy * cy + cz * cz);
-    if (carve && sdf > trunc) sdf = trunc;
+    if (kCarve && sdf > trunc) sdf = trunc;
     if (sdf <= trunc && sdf >= -trunc) {
       const std::uint64_t key = pack_block(ix >> 3, iy >> 3, iz >> 3);
       if (key != last_key) {
         last_key = key;
-        bin = &bins[partition_of(key)];
+        bin = &out.bins[partition_of(key)];
       }
+      if (kCarve && bin->count == bin->capacity) bin->grow(bin->count + 1);
       const auto offset = static_cast<std::uint32_t>(tsdf_voxel_offset(ix & 7, iy & 7, iz & 7));
-      bin->push_back(Sample{key, offset, static_cast<float>(sdf)});
+      bin->data[bin->count++] = Sample{key, offset, static_cast<float>(sdf)};
+      ++written;
     }
-    const int xy = tx < ty, xz = tx < tz, yz = ty < tz;
-    const int bx = xy & xz, by = (1 - xy) & yz, bz = 1 - bx - by;
+    const bool xy = tx < ty, xz = tx < tz, yz = ty < tz;
+    const bool bx = xy & xz, by = !xy & yz, bz = !bx & !by;
     const double t_next = bx ? tx : (by ? ty : tz);
     if (t_next > t1) break;
-    ix += bx * step[0];
-    iy += by * step[1];
-    iz += bz * step[2];
-    tx += bx * t_delta[0];
-    ty += by * t_delta[1];
-    tz += bz * t_delta[2];
+    ix += bx ? step[0] : 0;
+    iy += by ? step[1] : 0;
+    iz += bz ? step[2] : 0;
+    tx += bx ? t_delta[0] : 0.0;
+    ty += by ? t_delta[1] : 0.0;
+    tz += bz ? t_delta[2] : 0.0;
+    cx += bx ? vx : 0.0;
+    cy += by ? vy : 0.0;
+    cz += bz ? vz : 0.0;
   }
+  return written;
 }
 
 }  // namespace
@@ -358,8 +416,8 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
   const std::size_t n = points_W.size();
   const std::size_t per_chunk = (n + kRayChunks - 1) / kRayChunks;
   runner.parallel_for(kRayChunks, [&](std::size_t c) {
-    std::vector<Sample>* bins = &s.bins[c * kPartitions];
-    for (std::size_t p = 0; p < kPartitions; ++p) bins[p].clear();
+    ChunkBins out{&s.bins[c * kPartitions]};
+    out.begin();
     std::uint64_t rays = 0;
     const std::size_t end = std::min(n, (c + 1) * per_chunk);
     for (std::size_t i = c * per_chunk; i < end; ++i) {
@@ -370,7 +428,16 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       ++rays;
       const Eigen::Vector3d dir = d / r;
       const double t0 = carve ? 0.0 : std::max(0.0, r - trunc);
-      band_samples(o, dir, r, t0, r + trunc, v, trunc, carve, bins);
+      const double t1 = r + trunc;
+      if (carve) {
+        band_samples<true>(o, dir, r, t0, t1, v, trunc, out);
+        out.room = 0;  // unknown: the next reserve() recomputes it
+      } else {
+        // A segment of length L crosses at most L/v + 1 boundaries per axis: at most
+        // 3·(L/v + 1) + 1 voxels.
+        out.reserve(3 * static_cast<std::size_t>((t1 - t0) / v) + 7);
+        out.room -= band_samples<false>(o, dir, r, t0, t1, v, trunc, out);
+      }
     }
     s.chunk_rays[c] = rays;
   });
@@ -387,21 +454,25 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     std::size_t total = 0;
     for (std::size_t c = 0; c < kRayChunks; ++c) total += s.bins[c * kPartitions + p].size();
     if (part.table_keys.empty()) part.grow();
-    part.sample_slot.resize(total);
+    part.run_slot.resize(total);
+    part.run_length.resize(total);
     part.grouped.resize(total);
     part.new_leaves.clear();
     part.voxel_updates = 0;
-    std::size_t k = 0;
+    std::size_t runs = 0;
     for (std::size_t c = 0; c < kRayChunks; ++c) {
-      std::uint64_t last = kEmptyKey;
-      std::uint32_t slot = 0;
-      for (const Sample& smp : s.bins[c * kPartitions + p]) {
-        if (smp.block_key != last) {
-          last = smp.block_key;
-          slot = part.slot_for(last);
-        }
-        part.slot_count[slot]++;
-        part.sample_slot[k++] = slot;
+      const SampleBin& bin = s.bins[c * kPartitions + p];
+      for (std::size_t i = 0; i < bin.count;) {
+        const std::uint64_t key = bin.data[i].block_key;
+        std::size_t j = i + 1;
+        while (j < bin.count && bin.data[j].block_key == key) ++j;
+        const std::uint32_t slot = part.slot_for(key);
+        const auto len = static_cast<std::uint32_t>(j - i);
+        part.slot_count[slot] += len;
+        part.run_slot[runs] = slot;
+        part.run_length[runs] = len;
+        ++runs;
+        i = j;
       }
     }
     const std::size_t slots = part.slot_keys.size();
@@ -412,15 +483,25 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       acc += part.slot_count[sl];
     }
     part.slot_start[slots] = acc;
-    // Scatter (stable: ray order within each block).
-    k = 0;
+    // Scatter (stable: ray order within each block), run by run in the order counted.
     for (std::size_t sl = 0; sl < slots; ++sl) part.slot_count[sl] = part.slot_start[sl];
     part.slot_lines.assign(slots, 0);
-    for (std::size_t c = 0; c < kRayChunks; ++c) {
-      for (const Sample& smp : s.bins[c * kPartitions + p]) {
-        const std::uint32_t slot = part.sample_slot[k++];
-        part.grouped[part.slot_count[slot]++] = {smp.offset, smp.sdf_m};
-        part.slot_lines[slot] |= std::uint64_t{1} << (smp.offset >> 3);
+    {
+      std::size_t r = 0;
+      for (std::size_t c = 0; c < kRayChunks; ++c) {
+        const SampleBin& bin = s.bins[c * kPartitions + p];
+        for (std::size_t i = 0; i < bin.count; ++r) {
+          const std::uint32_t slot = part.run_slot[r];
+          GroupedSample* dst = &part.grouped[part.slot_count[slot]];
+          std::uint64_t lines = 0;
+          for (const std::size_t end = i + part.run_length[r]; i < end; ++i) {
+            const Sample& smp = bin.data[i];
+            *dst++ = {smp.offset, smp.sdf_m};
+            lines |= std::uint64_t{1} << (smp.offset >> 3);
+          }
+          part.slot_count[slot] += part.run_length[r];
+          part.slot_lines[slot] |= lines;
+        }
       }
     }
     // The leaf of every block: from the leaf cache, else found in the tree read-only (its
@@ -443,9 +524,18 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       }
       const std::size_t mask = cache.table.size() - 1;
       FastAccessor acc_tree(tree);
+      // The table is larger than the L2 cache and probed at random: prefetch a few slots ahead.
+      constexpr std::size_t kProbeAhead = 8;
+      const auto home = [&](std::size_t sl) {
+        return static_cast<std::size_t>(mix(part.slot_keys[sl]) >> 24) & mask;
+      };
+      for (std::size_t sl = 0; sl < std::min(slots, kProbeAhead); ++sl) {
+        __builtin_prefetch(&cache.table[home(sl)]);
+      }
       for (std::size_t sl = 0; sl < slots; ++sl) {
+        if (sl + kProbeAhead < slots) __builtin_prefetch(&cache.table[home(sl + kProbeAhead)]);
         const std::uint64_t key = part.slot_keys[sl];
-        std::size_t h = static_cast<std::size_t>(mix(key) >> 24) & mask;
+        std::size_t h = home(sl);
         while (cache.table[h].key != key && cache.table[h].key != kEmptyKey) h = (h + 1) & mask;
         if (cache.table[h].key != key) {
           const BlockIndex b = unpack_block(key);
@@ -462,30 +552,50 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
         part.slot_entry[sl] = cache.table[h];
       }
     }
-    // Apply, prefetching the touched cache lines of the blocks a few slots ahead: leaves are
-    // scattered in memory, so this step is bound by cache misses, not arithmetic.
-    constexpr std::size_t kAhead = 4;
-    const auto prefetch = [&](std::size_t sl) {
-      __builtin_prefetch(&part.slot_entry[sl].leaf->getValueMask(), 1);
-      std::uint64_t lines = part.slot_lines[sl];
-      while (lines != 0) {
-        const int l = __builtin_ctzll(lines);
-        lines &= lines - 1;
-        __builtin_prefetch(part.slot_entry[sl].values + 8 * l, 1);
+    // Apply, prefetching the touched cache lines of the blocks ahead: leaves are scattered in
+    // memory, so this step is bound by cache misses, not arithmetic. The prefetch runs a fixed
+    // number of cache lines ahead (not slots: a slot touches 1 to 64 lines, and prefetching
+    // more lines than the core can keep in flight drops them).
+    constexpr std::size_t kLinesAhead = 24;
+    std::size_t pf_slot = 0, issued = 0, consumed = 0;
+    std::uint64_t pf_lines = 0;
+    if (slots > 0) {
+      pf_lines = part.slot_lines[0];
+      __builtin_prefetch(&part.slot_entry[0].leaf->getValueMask(), 1);
+    }
+    const auto prefetch_until = [&](std::size_t target) {
+      while (issued < target) {
+        if (pf_lines == 0) {
+          if (++pf_slot >= slots) return;
+          pf_lines = part.slot_lines[pf_slot];
+          __builtin_prefetch(&part.slot_entry[pf_slot].leaf->getValueMask(), 1);
+          continue;
+        }
+        const int l = __builtin_ctzll(pf_lines);
+        pf_lines &= pf_lines - 1;
+        __builtin_prefetch(part.slot_entry[pf_slot].values + 8 * l, 1);
+        ++issued;
       }
     };
-    for (std::size_t sl = 0; sl < std::min(slots, kAhead); ++sl) prefetch(sl);
+    std::uint32_t* touched = part.touched.data();
     for (std::size_t sl = 0; sl < slots; ++sl) {
-      if (sl + kAhead < slots) prefetch(sl + kAhead);
+      consumed += static_cast<std::size_t>(__builtin_popcountll(part.slot_lines[sl]));
+      prefetch_until(consumed + kLinesAhead);
       Leaf* leaf = part.slot_entry[sl].leaf;
       Value* values = part.slot_entry[sl].values;
+      std::size_t nt = 0;
+      // The voxels of the block, each once in first-touch order (branch-free: whether a sample
+      // is a voxel's first is unpredictable).
       for (std::uint32_t g = part.slot_start[sl]; g < part.slot_start[sl + 1]; ++g) {
         const GroupedSample gs = part.grouped[g];
-        if (part.count[gs.offset] == 0) part.touched.push_back(gs.offset);
+        const std::uint32_t c = part.count[gs.offset];
+        touched[nt] = gs.offset;
+        nt += c == 0;
         part.sum[gs.offset] += gs.sdf_m;
-        part.count[gs.offset]++;
+        part.count[gs.offset] = c + 1;
       }
-      for (const std::uint32_t off : part.touched) {
+      for (std::size_t t = 0; t < nt; ++t) {
+        const std::uint32_t off = touched[t];
         const float obs = part.sum[off] / static_cast<float>(part.count[off]);
         Value& x = values[off];
         const float w = x[1];
@@ -496,8 +606,7 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
         part.sum[off] = 0.0f;
         part.count[off] = 0;
       }
-      part.voxel_updates += part.touched.size();
-      part.touched.clear();
+      part.voxel_updates += nt;
     }
   });
 

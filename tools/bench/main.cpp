@@ -19,6 +19,7 @@
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/kitti.hpp"
+#include "vdbfusion_reference.hpp"
 
 namespace {
 
@@ -161,7 +162,9 @@ int main(int argc, char** argv) {
   }
 
   std::vector<double> t_filter, t_occ, t_cost, t_pipeline, t_octomap, t_occ_only, t_tsdf,
-      t_tsdf_cpu, t_esdf2d;
+      t_tsdf_cpu, t_esdf2d, t_vdbfusion, t_vdbfusion_cpu;
+  // VDBFusion's algorithm on the same points, single-threaded (as VDBFusion is): the TSDF baseline.
+  bench::VdbFusionReference vdbfusion(opt.tsdf_voxel_m, opt.tsdf_truncation_m);
   core::DistanceField field2d;
   core::DistanceFieldScratch scratch2d;
   std::uint64_t points = 0, tsdf_samples = 0, tsdf_updates = 0;
@@ -179,6 +182,10 @@ int main(int argc, char** argv) {
     });
     t_tsdf_cpu.push_back(process_cpu_ms() - cpu0);
     t_tsdf.push_back(ts);
+    const double cpu1 = process_cpu_ms();
+    t_vdbfusion.push_back(timed_ms(
+        [&] { vdbfusion.integrate(mapper.sensor_W(), mapper.points_W(), opt.max_range_m); }));
+    t_vdbfusion_cpu.push_back(process_cpu_ms() - cpu1);
     const double c = opt.tsdf_only ? 0.0 : timed_ms([&] { mapper.update_costmap({}, 0, pool); });
     t_filter.push_back(f);
     t_occ.push_back(o);
@@ -246,6 +253,13 @@ int main(int argc, char** argv) {
     std::printf("  %-26s %9s %9s %9s %9s   (ms per scan)\n", "", "mean", "p50", "p99", "max");
     print_row("tsdf integrate (wall)", t_tsdf);
     print_row("tsdf integrate (CPU, sum)", t_tsdf_cpu);
+    print_row("VDBFusion algo (wall)", t_vdbfusion);
+    print_row("VDBFusion algo (CPU)", t_vdbfusion_cpu);
+    const auto ts = summarize(t_tsdf), tv = summarize(t_vdbfusion);
+    const auto tsc = summarize(t_tsdf_cpu), tvc = summarize(t_vdbfusion_cpu);
+    std::printf(
+        "  speed ratio VDBFusion / tarmac: wall mean %.2fx, p50 %.2fx; CPU mean %.2fx, p50 %.2fx\n",
+        tv.mean / ts.mean, tv.p50 / ts.p50, tvc.mean / tsc.mean, tvc.p50 / tsc.p50);
     double load[3] = {0, 0, 0};
     if (getloadavg(load, 3) > 0) {
       std::printf("  (CPU = process CPU time over all threads; machine load average %.2f)\n",
@@ -258,6 +272,8 @@ int main(int argc, char** argv) {
         "  map: %zu blocks, %zu voxels, %.1f MiB over %.0f m^2 mapped -> %.2f MiB per 1000 m^2\n",
         tsdf.block_count(), tsdf.voxel_count(), mib, area_m2,
         area_m2 > 0 ? mib / area_m2 * 1000.0 : 0.0);
+    std::printf("  digest %016llx; VDBFusion algorithm: %zu voxels\n",
+                static_cast<unsigned long long>(tsdf.digest()), vdbfusion.voxel_count());
   }
   if (opt.tsdf_only) return 0;
 
