@@ -23,42 +23,48 @@ std::uint8_t site_mask(UnknownPolicy policy) {
   return policy == UnknownPolicy::kUnknownIsOccupied ? 3 : 1;
 }
 
+/// One parabola of a lower envelope: its root v, F = f[v] + v², and its left breakpoint as the
+/// fraction zn / (2·zd) (zd > 0; the first parabola's is −inf and never read).
+struct Parabola {
+  std::int64_t F, zn, zd;
+  std::int64_t v;
+};
+
 /// Lower envelope (FH Algorithm 1) of the parabolas q ↦ (q − p)² + f[p] over the p with
 /// f[p] >= 0 (f[p] < 0: no site), in exact integer arithmetic. The breakpoint between
-/// parabolas p < q is z = (F_q − F_p) / (2 (q − p)), F_p = f[p] + p²; breakpoints are kept as
-/// fractions zn / (2 zd) and compared by cross-multiplying, so no division. A new parabola
-/// replaces the last one when it is as low at that one's left breakpoint (ties go to the parabola
-/// added last). Returns the number of parabolas; v holds their roots, zn/zd the breakpoints.
-int lower_envelope(const std::int32_t* f, int n, std::int32_t* v, std::int64_t* F, std::int64_t* zn,
-                   std::int64_t* zd) {
+/// parabolas p < q is z = (F_q − F_p) / (2 (q − p)); breakpoints are kept as fractions and
+/// compared by cross-multiplying, so no division. A new parabola replaces the last one when it
+/// is as low at that one's left breakpoint (ties go to the parabola added last). Returns the
+/// number of parabolas, followed in `e` by a sentinel whose breakpoint is never passed.
+/// @pre e holds n + 1 entries.
+int lower_envelope(const std::int32_t* __restrict f, int n, Parabola* __restrict e) {
   int k = -1;
   for (int q = 0; q < n; ++q) {
     if (f[q] < 0) continue;
     const std::int64_t Fq = f[q] + std::int64_t{q} * q;
-    // s(q, v[k]) <= z[k]  ⟺  (F_q − F_k)·zd_k <= zn_k·(q − v_k); the first parabola stays.
-    while (k > 0 && (Fq - F[k]) * zd[k] <= zn[k] * (q - v[k])) --k;
-    ++k;
-    v[k] = q;
-    F[k] = Fq;
-    if (k > 0) {
-      zn[k] = Fq - F[k - 1];
-      zd[k] = q - v[k - 1];
+    // s(q, v_k) <= z_k  ⟺  (F_q − F_k)·zd_k <= zn_k·(q − v_k); the first parabola stays.
+    while (k > 0 && (Fq - e[k].F) * e[k].zd <= e[k].zn * (q - e[k].v)) --k;
+    if (k >= 0) {
+      e[k + 1] = Parabola{Fq, Fq - e[k].F, q - e[k].v, q};
+    } else {
+      e[0] = Parabola{Fq, 0, 1, q};
     }
+    ++k;
   }
+  e[k + 1] = Parabola{0, 1, 0, 0};  // 1 < 2·q·0 never holds
   return k + 1;
 }
 
 /// For each q, the root of the envelope's parabola that is lowest at q: the last one whose
 /// breakpoint z lies strictly below q (a tie at q stays with the earlier parabola).
-/// Calls emit(q, root) in order of q. @pre count >= 1.
+/// Calls emit(q, root) in order of q. @pre the envelope is not empty.
 template <typename Emit>
-void scan_envelope(int n, int count, const std::int32_t* v, const std::int64_t* zn,
-                   const std::int64_t* zd, Emit&& emit) {
+void scan_envelope(int n, const Parabola* __restrict e, Emit&& emit) {
   int j = 0;
   for (int q = 0; q < n; ++q) {
-    // z[j+1] < q  ⟺  zn < 2·q·zd
-    while (j + 1 < count && zn[j + 1] < 2 * std::int64_t{q} * zd[j + 1]) ++j;
-    emit(q, v[j]);
+    // z_{j+1} < q  ⟺  zn < 2·q·zd
+    while (e[j + 1].zn < 2 * std::int64_t{q} * e[j + 1].zd) ++j;
+    emit(q, static_cast<int>(e[j].v));
   }
 }
 
@@ -91,10 +97,7 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
     for (auto& l : lines) l.resize(size);
   };
   ensure(s.line_f, line_len * kBlock);
-  ensure(s.line_v, line_len);
-  ensure(s.line_F, line_len);
-  ensure(s.line_zn, line_len);
-  ensure(s.line_zd, line_len);
+  ensure(s.line_e, (line_len + 1) * 4);  // Parabola = 4 × int64
   ensure(s.line_a, line_len * kBlock);
   ensure(s.line_b, line_len * kBlock);
   ensure(s.line_c, line_len);
@@ -146,10 +149,11 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
     runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
       std::int32_t* f = s.line_f[task].data();
       std::int32_t* a = s.line_a[task].data();  // gathered z offsets
-      std::int32_t* v = s.line_v[task].data();
-      std::int64_t* F = s.line_F[task].data();
-      std::int64_t* zn = s.line_zn[task].data();
-      std::int64_t* zd = s.line_zd[task].data();
+      Parabola* e = reinterpret_cast<Parabola*>(s.line_e[task].data());
+      std::int16_t* __restrict off0 = s.off[0].data();
+      std::int16_t* __restrict off1 = s.off[1].data();
+      const int len = ny;
+      const std::size_t stride = static_cast<std::size_t>(nx);
       const std::size_t first = groups * task / kTasksPerPass;
       const std::size_t last = groups * (task + 1) / kTasksPerPass;
       for (std::size_t group = first; group < last; ++group) {
@@ -157,30 +161,28 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
         const std::size_t start = (group % groups_per_plane) * kBlock;
         const int width = static_cast<int>(std::min<std::size_t>(kBlock, nx - start));
         const std::size_t base = zplane * plane + start;
-        for (int q = 0; q < ny; ++q) {
-          const std::int16_t* o = s.off[0].data() + base + static_cast<std::size_t>(q) * nx;
+        for (int q = 0; q < len; ++q) {
+          const std::int16_t* o = off0 + base + q * stride;
           for (int b = 0; b < width; ++b) {
             const std::int32_t dz = o[b];
-            a[b * ny + q] = dz;
-            f[b * ny + q] = dz == kNone ? -1 : dz * dz;
+            a[b * len + q] = dz;
+            f[b * len + q] = dz == kNone ? -1 : dz * dz;
           }
         }
         for (int b = 0; b < width; ++b) {
-          const std::int32_t* fl = f + b * ny;
-          const std::int32_t* al = a + b * ny;
+          const std::int32_t* fl = f + b * len;
+          const std::int32_t* al = a + b * len;
           const std::size_t col = base + b;
-          const int count = lower_envelope(fl, ny, v, F, zn, zd);
-          if (count == 0) {
-            for (int q = 0; q < ny; ++q) {
-              s.off[0][col + static_cast<std::size_t>(q) * nx] = kNone;
-              s.off[1][col + static_cast<std::size_t>(q) * nx] = kNone;
+          if (lower_envelope(fl, len, e) == 0) {
+            for (int q = 0; q < len; ++q) {
+              off0[col + q * stride] = kNone;
+              off1[col + q * stride] = kNone;
             }
             continue;
           }
-          scan_envelope(ny, count, v, zn, zd, [&](int q, std::int32_t root) {
-            const std::size_t i = col + static_cast<std::size_t>(q) * nx;
-            s.off[0][i] = static_cast<std::int16_t>(al[root]);
-            s.off[1][i] = static_cast<std::int16_t>(q - root);
+          scan_envelope(len, e, [&](int q, int root) {
+            off0[col + q * stride] = static_cast<std::int16_t>(al[root]);
+            off1[col + q * stride] = static_cast<std::int16_t>(q - root);
           });
         }
       }
@@ -194,10 +196,7 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
   const std::size_t rows = static_cast<std::size_t>(ny) * nz;
   runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
     std::int32_t* f = s.line_f[task].data();
-    std::int32_t* v = s.line_v[task].data();
-    std::int64_t* F = s.line_F[task].data();
-    std::int64_t* zn = s.line_zn[task].data();
-    std::int64_t* zd = s.line_zd[task].data();
+    Parabola* e = reinterpret_cast<Parabola*>(s.line_e[task].data());
     std::int32_t* __restrict ox = s.line_c[task].data();  // per cell: x offset to its site
     std::int32_t* __restrict o0 = s.line_a[task].data();  // carried offset along pass 1's axis
     std::int32_t* __restrict o1 = s.line_b[task].data();  // carried y offset (3D)
@@ -209,12 +208,12 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
       const std::int16_t* __restrict a0 = s.off[0].data() + base;
       const std::int16_t* __restrict a1 = three_d ? s.off[1].data() + base : nullptr;
       if (three_d) {
-        for (int x = 0; x < nx; ++x) {
+        for (int x = 0; x < width; ++x) {
           const std::int32_t u = a0[x], w = a1[x];
           f[x] = u == kNone ? -1 : u * u + w * w;
         }
       } else {
-        for (int x = 0; x < nx; ++x) {
+        for (int x = 0; x < width; ++x) {
           const std::int32_t u = a0[x];
           f[x] = u == kNone ? -1 : u * u;
         }
@@ -224,9 +223,8 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
       float* __restrict gx = out.gradient_x.data() + base;
       float* __restrict gy = out.gradient_y.data() + base;
       float* __restrict gz = out.gradient_z.data() + base;
-      const int count = lower_envelope(f, nx, v, F, zn, zd);
-      if (count == 0) {  // no obstacle in the grid
-        for (int x = 0; x < nx; ++x) {
+      if (lower_envelope(f, width, e) == 0) {  // no obstacle in the grid
+        for (int x = 0; x < width; ++x) {
           const bool unknown =
               report_unknown && st[x] == static_cast<std::uint8_t>(CellState::kUnknown);
           dist[x] = unknown ? std::numeric_limits<float>::quiet_NaN() : kInf;
@@ -235,13 +233,13 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
         continue;
       }
       if (three_d) {
-        scan_envelope(nx, count, v, zn, zd, [&](int q, std::int32_t root) {
+        scan_envelope(width, e, [&](int q, int root) {
           ox[q] = q - root;
           o0[q] = a0[root];
           o1[q] = a1[root];
         });
       } else {
-        scan_envelope(nx, count, v, zn, zd, [&](int q, std::int32_t root) {
+        scan_envelope(width, e, [&](int q, int root) {
           ox[q] = q - root;
           o0[q] = a0[root];
         });

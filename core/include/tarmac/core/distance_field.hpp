@@ -43,8 +43,8 @@ struct DistanceField {
 struct DistanceFieldScratch {
   std::vector<std::int16_t> off[2];  // per cell: offset to the nearest site along done axes
   std::vector<std::int32_t> lane;    // first pass: last site seen per lane
-  std::vector<std::vector<std::int32_t>> line_f, line_v, line_a, line_b, line_c;  // per task
-  std::vector<std::vector<std::int64_t>> line_F, line_zn, line_zd;  // per task: the envelope
+  std::vector<std::vector<std::int32_t>> line_f, line_a, line_b, line_c;  // per task
+  std::vector<std::vector<std::int64_t>> line_e;  // per task: the envelope's parabolas
 };
 
 /// Computes the exact distance field of `states` (dims.z() == 1 for 2D). Lines are split into a
