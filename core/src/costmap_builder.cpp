@@ -431,18 +431,24 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   //     returns of a voxel below the voxel rule's reach rise at least min_obstacle_height above
   //     their own scan's ground next to them (OccupancyMap::ring_layer_rise_cm).
   const auto min_rise_cm = static_cast<int>(std::ceil(params.min_obstacle_height_m * 100.0 - 1e-9));
+  // The layers' rise pointers, looked up once per call (windows of at most 64 layers).
+  std::array<const std::uint8_t*, 64> rise_layers{};
+  for (int z = 0; z < std::min(nz, 64); ++z)
+    rise_layers[static_cast<std::size_t>(z)] = map.ring_layer_rise_cm(z);
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
     for (int y = y0; y < y1; ++y) {
       const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
-      for (int x = 0; x < nx; ++x) {
+      for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
         const std::size_t i = static_cast<std::size_t>(y) * nx + x;
         if (classes[i] != static_cast<std::uint8_t>(ColumnClass::kFree)) continue;
-        const std::size_t sl = ring_row + static_cast<std::size_t>(map.ring_x(x));
+        const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
         const int gz = ground_layer[i];
         for (int z = std::max(0, gz); z < std::min(nz, gz + lo_layers); ++z) {
-          if (map.ring_layer_rise_cm(z)[sl] >= min_rise_cm) {
+          const std::uint8_t* rise =
+              z < 64 ? rise_layers[static_cast<std::size_t>(z)] : map.ring_layer_rise_cm(z);
+          if (rise[sl] >= min_rise_cm) {
             classes[i] = static_cast<std::uint8_t>(ColumnClass::kObstacle);
             break;
           }
