@@ -111,9 +111,12 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
     const std::size_t lanes = three_d ? plane : static_cast<std::size_t>(nx);
     const int len = three_d ? nz : ny;
     s.lane.resize(lanes);
-    runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
-      const std::size_t c0 = lanes * task / kTasksPerPass;
-      const std::size_t c1 = lanes * (task + 1) / kTasksPerPass;
+    // At least 64 lanes per task (a 2D row is few lanes): short lane runs do not vectorise well.
+    // Each cell's result is independent of the split.
+    const std::size_t tasks = std::clamp<std::size_t>(lanes / 64, 1, kTasksPerPass);
+    runner.parallel_for(tasks, [&](std::size_t task) {
+      const std::size_t c0 = lanes * task / tasks;
+      const std::size_t c1 = lanes * (task + 1) / tasks;
       std::int32_t* __restrict last = s.lane.data();
       for (std::size_t c = c0; c < c1; ++c) last[c] = -kNone;
       for (int p = 0; p < len; ++p) {
