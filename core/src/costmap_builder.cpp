@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -41,6 +42,26 @@ void mark_envelope(std::uint8_t* __restrict known, std::uint8_t* __restrict obst
     known[k] |= static_cast<std::uint8_t>(envelope & (l != OccupancyMap::kUnknown));
     obstacle[k] |= static_cast<std::uint8_t>(envelope & (above >= lo_layers) & (l > 0.0f));
   }
+}
+
+/// Accumulates one layer of a row run into per-column 32-bit words of layer bits (`bit` is the
+/// layer's bit in its word): occupied / observed. A select per cell, which vectorises.
+void mark_bits(std::uint32_t* __restrict occupied, std::uint32_t* __restrict known,
+               const float* __restrict log_odds, int count, std::uint32_t bit) {
+  for (int k = 0; k < count; ++k) {
+    const float l = log_odds[k];
+    occupied[k] |= l > 0.0f ? bit : 0u;
+    known[k] |= l != OccupancyMap::kUnknown ? bit : 0u;
+  }
+}
+
+/// Bits [a, b) of a 64-bit set, clamped to [0, 64).
+std::uint64_t bit_range(int a, int b) {
+  a = std::clamp(a, 0, 64);
+  b = std::clamp(b, 0, 64);
+  if (a >= b) return 0;
+  const std::uint64_t below_b = b == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << b) - 1;
+  return below_b & ~((std::uint64_t{1} << a) - 1);
 }
 
 }  // namespace
@@ -117,9 +138,45 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   //    ground cell. Unknown (−1e9) and free (< 0) are both "not > 0".
   auto& lowest = out.lowest_occupied;
   lowest.assign(geometry.cell_count(), -1);
+  // Windows of at most 64 layers: one pass over all layers builds per-column bit sets of the
+  // occupied and the observed layers; the lowest occupied layer and the envelope tests of step 3
+  // are then bit operations per column. Taller windows scan the layers (same results).
+  const bool use_bits = nz <= 64;
+  auto& occupied_bits = out.occupied_bits;
+  auto& known_bits = out.known_bits;
+  // Layers 0..31 in the first cell_count() words, 32..63 in the second.
+  const std::size_t cells_n = geometry.cell_count();
+  occupied_bits.resize(use_bits ? 2 * cells_n : 0);
+  known_bits.resize(use_bits ? 2 * cells_n : 0);
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    const std::size_t r0 = static_cast<std::size_t>(y0) * nx;
+    const std::size_t r1 = static_cast<std::size_t>(y1) * nx;
+    if (use_bits) {
+      for (const std::size_t half : {std::size_t{0}, cells_n}) {
+        std::fill(occupied_bits.begin() + static_cast<std::ptrdiff_t>(half + r0),
+                  occupied_bits.begin() + static_cast<std::ptrdiff_t>(half + r1), 0u);
+        std::fill(known_bits.begin() + static_cast<std::ptrdiff_t>(half + r0),
+                  known_bits.begin() + static_cast<std::ptrdiff_t>(half + r1), 0u);
+      }
+      for (int z = 0; z < nz; ++z) {
+        const float* layer = map.ring_layer(z);
+        const std::size_t half = z < 32 ? 0 : cells_n;
+        const std::uint32_t bit = std::uint32_t{1} << (z & 31);
+        for (int y = y0; y < y1; ++y) {
+          const std::size_t row = half + static_cast<std::size_t>(y) * nx;
+          for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
+            mark_bits(&occupied_bits[row + x0], &known_bits[row + x0], l, count, bit);
+          });
+        }
+      }
+      for (std::size_t i = r0; i < r1; ++i) {
+        const std::uint64_t b = occupied_bits[i] | std::uint64_t{occupied_bits[cells_n + i]} << 32;
+        lowest[i] = b == 0 ? std::int16_t{-1} : static_cast<std::int16_t>(std::countr_zero(b));
+      }
+      return;
+    }
     // Top down, overwriting: what stays is the lowest occupied layer. A plain select per cell,
     // which the compiler vectorises (the "first occupied from below" test did not).
     for (int z = nz - 1; z >= 0; --z) {
@@ -332,23 +389,34 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
     const std::size_t r0 = static_cast<std::size_t>(y0) * nx;
     const std::size_t r1 = static_cast<std::size_t>(y1) * nx;
     if (r0 == r1) return;
-    const auto [gmin, gmax] =
-        std::minmax_element(ground_layer.begin() + static_cast<std::ptrdiff_t>(r0),
-                            ground_layer.begin() + static_cast<std::ptrdiff_t>(r1));
-    std::fill(any_known.begin() + static_cast<std::ptrdiff_t>(r0),
-              any_known.begin() + static_cast<std::ptrdiff_t>(r1), 0);
-    std::fill(any_obstacle.begin() + static_cast<std::ptrdiff_t>(r0),
-              any_obstacle.begin() + static_cast<std::ptrdiff_t>(r1), 0);
-    const int z_begin = std::max(0, static_cast<int>(*gmin));
-    const int z_end = std::min(nz, static_cast<int>(*gmax) + top_layers);
-    for (int z = z_begin; z < z_end; ++z) {
-      const float* layer = map.ring_layer(z);
-      for (int y = y0; y < y1; ++y) {
-        const std::size_t row = static_cast<std::size_t>(y) * nx;
-        for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
-          mark_envelope(&any_known[row + x0], &any_obstacle[row + x0], &ground_layer[row + x0], l,
-                        count, z, lo_layers, top_layers);
-        });
+    if (use_bits) {
+      for (std::size_t i = r0; i < r1; ++i) {
+        const int gl = ground_layer[i];
+        const std::uint64_t known = known_bits[i] | std::uint64_t{known_bits[cells_n + i]} << 32;
+        const std::uint64_t occupied = occupied_bits[i] | std::uint64_t{occupied_bits[cells_n + i]}
+                                                              << 32;
+        any_known[i] = (known & bit_range(gl, gl + top_layers)) != 0;
+        any_obstacle[i] = (occupied & bit_range(gl + lo_layers, gl + top_layers)) != 0;
+      }
+    } else {
+      const auto [gmin, gmax] =
+          std::minmax_element(ground_layer.begin() + static_cast<std::ptrdiff_t>(r0),
+                              ground_layer.begin() + static_cast<std::ptrdiff_t>(r1));
+      std::fill(any_known.begin() + static_cast<std::ptrdiff_t>(r0),
+                any_known.begin() + static_cast<std::ptrdiff_t>(r1), 0);
+      std::fill(any_obstacle.begin() + static_cast<std::ptrdiff_t>(r0),
+                any_obstacle.begin() + static_cast<std::ptrdiff_t>(r1), 0);
+      const int z_begin = std::max(0, static_cast<int>(*gmin));
+      const int z_end = std::min(nz, static_cast<int>(*gmax) + top_layers);
+      for (int z = z_begin; z < z_end; ++z) {
+        const float* layer = map.ring_layer(z);
+        for (int y = y0; y < y1; ++y) {
+          const std::size_t row = static_cast<std::size_t>(y) * nx;
+          for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
+            mark_envelope(&any_known[row + x0], &any_obstacle[row + x0], &ground_layer[row + x0], l,
+                          count, z, lo_layers, top_layers);
+          });
+        }
       }
     }
     for (std::size_t i = r0; i < r1; ++i) {
@@ -363,18 +431,24 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   //     returns of a voxel below the voxel rule's reach rise at least min_obstacle_height above
   //     their own scan's ground next to them (OccupancyMap::ring_layer_rise_cm).
   const auto min_rise_cm = static_cast<int>(std::ceil(params.min_obstacle_height_m * 100.0 - 1e-9));
+  // The layers' rise pointers, looked up once per call (windows of at most 64 layers).
+  std::array<const std::uint8_t*, 64> rise_layers{};
+  for (int z = 0; z < std::min(nz, 64); ++z)
+    rise_layers[static_cast<std::size_t>(z)] = map.ring_layer_rise_cm(z);
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
     for (int y = y0; y < y1; ++y) {
       const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
-      for (int x = 0; x < nx; ++x) {
+      for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
         const std::size_t i = static_cast<std::size_t>(y) * nx + x;
         if (classes[i] != static_cast<std::uint8_t>(ColumnClass::kFree)) continue;
-        const std::size_t sl = ring_row + static_cast<std::size_t>(map.ring_x(x));
+        const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
         const int gz = ground_layer[i];
         for (int z = std::max(0, gz); z < std::min(nz, gz + lo_layers); ++z) {
-          if (map.ring_layer_rise_cm(z)[sl] >= min_rise_cm) {
+          const std::uint8_t* rise =
+              z < 64 ? rise_layers[static_cast<std::size_t>(z)] : map.ring_layer_rise_cm(z);
+          if (rise[sl] >= min_rise_cm) {
             classes[i] = static_cast<std::uint8_t>(ColumnClass::kObstacle);
             break;
           }

@@ -12,81 +12,59 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr std::size_t kTasksPerPass = 16;
-/// Lines along y and z are processed this many adjacent ones at a time: their cells are
-/// contiguous in memory (64 bytes of floats), so the gathers and scatters read and write whole
-/// cache lines instead of one float per line.
+/// Lines along y (3D middle pass) are processed this many adjacent ones at a time: their cells
+/// are contiguous in memory, so the gathers and scatters read and write whole cache lines.
 constexpr int kBlock = 16;
+/// Offset (cell − site, cells) meaning "no site on this line"; larger than any real offset.
+constexpr std::int32_t kNone = 1 << 14;
 
-/// 1D squared distance transform of f (FH Algorithm 1) with the argmin of each output.
-/// f[q] = +inf means "no site here". Writes d[q] = min_p (q − p)² + f[p] and arg[q] = p
-/// (−1 when every f is infinite). Ties go to the parabola added last (the larger p), a fixed rule.
-void edt_1d(const float* f, int n, float* d, std::int32_t* arg, std::int32_t* v, float* z) {
-  int k = -1;
-  for (int q = 0; q < n; ++q) {
-    if (f[q] == kInf) continue;
-    if (k < 0) {
-      k = 0;
-      v[0] = q;
-      z[0] = -kInf;
-      z[1] = kInf;
-      continue;
-    }
-    float s;
-    while (true) {
-      const int p = v[k];
-      // Intersection of the parabolas rooted at q and p. Values are integers well below 2^24,
-      // so float is exact enough to order breakpoints between integer positions.
-      s = ((f[q] + static_cast<float>(q) * q) - (f[p] + static_cast<float>(p) * p)) /
-          (2.0f * static_cast<float>(q - p));
-      if (s <= z[k] && k > 0) {
-        --k;
-        continue;
-      }
-      break;
-    }
-    if (s <= z[k]) {  // k == 0 and the new parabola dominates everywhere
-      v[0] = q;
-      z[0] = -kInf;
-      z[1] = kInf;
-      continue;
-    }
-    ++k;
-    v[k] = q;
-    z[k] = s;
-    z[k + 1] = kInf;
-  }
-  if (k < 0) {
-    std::fill(d, d + n, kInf);
-    std::fill(arg, arg + n, -1);
-    return;
-  }
-  int j = 0;
-  for (int q = 0; q < n; ++q) {
-    while (z[j + 1] < static_cast<float>(q)) ++j;
-    const float dq = static_cast<float>(q - v[j]);
-    d[q] = dq * dq + f[v[j]];
-    arg[q] = v[j];
-  }
+/// Bit of a CellState that makes it a site: occupied (1), or occupied and unknown (1 | 2).
+std::uint8_t site_mask(UnknownPolicy policy) {
+  return policy == UnknownPolicy::kUnknownIsOccupied ? 3 : 1;
 }
 
-/// edt_1d for an input that is 0 at sites and +inf elsewhere (the first pass), without
-/// parabolas: the envelope of zero-height parabolas breaks exactly at the midpoints between
-/// consecutive sites, and edt_1d keeps a midpoint cell with the left site. So each cell takes
-/// its nearest site, the left one on a tie. Same d and arg as edt_1d, bit for bit.
-void nearest_site_1d(const std::uint8_t* site, int n, float* d, std::int32_t* arg) {
-  int left = -1;
+/// One parabola of a lower envelope: its root v, F = f[v] + v², and its left breakpoint as the
+/// fraction zn / (2·zd) (zd > 0; the first parabola's is −inf and never read).
+struct Parabola {
+  std::int64_t F, zn, zd;
+  std::int64_t v;
+};
+
+/// Lower envelope (FH Algorithm 1) of the parabolas q ↦ (q − p)² + f[p] over the p with
+/// f[p] >= 0 (f[p] < 0: no site), in exact integer arithmetic. The breakpoint between
+/// parabolas p < q is z = (F_q − F_p) / (2 (q − p)); breakpoints are kept as fractions and
+/// compared by cross-multiplying, so no division. A new parabola replaces the last one when it
+/// is as low at that one's left breakpoint (ties go to the parabola added last). Returns the
+/// number of parabolas, followed in `e` by a sentinel whose breakpoint is never passed.
+/// @pre e holds n + 1 entries.
+int lower_envelope(const std::int32_t* __restrict f, int n, Parabola* __restrict e) {
+  int k = -1;
   for (int q = 0; q < n; ++q) {
-    if (site[q] != 0) left = q;
-    arg[q] = left;
+    if (f[q] < 0) continue;
+    const std::int64_t Fq = f[q] + std::int64_t{q} * q;
+    // s(q, v_k) <= z_k  ⟺  (F_q − F_k)·zd_k <= zn_k·(q − v_k); the first parabola stays.
+    while (k > 0 && (Fq - e[k].F) * e[k].zd <= e[k].zn * (q - e[k].v)) --k;
+    if (k >= 0) {
+      e[k + 1] = Parabola{Fq, Fq - e[k].F, q - e[k].v, q};
+    } else {
+      e[0] = Parabola{Fq, 0, 1, q};
+    }
+    ++k;
   }
-  int right = -1;
-  for (int q = n - 1; q >= 0; --q) {
-    if (site[q] != 0) right = q;
-    const int l = arg[q];
-    const int p = l < 0 || (right >= 0 && right - q < q - l) ? right : l;
-    arg[q] = p;
-    const float dq = static_cast<float>(q - p);
-    d[q] = p < 0 ? kInf : dq * dq;
+  e[k + 1] = Parabola{0, 1, 0, 0};  // 1 < 2·q·0 never holds
+  return k + 1;
+}
+
+/// For each q, the root of the envelope's parabola that is lowest at q: the last one whose
+/// breakpoint z lies strictly below q (a tie at q stays with the earlier parabola).
+/// Calls emit(q, root) in order of q. @pre the envelope is not empty.
+template <typename Emit>
+void scan_envelope(int n, const Parabola* __restrict e, Emit&& emit) {
+  int j = 0;
+  for (int q = 0; q < n; ++q) {
+    // z_{j+1} < q  ⟺  zn < 2·q·zd
+    while (e[j + 1].zn < 2 * std::int64_t{q} * e[j + 1].zd) ++j;
+    emit(q, static_cast<int>(e[j].v));
   }
 }
 
@@ -98,16 +76,20 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
   const int nx = dims.x(), ny = dims.y(), nz = dims.z();
   const std::size_t n = static_cast<std::size_t>(nx) * ny * nz;
   TARMAC_ASSERT(states.size() == n, "states must match dims");
+  TARMAC_ASSERT(nx < kNone && ny < kNone && nz < kNone, "dims must be below 16384");
   out.dims = dims;
   out.cell_size_m = cell_size_m;
   out.distance_m.resize(n);
   out.gradient_x.resize(n);
   out.gradient_y.resize(n);
   out.gradient_z.resize(n);
-  const int passes = nz == 1 ? 2 : 3;
-  // The last pass writes the output directly; it needs no squared distances or sites stored.
-  s.sq.resize(n);
-  for (int a = 0; a < 3; ++a) s.site[a].resize(a < passes - 1 ? n : 0);
+  const bool three_d = nz > 1;
+  const std::size_t plane = static_cast<std::size_t>(nx) * ny;
+  // Per cell, the offset (cell − nearest site so far) along each axis done: off[0] along the
+  // first pass's axis (z in 3D, y in 2D), off[1] along y (3D only). The squared distance of a
+  // cell after a pass is the sum of the squares of its offsets, so it is never stored.
+  s.off[0].resize(n);
+  s.off[1].resize(three_d ? n : 0);
   const int longest = std::max({nx, ny, nz});
   const std::size_t line_len = static_cast<std::size_t>(longest) + 1;
   const auto ensure = [&](auto& lines, std::size_t size) {
@@ -115,127 +97,186 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
     for (auto& l : lines) l.resize(size);
   };
   ensure(s.line_f, line_len * kBlock);
-  ensure(s.line_v, line_len);
-  ensure(s.line_arg, line_len * kBlock);
-  ensure(s.line_z, line_len);
-  ensure(s.line_d, line_len * kBlock);
-  ensure(s.line_s[0], line_len * kBlock);
-  ensure(s.line_s[1], line_len * kBlock);
-
-  const bool unknown_is_site = policy == UnknownPolicy::kUnknownIsOccupied;
+  ensure(s.line_e, (line_len + 1) * 4);  // Parabola = 4 × int64
+  ensure(s.line_a, line_len * kBlock);
+  ensure(s.line_b, line_len * kBlock);
+  ensure(s.line_c, line_len);
+  const std::uint8_t mask = site_mask(policy);
   const bool report_unknown = policy == UnknownPolicy::kReportUnknown;
 
-  // Metres and gradient of cell i at (x, y, z) from its squared distance and nearest site.
-  const auto finish = [&](std::size_t i, int x, int y, int zz, float sq, std::int32_t sx,
-                          std::int32_t sy, std::int32_t sz) {
-    float& dist = out.distance_m[i];
-    float& gx = out.gradient_x[i];
-    float& gy = out.gradient_y[i];
-    float& gz = out.gradient_z[i];
-    gx = gy = gz = 0.0f;
-    if (report_unknown && states[i] == CellState::kUnknown) {
-      dist = std::nanf("");
-      return;
-    }
-    if (sq == kInf) {
-      dist = kInf;
-      return;
-    }
-    const double r = std::sqrt(static_cast<double>(sq));
-    dist = static_cast<float>(r * cell_size_m);
-    if (r > 0.0) {
-      gx = static_cast<float>((x - sx) / r);
-      gy = static_cast<float>((y - sy) / r);
-      if (passes == 3) gz = static_cast<float>((zz - sz) / r);
-    }
-  };
-
-  // Pass along x builds, per cell, the squared distance to the nearest site in its row and that
-  // site's x. The pass along y takes the lower envelope of each column: the winner's x is copied
-  // from the cell it came from, its y is the argmin. The pass along z does the same for x and y.
-  // So each pass carries only the coordinates of the axes before it.
-  const std::size_t plane = static_cast<std::size_t>(nx) * ny;
-  const std::size_t rows = static_cast<std::size_t>(ny) * nz;
-  runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
-    auto* site = reinterpret_cast<std::uint8_t*>(s.line_v[task].data());
-    const std::size_t first = rows * task / kTasksPerPass;
-    const std::size_t last = rows * (task + 1) / kTasksPerPass;
-    for (std::size_t row = first; row < last; ++row) {
-      const std::size_t base = row * static_cast<std::size_t>(nx);
-      const CellState* st = states.data() + base;
-      for (int q = 0; q < nx; ++q) {
-        site[q] = static_cast<std::uint8_t>((st[q] == CellState::kOccupied) |
-                                            (unknown_is_site & (st[q] == CellState::kUnknown)));
+  // Pass 1, along the outermost axis (z in 3D, y in 2D): the nearest site on each line, by a
+  // sweep up and a sweep down that run across the contiguous lanes of a plane (or row) at once.
+  // A tie between the site below and the one above goes to the one below.
+  {
+    const std::size_t lanes = three_d ? plane : static_cast<std::size_t>(nx);
+    const int len = three_d ? nz : ny;
+    s.lane.resize(lanes);
+    // At least 64 lanes per task (a 2D row is few lanes): short lane runs do not vectorise well.
+    // Each cell's result is independent of the split.
+    const std::size_t tasks = std::clamp<std::size_t>(lanes / 64, 1, kTasksPerPass);
+    runner.parallel_for(tasks, [&](std::size_t task) {
+      const std::size_t c0 = lanes * task / tasks;
+      const std::size_t c1 = lanes * (task + 1) / tasks;
+      std::int32_t* __restrict last = s.lane.data();
+      for (std::size_t c = c0; c < c1; ++c) last[c] = -kNone;
+      for (int p = 0; p < len; ++p) {
+        const auto* __restrict st =
+            reinterpret_cast<const std::uint8_t*>(states.data()) + p * lanes;
+        std::int16_t* __restrict o = s.off[0].data() + p * lanes;
+        for (std::size_t c = c0; c < c1; ++c) {
+          last[c] = (st[c] & mask) != 0 ? p : last[c];
+          o[c] = static_cast<std::int16_t>(std::min(p - last[c], kNone));
+        }
       }
-      nearest_site_1d(site, nx, s.sq.data() + base, s.site[0].data() + base);
-    }
-  });
-
-  // Passes along y and z: kBlock adjacent lines at a time (adjacent along x for y, along the
-  // xy plane for z), gathered into per-task line buffers, transformed, scattered back.
-  for (int axis = 1; axis < passes; ++axis) {
-    const bool last_pass = axis == passes - 1;
-    const int len = axis == 1 ? ny : nz;
-    const std::size_t stride = axis == 1 ? static_cast<std::size_t>(nx) : plane;
-    // Groups of lines: along y, kBlock columns of one z plane (a plane's columns are split into
-    // ceil(nx / kBlock) groups); along z, kBlock xy cells.
-    const std::size_t groups_per_plane = axis == 1
-                                             ? (static_cast<std::size_t>(nx) + kBlock - 1) / kBlock
-                                             : (plane + kBlock - 1) / kBlock;
-    const std::size_t line_span = axis == 1 ? static_cast<std::size_t>(nx) : plane;
-    const std::size_t groups = groups_per_plane * (axis == 1 ? static_cast<std::size_t>(nz) : 1);
-    runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
-      float* f = s.line_f[task].data();
-      float* d = s.line_d[task].data();
-      std::int32_t* arg = s.line_arg[task].data();
-      std::int32_t* v = s.line_v[task].data();
-      float* z = s.line_z[task].data();
-      std::int32_t* carried[2] = {s.line_s[0][task].data(), s.line_s[1][task].data()};
-      const std::size_t first = groups * task / kTasksPerPass;
-      const std::size_t last = groups * (task + 1) / kTasksPerPass;
-      for (std::size_t group = first; group < last; ++group) {
-        const std::size_t outer = group / groups_per_plane;  // z plane for axis 1, 0 for axis 2
-        const std::size_t start = (group % groups_per_plane) * kBlock;
-        const int width = static_cast<int>(std::min<std::size_t>(kBlock, line_span - start));
-        const std::size_t base = outer * plane + start;  // first cell of the group's first line
-        // Gather: line b of the group into f[b * len ...], carried sites likewise.
-        for (int q = 0; q < len; ++q) {
-          const std::size_t i = base + q * stride;
-          for (int b = 0; b < width; ++b) f[b * len + q] = s.sq[i + b];
-          for (int a = 0; a < axis; ++a) {
-            for (int b = 0; b < width; ++b) carried[a][b * len + q] = s.site[a][i + b];
-          }
-        }
-        for (int b = 0; b < width; ++b) {
-          edt_1d(f + b * len, len, d + b * len, arg + b * len, v, z);
-        }
-        for (int q = 0; q < len; ++q) {
-          const std::size_t i = base + q * stride;
-          if (!last_pass) {
-            for (int b = 0; b < width; ++b) {
-              const std::int32_t from = arg[b * len + q];
-              s.sq[i + b] = d[b * len + q];
-              s.site[0][i + b] = from < 0 ? -1 : carried[0][b * len + from];
-              s.site[1][i + b] = from;
-            }
-            continue;
-          }
-          for (int b = 0; b < width; ++b) {
-            const std::int32_t from = arg[b * len + q];
-            const std::int32_t sx = from < 0 ? -1 : carried[0][b * len + from];
-            const std::int32_t sy = axis == 1 ? from : (from < 0 ? -1 : carried[1][b * len + from]);
-            const std::int32_t sz = axis == 2 ? from : 0;
-            // Cell coordinates: the group's line b at position q along the axis.
-            const std::size_t cell = start + b;  // index within the plane (axis 2) or row (1)
-            const int x = axis == 1 ? static_cast<int>(cell) : static_cast<int>(cell % nx);
-            const int y = axis == 1 ? q : static_cast<int>(cell / nx);
-            const int zz = axis == 1 ? static_cast<int>(outer) : q;
-            finish(i + b, x, y, zz, d[b * len + q], sx, sy, sz);
-          }
+      for (std::size_t c = c0; c < c1; ++c) last[c] = len + kNone;  // now "next"
+      for (int p = len - 1; p >= 0; --p) {
+        const auto* __restrict st =
+            reinterpret_cast<const std::uint8_t*>(states.data()) + p * lanes;
+        std::int16_t* __restrict o = s.off[0].data() + p * lanes;
+        for (std::size_t c = c0; c < c1; ++c) {
+          last[c] = (st[c] & mask) != 0 ? p : last[c];
+          const std::int32_t down = std::min(last[c] - p, kNone);
+          const std::int32_t up = o[c];
+          o[c] = static_cast<std::int16_t>(down < up ? -down : up);
         }
       }
     });
   }
+
+  // Pass 2 (3D only), along y: blocks of kBlock adjacent columns of one z plane are gathered,
+  // transformed, and scattered back in place (a block's cells are touched by that block only).
+  // Each cell takes the y offset to its envelope's root and carries that root's z offset.
+  if (three_d) {
+    const std::size_t groups_per_plane = (static_cast<std::size_t>(nx) + kBlock - 1) / kBlock;
+    const std::size_t groups = groups_per_plane * static_cast<std::size_t>(nz);
+    runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
+      std::int32_t* f = s.line_f[task].data();
+      std::int32_t* a = s.line_a[task].data();  // gathered z offsets
+      Parabola* e = reinterpret_cast<Parabola*>(s.line_e[task].data());
+      std::int16_t* __restrict off0 = s.off[0].data();
+      std::int16_t* __restrict off1 = s.off[1].data();
+      const int len = ny;
+      const std::size_t stride = static_cast<std::size_t>(nx);
+      const std::size_t first = groups * task / kTasksPerPass;
+      const std::size_t last = groups * (task + 1) / kTasksPerPass;
+      for (std::size_t group = first; group < last; ++group) {
+        const std::size_t zplane = group / groups_per_plane;
+        const std::size_t start = (group % groups_per_plane) * kBlock;
+        const int width = static_cast<int>(std::min<std::size_t>(kBlock, nx - start));
+        const std::size_t base = zplane * plane + start;
+        for (int q = 0; q < len; ++q) {
+          const std::int16_t* o = off0 + base + q * stride;
+          for (int b = 0; b < width; ++b) {
+            const std::int32_t dz = o[b];
+            a[b * len + q] = dz;
+            f[b * len + q] = dz == kNone ? -1 : dz * dz;
+          }
+        }
+        for (int b = 0; b < width; ++b) {
+          const std::int32_t* fl = f + b * len;
+          const std::int32_t* al = a + b * len;
+          const std::size_t col = base + b;
+          if (lower_envelope(fl, len, e) == 0) {
+            for (int q = 0; q < len; ++q) {
+              off0[col + q * stride] = kNone;
+              off1[col + q * stride] = kNone;
+            }
+            continue;
+          }
+          scan_envelope(len, e, [&](int q, int root) {
+            off0[col + q * stride] = static_cast<std::int16_t>(al[root]);
+            off1[col + q * stride] = static_cast<std::int16_t>(q - root);
+          });
+        }
+      }
+    });
+  }
+
+  // Last pass, along x (rows are contiguous): the envelope of each row over the squared
+  // distances of the passes before, then metres and gradient per cell. Each cell's squared
+  // distance is the exact integer dx² + dy² (+ dz²); its metres are
+  // float(sqrt(double(sq)) · cell_size_m) and its gradient (cell − site) / |cell − site|.
+  const std::size_t rows = static_cast<std::size_t>(ny) * nz;
+  runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
+    std::int32_t* f = s.line_f[task].data();
+    Parabola* e = reinterpret_cast<Parabola*>(s.line_e[task].data());
+    std::int32_t* __restrict ox = s.line_c[task].data();  // per cell: x offset to its site
+    std::int32_t* __restrict o0 = s.line_a[task].data();  // carried offset along pass 1's axis
+    std::int32_t* __restrict o1 = s.line_b[task].data();  // carried y offset (3D)
+    const int width = nx;  // a local copy: stores through the buffers cannot change it
+    const std::size_t first = rows * task / kTasksPerPass;
+    const std::size_t last = rows * (task + 1) / kTasksPerPass;
+    for (std::size_t row = first; row < last; ++row) {
+      const std::size_t base = row * static_cast<std::size_t>(nx);
+      const std::int16_t* __restrict a0 = s.off[0].data() + base;
+      const std::int16_t* __restrict a1 = three_d ? s.off[1].data() + base : nullptr;
+      if (three_d) {
+        for (int x = 0; x < width; ++x) {
+          const std::int32_t u = a0[x], w = a1[x];
+          f[x] = u == kNone ? -1 : u * u + w * w;
+        }
+      } else {
+        for (int x = 0; x < width; ++x) {
+          const std::int32_t u = a0[x];
+          f[x] = u == kNone ? -1 : u * u;
+        }
+      }
+      const auto* __restrict st = reinterpret_cast<const std::uint8_t*>(states.data()) + base;
+      float* __restrict dist = out.distance_m.data() + base;
+      float* __restrict gx = out.gradient_x.data() + base;
+      float* __restrict gy = out.gradient_y.data() + base;
+      float* __restrict gz = out.gradient_z.data() + base;
+      if (lower_envelope(f, width, e) == 0) {  // no obstacle in the grid
+        for (int x = 0; x < width; ++x) {
+          const bool unknown =
+              report_unknown && st[x] == static_cast<std::uint8_t>(CellState::kUnknown);
+          dist[x] = unknown ? std::numeric_limits<float>::quiet_NaN() : kInf;
+          gx[x] = gy[x] = gz[x] = 0.0f;
+        }
+        continue;
+      }
+      if (three_d) {
+        scan_envelope(width, e, [&](int q, int root) {
+          ox[q] = q - root;
+          o0[q] = a0[root];
+          o1[q] = a1[root];
+        });
+      } else {
+        scan_envelope(width, e, [&](int q, int root) {
+          ox[q] = q - root;
+          o0[q] = a0[root];
+        });
+        std::fill(o1, o1 + nx, 0);
+      }
+      // Three branch-free loops so each vectorises: unknown cells get zero offsets (so a zero
+      // gradient), then metres and gradients (an obstacle, r = 0, multiplies 0 by 1), then NaN.
+      const std::uint8_t unknown_state =
+          report_unknown ? static_cast<std::uint8_t>(CellState::kUnknown) : 0xff;
+      for (int x = 0; x < width; ++x) {
+        const std::int32_t keep = -static_cast<std::int32_t>(st[x] != unknown_state);
+        ox[x] &= keep;
+        o0[x] &= keep;
+        o1[x] &= keep;
+      }
+      float* __restrict g_pass1 = three_d ? gz : gy;  // gradient along pass 1's axis
+      float* __restrict g_y3 = three_d ? gy : gz;     // y in 3D; z (all zero) in 2D
+      const double cell = cell_size_m;
+      for (int x = 0; x < width; ++x) {
+        const double ex = ox[x], e0 = o0[x], e1 = o1[x];
+        const double r = std::sqrt(ex * ex + e0 * e0 + e1 * e1);
+        const double inv = 1.0 / (r + (r == 0.0));  // 1 / r; 1 for an obstacle (r = 0)
+        dist[x] = static_cast<float>(r * cell);
+        gx[x] = static_cast<float>(ex * inv);
+        g_pass1[x] = static_cast<float>(e0 * inv);
+        g_y3[x] = static_cast<float>(e1 * inv);
+      }
+      if (report_unknown) {
+        for (int x = 0; x < width; ++x) {
+          dist[x] = st[x] == unknown_state ? std::numeric_limits<float>::quiet_NaN() : dist[x];
+        }
+      }
+    }
+  });
 }
 
 }  // namespace tarmac::core

@@ -49,6 +49,9 @@ void check_against_brute_force(const Eigen::Vector3i& dims, const std::vector<Ce
       for (int x = 0; x < dims.x(); ++x, ++i) {
         if (states[i] == CellState::kUnknown && policy == UnknownPolicy::kReportUnknown) {
           ASSERT_TRUE(std::isnan(field.distance_m[i]));
+          ASSERT_EQ(field.gradient_x[i], 0.0f);
+          ASSERT_EQ(field.gradient_y[i], 0.0f);
+          ASSERT_EQ(field.gradient_z[i], 0.0f);
           continue;
         }
         std::int64_t best = std::numeric_limits<std::int64_t>::max();
@@ -81,6 +84,7 @@ void check_against_brute_force(const Eigen::Vector3i& dims, const std::vector<Ce
         } else {
           ASSERT_EQ(field.gradient_x[i], 0.0f);
           ASSERT_EQ(field.gradient_y[i], 0.0f);
+          ASSERT_EQ(field.gradient_z[i], 0.0f);
         }
       }
 }
@@ -109,6 +113,56 @@ TEST(DistanceField, Exact3D_EqualsBruteForceOnRandomScenes) {
     compute_distance_field(states, dims, 0.1, UnknownPolicy::kReportUnknown, field, scratch,
                            runner);
     check_against_brute_force(dims, states, UnknownPolicy::kReportUnknown, field);
+  }
+}
+
+TEST(DistanceField, Exact3D_UnknownIsOccupied_EqualsBruteForce) {
+  SerialRunner runner;
+  for (std::uint64_t seed = 21; seed <= 23; ++seed) {
+    const Eigen::Vector3i dims(19, 23, 7);
+    const auto states = random_states(dims, 0.002, 0.004, seed);
+    DistanceField field;
+    DistanceFieldScratch scratch;
+    compute_distance_field(states, dims, 0.2, UnknownPolicy::kUnknownIsOccupied, field, scratch,
+                           runner);
+    check_against_brute_force(dims, states, UnknownPolicy::kUnknownIsOccupied, field);
+  }
+}
+
+// Very sparse scenes: most lines of every pass hold no obstacle, some planes none at all.
+TEST(DistanceField, SparseScenes_EqualBruteForce) {
+  SerialRunner runner;
+  for (std::uint64_t seed = 31; seed <= 36; ++seed) {
+    const Eigen::Vector3i dims2(53, 41, 1);
+    const auto states2 = random_states(dims2, 0.0015, 0.2, seed);
+    DistanceField field;
+    DistanceFieldScratch scratch;
+    compute_distance_field(states2, dims2, 0.2, UnknownPolicy::kReportUnknown, field, scratch,
+                           runner);
+    check_against_brute_force(dims2, states2, UnknownPolicy::kReportUnknown, field);
+    const Eigen::Vector3i dims3(23, 19, 11);
+    const auto states3 = random_states(dims3, 0.0004, 0.1, seed);
+    compute_distance_field(states3, dims3, 0.2, UnknownPolicy::kReportUnknown, field, scratch,
+                           runner);
+    check_against_brute_force(dims3, states3, UnknownPolicy::kReportUnknown, field);
+  }
+}
+
+// The field and scratch are reused across calls of other shapes (3D, then 2D, then 3D): every
+// output, the 2D field's zero z gradient included, comes from the call that wrote it.
+TEST(DistanceField, ReusedAcrossShapes_EqualsBruteForce) {
+  SerialRunner runner;
+  DistanceField field;
+  DistanceFieldScratch scratch;
+  const Eigen::Vector3i a(17, 13, 5), b(31, 27, 1), c(9, 21, 4);
+  for (const auto& dims : {a, b, c, b}) {
+    const auto states = random_states(dims, 0.01, 0.1, static_cast<std::uint64_t>(dims.prod()));
+    compute_distance_field(states, dims, 0.2, UnknownPolicy::kReportUnknown, field, scratch,
+                           runner);
+    check_against_brute_force(dims, states, UnknownPolicy::kReportUnknown, field);
+    if (dims.z() == 1) {
+      for (const float g : field.gradient_z) ASSERT_EQ(g, 0.0f);
+    }
   }
 }
 

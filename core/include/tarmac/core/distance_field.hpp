@@ -41,12 +41,10 @@ struct DistanceField {
 
 /// Scratch buffers, reused across calls so the cycle does not allocate after warm-up.
 struct DistanceFieldScratch {
-  std::vector<float> sq;                   // squared distance, cell units
-  std::vector<std::int32_t> site[3];       // nearest obstacle cell per axis
-  std::vector<std::vector<float>> line_f;  // per task: 1D input
-  std::vector<std::vector<std::int32_t>> line_v, line_arg;
-  std::vector<std::vector<float>> line_z, line_d;
-  std::vector<std::vector<std::int32_t>> line_s[2];  // per task: carried site coordinates
+  std::vector<std::int16_t> off[2];  // per cell: offset to the nearest site along done axes
+  std::vector<std::int32_t> lane;    // first pass: last site seen per lane
+  std::vector<std::vector<std::int32_t>> line_f, line_a, line_b, line_c;  // per task
+  std::vector<std::vector<std::int64_t>> line_e;  // per task: the envelope's parabolas
 };
 
 /// Computes the exact distance field of `states` (dims.z() == 1 for 2D). Lines are split into a
