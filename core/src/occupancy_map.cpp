@@ -435,4 +435,13 @@ void OccupancyMap::export_log_odds(std::vector<float>& out) const {
   }
 }
 
+void OccupancyMap::reset() {
+  // Every per-voxel layer back to its constructed state (a layer added here must be reset too:
+  // a rebuilt window must equal a fresh one).
+  std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
+  std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
+  min_ = VoxelIndex::Zero();
+  placed_ = false;
+}
+
 }  // namespace tarmac::core
