@@ -189,7 +189,9 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
   while (cursor_seq_ < next_seq_) {
     RetainedScan& r = retained(cursor_seq_);
     const std::uint64_t n = r.points_S.size();
-    if (quota != 0 && step.scans > 0 && step.points + n > quota) break;
+    // At least two scans per step: one for the scan just ingested, one to catch up, so a
+    // rebuild always completes within retain_scans steps whatever the quota.
+    if (quota != 0 && step.scans >= 2 && step.points + n > quota) break;
     const Eigen::Isometry3d T_W_S = r.T_W_B * r.T_B_S;
     transform_points(T_W_S, r.points_S, rebuild_points_W_);
     spare_->recenter(r.T_W_B.translation());

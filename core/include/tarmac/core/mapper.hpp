@@ -91,8 +91,9 @@ class Mapper {
   /// interpolated revised pose; scans outside the span keep theirs. Returns the number revised.
   std::uint64_t correct_trajectory(std::span<const StampedPose> trajectory_W_B);
   /// Starts a scheduled rebuild when its stamp is reached, then advances a running rebuild by
-  /// the points quota (at least one scan). Does nothing otherwise. Deterministic: the quota
-  /// counts points, never time. Call it after each ingested scan (its stages done).
+  /// the points quota (at least two scans: it always catches up). Does nothing otherwise.
+  /// Deterministic: the quota counts points, never time. Call it after each ingested scan (its
+  /// stages done).
   RebuildStep rebuild_step(TaskRunner& runner);
   /// A rebuild is scheduled or running.
   [[nodiscard]] bool rebuilding() const { return rebuilding_ || pending_; }

@@ -33,9 +33,9 @@ struct CorrectionParams {
   /// No prediction (hence no jump detection) across a gap between pose samples longer than this.
   double max_prediction_gap_s = 0.5;
   /// Rebuild work: retained points re-integrated per rebuild_step() call, i.e. per ingested scan
-  /// (at least one scan; 0: the whole rebuild in one call). While a rebuild runs the published
-  /// maps come from the live map.
-  std::uint64_t rebuild_points_per_cycle = 400000;
+  /// (at least two scans, so it always catches up; 0: the whole rebuild in one call). While a
+  /// rebuild runs the published maps come from the live map.
+  std::uint64_t rebuild_points_per_cycle = 80000;
 
   [[nodiscard]] Status validate() const;
 };
