@@ -33,6 +33,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonStateRefuse = 140,
   kDomainDaemonTsdfShed = 141,
   kDomainDaemonPeriodicSave = 142,
+  kDomainDaemonPoseJump = 143,
 };
 
 inline bool running_in_ci() {
