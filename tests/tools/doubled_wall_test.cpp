@@ -86,8 +86,9 @@ core::MapperParams params(int retain_scans, std::uint64_t quota, bool correction
 
 /// Maps scans [first, kScans) with the given poses and correction handling, one pool of
 /// `threads`, and a rebuild step after every scan (as the daemon does once per tick).
-MapRun map(const Sequence& s, const core::MapperParams& mp, Handling handling, std::size_t threads = 2,
-        int first = 0, const std::vector<Eigen::Isometry3d>* poses = nullptr) {
+MapRun map(const Sequence& s, const core::MapperParams& mp, Handling handling,
+           std::size_t threads = 2, int first = 0,
+           const std::vector<Eigen::Isometry3d>* poses = nullptr) {
   daemon::ThreadPool pool(threads);
   core::Mapper mapper(mp);
   core::PoseJumpDetector detector(mp.corrections);
