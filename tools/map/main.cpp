@@ -435,6 +435,17 @@ int main(int argc, char** argv) {
     if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
   }
   if (tty) std::fprintf(stderr, "\n");
+  // Offline there is no next scan to wait for: a rebuild still running at the end is finished
+  // (steps of the same quota), so the written maps are the corrected ones.
+  std::size_t rebuild_steps_after_end = 0;
+  while (mapper.rebuilding()) {
+    core::RebuildStep step;
+    const double ms = timed_ms([&] { step = mapper.rebuild_step(pool); });
+    if (step.scans == 0) break;  // scheduled after the last scan's stamp: never starts
+    rebuild_ms.push_back(ms);
+    ++rebuild_steps_after_end;
+  }
+  if (rebuild_steps_after_end > 0) mapper.update_costmap({}, cloud.stamp_ns, pool);
 
   // ---- outputs ----
   const auto& occ_map = mapper.occupancy();
@@ -592,7 +603,8 @@ int main(int argc, char** argv) {
     std::printf(
         "corrections: %llu applied (%llu from pose jumps, %llu from --corrections), %llu "
         "ignored; %llu rebuilds completed, %llu scans re-integrated in %zu steps, %.1f ms in "
-        "total (max step %.1f ms), %llu scans rolled out, %llu TSDF blocks erased\n",
+        "total (max step %.1f ms; %zu steps after the last scan), %llu scans rolled out, %llu "
+        "TSDF blocks erased\n",
         static_cast<unsigned long long>(cs.corrections),
         static_cast<unsigned long long>(jump_corrections),
         static_cast<unsigned long long>(next_correction),
@@ -600,7 +612,7 @@ int main(int argc, char** argv) {
         static_cast<unsigned long long>(cs.rebuilds_completed),
         static_cast<unsigned long long>(cs.scans_reintegrated), rebuild_ms.size(), rebuild_total,
         rebuild_ms.empty() ? 0.0 : *std::max_element(rebuild_ms.begin(), rebuild_ms.end()),
-        static_cast<unsigned long long>(cs.scans_rolled_out),
+        rebuild_steps_after_end, static_cast<unsigned long long>(cs.scans_rolled_out),
         static_cast<unsigned long long>(cs.tsdf_blocks_erased));
   }
 
