@@ -277,6 +277,15 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     r.scalar<float>("max_range_m", t.max_range_m, 0.1f, 1000.0f);
     r.scalar<bool>("space_carving", t.space_carving, false, true);
   });
+  root.map("corrections", [&](MapReader& r) {
+    auto& k = p.corrections;
+    r.scalar<bool>("enabled", k.enabled, false, true);
+    r.scalar<int>("retain_scans", k.retain_scans, 1, 10000);
+    r.scalar<double>("jump_threshold_m", k.jump_threshold_m, 0.01, 1000.0);
+    r.scalar<double>("jump_threshold_deg", k.jump_threshold_deg, 0.01, 180.0);
+    r.scalar<double>("max_prediction_gap_s", k.max_prediction_gap_s, 0.001, 60.0);
+    r.scalar<std::uint64_t>("rebuild_points_per_cycle", k.rebuild_points_per_cycle, 0, 100'000'000);
+  });
 }
 
 const std::vector<std::string> kPoseTypes = {"PoseWithCovarianceStamped", "Odometry"};
@@ -365,6 +374,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<std::uint32_t>("buffer_size", c.pose.buffer_size, 2, 100000);
     r.scalar<double>("max_gap_ms", c.pose.max_gap_ms, 1.0, 10000.0);
     r.scalar<double>("max_age_ms", c.pose.max_age_ms, 1.0, 60000.0);
+    r.string("correction_topic", c.pose.correction_topic);
   });
   root.map("executor", [&](MapReader& r) {
     auto& e = c.executor;
@@ -385,6 +395,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<double>("ingest_ms", b.ingest_ms, 0.001, 10000.0);
     r.scalar<double>("integrate_ms", b.integrate_ms, 0.001, 10000.0);
     r.scalar<double>("tsdf_ms", b.tsdf_ms, 0.001, 10000.0);
+    r.scalar<double>("rebuild_ms", b.rebuild_ms, 0.001, 10000.0);
     r.scalar<double>("costmap_ms", b.costmap_ms, 0.001, 10000.0);
     r.scalar<double>("publish_ms", b.publish_ms, 0.001, 10000.0);
     r.scalar<double>("cycle_ms", b.cycle_ms, 0.001, 10000.0);
@@ -422,6 +433,9 @@ core::Status validate_daemon(const Config& c) {
     return core::Error{"config.value", path + ": " + why};
   };
   if (c.pose.topic.empty()) return err("pose.topic", "must not be empty");
+  if (c.mapping.corrections.enabled && c.pose.correction_topic.empty()) {
+    return err("pose.correction_topic", "must not be empty when corrections.enabled is true");
+  }
   for (const auto& s : c.sensors) {
     if (s.topic == c.pose.topic) return err("pose.topic", "same topic as sensor " + s.id);
   }
@@ -567,6 +581,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "buffer_size" << YAML::Value << pi.buffer_size;
   out << YAML::Key << "max_gap_ms" << YAML::Value << pi.max_gap_ms;
   out << YAML::Key << "max_age_ms" << YAML::Value << pi.max_age_ms;
+  out << YAML::Key << "correction_topic" << YAML::Value << pi.correction_topic;
   out << YAML::EndMap;
   const auto& e = config.executor;
   out << YAML::Key << "executor" << YAML::Value << YAML::BeginMap;
@@ -587,6 +602,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "ingest_ms" << YAML::Value << b.ingest_ms;
   out << YAML::Key << "integrate_ms" << YAML::Value << b.integrate_ms;
   out << YAML::Key << "tsdf_ms" << YAML::Value << b.tsdf_ms;
+  out << YAML::Key << "rebuild_ms" << YAML::Value << b.rebuild_ms;
   out << YAML::Key << "costmap_ms" << YAML::Value << b.costmap_ms;
   out << YAML::Key << "publish_ms" << YAML::Value << b.publish_ms;
   out << YAML::Key << "cycle_ms" << YAML::Value << b.cycle_ms;
@@ -672,6 +688,15 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "max_weight" << YAML::Value << t.max_weight;
   out << YAML::Key << "max_range_m" << YAML::Value << t.max_range_m;
   out << YAML::Key << "space_carving" << YAML::Value << t.space_carving;
+  out << YAML::EndMap;
+  const auto& k = m.corrections;
+  out << YAML::Key << "corrections" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "enabled" << YAML::Value << k.enabled;
+  out << YAML::Key << "retain_scans" << YAML::Value << k.retain_scans;
+  out << YAML::Key << "jump_threshold_m" << YAML::Value << k.jump_threshold_m;
+  out << YAML::Key << "jump_threshold_deg" << YAML::Value << k.jump_threshold_deg;
+  out << YAML::Key << "max_prediction_gap_s" << YAML::Value << k.max_prediction_gap_s;
+  out << YAML::Key << "rebuild_points_per_cycle" << YAML::Value << k.rebuild_points_per_cycle;
   out << YAML::EndMap << YAML::EndMap;
   return out.c_str();
 }

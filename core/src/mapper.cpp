@@ -1,11 +1,28 @@
 #include "tarmac/core/mapper.hpp"
 
+#include <algorithm>
+
 namespace tarmac::core {
+
+namespace {
+
+/// Sensor-frame points into the world frame, the arithmetic filter_scan uses (float), so a scan
+/// re-integrated from retention lands exactly where a fresh ingest would put it.
+void transform_points(const Eigen::Isometry3d& T_W_S, std::span<const Eigen::Vector3f> points_S,
+                      std::vector<Eigen::Vector3f>& points_W) {
+  const Eigen::Matrix3f R_W_S = T_W_S.linear().cast<float>();
+  const Eigen::Vector3f t_W_S = T_W_S.translation().cast<float>();
+  points_W.resize(points_S.size());
+  for (std::size_t i = 0; i < points_S.size(); ++i) points_W[i] = R_W_S * points_S[i] + t_W_S;
+}
+
+}  // namespace
 
 Status MapperParams::validate() const {
   if (auto s = filters.validate(); !s) return s;
   if (auto s = occupancy.validate(); !s) return s;
   if (auto s = tsdf.validate(); !s) return s;
+  if (auto s = corrections.validate(); !s) return s;
   return costmap.validate();
 }
 
@@ -15,6 +32,10 @@ Mapper::Mapper(const MapperParams& params)
       tsdf_integrator_(params.tsdf),
       tsdf_(tsdf_integrator_.make_layer()) {
   TARMAC_ASSERT(params.validate().ok(), "MapperParams must be validated first");
+  if (params.corrections.enabled) {
+    retained_.resize(static_cast<std::size_t>(params.corrections.retain_scans));
+    spare_ = std::make_unique<OccupancyMap>(params.occupancy);
+  }
 }
 
 FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
@@ -22,12 +43,36 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   const Eigen::Isometry3d T_W_S = T_W_B * T_B_S;
   sensor_W_ = T_W_S.translation();
   T_W_B_ = T_W_B;
+  // Filters in the sensor frame (none of them depends on the pose), so the survivors can be
+  // retained for a rebuild; then the same float transform filter_scan applies.
+  // With a motion, the sweep is first deskewed into the sensor frame at the stamp.
+  const PointCloud* input = &cloud;
   if (motion != nullptr && cloud.has_time() && cloud.consistent() && motion->t1_s > motion->t0_s) {
     deskewed_.stamp_ns = cloud.stamp_ns;
     deskew_points(cloud, *motion, T_W_B, T_B_S, deskewed_.points_S);
-    return filter_scan(deskewed_, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_);
+    input = &deskewed_;
   }
-  return filter_scan(cloud, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_);
+  const FilterCounts counts = filter_scan(*input, Eigen::Isometry3d::Identity(), T_B_S,
+                                          params_.filters, points_S_, filter_scratch_);
+  transform_points(T_W_S, points_S_, points_W_);
+  if (!retained_.empty()) {
+    if (rebuilding_ && next_seq_ >= retained_.size() &&
+        cursor_seq_ <= next_seq_ - retained_.size()) {
+      // The slot about to be overwritten has not been re-integrated yet: it rolls out.
+      correction_stats_.scans_rolled_out += next_seq_ - retained_.size() + 1 - cursor_seq_;
+      cursor_seq_ = next_seq_ - retained_.size() + 1;
+    }
+    RetainedScan& slot = retained(next_seq_);
+    slot.stamp_ns = cloud.stamp_ns;
+    slot.T_W_B = T_W_B;
+    slot.T_B_S = T_B_S;
+    slot.points_S.assign(points_S_.begin(), points_S_.end());  // keeps capacity
+    slot.tsdf_wanted = false;
+    slot.tsdf_done = false;
+    slot.tsdf_blocks.clear();
+    ++next_seq_;
+  }
+  return counts;
 }
 
 OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
@@ -37,12 +82,143 @@ OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
 
 const TsdfUpdate& Mapper::integrate_tsdf(TaskRunner& runner) {
   if (!params_.tsdf.enabled) return no_tsdf_update_;
-  return tsdf_integrator_.integrate(sensor_W_, points_W_, tsdf_, runner);
+  if (retained_.empty() || next_seq_ == 0) {
+    return tsdf_integrator_.integrate(sensor_W_, points_W_, tsdf_, runner);
+  }
+  RetainedScan& slot = retained(next_seq_ - 1);
+  slot.tsdf_wanted = true;
+  // During a rebuild the TSDF is integrated by rebuild_step(), in stamp order.
+  if (rebuilding_) return no_tsdf_update_;
+  const TsdfUpdate& update = tsdf_integrator_.integrate(sensor_W_, points_W_, tsdf_, runner);
+  record_tsdf(slot, update);
+  return update;
+}
+
+void Mapper::record_tsdf(RetainedScan& scan, const TsdfUpdate& update) {
+  scan.tsdf_blocks.assign(update.blocks.begin(), update.blocks.end());
+  scan.tsdf_done = true;
 }
 
 void Mapper::update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                             TaskRunner& runner) {
   build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner);
+}
+
+std::size_t Mapper::retained_scans() const {
+  return static_cast<std::size_t>(std::min<std::uint64_t>(next_seq_, retained_.size()));
+}
+
+std::uint64_t Mapper::oldest_seq() const {
+  return next_seq_ - retained_scans();
+}
+
+void Mapper::retained_poses(std::vector<StampedPose>& out) const {
+  out.clear();
+  for (std::uint64_t s = oldest_seq(); s < next_seq_; ++s) {
+    const RetainedScan& r = retained_[s % retained_.size()];
+    out.push_back({r.stamp_ns, r.T_W_B});
+  }
+}
+
+std::uint64_t Mapper::correct_rigid(const Eigen::Isometry3d& delta, std::int64_t before_stamp_ns) {
+  std::uint64_t revised = 0;
+  for (std::uint64_t s = oldest_seq(); s < next_seq_; ++s) {
+    RetainedScan& r = retained(s);
+    if (r.stamp_ns >= before_stamp_ns) continue;
+    r.T_W_B = delta * r.T_W_B;
+    ++revised;
+  }
+  if (revised == 0) {
+    ++correction_stats_.corrections_empty;
+    return 0;
+  }
+  schedule_rebuild(before_stamp_ns);
+  return revised;
+}
+
+std::uint64_t Mapper::correct_trajectory(std::span<const StampedPose> trajectory_W_B) {
+  std::uint64_t revised = 0;
+  for (std::uint64_t s = oldest_seq(); s < next_seq_; ++s) {
+    RetainedScan& r = retained(s);
+    if (const auto T = interpolate_pose(trajectory_W_B, r.stamp_ns)) {
+      r.T_W_B = *T;
+      ++revised;
+    }
+  }
+  if (revised == 0) {
+    ++correction_stats_.corrections_empty;
+    return 0;
+  }
+  schedule_rebuild(trajectory_W_B.back().stamp_ns + 1);
+  return revised;
+}
+
+void Mapper::schedule_rebuild(std::int64_t from_stamp_ns) {
+  ++correction_stats_.corrections;
+  // A correction during a rebuild restarts it: what was re-integrated so far used older poses.
+  rebuilding_ = false;
+  pending_from_stamp_ns_ =
+      pending_ ? std::max(pending_from_stamp_ns_, from_stamp_ns) : from_stamp_ns;
+  pending_ = true;
+  // The costmap's vehicle pose is the newest scan's: revised with it.
+  T_W_B_ = retained(next_seq_ - 1).T_W_B;
+}
+
+void Mapper::start_rebuild() {
+  if (params_.tsdf.enabled) {
+    // Erase what the retained scans put into the TSDF under their old poses; rebuild_step()
+    // re-integrates them with the revised ones.
+    for (std::uint64_t s = oldest_seq(); s < next_seq_; ++s) {
+      RetainedScan& r = retained(s);
+      if (!r.tsdf_done) continue;
+      correction_stats_.tsdf_blocks_erased += tsdf_.erase_blocks(r.tsdf_blocks);
+      r.tsdf_done = false;
+      r.tsdf_blocks.clear();
+    }
+  }
+  spare_->reset();
+  cursor_seq_ = oldest_seq();
+  rebuilding_ = true;
+  pending_ = false;
+  ++correction_stats_.rebuilds_started;
+}
+
+RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
+  RebuildStep step;
+  // A scheduled rebuild starts once a scan stamped at or after the correction's stamp is in:
+  // every scan before it that will ever be integrated is then retained, whatever the order in
+  // which the correction and the scans arrived.
+  if (pending_ && next_seq_ > 0 && retained(next_seq_ - 1).stamp_ns >= pending_from_stamp_ns_) {
+    start_rebuild();
+  }
+  if (!rebuilding_) return step;
+  const std::uint64_t quota = params_.corrections.rebuild_points_per_cycle;
+  while (cursor_seq_ < next_seq_) {
+    RetainedScan& r = retained(cursor_seq_);
+    const std::uint64_t n = r.points_S.size();
+    // At least two scans per step: one for the scan just ingested, one to catch up, so a
+    // rebuild always completes within retain_scans steps whatever the quota.
+    if (quota != 0 && step.scans >= 2 && step.points + n > quota) break;
+    const Eigen::Isometry3d T_W_S = r.T_W_B * r.T_B_S;
+    transform_points(T_W_S, r.points_S, rebuild_points_W_);
+    spare_->recenter(r.T_W_B.translation());
+    spare_->integrate(T_W_S.translation(), rebuild_points_W_, {}, runner, r.T_W_B.linear().col(2));
+    if (params_.tsdf.enabled && r.tsdf_wanted) {
+      record_tsdf(
+          r, tsdf_integrator_.integrate(T_W_S.translation(), rebuild_points_W_, tsdf_, runner));
+    }
+    step.points += n;
+    ++step.scans;
+    ++cursor_seq_;
+  }
+  correction_stats_.scans_reintegrated += step.scans;
+  if (cursor_seq_ == next_seq_) {
+    std::swap(map_, *spare_);
+    rebuilding_ = false;
+    step.completed = true;
+    ++correction_stats_.rebuilds_completed;
+  }
+  return step;
 }
 
 }  // namespace tarmac::core

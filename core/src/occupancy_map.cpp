@@ -644,4 +644,19 @@ void OccupancyMap::export_log_odds(std::vector<float>& out) const {
   }
 }
 
+void OccupancyMap::reset() {
+  // Every per-voxel layer back to its constructed state (a layer added here must be reset too:
+  // a rebuilt window must equal a fresh one).
+  std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
+  std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
+  std::fill(state_.begin(), state_.end(), std::uint8_t{0});
+  // The static layer too: a rebuild re-derives it from the retained scans (what was static
+  // before the correction sits in the uncorrected frame).
+  static_->blocks.clear();
+  static_->count = 0;
+  for (auto& d : demoted_) d.clear();
+  min_ = VoxelIndex::Zero();
+  placed_ = false;
+}
+
 }  // namespace tarmac::core

@@ -264,6 +264,21 @@ void TsdfLayer::clear() {
   grids_->leaf_cache.clear();
 }
 
+std::size_t TsdfLayer::erase_blocks(std::span<const BlockIndex> blocks) {
+  auto& tree = grids().tsdf->tree();  // grids() drops the integrator's leaf cache
+  const auto background = tree.background();
+  std::size_t erased = 0;
+  for (const BlockIndex& b : blocks) {
+    const openvdb::Coord o(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge, b.z() * kTsdfBlockEdge);
+    // The leaf is replaced by an inactive background tile: the block reads as never observed.
+    Leaf* leaf = tree.stealNode<Leaf>(o, background, false);
+    if (leaf == nullptr) continue;
+    delete leaf;
+    ++erased;
+  }
+  return erased;
+}
+
 TsdfLayer TsdfLayer::clone() const {
   TsdfLayer copy(voxel_size_m_, truncation_m_);
   copy.grids_->tsdf = grids_->tsdf->deepCopy();

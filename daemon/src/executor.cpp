@@ -84,9 +84,18 @@ class RecentWindow {
   std::size_t next_ = 0;
 };
 
-enum Stage : std::size_t { kDrain, kIngest, kIntegrate, kTsdf, kCostmap, kPublish, kStageCount };
-constexpr const char* kStageNames[kStageCount] = {"drain", "ingest",  "integrate",
-                                                  "tsdf",  "costmap", "publish"};
+enum Stage : std::size_t {
+  kDrain,
+  kIngest,
+  kIntegrate,
+  kTsdf,
+  kRebuild,
+  kCostmap,
+  kPublish,
+  kStageCount
+};
+constexpr const char* kStageNames[kStageCount] = {"drain",   "ingest",  "integrate", "tsdf",
+                                                  "rebuild", "costmap", "publish"};
 
 }  // namespace
 
@@ -110,10 +119,28 @@ class Executor::Impl {
     explicit PoseSinkImpl(Impl& owner) : owner_(owner) {}
     void pose(const transport::PoseSample& sample) override {
       switch (owner_.poses.insert(sample)) {
-        case PoseBuffer::Insert::kOk: break;
+        case PoseBuffer::Insert::kOk:
+          if (owner_.config.mapping.corrections.enabled) {
+            if (const auto jump = owner_.jumps.feed({sample.stamp_ns, sample.T_W_B})) {
+              owner_.on_pose_jump(*jump, sample.stamp_ns);
+            }
+          }
+          break;
         case PoseBuffer::Insert::kOutOfOrder: owner_.rejections.add("pose.out_of_order"); break;
         case PoseBuffer::Insert::kDuplicate: owner_.rejections.add("pose.duplicate_stamp"); break;
       }
+    }
+    void reject(std::string_view reason) override { owner_.rejections.add(reason); }
+
+   private:
+    Impl& owner_;
+  };
+
+  class TrajectorySinkImpl final : public transport::TrajectorySink {
+   public:
+    explicit TrajectorySinkImpl(Impl& owner) : owner_(owner) {}
+    void trajectory(std::span<const transport::PoseSample> poses) override {
+      owner_.on_trajectory(poses);
     }
     void reject(std::string_view reason) override { owner_.rejections.add(reason); }
 
@@ -128,7 +155,11 @@ class Executor::Impl {
         poses(cfg.pose.buffer_size, ms_to_ns(cfg.pose.max_gap_ms)),
         scheduler(scheduler_params(cfg)),
         mapper(cfg.mapping),
-        pose_sink(*this) {}
+        jumps(cfg.mapping.corrections),
+        pose_sink(*this),
+        trajectory_sink(*this) {
+    trajectory_scratch.reserve(1024);
+  }
 
   static SchedulerParams scheduler_params(const config::Config& cfg) {
     SchedulerParams p;
@@ -153,7 +184,8 @@ class Executor::Impl {
     report.stages.resize(kStageCount);
     const double budgets[kStageCount] = {config.budgets.drain_ms,     config.budgets.ingest_ms,
                                          config.budgets.integrate_ms, config.budgets.tsdf_ms,
-                                         config.budgets.costmap_ms,   config.budgets.publish_ms};
+                                         config.budgets.rebuild_ms,   config.budgets.costmap_ms,
+                                         config.budgets.publish_ms};
     for (std::size_t i = 0; i < kStageCount; ++i) {
       report.stages[i].name = kStageNames[i];
       report.stages[i].budget_ms = budgets[i];
@@ -170,12 +202,28 @@ class Executor::Impl {
                           "points.isolated", "scan.tsdf_shed_quota", "scan.deskew_span"}) {
       drops.declare(r);
     }
-    for (const char* r :
-         {"scan.unknown_frame", "scan.future", "scan.stale", "scan.late", "scan.duplicate_stamp",
-          "pointcloud.missing_xyz", "pointcloud.bad_datatype", "pointcloud.bad_count",
-          "pointcloud.field_outside_point", "pointcloud.bad_row_step", "pointcloud.bad_size",
-          "pose.unknown_frame", "pose.non_finite", "pose.bad_quaternion", "pose.out_of_order",
-          "pose.duplicate_stamp", "zones.polygon", "zones.non_finite", "zones.z_range"}) {
+    for (const char* r : {"scan.unknown_frame",
+                          "scan.future",
+                          "scan.stale",
+                          "scan.late",
+                          "scan.duplicate_stamp",
+                          "pointcloud.missing_xyz",
+                          "pointcloud.bad_datatype",
+                          "pointcloud.bad_count",
+                          "pointcloud.field_outside_point",
+                          "pointcloud.bad_row_step",
+                          "pointcloud.bad_size",
+                          "pose.unknown_frame",
+                          "pose.non_finite",
+                          "pose.bad_quaternion",
+                          "pose.out_of_order",
+                          "pose.duplicate_stamp",
+                          "zones.polygon",
+                          "zones.non_finite",
+                          "zones.z_range",
+                          "correction.unknown_frame",
+                          "correction.empty",
+                          "correction.unsorted"}) {
       rejections.declare(r);
     }
     report.drops.reserve(32);
@@ -184,10 +232,18 @@ class Executor::Impl {
     overflow_seen.assign(config.sensors.size(), 0);
     diag.name = "tarmacd: executor";
     diag.hardware_id = config.dds.participant.name;
-    diag.values.resize(10);
+    diag.values.resize(11);
   }
 
   void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped);
+  /// A jump in the pose stream (DESIGN.md §4, pose corrections): the pose samples before it and
+  /// the mapper's retained scans are re-expressed in the corrected frame (T ← Δ · T), and the
+  /// mapper starts rebuilding its window from the retained scans (rebuild stage, per tick).
+  void on_pose_jump(const Eigen::Isometry3d& delta, std::int64_t stamp_ns);
+  /// A corrected trajectory (nav_msgs/Path on pose.correction_topic): the pose samples it
+  /// covers are replaced (newer ones re-expressed by the correction at its end), the mapper's
+  /// retained scans within it take the revised poses and the rebuild starts.
+  void on_trajectory(std::span<const transport::PoseSample> samples);
   void real_time_setup(const RunHooks& hooks);
 
   [[nodiscard]] std::filesystem::path tsdf_path() const {
@@ -227,7 +283,11 @@ class Executor::Impl {
   PoseBuffer poses;
   ScanScheduler scheduler;
   core::Mapper mapper;
+  core::PoseJumpDetector jumps;
   PoseSinkImpl pose_sink;
+  TrajectorySinkImpl trajectory_sink;
+  std::unique_ptr<transport::TrajectoryInput> trajectory_input;
+  std::vector<core::StampedPose> trajectory_scratch;
   std::unique_ptr<ThreadPool> pool;
   std::vector<core::VirtualZone> zones;
   std::string zone_rejection;
@@ -259,6 +319,40 @@ class Executor::Impl {
   bool saver_stop = false;                          // guarded by saver_mutex
   std::atomic<bool> saver_busy{false};
 };
+
+void Executor::Impl::on_pose_jump(const Eigen::Isometry3d& delta, std::int64_t stamp_ns) {
+  const std::size_t rebased = poses.rebase_before(stamp_ns, delta);
+  const std::uint64_t revised = mapper.correct_rigid(delta, stamp_ns);
+  {
+    std::lock_guard lock(totals_mutex);
+    ++totals.pose_jumps;
+  }
+  // Rare (a loop closure or a GPS fix), so one log line each.
+  spdlog::warn(
+      "corrections: pose jump at stamp {} ns ({:.3f} m, {:.2f} deg from the prediction): {} "
+      "pose samples and {} retained scans re-expressed, rebuilding",
+      stamp_ns, delta.translation().norm(),
+      Eigen::AngleAxisd(delta.linear()).angle() * 180.0 / M_PI, rebased, revised);
+}
+
+void Executor::Impl::on_trajectory(std::span<const transport::PoseSample> samples) {
+  trajectory_scratch.clear();
+  for (const auto& p : samples) trajectory_scratch.push_back({p.stamp_ns, p.T_W_B});
+  const std::size_t replaced = poses.apply_trajectory(trajectory_scratch);
+  const std::uint64_t revised = mapper.correct_trajectory(trajectory_scratch);
+  // Later live samples are predicted from the corrected ones.
+  core::StampedPose tail[2];
+  jumps.reset(std::span<const core::StampedPose>(tail, poses.newest_two(tail)));
+  {
+    std::lock_guard lock(totals_mutex);
+    ++totals.trajectory_corrections;
+  }
+  spdlog::warn(
+      "corrections: corrected trajectory of {} poses ({} .. {} ns): {} pose samples and {} "
+      "retained scans revised{}",
+      samples.size(), samples.front().stamp_ns, samples.back().stamp_ns, replaced, revised,
+      revised > 0 ? ", rebuilding" : " (none retained in its span: nothing to rebuild)");
+}
 
 void Executor::Impl::real_time_setup(const RunHooks& hooks) {
   const auto& e = config.executor;
@@ -312,6 +406,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   const std::uint64_t pose_overflow = pose_input->overflow_drops();
   drops.add("queue.pose_overflow", pose_overflow - pose_overflow_seen);
   pose_overflow_seen = pose_overflow;
+  // After the poses: a correction applies to the samples already in the buffer.
+  if (trajectory_input) trajectory_input->drain(trajectory_sink);
   zone_rejection.clear();
   const bool zones_changed = zone_input->take_latest(zones, zone_rejection);
   if (!zone_rejection.empty()) rejections.add(zone_rejection);
@@ -323,6 +419,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
 
   // ---- ingest + integrate, scan by scan in (stamp, sensor) order ----
   std::uint64_t points_in = 0, points_used = 0, tsdf_points = 0, tsdf_scans = 0;
+  std::uint64_t reintegrated = 0, rebuilds_completed = 0;
+  bool rebuilt = false;
   const bool tsdf_enabled = config.mapping.tsdf.enabled;
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
@@ -356,6 +454,16 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     drops.add("points.isolated", counts.isolated);
     newest_stamp_ns = std::max(newest_stamp_ns, cloud.stamp_ns);
     scheduler.release(sel.slot);
+    // ---- rebuild after a pose correction: a points quota of retained scans per scan, so
+    // its progress is a function of the scan sequence, not of how scans fall into ticks ----
+    if (mapper.rebuilding()) {
+      const auto t3 = Clock::now();
+      const core::RebuildStep step = mapper.rebuild_step(*pool);
+      stage_ms[kRebuild] += ms_between(t3, Clock::now());
+      rebuilt = rebuilt || step.completed;
+      reintegrated += step.scans;
+      rebuilds_completed += step.completed ? 1 : 0;
+    }
   }
 
   {
@@ -363,11 +471,22 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     totals.scans_integrated += selected.size();
     totals.tsdf_scans += tsdf_scans;
     totals.tsdf_shed_scans += shed[kTsdf];
+    totals.scans_reintegrated += reintegrated;
+    totals.rebuilds_completed += rebuilds_completed;
     totals.newest_stamp_ns = newest_stamp_ns;
   }
 
+  if (mapper.rebuilding()) shed[kRebuild] = mapper.rebuild_remaining();  // for the next scans
+  if (rebuilt) {
+    const auto& cs = mapper.correction_stats();
+    spdlog::info(
+        "corrections: rebuilt window swapped in ({} scans re-integrated so far, {} TSDF "
+        "blocks erased, {} scans rolled out)",
+        cs.scans_reintegrated, cs.tsdf_blocks_erased, cs.scans_rolled_out);
+  }
+
   // ---- costmap + 2D ESDF, once per tick (when something changed) ----
-  const bool update = !selected.empty() || zones_changed;
+  const bool update = !selected.empty() || zones_changed || rebuilt;
   const auto t_costmap0 = Clock::now();
   if (update) {
     mapper.update_costmap(zones, newest_stamp_ns, *pool);
@@ -459,6 +578,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     put(7, "skipped_ticks_total", static_cast<double>(totals.skipped_ticks));
     put(8, "stamp_to_publish_p99_ms", stamp_to_publish.percentile(0.99));
     put(9, "tsdf_ms", stage_ms[kTsdf]);
+    put(10, "rebuild_ms", stage_ms[kRebuild]);
     outputs->publish_diagnostics(diag);
   }
   ++cycle_index;
@@ -487,6 +607,12 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
                                            std::max<std::size_t>(cfg.executor.queue_depth, 64));
   if (!pose) return pose.error();
   impl->pose_input = std::move(pose).value();
+  if (cfg.mapping.corrections.enabled) {
+    auto trajectory = transport::TrajectoryInput::create(
+        impl->participant, cfg.pose.correction_topic, cfg.pose.frame_id, q.pose, 4);
+    if (!trajectory) return trajectory.error();
+    impl->trajectory_input = std::move(trajectory).value();
+  }
   auto zones = transport::ZoneInput::create(impl->participant, cfg.outputs.virtual_obstacles_topic,
                                             q.virtual_obstacles);
   if (!zones) return zones.error();

@@ -57,4 +57,48 @@ PoseBuffer::Lookup PoseBuffer::lookup(std::int64_t stamp_ns, Eigen::Isometry3d& 
   return Lookup::kOk;
 }
 
+std::size_t PoseBuffer::rebase_before(std::int64_t before_stamp_ns,
+                                      const Eigen::Isometry3d& delta) {
+  std::size_t changed = 0;
+  for (std::size_t i = 0; i < size_; ++i) {
+    auto& s = ring_[(head_ + i) % ring_.size()];
+    if (s.stamp_ns >= before_stamp_ns) break;  // sorted
+    s.T_W_B = delta * s.T_W_B;
+    ++changed;
+  }
+  return changed;
+}
+
+std::size_t PoseBuffer::apply_trajectory(std::span<const core::StampedPose> trajectory) {
+  if (trajectory.empty()) return 0;
+  const core::StampedPose& end = trajectory.back();
+  Eigen::Isometry3d T_old_end;
+  const bool have_end = lookup(end.stamp_ns, T_old_end) == Lookup::kOk;
+  const Eigen::Isometry3d delta_end =
+      have_end ? end.T_W_B * T_old_end.inverse() : Eigen::Isometry3d::Identity();
+  std::size_t changed = 0;
+  for (std::size_t i = 0; i < size_; ++i) {
+    auto& s = ring_[(head_ + i) % ring_.size()];
+    if (s.stamp_ns < trajectory.front().stamp_ns) continue;
+    if (s.stamp_ns <= end.stamp_ns) {
+      s.T_W_B = *core::interpolate_pose(trajectory, s.stamp_ns);  // within the span: defined
+    } else if (have_end) {
+      s.T_W_B = delta_end * s.T_W_B;
+    } else {
+      continue;
+    }
+    ++changed;
+  }
+  return changed;
+}
+
+std::size_t PoseBuffer::newest_two(core::StampedPose (&out)[2]) const {
+  const std::size_t n = std::min<std::size_t>(size_, 2);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto& s = at(size_ - n + k);
+    out[k] = {s.stamp_ns, s.T_W_B};
+  }
+  return n;
+}
+
 }  // namespace tarmac::daemon

@@ -43,6 +43,29 @@ TEST(Config, OutOfRangeAndBadValuesNameTheKey) {
             "dds.qos.pose.depth: must be in [1, 10000], got 0");
 }
 
+TEST(Config, CorrectionKeysAreReadAndChecked) {
+  auto ok = load_config_string(
+      "version: 1\ncorrections: {retain_scans: 20, jump_threshold_m: 1.5, "
+      "jump_threshold_deg: 5, max_prediction_gap_s: 0.2, rebuild_points_per_cycle: 0}\n"
+      "pose: {correction_topic: rt/loop/path}\nbudgets: {rebuild_ms: 80}\n");
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  const auto& k = ok.value().mapping.corrections;
+  EXPECT_EQ(k.retain_scans, 20);
+  EXPECT_EQ(k.jump_threshold_m, 1.5);
+  EXPECT_EQ(k.jump_threshold_deg, 5.0);
+  EXPECT_EQ(k.max_prediction_gap_s, 0.2);
+  EXPECT_EQ(k.rebuild_points_per_cycle, 0u);
+  EXPECT_EQ(ok.value().pose.correction_topic, "rt/loop/path");
+  EXPECT_EQ(ok.value().budgets.rebuild_ms, 80.0);
+  EXPECT_EQ(error_of("version: 1\ncorrections: {retain_scans: 0}\n"),
+            "corrections.retain_scans: must be in [1, 10000], got 0");
+  EXPECT_EQ(error_of("version: 1\ncorrections: {jump_threshold_deg: 181}\n"),
+            "corrections.jump_threshold_deg: must be in [0.01, 180], got 181");
+  EXPECT_EQ(error_of("version: 1\ncorrections: {retain: 3}\n"), "corrections.retain: unknown key");
+  EXPECT_NE(error_of("version: 1\npose: {correction_topic: ''}\n").find("pose.correction_topic"),
+            std::string::npos);
+}
+
 TEST(Config, VersionIsRequiredAndChecked) {
   EXPECT_NE(error_of("dds: {}\n").find("version:"), std::string::npos);
   EXPECT_NE(error_of("version: 2\n").find("this build reads version 1"), std::string::npos);

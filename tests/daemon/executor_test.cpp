@@ -182,7 +182,10 @@ class Daemon : public ::testing::Test {
   /// Replays the sequence into an executor with `workers` threads and returns the digest of the
   /// costmap stamped with the last scan.
   std::string replayed_digest(std::uint32_t domain, std::uint32_t workers, double jitter_ms,
-                              const std::function<void(config::Config&)>& tweak = {}) {
+                              const std::function<void(config::Config&)>& tweak = {},
+                              const tools::KittiSequence& seq = sequence(),
+                              double rate_scale = 2.0) {
+    const auto n_scans = static_cast<std::uint64_t>(seq.scans.size());
     auto cfg = test_config(domain, workers);
     if (tweak) tweak(cfg);
     RunningExecutor executor(cfg);
@@ -191,22 +194,22 @@ class Daemon : public ::testing::Test {
     EXPECT_TRUE(grids.ok());
     tools::ReplayOptions options;
     options.lidar_qos = cfg.dds.qos.lidar;
-    options.rate_scale = 2.0;  // 20 Hz into a 10 Hz executor: two scans per tick
+    options.rate_scale = rate_scale;  // default 20 Hz into a 10 Hz executor: two scans per tick
     options.jitter_ms = jitter_ms;
     options.seed = 7;
-    auto stats = tools::replay(participant, sequence(), options);
+    auto stats = tools::replay(participant, seq, options);
     EXPECT_TRUE(stats.ok()) << (stats.ok() ? "" : stats.error().message);
     if (!stats.ok()) return "";
-    EXPECT_EQ(stats.value().scans, static_cast<std::size_t>(kScans));
+    EXPECT_EQ(stats.value().scans, n_scans);
     transport::OccupancyGridMsg grid;
     EXPECT_TRUE(wait_for_costmap(*grids.value(), stats.value().last_stamp_ns, grid))
         << "no costmap stamped with the last scan";
     EXPECT_EQ(grid.header().frame_id(), "map");
     // The totals are updated right after the tick publishes: give it a moment.
-    for (int i = 0; i < 50 && executor.get().totals().scans_integrated < kScans; ++i) {
+    for (int i = 0; i < 50 && executor.get().totals().scans_integrated < n_scans; ++i) {
       std::this_thread::sleep_for(20ms);
     }
-    EXPECT_EQ(executor.get().totals().scans_integrated, static_cast<std::uint64_t>(kScans));
+    EXPECT_EQ(executor.get().totals().scans_integrated, n_scans);
     last_stamp_ns_ = stats.value().last_stamp_ns;
     executor.stop();
     totals_ = executor.get().totals();
@@ -262,6 +265,85 @@ TEST_F(Daemon, TsdfQuota_ShedsTheTsdfStageFirst_OccupancyAndCostmapUnchanged) {
   EXPECT_EQ(totals_.tsdf_shed_scans, static_cast<std::uint64_t>(kScans));
   EXPECT_EQ(totals_.tsdf_scans, 0u);
   EXPECT_EQ(tsdf_voxels_, 0u);
+}
+
+/// The terminal walls with the localiser drifting 1 m sideways over 0.5 s and snapping back to
+/// the true poses at scan 20 (a jump of 1 m in the pose stream), 40 scans, 16 beams.
+const tools::KittiSequence& drift_sequence() {
+  static const tools::KittiSequence seq = [] {
+    const auto dir = std::filesystem::temp_directory_path() /
+                     ("tarmac-executor-drift-" + std::to_string(::getpid()));
+    sim::SequenceParams p;
+    p.scans = 40;
+    p.lidar.beams = 16;
+    p.lidar.azimuth_steps = 512;
+    p.drift_m = 1.0;
+    p.drift_ramp_s = 0.5;
+    p.correct_at_scan = 20;
+    const auto written = sim::write_sequence(sim::Scene::terminal_walls(), p, dir);
+    EXPECT_TRUE(written.ok()) << written.error;
+    auto opened = tools::open_kitti(dir);
+    EXPECT_TRUE(opened.ok()) << (opened.ok() ? "" : opened.error().message);
+    return std::move(opened).value();
+  }();
+  return seq;
+}
+
+void pose_jump_config(config::Config& c) {
+  c.mapping.corrections.retain_scans = 10;
+  c.mapping.corrections.rebuild_points_per_cycle = 20000;  // 2-3 of these scans per step
+}
+
+/// The core offline with the daemon's correction logic: jump detection on the wire poses, a
+/// rigid correction of the retained scans, a rebuild step after each scan.
+std::string offline_corrected_digest(const config::Config& cfg, std::uint64_t* jumps,
+                                     std::uint64_t* rebuilds) {
+  core::Mapper mapper(cfg.mapping);
+  core::PoseJumpDetector detector(cfg.mapping.corrections);
+  core::SerialRunner runner;
+  const auto& seq = drift_sequence();
+  const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
+  core::PointCloud cloud;
+  *jumps = 0;
+  for (std::size_t k = 0; k < seq.scans.size(); ++k) {
+    EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
+    const auto wire =
+        transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(seq.T_W_S[k], T_B_S)));
+    const std::int64_t stamp = static_cast<std::int64_t>(k) * 100'000'000;
+    if (const auto jump = detector.feed({stamp, wire.value()})) {
+      mapper.correct_rigid(*jump, stamp);
+      ++*jumps;
+    }
+    cloud.stamp_ns = stamp;
+    mapper.ingest(cloud, wire.value(), T_B_S);
+    mapper.integrate(runner);
+    mapper.integrate_tsdf(runner);
+    if (mapper.rebuilding()) mapper.rebuild_step(runner);
+  }
+  EXPECT_FALSE(mapper.rebuilding());
+  *rebuilds = mapper.correction_stats().rebuilds_completed;
+  mapper.update_costmap({}, 0, runner);
+  const auto& cells = mapper.costmap().costmap.cells();
+  return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
+}
+
+TEST_F(Daemon, PoseJump_RebuildsTheWindow_CostmapEqualsOfflineCore) {
+  // At the recorded 10 Hz: each rebuild step re-integrates two more scans per scan.
+  const std::string got =
+      replayed_digest(test::kDomainDaemonPoseJump, 2, 0.0, pose_jump_config, drift_sequence(), 1.0);
+  auto cfg = test_config(0, 2);
+  pose_jump_config(cfg);
+  std::uint64_t jumps = 0, rebuilds = 0;
+  const std::string want = offline_corrected_digest(cfg, &jumps, &rebuilds);
+  EXPECT_EQ(jumps, 1u);
+  EXPECT_EQ(rebuilds, 1u);
+  EXPECT_EQ(totals_.pose_jumps, 1u);
+  EXPECT_EQ(totals_.rebuilds_completed, 1u);
+  EXPECT_GE(totals_.scans_reintegrated, 10u);
+  EXPECT_EQ(got, want);
+  // Without the correction handling the costmap differs (the drifted wall stays).
+  cfg.mapping.corrections.enabled = false;
+  EXPECT_NE(want, offline_corrected_digest(cfg, &jumps, &rebuilds));
 }
 
 /// Collects CycleReports until `done(report)` or the timeout; returns the last one.

@@ -39,6 +39,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonTsdfShed = 141,
   kDomainDaemonPeriodicSave = 142,
   kDomainDaemonSecurity = 143,
+  kDomainDaemonPoseJump = 144,
 };
 
 inline bool running_in_ci() {

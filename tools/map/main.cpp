@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <fstream>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -34,7 +35,7 @@ constexpr int kExitIo = 74;
 constexpr int kExitConfig = 78;
 
 struct Options {
-  std::string dataset, out = "out/map", config, poses = "poses.txt", prior;
+  std::string dataset, out = "out/map", config, poses = "poses.txt", prior, corrections;
   std::size_t threads = 2;
   std::size_t max_scans = 0;  // 0: all
   double sensor_height_m = 1.9;
@@ -44,10 +45,14 @@ void usage() {
   std::fprintf(stderr,
                "usage: tarmac-map --dataset DIR [--out DIR] [--config FILE] [--threads N]\n"
                "                  [--poses FILE] [--scans N] [--sensor-height M] [--prior FILE]\n"
+               "                  [--corrections FILE]\n"
                "  DIR in KITTI layout: scans/NNNNNN.bin, poses.txt (T_world_sensor), times.txt\n"
                "  --poses FILE      pose file inside DIR (default poses.txt)\n"
                "  --sensor-height M sensor above the vehicle base, m (default 1.9)\n"
-               "  --prior FILE      a tsdf.vdb from an earlier run: writes changes.npy/.png\n");
+               "  --prior FILE      a tsdf.vdb from an earlier run: writes changes.npy/.png\n"
+               "  --corrections FILE corrected trajectories: lines 'K stamp_s' + 12 numbers of\n"
+               "                    T_world_sensor (as poses.txt); the lines of one K form one\n"
+               "                    correction, applied after scan K (tarmac-sim --correct-at)\n");
 }
 
 struct StageTimes {
@@ -214,6 +219,53 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
   return core::Ok{};
 }
 
+/// One corrected trajectory of a --corrections file, applied after scan `after_scan`.
+struct Correction {
+  std::size_t after_scan = 0;
+  std::vector<core::StampedPose> trajectory_W_S;  // T_world_sensor, as poses.txt
+};
+
+/// Reads a corrections file: lines "K stamp_s r00 r01 r02 tx r10 r11 r12 ty r20 r21 r22 tz";
+/// consecutive lines with the same K form one correction, stamps increasing within it.
+core::Result<std::vector<Correction>> read_corrections(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return core::Error{"corrections.open", path + ": cannot be read"};
+  std::vector<Correction> out;
+  std::string line;
+  for (std::size_t n = 1; std::getline(in, line); ++n) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    long long k = -1;
+    double stamp_s = 0.0;
+    double m[12];
+    ls >> k >> stamp_s;
+    for (double& x : m) ls >> x;
+    std::string rest;
+    if (!ls || k < 0 || !std::isfinite(stamp_s) || (ls >> rest)) {
+      return core::Error{"corrections.format",
+                         path + ":" + std::to_string(n) + ": expected 'K stamp_s' and 12 numbers"};
+    }
+    core::StampedPose p;
+    p.stamp_ns = std::llround(stamp_s * 1e9);
+    Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+    for (int i = 0; i < 12; ++i) T(i / 4, i % 4) = m[i];
+    p.T_W_B.matrix() = T;
+    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+    if (!T.allFinite() || !(R.transpose() * R).isApprox(Eigen::Matrix3d::Identity(), 1e-6)) {
+      return core::Error{"corrections.format",
+                         path + ":" + std::to_string(n) + ": not a rigid transform"};
+    }
+    if (out.empty() || out.back().after_scan != static_cast<std::size_t>(k)) {
+      out.push_back({static_cast<std::size_t>(k), {}});
+    } else if (p.stamp_ns <= out.back().trajectory_W_S.back().stamp_ns) {
+      return core::Error{"corrections.format",
+                         path + ":" + std::to_string(n) + ": stamps must increase"};
+    }
+    out.back().trajectory_W_S.push_back(p);
+  }
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -237,6 +289,8 @@ int main(int argc, char** argv) {
       opt.sensor_height_m = std::atof(argv[++i]);
     else if (a == "--prior" && has_value)
       opt.prior = argv[++i];
+    else if (a == "--corrections" && has_value)
+      opt.corrections = argv[++i];
     else if (a == "--help" || a == "-h") {
       usage();
       return 0;
@@ -308,8 +362,27 @@ int main(int argc, char** argv) {
     clearing.emplace(std::move(truth).value());
   }
 
+  std::vector<Correction> corrections;
+  if (!opt.corrections.empty()) {
+    auto read = read_corrections(opt.corrections);
+    if (!read) {
+      std::fprintf(stderr, "tarmac-map: %s [%s]\n", read.error().message.c_str(),
+                   read.error().code.c_str());
+      return kExitData;
+    }
+    corrections = std::move(read).value();
+    if (!params.corrections.enabled) {
+      std::fprintf(stderr, "tarmac-map: --corrections needs corrections.enabled: true\n");
+      return kExitConfig;
+    }
+  }
+
   daemon::ThreadPool pool(opt.threads);
   core::Mapper mapper(params);
+  core::PoseJumpDetector jumps(params.corrections);
+  std::size_t next_correction = 0;
+  std::uint64_t jump_corrections = 0;
+  std::vector<double> rebuild_ms;  // per rebuild step
   Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
   T_B_S.translation().z() = opt.sensor_height_m;
   const std::size_t n = opt.max_scans == 0 ? seq.value().scans.size()
@@ -332,6 +405,12 @@ int main(int argc, char** argv) {
     }));
     cloud.stamp_ns = static_cast<std::int64_t>(std::llround(s.times_s[k] * 1e9));
     const Eigen::Isometry3d T_W_B = s.T_W_S[k] * T_B_S.inverse();
+    // (b) a jump in the pose stream: a rigid correction of every retained scan before this one.
+    if (params.corrections.enabled) {
+      if (const auto jump = jumps.feed({cloud.stamp_ns, T_W_B})) {
+        if (mapper.correct_rigid(*jump, cloud.stamp_ns) > 0) ++jump_corrections;
+      }
+    }
     core::FilterCounts counts;
     core::OccupancyUpdateStats occ;
     const double f_ms = timed_ms([&] { counts = mapper.ingest(cloud, T_W_B, T_B_S); });
@@ -341,6 +420,19 @@ int main(int argc, char** argv) {
       tsdf_samples += up.samples;
       tsdf_updates += up.voxel_updates;
     });
+    // (a) a corrected trajectory published after this scan.
+    while (next_correction < corrections.size() && corrections[next_correction].after_scan <= k) {
+      std::vector<core::StampedPose> traj = corrections[next_correction].trajectory_W_S;
+      for (auto& p : traj) p.T_W_B = p.T_W_B * T_B_S.inverse();
+      mapper.correct_trajectory(traj);
+      jumps.reset(traj);  // the next live poses are predicted from the corrected ones
+      ++next_correction;
+    }
+    if (mapper.rebuilding()) {
+      core::RebuildStep step;
+      const double ms = timed_ms([&] { step = mapper.rebuild_step(pool); });
+      if (step.scans > 0) rebuild_ms.push_back(ms);  // not the calls waiting for the start
+    }
     const double c_ms = timed_ms([&] { mapper.update_costmap({}, cloud.stamp_ns, pool); });
     if (clearing) {
       clearing->observe(static_cast<int>(k), s.times_s[k], mapper.costmap().column_class);
@@ -362,6 +454,17 @@ int main(int argc, char** argv) {
     if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
   }
   if (tty) std::fprintf(stderr, "\n");
+  // Offline there is no next scan to wait for: a rebuild still running at the end is finished
+  // (steps of the same quota), so the written maps are the corrected ones.
+  std::size_t rebuild_steps_after_end = 0;
+  while (mapper.rebuilding()) {
+    core::RebuildStep step;
+    const double ms = timed_ms([&] { step = mapper.rebuild_step(pool); });
+    if (step.scans == 0) break;  // scheduled after the last scan's stamp: never starts
+    rebuild_ms.push_back(ms);
+    ++rebuild_steps_after_end;
+  }
+  if (rebuild_steps_after_end > 0) mapper.update_costmap({}, cloud.stamp_ns, pool);
 
   // ---- outputs ----
   const auto& occ_map = mapper.occupancy();
@@ -528,6 +631,26 @@ int main(int argc, char** argv) {
           static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
           static_cast<unsigned long long>(tsdf_out.changes.removed_voxels), tsdf_out.changes_ms);
     }
+  }
+
+  if (params.corrections.enabled) {
+    const core::CorrectionStats& cs = mapper.correction_stats();
+    double rebuild_total = 0.0;
+    for (const double ms : rebuild_ms) rebuild_total += ms;
+    std::printf(
+        "corrections: %llu applied (%llu from pose jumps, %llu from --corrections), %llu "
+        "ignored; %llu rebuilds completed, %llu scans re-integrated in %zu steps, %.1f ms in "
+        "total (max step %.1f ms; %zu steps after the last scan), %llu scans rolled out, %llu "
+        "TSDF blocks erased\n",
+        static_cast<unsigned long long>(cs.corrections),
+        static_cast<unsigned long long>(jump_corrections),
+        static_cast<unsigned long long>(next_correction),
+        static_cast<unsigned long long>(cs.corrections_empty),
+        static_cast<unsigned long long>(cs.rebuilds_completed),
+        static_cast<unsigned long long>(cs.scans_reintegrated), rebuild_ms.size(), rebuild_total,
+        rebuild_ms.empty() ? 0.0 : *std::max_element(rebuild_ms.begin(), rebuild_ms.end()),
+        rebuild_steps_after_end, static_cast<unsigned long long>(cs.scans_rolled_out),
+        static_cast<unsigned long long>(cs.tsdf_blocks_erased));
   }
 
   const auto bytes = [](const auto& vec) {

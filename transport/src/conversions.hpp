@@ -31,6 +31,7 @@ using OccupancyGridMsg = nav_msgs::msg::dds_::OccupancyGrid_;
 using PoseMsg = geometry_msgs::msg::dds_::Pose_;
 using PoseStampedMsg = geometry_msgs::msg::dds_::PoseWithCovarianceStamped_;
 using OdometryMsg = nav_msgs::msg::dds_::Odometry_;
+using PathMsg = nav_msgs::msg::dds_::Path_;
 using DistanceMapSliceMsg = tarmac_msgs::msg::dds_::DistanceMapSlice_;
 using CycleReportMsg = tarmac_msgs::msg::dds_::CycleReport_;
 using VirtualObstacleArrayMsg = tarmac_msgs::msg::dds_::VirtualObstacleArray_;

@@ -137,6 +137,79 @@ std::size_t PoseInput::matched_writers() const {
   return impl_->stamped ? impl_->stamped->matched_writers() : impl_->odometry->matched_writers();
 }
 
+// ---- corrected trajectories ----
+
+class TrajectoryInput::Impl {
+ public:
+  using Reader = transport::Reader<nav_msgs::msg::dds_::Path_PubSubType>;
+  std::unique_ptr<Reader> reader;
+  std::string frame_id;
+  std::vector<PathMsg> batch;
+  std::vector<PoseSample> poses;  // capacity kept across drains
+
+  void convert(const PathMsg& msg, TrajectorySink& sink) {
+    if (msg.header().frame_id() != frame_id) {
+      sink.reject("correction.unknown_frame");
+      return;
+    }
+    if (msg.poses().empty()) {
+      sink.reject("correction.empty");
+      return;
+    }
+    poses.clear();
+    for (const auto& p : msg.poses()) {
+      if (!p.header().frame_id().empty() && p.header().frame_id() != frame_id) {
+        sink.reject("correction.unknown_frame");
+        return;
+      }
+      auto T = from_pose_msg(p.pose());
+      if (!T) {
+        sink.reject(T.error().code);
+        return;
+      }
+      const std::int64_t stamp = from_time_msg(p.header().stamp());
+      if (!poses.empty() && stamp <= poses.back().stamp_ns) {
+        sink.reject("correction.unsorted");
+        return;
+      }
+      poses.push_back(PoseSample{stamp, T.value()});
+    }
+    sink.trajectory(poses);
+  }
+};
+
+core::Result<std::unique_ptr<TrajectoryInput>> TrajectoryInput::create(
+    const Participant& participant, const std::string& topic, const std::string& frame_id,
+    const QosSpec& qos, std::size_t queue_depth) {
+  auto reader = Impl::Reader::create(participant, topic, qos, queue_depth);
+  if (!reader) return reader.error();
+  auto impl = std::make_unique<Impl>();
+  impl->reader = std::move(reader).value();
+  impl->frame_id = frame_id;
+  impl->batch.reserve(queue_depth);
+  impl->poses.reserve(1024);
+  return std::unique_ptr<TrajectoryInput>(new TrajectoryInput(std::move(impl)));
+}
+
+TrajectoryInput::TrajectoryInput(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TrajectoryInput::~TrajectoryInput() = default;
+
+std::size_t TrajectoryInput::drain(TrajectorySink& sink) {
+  auto& batch = impl_->batch;
+  batch.clear();
+  const std::size_t n = impl_->reader->take_all(batch);
+  for (const auto& m : batch) impl_->convert(m, sink);
+  batch.clear();
+  return n;
+}
+
+std::uint64_t TrajectoryInput::overflow_drops() const {
+  return impl_->reader->dropped();
+}
+std::size_t TrajectoryInput::matched_writers() const {
+  return impl_->reader->matched_writers();
+}
+
 // ---- virtual obstacles ----
 
 class ZoneInput::Impl {

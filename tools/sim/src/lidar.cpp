@@ -96,6 +96,14 @@ std::string readme(const SequenceParams& p) {
   s += "  rate              " + number(p.rate_hz) + " Hz, " + std::to_string(p.scan_count()) +
        " scans\n";
   s += "  tilt              " + number(p.tilt_deg) + " deg about x (world = Rx(tilt) * scene)\n";
+  if (p.drift_m != 0.0) {
+    s += "  pose drift        " + number(p.drift_m) + " m along scene y, reached after " +
+         number(p.drift_ramp_s) + " s; " +
+         (p.correct_at_scan > 0 ? "true poses from scan " + std::to_string(p.correct_at_scan) +
+                                      " on (corrections.txt: the corrected trajectory)"
+                                : std::string("never corrected")) +
+         "\n";
+  }
   return s;
 }
 
@@ -205,6 +213,18 @@ int SequenceParams::scan_count() const {
   return static_cast<int>(std::floor(path.duration_s() * rate_hz + 1e-9)) + 1;
 }
 
+Eigen::Isometry3d SequenceParams::true_T_O_S(int i) const {
+  return T_O_W() * path.T_W_S(stamp_s(i));
+}
+
+Eigen::Isometry3d SequenceParams::written_T_O_S(int i) const {
+  const double t_s = stamp_s(i);
+  if (drift_m == 0.0 || (correct_at_scan > 0 && i >= correct_at_scan)) return true_T_O_S(i);
+  Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
+  D.translation().y() = drift_m * std::min(t_s / drift_ramp_s, 1.0);
+  return T_O_W() * D * path.T_W_S(t_s);
+}
+
 Eigen::Isometry3d SequenceParams::T_O_W() const {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   if (tilt_deg != 0.0) {
@@ -223,6 +243,9 @@ std::string SequenceParams::validate() const {
   if (!std::isfinite(tilt_deg) || std::abs(tilt_deg) > 180.0) {
     return "tilt must be in [-180, 180] deg";
   }
+  if (!std::isfinite(drift_m) || std::abs(drift_m) > 100.0) return "drift must be in [-100, 100] m";
+  if (!(drift_ramp_s > 0.0) || !std::isfinite(drift_ramp_s)) return "drift ramp must be > 0 s";
+  if (correct_at_scan < 0) return "correct-at must be >= 0 (0: never)";
   if (scans > 1000000 || (scans == 0 && !(path.duration_s() * rate_hz < 1e6))) {
     return "too many scans (more than 1000000)";
   }
@@ -283,7 +306,7 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       append_le(bytes, r.intensity);
     }
     if (!write_file(scans_dir / scan_name(i), bytes, result.error)) return result;
-    poses += pose_line(T_O_W * T_W_S);
+    poses += pose_line(params.written_T_O_S(i));
     times += number(t_s) + "\n";
     for (const Object& o : scene.objects()) {
       if (!o.dynamic()) continue;
@@ -295,6 +318,16 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       boxes += '\n';
     }
     points_per_scan.push_back(returns.size());
+  }
+  if (params.drift_m != 0.0 && params.correct_at_scan > 0 && params.correct_at_scan <= n) {
+    std::string corrections;
+    const std::string after = std::to_string(params.correct_at_scan - 1) + " ";
+    for (int i = 0; i < params.correct_at_scan; ++i) {
+      corrections += after + number(params.stamp_s(i)) + " " + pose_line(params.true_T_O_S(i));
+    }
+    if (!write_file(out_dir / "corrections.txt", corrections, result.error)) return result;
+  } else {
+    std::filesystem::remove(out_dir / "corrections.txt", ec);  // none stale from an earlier run
   }
   if (!write_file(out_dir / "poses.txt", poses, result.error) ||
       !write_file(out_dir / "times.txt", times, result.error) ||

@@ -21,7 +21,8 @@ void usage(std::FILE* to) {
       to,
       "usage: tarmac-sim --out DIR [--scans N] [--rate-hz HZ] [--speed M/S] [--beams N]\n"
       "                  [--azimuth-steps N] [--max-range M] [--noise-m M] [--seed N]\n"
-      "                  [--tilt-deg DEG]\n"
+      "                  [--tilt-deg DEG] [--scene airside|terminal]\n"
+      "                  [--drift-m M [--drift-ramp-s S] [--correct-at K]]\n"
       "  Drives a vehicle along y = 0 from x = 0 to x = 60 m through a synthetic airside apron\n"
       "  and writes DIR/scans/NNNNNN.bin (sensor frame), poses.txt (T_world_sensor), times.txt,\n"
       "  scene.json (ground truth) and README.txt. Same arguments, same bytes.\n"
@@ -34,7 +35,12 @@ void usage(std::FILE* to) {
       "  --max-range M      maximum range (default 100)\n"
       "  --noise-m M        Gaussian range noise, 1 sigma (default 0)\n"
       "  --seed N           noise seed (default 1)\n"
-      "  --tilt-deg DEG     rotate the poses' world frame about x (default 0)\n");
+      "  --tilt-deg DEG     rotate the poses' world frame about x (default 0)\n"
+      "  --scene NAME       airside (default) or terminal (long walls beside the path)\n"
+      "  --drift-m M        pose drift: written poses shifted along scene y, growing to M\n"
+      "  --drift-ramp-s S   time the drift takes to reach M (default 2 s)\n"
+      "  --correct-at K     true poses again from scan K on; writes corrections.txt (the\n"
+      "                     corrected trajectory of scans 0..K-1, for tarmac-map --corrections)\n");
 }
 
 template <typename T>
@@ -49,6 +55,7 @@ bool parse(std::string_view text, T& value) {
 int main(int argc, char** argv) {
   sim::SequenceParams params;
   std::string out_dir;
+  std::string scene_name = "airside";
   for (int i = 1; i < argc; ++i) {
     const std::string_view arg = argv[i];
     if (arg == "--help" || arg == "-h") {
@@ -83,6 +90,15 @@ int main(int argc, char** argv) {
       ok = parse(value, params.seed);
     } else if (arg == "--tilt-deg") {
       ok = parse(value, params.tilt_deg);
+    } else if (arg == "--scene") {
+      scene_name = value;
+      ok = scene_name == "airside" || scene_name == "terminal";
+    } else if (arg == "--drift-m") {
+      ok = parse(value, params.drift_m);
+    } else if (arg == "--drift-ramp-s") {
+      ok = parse(value, params.drift_ramp_s);
+    } else if (arg == "--correct-at") {
+      ok = parse(value, params.correct_at_scan);
     } else {
       std::fprintf(stderr, "tarmac-sim: unknown option %s\n", argv[i - 1]);
       usage(stderr);
@@ -105,8 +121,9 @@ int main(int argc, char** argv) {
     return kExitUsage;
   }
 
-  const sim::SequenceResult result =
-      sim::write_sequence(sim::Scene::airside_default(), params, out_dir);
+  const sim::SequenceResult result = sim::write_sequence(
+      scene_name == "terminal" ? sim::Scene::terminal_walls() : sim::Scene::airside_default(),
+      params, out_dir);
   if (!result.ok()) {
     std::fprintf(stderr, "tarmac-sim: %s\n", result.error.c_str());
     return kExitIo;

@@ -378,6 +378,16 @@ std::string Scene::to_json(const Eigen::Isometry3d& T_world_W) const {
   return out;
 }
 
+Scene Scene::terminal_walls() {
+  using V = Eigen::Vector3d;
+  Scene scene;
+  scene.add("ground", "ground", Plane{V::UnitZ(), 0.0});
+  scene.add("terminal_left", "building", Box{V(-30.0, 8.1, 0.0), V(90.0, 8.5, 6.0)});
+  scene.add("terminal_right", "building", Box{V(-30.0, -16.5, 0.0), V(90.0, -16.1, 6.0)});
+  scene.add("pillar", "pillar", Cylinder{Axis::kZ, V(30.0, -6.0, 0.0), 4.0, 0.4});
+  return scene;
+}
+
 Scene Scene::airside_default() {
   using V = Eigen::Vector3d;
   Scene scene;

@@ -58,6 +58,9 @@ struct PoseInputConfig {
   std::uint32_t buffer_size = 500;  ///< poses kept for interpolation (5 s at 100 Hz)
   double max_gap_ms = 250.0;        ///< no interpolation across a larger gap between poses
   double max_age_ms = 1000.0;       ///< pose input reported stale when its newest is older
+  /// nav_msgs/Path of revised past poses (a pose-graph correction), same frame_id; QoS of the
+  /// pose input. Read when corrections.enabled.
+  std::string correction_topic = "rt/tarmac/pose_correction";
 };
 
 /// The fixed-rate executor (YAML `executor`).
@@ -82,6 +85,7 @@ struct BudgetConfig {
   double ingest_ms = 15.0;     ///< filters, all scans of the tick
   double integrate_ms = 50.0;  ///< occupancy raycasting, all scans of the tick
   double tsdf_ms = 30.0;       ///< TSDF integration, all scans of the tick that run it
+  double rebuild_ms = 50.0;    ///< pose-correction rebuild work of the tick (corrections.*)
   double costmap_ms = 35.0;    ///< costmap + 2D ESDF, once per tick
   double publish_ms = 10.0;    ///< costmap, ESDF slice, reports
   double cycle_ms = 90.0;      ///< the whole tick

@@ -3,6 +3,7 @@
 /// filter → integrate occupancy → costmap + 2D ESDF. Each stage is a separate call so the caller
 /// can time it and give it a budget (the core has no clock).
 
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -12,6 +13,7 @@
 #include "tarmac/core/deskew.hpp"
 #include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/point_cloud.hpp"
+#include "tarmac/core/pose_correction.hpp"
 #include "tarmac/core/scan_filter.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
 
@@ -22,8 +24,29 @@ struct MapperParams {
   OccupancyParams occupancy;
   CostmapParams costmap;
   TsdfParams tsdf;
+  CorrectionParams corrections;
 
   [[nodiscard]] Status validate() const;
+};
+
+/// Pose-correction counters since construction.
+struct CorrectionStats {
+  std::uint64_t corrections = 0;        ///< corrections that changed a retained pose
+  std::uint64_t corrections_empty = 0;  ///< corrections that changed no retained pose (ignored)
+  std::uint64_t rebuilds_started = 0;   ///< a correction during a rebuild restarts it
+  std::uint64_t rebuilds_completed = 0;
+  std::uint64_t scans_reintegrated = 0;
+  /// Retained scans that left the ring (a newer scan took their slot) before the rebuild
+  /// reached them: the rebuilt window holds the scans retained while it ran.
+  std::uint64_t scans_rolled_out = 0;
+  std::uint64_t tsdf_blocks_erased = 0;  ///< TSDF blocks cleared for re-integration
+};
+
+/// What one rebuild_step() did.
+struct RebuildStep {
+  std::uint64_t scans = 0;   ///< retained scans re-integrated
+  std::uint64_t points = 0;  ///< their points
+  bool completed = false;    ///< the rebuilt window replaced the live one in this step
 };
 
 class Mapper {
@@ -46,6 +69,47 @@ class Mapper {
   /// (and returns an empty update) when tsdf.enabled is false.
   const TsdfUpdate& integrate_tsdf(TaskRunner& runner);
 
+  /// Pose corrections (pose_correction.hpp). With corrections.enabled the mapper retains the
+  /// last corrections.retain_scans filtered scans (sensor-frame points, stamp, T_W_B, T_B_S)
+  /// in a ring sized at construction. A correction revises the retained poses and schedules a
+  /// rebuild, which starts in the first rebuild_step() after a scan stamped at or after the
+  /// correction (a jump's stamp; just after a trajectory's end) has been ingested — so the
+  /// retained set does not depend on whether the correction arrived before or after the scans
+  /// preceding it. The window is then re-integrated from the retained scans, in stamp order,
+  /// with their revised poses into a second (spare) window, corrections.rebuild_points_per_cycle
+  /// points per rebuild_step() (callers step once per ingested scan); scans ingested meanwhile
+  /// join the retention and are integrated into both windows; when the rebuild has caught up,
+  /// the rebuilt window replaces the live one. The result equals a fresh mapper fed the
+  /// retained scans with the revised poses (the window then holds only what the retained scans
+  /// saw: older content is forgotten, unknown).
+  /// TSDF (whole site): the blocks the retained scans had updated are erased when the rebuild
+  /// starts and the retained scans are re-integrated, in order, by rebuild_step(); TSDF
+  /// integration of scans ingested during a rebuild is deferred to it. Content of older scans
+  /// in those blocks is lost; the TSDF elsewhere is not moved (counted: tsdf_blocks_erased).
+  ///
+  /// (b) A rigid correction: T_W_B ← delta · T_W_B for every retained scan stamped before
+  /// `before_stamp_ns`. Returns the number of retained scans revised (0: ignored, counted).
+  std::uint64_t correct_rigid(const Eigen::Isometry3d& delta, std::int64_t before_stamp_ns);
+  /// (a) A corrected trajectory (sorted by stamp): each retained scan within its span gets the
+  /// interpolated revised pose; scans outside the span keep theirs. Returns the number revised.
+  std::uint64_t correct_trajectory(std::span<const StampedPose> trajectory_W_B);
+  /// Starts a scheduled rebuild when its stamp is reached, then advances a running rebuild by
+  /// the points quota (at least two scans: it always catches up). Does nothing otherwise.
+  /// Deterministic: the quota counts points, never time. Call it after each ingested scan (its
+  /// stages done).
+  RebuildStep rebuild_step(TaskRunner& runner);
+  /// A rebuild is scheduled or running.
+  [[nodiscard]] bool rebuilding() const { return rebuilding_ || pending_; }
+  /// Retained scans the running rebuild has still to re-integrate (0 when none runs).
+  [[nodiscard]] std::uint64_t rebuild_remaining() const {
+    return rebuilding_ ? next_seq_ - cursor_seq_ : (pending_ ? retained_scans() : 0);
+  }
+  [[nodiscard]] const CorrectionStats& correction_stats() const { return correction_stats_; }
+  /// Retained scans (0 when corrections are disabled).
+  [[nodiscard]] std::size_t retained_scans() const;
+  /// The poses of the retained scans, oldest first (for tests and tools).
+  void retained_poses(std::vector<StampedPose>& out) const;
+
   /// The last ingested scan's surviving points, world frame, and the sensor origin.
   [[nodiscard]] const std::vector<Eigen::Vector3f>& points_W() const { return points_W_; }
   [[nodiscard]] const Eigen::Vector3d& sensor_W() const { return sensor_W_; }
@@ -59,8 +123,33 @@ class Mapper {
   [[nodiscard]] TsdfLayer& tsdf() { return tsdf_; }
 
  private:
+  struct RetainedScan {
+    std::int64_t stamp_ns = 0;
+    Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
+    Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+    std::vector<Eigen::Vector3f> points_S;  ///< filtered, sensor frame
+    bool tsdf_wanted = false;               ///< the scan was (or is to be) TSDF-integrated
+    bool tsdf_done = false;                 ///< its TSDF contribution is in the layer
+    std::vector<BlockIndex> tsdf_blocks;    ///< blocks of that contribution
+  };
+  RetainedScan& retained(std::uint64_t seq) { return retained_[seq % retained_.size()]; }
+  [[nodiscard]] std::uint64_t oldest_seq() const;
+  void schedule_rebuild(std::int64_t from_stamp_ns);
+  void start_rebuild();
+  void record_tsdf(RetainedScan& scan, const TsdfUpdate& update);
+
   MapperParams params_;
   OccupancyMap map_;
+  std::vector<Eigen::Vector3f> points_S_;  ///< the last ingested scan's survivors, sensor frame
+  std::vector<RetainedScan> retained_;     ///< ring, corrections.retain_scans slots
+  std::uint64_t next_seq_ = 0;             ///< scans retained so far; seq k is in slot k % size
+  std::unique_ptr<OccupancyMap> spare_;    ///< the window being rebuilt
+  bool rebuilding_ = false;
+  bool pending_ = false;  ///< a rebuild is scheduled, from pending_from_stamp_ns_
+  std::int64_t pending_from_stamp_ns_ = 0;
+  std::uint64_t cursor_seq_ = 0;  ///< next retained scan the rebuild integrates
+  std::vector<Eigen::Vector3f> rebuild_points_W_;
+  CorrectionStats correction_stats_;
   CostmapLayers layers_;
   std::vector<Eigen::Vector3f> points_W_;
   FilterScratch filter_scratch_;

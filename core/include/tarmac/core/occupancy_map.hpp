@@ -110,6 +110,11 @@ class OccupancyMap {
                                  TaskRunner& runner,
                                  const Eigen::Vector3d& up_W = Eigen::Vector3d::UnitZ());
 
+  /// Forgets everything: every voxel unknown, the static layer empty (site-wide), the window
+  /// unplaced (the next recenter() or integrate() places it), as if just constructed. Keeps the
+  /// window storage; a rebuild after a pose correction starts from it.
+  void reset();
+
   /// Log-odds at a voxel, kUnknown when unobserved or outside the window.
   [[nodiscard]] float log_odds(const VoxelIndex& v) const;
   [[nodiscard]] bool in_window(const VoxelIndex& v) const;

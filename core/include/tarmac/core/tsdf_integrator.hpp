@@ -113,6 +113,10 @@ class TsdfLayer {
 
   /// Drops every voxel.
   void clear();
+  /// Drops the given blocks (those not allocated are skipped; duplicates are fine), as if never
+  /// observed: a pose-correction rebuild erases what the retained scans wrote before
+  /// re-integrating them. Returns the blocks dropped.
+  std::size_t erase_blocks(std::span<const BlockIndex> blocks);
 
   /// A deep copy (every block copied; the integrator's leaf cache is not): a snapshot another
   /// thread can save while this layer keeps integrating. Costs a copy of memory_bytes().

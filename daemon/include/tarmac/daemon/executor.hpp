@@ -30,7 +30,11 @@ struct ExecutorTotals {
   std::uint64_t tsdf_shed_scans = 0;  ///< scans whose TSDF stage was shed by the points quota
   std::uint64_t tsdf_saves = 0;       ///< periodic TSDF saves written (not the one on exit)
   std::uint64_t tsdf_save_failures = 0;
-  std::uint64_t tsdf_saves_skipped = 0;  ///< periodic saves skipped: the previous still writing
+  std::uint64_t tsdf_saves_skipped = 0;      ///< periodic saves skipped: the previous still writing
+  std::uint64_t pose_jumps = 0;              ///< jumps in the pose stream taken as corrections
+  std::uint64_t trajectory_corrections = 0;  ///< corrected trajectories (nav_msgs/Path) applied
+  std::uint64_t rebuilds_completed = 0;      ///< rebuilt windows swapped in
+  std::uint64_t scans_reintegrated = 0;      ///< retained scans re-integrated by rebuilds
 };
 
 /// What load_tsdf() found in the state directory.

@@ -6,10 +6,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include <Eigen/Geometry>
 
+#include "tarmac/core/pose_correction.hpp"
 #include "tarmac/transport/inputs.hpp"
 
 namespace tarmac::daemon {
@@ -34,6 +36,21 @@ class PoseBuffer {
   /// T_W_B at `stamp_ns`: the sample itself when a pose has exactly that stamp, otherwise
   /// interpolated between its neighbours. RT-safe.
   Lookup lookup(std::int64_t stamp_ns, Eigen::Isometry3d& T_W_B) const;
+
+  /// Re-expresses every sample stamped before `before_stamp_ns` in a corrected frame
+  /// (T ← delta · T): after a jump in the pose stream (a pose-graph correction), scans stamped
+  /// before it are then looked up in the same frame as the rebuilt map. Returns the samples
+  /// changed. RT-safe.
+  std::size_t rebase_before(std::int64_t before_stamp_ns, const Eigen::Isometry3d& delta);
+
+  /// A corrected trajectory (sorted by stamp): every sample within its span takes the
+  /// trajectory's pose at its stamp (interpolated), and the newer samples are re-expressed by the
+  /// correction at the trajectory's end (delta = T_corrected · T_old⁻¹ there, T_old looked up in
+  /// this buffer; when it cannot be looked up they are left alone). Returns the samples changed.
+  /// RT-safe.
+  std::size_t apply_trajectory(std::span<const core::StampedPose> trajectory);
+  /// The newest min(2, size()) samples, oldest first, into `out`; returns how many.
+  std::size_t newest_two(core::StampedPose (&out)[2]) const;
 
   [[nodiscard]] std::size_t size() const { return size_; }
   [[nodiscard]] std::optional<std::int64_t> newest_stamp() const;

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -95,6 +96,43 @@ class PoseInput {
 
  private:
   explicit PoseInput(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// A corrected trajectory (pose-graph correction): revised T_map_base for past stamps, sorted.
+class TrajectorySink {
+ public:
+  virtual ~TrajectorySink() = default;
+  /// `poses` is valid during the call only.
+  virtual void trajectory(std::span<const PoseSample> poses) = 0;
+  virtual void reject(std::string_view reason) = 0;
+};
+
+/// nav_msgs/Path read as a corrected trajectory. Rejected whole, with a reason:
+/// `correction.unknown_frame` (header or a pose in another frame than `frame_id`; a pose with an
+/// empty frame_id takes the path's), `correction.empty`, `correction.unsorted` (stamps not
+/// strictly increasing), and the pose codes (`pose.non_finite`, `pose.bad_quaternion`).
+class TrajectoryInput {
+ public:
+  static core::Result<std::unique_ptr<TrajectoryInput>> create(const Participant& participant,
+                                                               const std::string& topic,
+                                                               const std::string& frame_id,
+                                                               const QosSpec& qos,
+                                                               std::size_t queue_depth);
+  ~TrajectoryInput();
+  TrajectoryInput(const TrajectoryInput&) = delete;
+  TrajectoryInput& operator=(const TrajectoryInput&) = delete;
+
+  /// Converts every queued path into the sink, oldest first. Returns the number taken.
+  /// Allocates only for paths longer than any before (corrections are rare).
+  std::size_t drain(TrajectorySink& sink);
+  [[nodiscard]] std::uint64_t overflow_drops() const;
+  [[nodiscard]] std::size_t matched_writers() const;
+
+  class Impl;
+
+ private:
+  explicit TrajectoryInput(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -122,6 +122,18 @@ struct SequenceParams {
   int scans = 0;           ///< 0: enough to drive the whole path, floor(duration·rate) + 1
   double tilt_deg = 0.0;   ///< rotation of the poses' world frame O about x (T_O_W)
   std::uint64_t seed = 1;  ///< seed of the range noise
+  /// Pose drift (a localiser's growing error) written into poses.txt: the written pose of scan
+  /// i is T_O_W · D(t) · T_W_S(t), D(t) a translation along the scene's +y of
+  /// drift_m · min(t / drift_ramp_s, 1), until scan correct_at_scan (0: never) from which the
+  /// true poses are written again (the jump a GPS fix or loop closure makes). The scans are
+  /// always taken from the true poses.
+  double drift_m = 0.0;
+  double drift_ramp_s = 2.0;  ///< > 0
+  int correct_at_scan = 0;
+  /// The written pose of scan i (with the drift, if any).
+  Eigen::Isometry3d written_T_O_S(int i) const;
+  /// The true pose of scan i (no drift).
+  Eigen::Isometry3d true_T_O_S(int i) const;
 
   /// The number of scans to write (resolves scans == 0).
   int scan_count() const;
@@ -152,7 +164,11 @@ struct SequenceResult {
 /// Simulates the sequence and writes it to `out_dir` in KITTI layout: scans/NNNNNN.bin
 /// (float32 little-endian x, y, z, intensity per point, frame S), poses.txt (row-major 3×4
 /// T_O_S per scan, shortest round-trip decimal), times.txt (stamp per scan, s), scene.json and
-/// README.txt. Creates the directories; removes stale scans/NNNNNN.bin files first.
+/// README.txt. Creates the directories; removes stale scans/NNNNNN.bin files first. With a
+/// drift and correct_at_scan = K > 0 it also writes corrections.txt: the corrected trajectory
+/// the pose source publishes with its jump, one line per scan 0 .. K − 1:
+/// `K−1 stamp_s` then the 12 numbers of the true T_O_S (row-major 3×4) — read by
+/// `tarmac-map --corrections` (applied after scan K − 1 is integrated).
 SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
                               const std::filesystem::path& out_dir);
 

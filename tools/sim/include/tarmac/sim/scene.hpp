@@ -168,6 +168,15 @@ class Scene {
   ///                             before the default vehicle (3 m/s) gets near x = 15.
   static Scene airside_default();
 
+  /// A terminal frontage for pose-drift tests: long walls parallel to the drive path on both
+  /// sides, seen from every scan, so a pose error shows as a shifted or doubled wall:
+  ///  - id 0  ground          plane z = 0
+  ///  - id 1  terminal_left   box [-30, 8.1, 0] .. [90, 8.5, 6] (its face at y = 8.1, mid-voxel at
+  ///  0.2 m)
+  ///  - id 2  terminal_right  box [-30, -16.5, 0] .. [90, -16.1, 6] (its face at y = -16.1)
+  ///  - id 3  pillar          vertical cylinder at (30, -6), r = 0.4, z in [0, 4]
+  static Scene terminal_walls();
+
  private:
   std::vector<Object> objects_;
 };
