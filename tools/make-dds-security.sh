@@ -13,9 +13,9 @@
 #
 # Identities (subject "CN=<id>,O=tarmac") and what their grant allows on the default topics
 # (DESIGN.md section 5; if the config renames topics, edit permissions.xml and re-sign it):
-#   tarmacd    subscribes LiDAR, pose, virtual obstacles; publishes costmap, ESDF slices,
+#   tarmacd    subscribes LiDAR, pose, pose corrections, virtual obstacles; publishes costmap, ESDF slices,
 #              CycleReport, DiagnosticArray
-#   publisher  publishes LiDAR and pose (tarmac-replay, a localisation stack, LiDAR drivers)
+#   publisher  publishes LiDAR, pose and pose corrections (tarmac-replay, a localisation stack, LiDAR drivers)
 #   obstacles  publishes virtual obstacles; subscribes the costmap
 #   monitor    subscribes every tarmac topic, publishes nothing (tarmac-audit, tarmac-echo)
 #
@@ -118,6 +118,7 @@ topics() {  # topics TOPIC... -> <topics> element
 }
 lidar='rt/tarmac/lidar/*/points'
 pose=rt/tarmac/pose
+correction=rt/tarmac/pose_correction
 obstacles=rt/tarmac/virtual_obstacles
 costmap=rt/tarmac/costmap
 slice=rt/tarmac/esdf_slice
@@ -142,10 +143,10 @@ grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS (already rendered, may be 
   echo '     xsi:noNamespaceSchemaLocation="http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd">'
   echo '  <permissions>'
   grant tarmacd "$(topics "$costmap" "$slice" "$report" "$diag")" \
-    "$(topics "$lidar" "$pose" "$obstacles")"
-  grant publisher "$(topics "$lidar" "$pose")" ""
+    "$(topics "$lidar" "$pose" "$correction" "$obstacles")"
+  grant publisher "$(topics "$lidar" "$pose" "$correction")" ""
   grant obstacles "$(topics "$obstacles")" "$(topics "$costmap")"
-  grant monitor "" "$(topics "$lidar" "$pose" "$obstacles" "$costmap" "$slice" "$report" "$diag")"
+  grant monitor "" "$(topics "$lidar" "$pose" "$correction" "$obstacles" "$costmap" "$slice" "$report" "$diag")"
   echo '  </permissions>'
   echo '</dds>'
 } > permissions.xml

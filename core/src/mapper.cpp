@@ -75,6 +75,10 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   return counts;
 }
 
+void Mapper::reserve_retained(std::size_t points_per_scan) {
+  for (auto& r : retained_) r.points_S.reserve(points_per_scan);
+}
+
 OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
   map_.recenter(T_W_B_.translation());
   return map_.integrate(sensor_W_, points_W_, {}, runner, T_W_B_.linear().col(2));

@@ -235,6 +235,7 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   state_.assign(n, 0);
   static_ = std::make_unique<StaticStore>();
   demoted_.resize(kApplyTasks);
+  for (auto& d : demoted_) d.reserve(4096);  // demotions per scan and task; grows once if more
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
                         std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;

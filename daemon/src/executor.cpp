@@ -159,6 +159,7 @@ class Executor::Impl {
         pose_sink(*this),
         trajectory_sink(*this) {
     trajectory_scratch.reserve(1024);
+    mapper.reserve_retained(cfg.quotas.reserve_points_per_scan);
   }
 
   static SchedulerParams scheduler_params(const config::Config& cfg) {

@@ -60,6 +60,10 @@ class Mapper {
   /// sensor frame at the stamp (deskew_points); without either, the sweep is taken as rigid.
   FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                       const Eigen::Isometry3d& T_B_S, const ScanMotion* motion = nullptr);
+  /// Reserves `points_per_scan` points in every retained-scan slot (corrections.enabled), so the
+  /// retention ring does not grow in the cycle while it first fills (the daemon passes
+  /// quotas.reserve_points_per_scan; a larger scan grows its slot once).
+  void reserve_retained(std::size_t points_per_scan);
   /// Stage 2: moves the window with the vehicle and integrates the ingested scan.
   OccupancyUpdateStats integrate(TaskRunner& runner);
   /// Stage 3: rebuilds the costmap and the 2D distance map from the window.
