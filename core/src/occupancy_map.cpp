@@ -6,20 +6,31 @@
 #include <cmath>
 #include <limits>
 #include <tuple>
-#include <unordered_map>
 
 namespace tarmac::core {
 
 /// The site-wide static layer: one 512-bit mask per 8×8×8 block of voxels that holds any.
 /// Sparse and OpenVDB-free (this file stays cheap to compile); only promotions, demotions and the
-/// window's entering slabs touch it, never the per-voxel hot loops.
+/// window's entering slabs touch it, never the per-voxel hot loops. An open-addressing table
+/// sized at construction (a few windows' worth of blocks), so promotions do not allocate in the
+/// cycle; it doubles when half full (the static map grown over several windows of site). A block
+/// whose last voxel is demoted keeps its slot with an empty mask.
 struct StaticStore {
   static constexpr int kShift = 3;
   static constexpr int kSide = 1 << kShift;
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
   using Mask = std::array<std::uint64_t, 8>;  // bit (z·64 + y·8 + x) of the block
-  std::unordered_map<std::uint64_t, Mask> blocks;
-  std::size_t count = 0;
+  std::vector<std::uint64_t> keys;
+  std::vector<Mask> masks;
+  std::size_t used = 0;   ///< slots holding a key
+  std::size_t count = 0;  ///< voxels in the layer
 
+  explicit StaticStore(std::size_t min_blocks) {
+    std::size_t capacity = 1024;
+    while (capacity < 2 * min_blocks) capacity *= 2;
+    keys.assign(capacity, kEmpty);
+    masks.assign(capacity, Mask{});
+  }
   static std::uint64_t key(int bx, int by, int bz) {
     constexpr std::uint64_t kBias = std::uint64_t{1} << 20;
     constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
@@ -33,34 +44,84 @@ struct StaticStore {
   static std::uint64_t key_of(const VoxelIndex& v) {
     return key(v.x() >> kShift, v.y() >> kShift, v.z() >> kShift);
   }
-  bool contains(const VoxelIndex& v) const {
-    const auto it = blocks.find(key_of(v));
-    if (it == blocks.end()) return false;
+  [[nodiscard]] std::size_t probe(std::uint64_t k) const {
+    const std::size_t mask = keys.size() - 1;
+    std::size_t i = static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ull) >> 20) & mask;
+    while (keys[i] != kEmpty && keys[i] != k) i = (i + 1) & mask;
+    return i;
+  }
+  [[nodiscard]] const Mask* find(std::uint64_t k) const {
+    const std::size_t i = probe(k);
+    return keys[i] == k ? &masks[i] : nullptr;
+  }
+  Mask& find_or_insert(std::uint64_t k) {
+    std::size_t i = probe(k);
+    if (keys[i] == k) return masks[i];
+    if (2 * (used + 1) > keys.size()) {
+      grow();
+      i = probe(k);
+    }
+    keys[i] = k;
+    masks[i] = Mask{};
+    ++used;
+    return masks[i];
+  }
+  void grow() {
+    std::vector<std::uint64_t> old_keys(2 * keys.size(), kEmpty);
+    std::vector<Mask> old_masks(2 * keys.size(), Mask{});
+    old_keys.swap(keys);
+    old_masks.swap(masks);
+    for (std::size_t j = 0; j < old_keys.size(); ++j) {
+      if (old_keys[j] == kEmpty) continue;
+      const std::size_t i = probe(old_keys[j]);
+      keys[i] = old_keys[j];
+      masks[i] = old_masks[j];
+    }
+  }
+  void clear() {
+    std::fill(keys.begin(), keys.end(), kEmpty);
+    used = 0;
+    count = 0;
+  }
+  /// fn(key, mask) for every block with a voxel, in table order.
+  template <typename Fn>
+  void for_each(Fn&& fn) const {
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      if (keys[i] != kEmpty) fn(keys[i], masks[i]);
+    }
+  }
+  [[nodiscard]] bool contains(const VoxelIndex& v) const {
+    const Mask* m = find(key_of(v));
+    if (m == nullptr) return false;
     const int b = bit(v);
-    return ((it->second[b >> 6] >> (b & 63)) & 1) != 0;
+    return (((*m)[b >> 6] >> (b & 63)) & 1) != 0;
   }
   void insert(const VoxelIndex& v) {
-    Mask& m = blocks.try_emplace(key_of(v), Mask{}).first->second;
+    Mask& m = find_or_insert(key_of(v));
     const int b = bit(v);
     const std::uint64_t one = std::uint64_t{1} << (b & 63);
     if ((m[b >> 6] & one) == 0) ++count;
     m[b >> 6] |= one;
   }
   void erase(const VoxelIndex& v) {
-    const auto it = blocks.find(key_of(v));
-    if (it == blocks.end()) return;
+    const std::size_t i = probe(key_of(v));
+    if (keys[i] != key_of(v)) return;
     const int b = bit(v);
     const std::uint64_t one = std::uint64_t{1} << (b & 63);
-    if ((it->second[b >> 6] & one) == 0) return;
-    it->second[b >> 6] &= ~one;
+    if ((masks[i][b >> 6] & one) == 0) return;
+    masks[i][b >> 6] &= ~one;
     --count;
-    if (std::all_of(it->second.begin(), it->second.end(), [](std::uint64_t w) { return w == 0; })) {
-      blocks.erase(it);
-    }
   }
 };
 
 namespace {
+
+/// Blocks of the static layer two windows hold (the table's initial reservation).
+std::size_t static_reservation(const Eigen::Vector3i& dims) {
+  std::size_t blocks = 1;
+  for (int a = 0; a < 3; ++a) blocks *= static_cast<std::size_t>((dims[a] + 7) / 8 + 1);
+  return 2 * blocks;
+}
 
 constexpr std::uint8_t kStatic = 0x80;
 constexpr std::uint8_t kCount = 0x7f;
@@ -233,7 +294,7 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   log_odds_.assign(n, kUnknown);
   rise_cm_.assign(n, 0);
   state_.assign(n, 0);
-  static_ = std::make_unique<StaticStore>();
+  static_ = std::make_unique<StaticStore>(static_reservation(dims_));
   demoted_.resize(kApplyTasks);
   for (auto& d : demoted_) d.reserve(4096);  // demotions per scan and task; grows once if more
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
@@ -257,7 +318,7 @@ OccupancyMap::~OccupancyMap() = default;
 std::size_t OccupancyMap::memory_bytes() const {
   std::size_t bytes =
       log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() + state_.capacity() +
-      static_->blocks.size() * (sizeof(StaticStore::Mask) + 32) +
+      static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t)) +
       scan_ground_z_.capacity() * sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
       hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t);
@@ -352,10 +413,10 @@ void OccupancyMap::restore_static(const VoxelIndex& lo, const VoxelIndex& hi) {
   for (int bz = lo.z() >> kS; bz <= hi.z() >> kS; ++bz) {
     for (int by = lo.y() >> kS; by <= hi.y() >> kS; ++by) {
       for (int bx = lo.x() >> kS; bx <= hi.x() >> kS; ++bx) {
-        const auto it = static_->blocks.find(StaticStore::key(bx, by, bz));
-        if (it == static_->blocks.end()) continue;
+        const StaticStore::Mask* block = static_->find(StaticStore::key(bx, by, bz));
+        if (block == nullptr) continue;
         for (int w = 0; w < 8; ++w) {
-          for (std::uint64_t m = it->second[w]; m != 0; m &= m - 1) {
+          for (std::uint64_t m = (*block)[w]; m != 0; m &= m - 1) {
             const int b = w * 64 + std::countr_zero(m);
             const VoxelIndex v((bx << kS) | (b & 7), (by << kS) | ((b >> 3) & 7),
                                (bz << kS) | (b >> 6));
@@ -390,7 +451,7 @@ std::size_t OccupancyMap::static_count() const {
 void OccupancyMap::export_static(std::vector<VoxelIndex>& out) const {
   out.clear();
   out.reserve(static_->count);
-  for (const auto& [key, mask] : static_->blocks) {
+  static_->for_each([&](std::uint64_t key, const StaticStore::Mask& mask) {
     const auto field = [&](int shift) {
       return static_cast<int>(static_cast<std::int64_t>((key >> shift) & ((1u << 21) - 1)) -
                               (std::int64_t{1} << 20));
@@ -402,7 +463,7 @@ void OccupancyMap::export_static(std::vector<VoxelIndex>& out) const {
         out.emplace_back((bx << 3) | (b & 7), (by << 3) | ((b >> 3) & 7), (bz << 3) | (b >> 6));
       }
     }
-  }
+  });
   std::sort(out.begin(), out.end(), [](const VoxelIndex& a, const VoxelIndex& b) {
     return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
   });
@@ -417,7 +478,7 @@ void OccupancyMap::import_static(std::span<const VoxelIndex> voxels) {
       log_odds_[s] = kUnknown;
     }
   }
-  static_ = std::make_unique<StaticStore>();
+  static_ = std::make_unique<StaticStore>(static_reservation(dims_));
   for (const VoxelIndex& v : voxels) static_->insert(v);
   if (placed_) restore_static(min_, min_ + dims_ - VoxelIndex::Ones());
 }
@@ -653,8 +714,7 @@ void OccupancyMap::reset() {
   std::fill(state_.begin(), state_.end(), std::uint8_t{0});
   // The static layer too: a rebuild re-derives it from the retained scans (what was static
   // before the correction sits in the uncorrected frame).
-  static_->blocks.clear();
-  static_->count = 0;
+  static_->clear();
   for (auto& d : demoted_) d.clear();
   min_ = VoxelIndex::Zero();
   placed_ = false;

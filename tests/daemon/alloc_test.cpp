@@ -287,9 +287,7 @@ TEST(Allocations, SteadyStateTicks_AllocateNothingOnTheExecutorThreads) {
   }
   ASSERT_LT(g_n_stacks.load(), kMaxStacks) << "more allocations than stacks recorded";
   EXPECT_EQ(by_owner["ours"], 0u) << "tarmac's daemon/transport code allocates in the cycle";
-  // The core's are printed, not asserted: since the dynamic/static layers merged, the site-wide
-  // static layer's hash blocks grow as voxels are promoted (map growth, like OpenVDB leaves;
-  // 7 over 30 ticks here). Everything else in the core is allocation-free after warm-up.
+  EXPECT_EQ(by_owner["core"], 0u) << "the mapping core allocates in the cycle";
   EXPECT_EQ(by_owner["other"], 0u) << "allocations of unknown owner in the cycle";
 }
 
