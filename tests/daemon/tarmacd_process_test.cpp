@@ -82,6 +82,38 @@ class NotifySocket {
   std::vector<std::string> messages_;
 };
 
+/// Starts tarmacd with `dir`/tarmac.yaml, its output in `dir`/tarmacd.log, `dir`/notify.sock as
+/// NOTIFY_SOCKET and, when given, WATCHDOG_USEC. Returns the child's pid (< 0: fork failed).
+pid_t spawn_tarmacd(const fs::path& dir, const char* watchdog_usec = nullptr) {
+  const fs::path config = dir / "tarmac.yaml";
+  const pid_t pid = fork();
+  if (pid == 0) {
+    setenv("NOTIFY_SOCKET", (dir / "notify.sock").c_str(), 1);
+    if (watchdog_usec != nullptr) setenv("WATCHDOG_USEC", watchdog_usec, 1);
+    const std::string log = (dir / "tarmacd.log").string();
+    freopen(log.c_str(), "w", stdout);
+    freopen(log.c_str(), "a", stderr);
+    execl(TARMAC_TARMACD, TARMAC_TARMACD, "--config", config.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
+/// Waits up to 10 s for `pid` to exit, then kills it. Returns the pid when it exited by itself,
+/// 0 when it had to be killed.
+pid_t wait_or_kill(pid_t pid, int& wstatus) {
+  pid_t waited = 0;
+  for (int i = 0; i < 100 && waited == 0; ++i) {
+    waited = waitpid(pid, &wstatus, WNOHANG);
+    if (waited == 0) std::this_thread::sleep_for(100ms);
+  }
+  if (waited == 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, &wstatus, 0);
+  }
+  return waited;
+}
+
 TEST(Tarmacd, Notify_ReadyWatchdogStatusThenStoppingAndExit0OnSigterm) {
   auto sniffer = tarmac::test::RtpsSniffer::start();
   TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
@@ -98,32 +130,15 @@ TEST(Tarmacd, Notify_ReadyWatchdogStatusThenStoppingAndExit0OnSigterm) {
   NotifySocket notify(dir / "notify.sock");
   ASSERT_TRUE(notify.bound());
 
-  const pid_t pid = fork();
+  const pid_t pid = spawn_tarmacd(dir, "2000000");
   ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    setenv("NOTIFY_SOCKET", (dir / "notify.sock").c_str(), 1);
-    setenv("WATCHDOG_USEC", "2000000", 1);
-    const std::string log = (dir / "tarmacd.log").string();
-    freopen(log.c_str(), "w", stdout);
-    freopen(log.c_str(), "a", stderr);
-    execl(TARMAC_TARMACD, TARMAC_TARMACD, "--config", config.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
   const bool ready = notify.wait_for("READY=1", 15s);
   const bool watchdog = notify.wait_for("WATCHDOG=1", 5s);
   const bool status = notify.wait_for("STATUS=", 5s);
   kill(pid, SIGTERM);
   const bool stopping = notify.wait_for("STOPPING=1", 10s);
   int wstatus = 0;
-  pid_t waited = 0;
-  for (int i = 0; i < 100 && waited == 0; ++i) {
-    waited = waitpid(pid, &wstatus, WNOHANG);
-    if (waited == 0) std::this_thread::sleep_for(100ms);
-  }
-  if (waited == 0) {
-    kill(pid, SIGKILL);
-    waitpid(pid, &wstatus, 0);
-  }
+  const pid_t waited = wait_or_kill(pid, wstatus);
   std::ifstream log_in(dir / "tarmacd.log");
   const std::string log((std::istreambuf_iterator<char>(log_in)), std::istreambuf_iterator<char>());
   EXPECT_TRUE(ready) << log;
@@ -164,29 +179,12 @@ DaemonRun run_tarmacd_until_ready(const fs::path& dir) {
   DaemonRun run;
   NotifySocket notify(dir / "notify.sock");
   EXPECT_TRUE(notify.bound());
-  const fs::path config = dir / "tarmac.yaml";
-  const pid_t pid = fork();
+  const pid_t pid = spawn_tarmacd(dir);
   EXPECT_GE(pid, 0);
-  if (pid == 0) {
-    setenv("NOTIFY_SOCKET", (dir / "notify.sock").c_str(), 1);
-    const std::string log = (dir / "tarmacd.log").string();
-    freopen(log.c_str(), "w", stdout);
-    freopen(log.c_str(), "a", stderr);
-    execl(TARMAC_TARMACD, TARMAC_TARMACD, "--config", config.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
   run.ready = notify.wait_for("READY=1", 15s);
   kill(pid, SIGTERM);
   int wstatus = 0;
-  pid_t waited = 0;
-  for (int i = 0; i < 100 && waited == 0; ++i) {
-    waited = waitpid(pid, &wstatus, WNOHANG);
-    if (waited == 0) std::this_thread::sleep_for(100ms);
-  }
-  if (waited == 0) {
-    kill(pid, SIGKILL);
-    waitpid(pid, &wstatus, 0);
-  }
+  const pid_t waited = wait_or_kill(pid, wstatus);
   run.exited = waited != 0 && WIFEXITED(wstatus);
   run.exit_code = run.exited ? WEXITSTATUS(wstatus) : -1;
   std::ifstream log_in(dir / "tarmacd.log");
