@@ -97,7 +97,9 @@ int main(int argc, char** argv) {
                security.enabled ? "on, identity " + security.identity_certificate : "off",
                config.value().sensors.size(), config.value().pose.topic);
   executor.value()->load_tsdf();  // logs what it found; never fails the start
+  executor.value()->prepare();    // memory locked, workers up: the first tick follows READY
   sd_notify(0, "READY=1");
+  spdlog::info("tarmacd: ready (READY=1 sent), first tick within one period");
 
   int stop_signal = 0;
   executor.value()->run([&] {

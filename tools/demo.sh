@@ -27,10 +27,14 @@ build/bin/tarmac-sim --out out/sim --beams 64
 build/bin/tarmacd --config config/tarmac.yaml > out/daemon/tarmacd.log 2>&1 &
 daemon_pid=$!
 trap 'kill -TERM "$daemon_pid" 2>/dev/null || true' EXIT
-for _ in $(seq 50); do grep -q "DDS up" out/daemon/tarmacd.log && break; sleep 0.1; done
+# READY=1 comes after mlockall and the worker pool: from then on a tick runs every period.
+for _ in $(seq 100); do grep -q "tarmacd: ready" out/daemon/tarmacd.log && break; sleep 0.1; done
 build/bin/tarmac-audit --config config/tarmac.yaml --idle-s 2 --timeout-s 120 \
-  --json out/daemon/audit.json --png out/daemon/costmap.png > out/daemon/audit.txt &
+  --json out/daemon/audit.json --png out/daemon/costmap.png > out/daemon/audit.txt \
+  2> out/daemon/audit.log &
 audit_pid=$!
+# The replay starts once the audit has matched tarmacd, so the first (cold) cycles are counted.
+for _ in $(seq 100); do grep -q "tarmac-audit: matched" out/daemon/audit.log && break; sleep 0.1; done
 # Scans stamped on the 100 ms grid, as a LiDAR phase-locked to PTP would (executor.sensor_phase_ms:
 # 0): tarmacd ticks input_delay_ms after each, so no scan waits longer for its tick.
 build/bin/tarmac-replay --dataset out/sim --config config/tarmac.yaml --align-ms 100

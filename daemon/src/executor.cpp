@@ -246,6 +246,9 @@ class Executor::Impl {
   /// retained scans within it take the revised poses and the rebuild starts.
   void on_trajectory(std::span<const transport::PoseSample> samples);
   void real_time_setup(const RunHooks& hooks);
+  [[nodiscard]] bool periodic_save() const {
+    return config.mapping.tsdf.enabled && config.state.save_period_s > 0.0;
+  }
 
   [[nodiscard]] std::filesystem::path tsdf_path() const {
     return std::filesystem::path(config.state.dir) / config.state.tsdf_file;
@@ -632,12 +635,18 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
 Executor::Executor(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Executor::~Executor() = default;
 
+void Executor::prepare(const RunHooks& hooks) {
+  Impl& d = *impl_;
+  if (d.pool) return;
+  if (hooks.on_thread_start) hooks.on_thread_start();
+  if (d.periodic_save()) d.start_saver();  // before real_time_setup: not pinned, not SCHED_FIFO
+  d.real_time_setup(hooks);
+}
+
 void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& hooks) {
   Impl& d = *impl_;
-  if (hooks.on_thread_start) hooks.on_thread_start();
-  const bool periodic_save = d.config.mapping.tsdf.enabled && d.config.state.save_period_s > 0.0;
-  if (periodic_save) d.start_saver();  // before real_time_setup: not pinned, not SCHED_FIFO
-  d.real_time_setup(hooks);
+  prepare(hooks);
+  const bool periodic_save = d.periodic_save();
   const auto save_every = static_cast<std::uint64_t>(
       std::max(1.0, std::round(d.config.state.save_period_s * d.config.executor.rate_hz)));
   const std::int64_t period_ns = std::llround(1e9 / d.config.executor.rate_hz);

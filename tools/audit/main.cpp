@@ -16,6 +16,7 @@
 #include <fstream>
 #include <map>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "conversions.hpp"
@@ -160,6 +161,19 @@ int main(int argc, char** argv) {
   sa.sa_handler = [](int) { g_stop = true; };
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  // Say when both readers have matched tarmacd's writers: a script starts its publisher after
+  // this line, so the first costmaps (the cold start) are in the figures, not lost to discovery.
+  const auto t_wait = std::chrono::steady_clock::now();
+  while (!g_stop &&
+         (reports.value()->matched_writers() == 0 || grids.value()->matched_writers() == 0) &&
+         std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wait).count() <
+             timeout_s) {
+    std::this_thread::sleep_for(10ms);
+  }
+  if (reports.value()->matched_writers() > 0 && grids.value()->matched_writers() > 0) {
+    std::fprintf(stderr, "tarmac-audit: matched (%s, %s)\n", cfg.outputs.costmap_topic.c_str(),
+                 cfg.outputs.cycle_report_topic.c_str());
+  }
 
   std::map<std::string, Series> stages;
   std::vector<std::string> stage_order;

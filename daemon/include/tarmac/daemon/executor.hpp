@@ -61,9 +61,15 @@ class Executor {
   Executor(const Executor&) = delete;
   Executor& operator=(const Executor&) = delete;
 
+  /// Applies pinning / SCHED_FIFO / mlockall to the calling thread (failures logged once) and
+  /// starts the worker pool and the periodic saver. Call it on the thread that will call run(),
+  /// before READY=1: mlockall faults the whole process in (hundreds of ms with the window and a
+  /// loaded TSDF), and scans that arrive meanwhile would pile up for the first tick. Idempotent;
+  /// `hooks.on_thread_start` is taken from the first call.
+  void prepare(const RunHooks& hooks = {});
+
   /// Runs ticks on the calling thread until `stop_requested()` returns true (checked once per
-  /// tick, so a stop takes at most one period). Applies pinning / SCHED_FIFO / mlockall to the
-  /// calling thread first (failures logged once) and starts the worker pool.
+  /// tick, so a stop takes at most one period). Calls prepare(hooks) first if it has not run.
   void run(const std::function<bool()>& stop_requested, const RunHooks& hooks = {});
 
   /// Writes the occupancy window to state.dir/state.map_file. Not for the cycle.
