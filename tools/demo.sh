@@ -20,16 +20,20 @@ echo "costmap image: out/mulran/costmap.png  (ESDF slice: out/mulran/esdf_slice.
 
 echo
 echo "== tarmacd on loopback DDS: a simulated airside sequence (64-beam LiDAR) replayed at 10 Hz =="
-mkdir -p out/daemon
+rm -rf out/daemon && mkdir -p out/daemon
 build/bin/tarmac-sim --out out/sim --beams 64
+# The shipped config with its state directory in out/daemon/state (the demo starts with an empty
+# static map every time, and never touches /var/lib/tarmac's).
+sed 's|^  dir: /var/lib/tarmac |  dir: out/daemon/state |' config/tarmac.yaml > out/daemon/tarmac.yaml
+grep -q '^  dir: out/daemon/state ' out/daemon/tarmac.yaml
 # The shipped config: one LiDAR 'front' on rt/tarmac/lidar/front/points, poses on rt/tarmac/pose,
 # localhost-only DDS, SCHED_FIFO/mlockall attempted (logged and skipped when not permitted).
-build/bin/tarmacd --config config/tarmac.yaml > out/daemon/tarmacd.log 2>&1 &
+build/bin/tarmacd --config out/daemon/tarmac.yaml > out/daemon/tarmacd.log 2>&1 &
 daemon_pid=$!
 trap 'kill -TERM "$daemon_pid" 2>/dev/null || true' EXIT
 # READY=1 comes after mlockall and the worker pool: from then on a tick runs every period.
 for _ in $(seq 100); do grep -q "tarmacd: ready" out/daemon/tarmacd.log && break; sleep 0.1; done
-build/bin/tarmac-audit --config config/tarmac.yaml --idle-s 2 --timeout-s 120 \
+build/bin/tarmac-audit --config out/daemon/tarmac.yaml --idle-s 2 --timeout-s 120 \
   --json out/daemon/audit.json --png out/daemon/costmap.png > out/daemon/audit.txt \
   2> out/daemon/audit.log &
 audit_pid=$!
@@ -37,7 +41,7 @@ audit_pid=$!
 for _ in $(seq 100); do grep -q "tarmac-audit: matched" out/daemon/audit.log && break; sleep 0.1; done
 # Scans stamped on the 100 ms grid, as a LiDAR phase-locked to PTP would (executor.sensor_phase_ms:
 # 0): tarmacd ticks input_delay_ms after each, so no scan waits longer for its tick.
-build/bin/tarmac-replay --dataset out/sim --config config/tarmac.yaml --align-ms 100
+build/bin/tarmac-replay --dataset out/sim --config out/daemon/tarmac.yaml --align-ms 100
 wait "$audit_pid"
 cat out/daemon/audit.txt
 kill -TERM "$daemon_pid"
@@ -46,6 +50,18 @@ trap - EXIT
 echo "tarmacd stopped on SIGTERM with exit code $rc; log: out/daemon/tarmacd.log"
 grep -E "stopped after|state:" out/daemon/tarmacd.log | sed 's/^/  /'
 echo "costmap image: out/daemon/costmap.png  (audit as JSON: out/daemon/audit.json)"
+echo
+echo "== determinism: the daemon's last costmap against tarmac-map on the same sequence and config =="
+daemon_digest=$(sed -n 's/^last costmap: .*digest \([0-9a-f]*\)$/\1/p' out/daemon/audit.txt)
+build/bin/tarmac-map --dataset out/sim --config out/daemon/tarmac.yaml --threads 2 \
+  --out out/daemon/offline > out/daemon/offline.txt 2>&1
+offline_digest=$(sed -n 's/^digest: .* costmap \([0-9a-f]*\) .*$/\1/p' out/daemon/offline.txt)
+if [ -n "$daemon_digest" ] && [ "$daemon_digest" = "$offline_digest" ]; then
+  echo "costmap digest $daemon_digest: tarmacd over DDS = tarmac-map offline, bit for bit"
+else
+  echo "costmap digests differ: tarmacd '$daemon_digest', tarmac-map '$offline_digest'" \
+    "(a scan lost or late at start-up? see out/daemon/audit.txt)"
+fi
 
 echo
 echo "== DDS on loopback: tarmac <-> Cyclone DDS interop, every field compared =="

@@ -139,8 +139,8 @@ class Executor::Impl {
   class TrajectorySinkImpl final : public transport::TrajectorySink {
    public:
     explicit TrajectorySinkImpl(Impl& owner) : owner_(owner) {}
-    void trajectory(std::span<const transport::PoseSample> poses) override {
-      owner_.on_trajectory(poses);
+    void trajectory(std::int64_t stamp_ns, std::span<const transport::PoseSample> poses) override {
+      owner_.queue_trajectory(stamp_ns, poses);
     }
     void reject(std::string_view reason) override { owner_.rejections.add(reason); }
 
@@ -244,7 +244,14 @@ class Executor::Impl {
   /// A corrected trajectory (nav_msgs/Path on pose.correction_topic): the pose samples it
   /// covers are replaced (newer ones re-expressed by the correction at its end), the mapper's
   /// retained scans within it take the revised poses and the rebuild starts.
-  void on_trajectory(std::span<const transport::PoseSample> samples);
+  void on_trajectory(std::int64_t made_ns, std::span<const transport::PoseSample> samples);
+  /// A corrected trajectory made at `stamp_ns` waits for its place in the stamp order
+  /// (DESIGN.md §3): it is applied after every scan stamped up to `stamp_ns` and before any later
+  /// one, whenever it arrived within the input delay. One that arrives after a later scan was
+  /// integrated is applied at once (still a full rebuild) and counted as late.
+  void queue_trajectory(std::int64_t stamp_ns, std::span<const transport::PoseSample> samples);
+  /// Applies, in stamp order, the queued corrections stamped before `stamp_ns`.
+  void apply_corrections_before(std::int64_t stamp_ns);
   void real_time_setup(const RunHooks& hooks);
   [[nodiscard]] bool periodic_save() const {
     return config.mapping.tsdf.enabled && config.state.save_period_s > 0.0;
@@ -292,6 +299,11 @@ class Executor::Impl {
   TrajectorySinkImpl trajectory_sink;
   std::unique_ptr<transport::TrajectoryInput> trajectory_input;
   std::vector<core::StampedPose> trajectory_scratch;
+  struct PendingCorrection {
+    std::int64_t stamp_ns = 0;
+    std::vector<transport::PoseSample> samples;
+  };
+  std::vector<PendingCorrection> pending_corrections;  ///< by stamp; corrections are rare
   std::unique_ptr<ThreadPool> pool;
   std::vector<core::VirtualZone> zones;
   std::string zone_rejection;
@@ -339,10 +351,11 @@ void Executor::Impl::on_pose_jump(const Eigen::Isometry3d& delta, std::int64_t s
       Eigen::AngleAxisd(delta.linear()).angle() * 180.0 / M_PI, rebased, revised);
 }
 
-void Executor::Impl::on_trajectory(std::span<const transport::PoseSample> samples) {
+void Executor::Impl::on_trajectory(std::int64_t made_ns,
+                                   std::span<const transport::PoseSample> samples) {
   trajectory_scratch.clear();
   for (const auto& p : samples) trajectory_scratch.push_back({p.stamp_ns, p.T_W_B});
-  const std::size_t replaced = poses.apply_trajectory(trajectory_scratch);
+  const std::size_t replaced = poses.apply_trajectory(trajectory_scratch, made_ns);
   const std::uint64_t revised = mapper.correct_trajectory(trajectory_scratch);
   // Later live samples are predicted from the corrected ones.
   core::StampedPose tail[2];
@@ -356,6 +369,36 @@ void Executor::Impl::on_trajectory(std::span<const transport::PoseSample> sample
       "retained scans revised{}",
       samples.size(), samples.front().stamp_ns, samples.back().stamp_ns, replaced, revised,
       revised > 0 ? ", rebuilding" : " (none retained in its span: nothing to rebuild)");
+}
+
+void Executor::Impl::queue_trajectory(std::int64_t stamp_ns,
+                                      std::span<const transport::PoseSample> samples) {
+  if (newest_stamp_ns > stamp_ns) {
+    spdlog::warn(
+        "corrections: trajectory made at stamp {} ns arrived after scan {} ns was integrated: "
+        "applied now, out of stamp order",
+        stamp_ns, newest_stamp_ns);
+    {
+      std::lock_guard lock(totals_mutex);
+      ++totals.late_corrections;
+    }
+    on_trajectory(stamp_ns, samples);
+    return;
+  }
+  auto at =
+      std::upper_bound(pending_corrections.begin(), pending_corrections.end(), stamp_ns,
+                       [](std::int64_t t, const PendingCorrection& c) { return t < c.stamp_ns; });
+  pending_corrections.insert(at, PendingCorrection{stamp_ns, {samples.begin(), samples.end()}});
+}
+
+void Executor::Impl::apply_corrections_before(std::int64_t stamp_ns) {
+  std::size_t n = 0;
+  while (n < pending_corrections.size() && pending_corrections[n].stamp_ns < stamp_ns) {
+    on_trajectory(pending_corrections[n].stamp_ns, pending_corrections[n].samples);
+    ++n;
+  }
+  if (n > 0)
+    pending_corrections.erase(pending_corrections.begin(), pending_corrections.begin() + n);
 }
 
 void Executor::Impl::real_time_setup(const RunHooks& hooks) {
@@ -428,6 +471,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   const bool tsdf_enabled = config.mapping.tsdf.enabled;
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
+    if (!pending_corrections.empty()) apply_corrections_before(cloud.stamp_ns);
     const auto t0 = Clock::now();
     const core::FilterCounts counts =
         mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], sel.deskew ? &sel.motion : nullptr);
@@ -468,6 +512,14 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
       reintegrated += step.scans;
       rebuilds_completed += step.completed ? 1 : 0;
     }
+  }
+
+  // Corrections stamped up to the input horizon (no scan up to their stamp is still pending):
+  // every scan before them is in, every later one is to come.
+  if (!pending_corrections.empty()) {
+    const std::int64_t horizon = std::min(tick_ns - ms_to_ns(config.executor.input_delay_ms),
+                                          scheduler.oldest_pending_stamp() - 1);
+    apply_corrections_before(horizon + 1);
   }
 
   {

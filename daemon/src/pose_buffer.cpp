@@ -69,7 +69,8 @@ std::size_t PoseBuffer::rebase_before(std::int64_t before_stamp_ns,
   return changed;
 }
 
-std::size_t PoseBuffer::apply_trajectory(std::span<const core::StampedPose> trajectory) {
+std::size_t PoseBuffer::apply_trajectory(std::span<const core::StampedPose> trajectory,
+                                         std::int64_t made_ns) {
   if (trajectory.empty()) return 0;
   const core::StampedPose& end = trajectory.back();
   Eigen::Isometry3d T_old_end;
@@ -82,7 +83,7 @@ std::size_t PoseBuffer::apply_trajectory(std::span<const core::StampedPose> traj
     if (s.stamp_ns < trajectory.front().stamp_ns) continue;
     if (s.stamp_ns <= end.stamp_ns) {
       s.T_W_B = *core::interpolate_pose(trajectory, s.stamp_ns);  // within the span: defined
-    } else if (have_end) {
+    } else if (have_end && s.stamp_ns <= made_ns) {
       s.T_W_B = delta_end * s.T_W_B;
     } else {
       continue;

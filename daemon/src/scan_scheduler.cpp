@@ -76,6 +76,14 @@ std::size_t ScanScheduler::pending() const {
       slots_.begin(), slots_.end(), [](const Slot& s) { return s.state == State::kPending; }));
 }
 
+std::int64_t ScanScheduler::oldest_pending_stamp() const {
+  std::int64_t oldest = std::numeric_limits<std::int64_t>::max();
+  for (const Slot& s : slots_) {
+    if (s.state == State::kPending) oldest = std::min(oldest, s.cloud.stamp_ns);
+  }
+  return oldest;
+}
+
 void ScanScheduler::decimate(core::PointCloud& cloud, TickStats& stats) const {
   const std::size_t n = cloud.size();
   if (n <= params_.points_per_scan) return;

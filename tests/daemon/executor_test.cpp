@@ -3,6 +3,7 @@
 // process, and the received costmap is compared with the core run offline on the same sequence.
 // Every test has its own DDS domain and runs under the packet capture (nothing off loopback).
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
@@ -218,6 +219,8 @@ class Daemon : public ::testing::Test {
     return digest_of(grid);
   }
 
+  void check_path_correction(std::uint32_t domain, double lead_s);
+
   std::unique_ptr<test::RtpsSniffer> sniffer_;
   std::int64_t last_stamp_ns_ = 0;
   ExecutorTotals totals_;
@@ -344,6 +347,127 @@ TEST_F(Daemon, PoseJump_RebuildsTheWindow_CostmapEqualsOfflineCore) {
   // Without the correction handling the costmap differs (the drifted wall stays).
   cfg.mapping.corrections.enabled = false;
   EXPECT_NE(want, offline_corrected_digest(cfg, &jumps, &rebuilds));
+}
+
+/// The drift sequence's poses as the daemon sees them after a wire round trip (quaternions).
+core::StampedPose wire_pose(std::int64_t stamp_ns, const Eigen::Isometry3d& T_W_S,
+                            const Eigen::Isometry3d& T_B_S) {
+  return {stamp_ns,
+          transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(T_W_S, T_B_S))).value()};
+}
+
+/// The core offline with the sequence's corrected trajectory (corrections.txt, true poses of
+/// scans 0..19) applied right after its scan, as `tarmac-map --corrections` does; `stamps`
+/// are the replay's.
+std::string offline_path_corrected_digest(const config::Config& cfg,
+                                          const tools::Correction& correction,
+                                          const std::vector<std::int64_t>& stamps,
+                                          std::uint64_t* rebuilds) {
+  core::Mapper mapper(cfg.mapping);
+  core::SerialRunner runner;
+  const auto& seq = drift_sequence();
+  const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
+  core::PointCloud cloud;
+  for (std::size_t k = 0; k < seq.scans.size(); ++k) {
+    EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
+    cloud.stamp_ns = stamps[k];
+    mapper.ingest(cloud, wire_pose(stamps[k], seq.T_W_S[k], T_B_S).T_W_B, T_B_S);
+    mapper.integrate(runner);
+    mapper.integrate_tsdf(runner);
+    if (mapper.rebuilding()) mapper.rebuild_step(runner);
+    if (k == correction.after_scan) {
+      std::vector<core::StampedPose> trajectory;
+      for (const auto& p : correction.trajectory_W_S) {
+        const auto i = static_cast<std::size_t>(
+            std::find_if(seq.times_s.begin(), seq.times_s.end(),
+                         [&](double t) { return std::llround(t * 1e9) == p.stamp_ns; }) -
+            seq.times_s.begin());
+        EXPECT_LT(i, stamps.size()) << "correction stamp off the scan stamps";
+        if (i < stamps.size()) trajectory.push_back(wire_pose(stamps[i], p.T_W_B, T_B_S));
+      }
+      EXPECT_GT(mapper.correct_trajectory(trajectory), 0u);
+    }
+  }
+  EXPECT_FALSE(mapper.rebuilding());
+  *rebuilds = mapper.correction_stats().rebuilds_completed;
+  mapper.update_costmap({}, 0, runner);
+  const auto& cells = mapper.costmap().costmap.cells();
+  return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
+}
+
+/// The localiser publishes its corrected trajectory (nav_msgs/Path) stamped with scan 19,
+/// `lead_s` before that scan (0: right after it); the jump in the live poses at scan 20 is not
+/// taken as one (threshold out of reach), so the map is corrected by the Path alone. tarmacd
+/// applies it after every scan stamped up to the Path's stamp and before any later one, whatever
+/// the arrival: the offline core with the correction after scan 19 gives the same costmap.
+void Daemon::check_path_correction(std::uint32_t domain, double lead_s) {
+  const auto& seq = drift_sequence();
+  auto corrections = tools::read_corrections(seq.dir / "corrections.txt");
+  ASSERT_TRUE(corrections.ok()) << corrections.error().message;
+  ASSERT_EQ(corrections.value().size(), 1u);
+  ASSERT_EQ(corrections.value()[0].after_scan, 19u);
+  const auto tweak = [](config::Config& c) {
+    pose_jump_config(c);
+    c.mapping.corrections.jump_threshold_m = 1000.0;
+    c.mapping.corrections.jump_threshold_deg = 180.0;
+  };
+  auto cfg = test_config(domain, 2);
+  tweak(cfg);
+  RunningExecutor executor(cfg);
+  auto participant = peer(domain);
+  auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
+  ASSERT_TRUE(grids.ok());
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.corrections = corrections.value();
+  options.correction_topic = cfg.pose.correction_topic;
+  options.correction_lead_s = lead_s;
+  options.start_ns = (std::chrono::duration_cast<std::chrono::nanoseconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                              .count() /
+                          100'000'000 +
+                      5) *
+                     100'000'000;  // 0.4-0.5 s ahead, on the 100 ms grid
+  auto stats = tools::replay(participant, seq, options);
+  ASSERT_TRUE(stats.ok()) << stats.error().message;
+  EXPECT_EQ(stats.value().corrections, 1u);
+  transport::OccupancyGridMsg grid;
+  ASSERT_TRUE(wait_for_costmap(*grids.value(), stats.value().last_stamp_ns, grid));
+  for (int i = 0; i < 50 && executor.get().totals().scans_integrated < seq.scans.size(); ++i) {
+    std::this_thread::sleep_for(20ms);
+  }
+  executor.stop();
+  const auto totals = executor.get().totals();
+  EXPECT_EQ(totals.scans_integrated, seq.scans.size());
+  EXPECT_EQ(totals.trajectory_corrections, 1u);
+  EXPECT_EQ(totals.late_corrections, 0u);
+  EXPECT_EQ(totals.pose_jumps, 0u);
+  EXPECT_EQ(totals.rebuilds_completed, 1u);
+
+  std::vector<std::int64_t> stamps(seq.scans.size());
+  for (std::size_t k = 0; k < stamps.size(); ++k) {
+    stamps[k] = options.start_ns + std::llround((seq.times_s[k] - seq.times_s[0]) * 1e9);
+  }
+  EXPECT_EQ(stamps.back(), stats.value().last_stamp_ns);
+  auto offline_cfg = test_config(0, 2);
+  tweak(offline_cfg);
+  std::uint64_t rebuilds = 0;
+  const std::string want =
+      offline_path_corrected_digest(offline_cfg, corrections.value()[0], stamps, &rebuilds);
+  EXPECT_EQ(rebuilds, 1u);
+  EXPECT_EQ(digest_of(grid), want);
+  // Without the Path the drifted walls stay: a different costmap.
+  std::uint64_t jumps = 0;
+  EXPECT_NE(want, offline_corrected_digest(offline_cfg, &jumps, &rebuilds));
+}
+
+TEST_F(Daemon, PathCorrection_RightAfterItsScan_CostmapEqualsOfflineCore) {
+  check_path_correction(test::kDomainDaemonPathCorrection, 0.0);
+}
+
+TEST_F(Daemon, PathCorrection_ArrivingEarly_WaitsForItsStamp_CostmapEqualsOfflineCore) {
+  // Sent 1.5 s (15 scans) before scan 19: applied on arrival it would find no scan to correct.
+  check_path_correction(test::kDomainDaemonPathEarly, 1.5);
 }
 
 /// Collects CycleReports until `done(report)` or the timeout; returns the last one.

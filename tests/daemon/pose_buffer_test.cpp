@@ -98,25 +98,28 @@ TEST(PoseBuffer, RebaseBefore_MovesOnlyOlderSamples) {
   EXPECT_EQ(T.matrix(), pose(300, 3, 0.1 * 3).T_W_B.matrix());
 }
 
-TEST(PoseBuffer, ApplyTrajectory_ReplacesTheSpanAndMovesNewerSamples) {
+TEST(PoseBuffer, ApplyTrajectory_ReplacesTheSpanAndMovesNewerSamplesUpToWhenItWasMade) {
   PoseBuffer buffer(8, 1'000'000'000);
   for (int k = 0; k < 5; ++k) buffer.insert(pose(100 * k, k, 0.0));
-  // The corrected trajectory covers stamps 100..200, shifted 0.5 m in z.
+  // The corrected trajectory covers stamps 100..200, shifted 0.5 m in z, and was made at 300:
+  // the sample at 400 came from the corrected localiser already.
   std::vector<core::StampedPose> traj;
   for (int k = 1; k <= 2; ++k) {
     auto T = pose(100 * k, k, 0.0).T_W_B;
     T.translation().z() += 0.5;
     traj.push_back({100 * k, T});
   }
-  EXPECT_EQ(buffer.apply_trajectory(traj), 4u);  // 100, 200 replaced; 300, 400 moved
+  EXPECT_EQ(buffer.apply_trajectory(traj, 300), 3u);  // 100, 200 replaced; 300 moved
   Eigen::Isometry3d T;
   ASSERT_EQ(buffer.lookup(0, T), PoseBuffer::Lookup::kOk);
   EXPECT_EQ(T.translation().z(), 0.5);  // before the span: untouched
   ASSERT_EQ(buffer.lookup(200, T), PoseBuffer::Lookup::kOk);
   EXPECT_EQ(T.matrix(), traj[1].T_W_B.matrix());
-  ASSERT_EQ(buffer.lookup(400, T), PoseBuffer::Lookup::kOk);
+  ASSERT_EQ(buffer.lookup(300, T), PoseBuffer::Lookup::kOk);
   EXPECT_DOUBLE_EQ(T.translation().z(), 1.0);  // moved by the correction at the span's end
-  EXPECT_DOUBLE_EQ(T.translation().x(), 4.0);
+  EXPECT_DOUBLE_EQ(T.translation().x(), 3.0);
+  ASSERT_EQ(buffer.lookup(400, T), PoseBuffer::Lookup::kOk);
+  EXPECT_EQ(T.matrix(), pose(400, 4, 0.0).T_W_B.matrix());  // after it was made: kept
   core::StampedPose tail[2];
   ASSERT_EQ(buffer.newest_two(tail), 2u);
   EXPECT_EQ(tail[0].stamp_ns, 300);

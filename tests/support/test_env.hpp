@@ -40,6 +40,8 @@ enum Domain : std::uint32_t {
   kDomainDaemonPeriodicSave = 142,
   kDomainDaemonSecurity = 143,
   kDomainDaemonPoseJump = 144,
+  kDomainDaemonPathCorrection = 145,
+  kDomainDaemonPathEarly = 146,
 };
 
 inline bool running_in_ci() {

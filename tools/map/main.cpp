@@ -219,53 +219,6 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
   return core::Ok{};
 }
 
-/// One corrected trajectory of a --corrections file, applied after scan `after_scan`.
-struct Correction {
-  std::size_t after_scan = 0;
-  std::vector<core::StampedPose> trajectory_W_S;  // T_world_sensor, as poses.txt
-};
-
-/// Reads a corrections file: lines "K stamp_s r00 r01 r02 tx r10 r11 r12 ty r20 r21 r22 tz";
-/// consecutive lines with the same K form one correction, stamps increasing within it.
-core::Result<std::vector<Correction>> read_corrections(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return core::Error{"corrections.open", path + ": cannot be read"};
-  std::vector<Correction> out;
-  std::string line;
-  for (std::size_t n = 1; std::getline(in, line); ++n) {
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream ls(line);
-    long long k = -1;
-    double stamp_s = 0.0;
-    double m[12];
-    ls >> k >> stamp_s;
-    for (double& x : m) ls >> x;
-    std::string rest;
-    if (!ls || k < 0 || !std::isfinite(stamp_s) || (ls >> rest)) {
-      return core::Error{"corrections.format",
-                         path + ":" + std::to_string(n) + ": expected 'K stamp_s' and 12 numbers"};
-    }
-    core::StampedPose p;
-    p.stamp_ns = std::llround(stamp_s * 1e9);
-    Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
-    for (int i = 0; i < 12; ++i) T(i / 4, i % 4) = m[i];
-    p.T_W_B.matrix() = T;
-    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
-    if (!T.allFinite() || !(R.transpose() * R).isApprox(Eigen::Matrix3d::Identity(), 1e-6)) {
-      return core::Error{"corrections.format",
-                         path + ":" + std::to_string(n) + ": not a rigid transform"};
-    }
-    if (out.empty() || out.back().after_scan != static_cast<std::size_t>(k)) {
-      out.push_back({static_cast<std::size_t>(k), {}});
-    } else if (p.stamp_ns <= out.back().trajectory_W_S.back().stamp_ns) {
-      return core::Error{"corrections.format",
-                         path + ":" + std::to_string(n) + ": stamps must increase"};
-    }
-    out.back().trajectory_W_S.push_back(p);
-  }
-  return out;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -362,9 +315,9 @@ int main(int argc, char** argv) {
     clearing.emplace(std::move(truth).value());
   }
 
-  std::vector<Correction> corrections;
+  std::vector<tools::Correction> corrections;
   if (!opt.corrections.empty()) {
-    auto read = read_corrections(opt.corrections);
+    auto read = tools::read_corrections(opt.corrections);
     if (!read) {
       std::fprintf(stderr, "tarmac-map: %s [%s]\n", read.error().message.c_str(),
                    read.error().code.c_str());

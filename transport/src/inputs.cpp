@@ -174,7 +174,8 @@ class TrajectoryInput::Impl {
       }
       poses.push_back(PoseSample{stamp, T.value()});
     }
-    sink.trajectory(poses);
+    const std::int64_t made_ns = from_time_msg(msg.header().stamp());
+    sink.trajectory(made_ns != 0 ? made_ns : poses.back().stamp_ns, poses);
   }
 };
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <sstream>
+#include <string>
 
 namespace tarmac::tools {
 
@@ -81,6 +82,46 @@ core::Status read_kitti_scan(const std::filesystem::path& file, core::PointCloud
     cloud.intensity.push_back(raw[4 * i + 3]);
   }
   return core::Ok{};
+}
+
+core::Result<std::vector<Correction>> read_corrections(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  const std::string path = file.string();
+  if (!in) return core::Error{"corrections.open", path + ": cannot be read"};
+  std::vector<Correction> out;
+  std::string line;
+  for (std::size_t n = 1; std::getline(in, line); ++n) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    long long k = -1;
+    double stamp_s = 0.0;
+    double m[12];
+    ls >> k >> stamp_s;
+    for (double& x : m) ls >> x;
+    std::string rest;
+    if (!ls || k < 0 || !std::isfinite(stamp_s) || (ls >> rest)) {
+      return core::Error{"corrections.format",
+                         path + ":" + std::to_string(n) + ": expected 'K stamp_s' and 12 numbers"};
+    }
+    core::StampedPose p;
+    p.stamp_ns = std::llround(stamp_s * 1e9);
+    Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+    for (int i = 0; i < 12; ++i) T(i / 4, i % 4) = m[i];
+    p.T_W_B.matrix() = T;
+    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+    if (!T.allFinite() || !(R.transpose() * R).isApprox(Eigen::Matrix3d::Identity(), 1e-6)) {
+      return core::Error{"corrections.format",
+                         path + ":" + std::to_string(n) + ": not a rigid transform"};
+    }
+    if (out.empty() || out.back().after_scan != static_cast<std::size_t>(k)) {
+      out.push_back({static_cast<std::size_t>(k), {}});
+    } else if (p.stamp_ns <= out.back().trajectory_W_S.back().stamp_ns) {
+      return core::Error{"corrections.format",
+                         path + ":" + std::to_string(n) + ": stamps must increase"};
+    }
+    out.back().trajectory_W_S.push_back(p);
+  }
+  return out;
 }
 
 }  // namespace tarmac::tools

@@ -29,6 +29,7 @@ void usage(std::FILE* to) {
                "usage: tarmac-replay --dataset DIR [--rate-scale X] [--config FILE] [--scans N]\n"
                "                     [--poses FILE] [--jitter-ms MS] [--sensor ID] [--loop N]\n"
                "                     [--no-poses] [--align-ms MS] [--identity DIR]\n"
+               "                     [--corrections FILE]\n"
                "  Publishes DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt\n"
                "  T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and\n"
                "  geometry_msgs/PoseWithCovarianceStamped on the topics of FILE (default: the\n"
@@ -46,13 +47,17 @@ void usage(std::FILE* to) {
                "                  phase-locked to PTP (tarmacd ticks on the same grid)\n"
                "  --identity DIR  DDS Security identity DIR/cert.pem, DIR/key.pem instead of\n"
                "                  the config's (dds.security; e.g. make-dds-security.sh's\n"
-               "                  'publisher')\n");
+               "                  'publisher')\n"
+               "  --corrections FILE  corrected trajectories (tarmac-sim --correct-at writes\n"
+               "                  DIR/corrections.txt): each sent as nav_msgs/Path on the\n"
+               "                  config's pose.correction_topic right after its scan K\n");
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string dataset, config_path, poses_file = "poses.txt", sensor_id, identity_dir;
+  std::string dataset, config_path, poses_file = "poses.txt", sensor_id, identity_dir,
+                                    corrections_file;
   tools::ReplayOptions options;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -77,6 +82,8 @@ int main(int argc, char** argv) {
       options.jitter_ms = std::atof(argv[++i]);
     } else if (a == "--sensor" && has_value) {
       sensor_id = argv[++i];
+    } else if (a == "--corrections" && has_value) {
+      corrections_file = argv[++i];
     } else if (a == "--identity" && has_value) {
       identity_dir = argv[++i];
     } else if (a == "--help" || a == "-h") {
@@ -131,6 +138,15 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tarmac-replay: %s\n", seq.error().message.c_str());
     return kExitData;
   }
+  if (!corrections_file.empty()) {
+    auto read = tools::read_corrections(corrections_file);
+    if (!read) {
+      std::fprintf(stderr, "tarmac-replay: %s\n", read.error().message.c_str());
+      return kExitData;
+    }
+    options.corrections = std::move(read).value();
+    options.correction_topic = cfg.pose.correction_topic;
+  }
   auto participant = transport::Participant::create(cfg.dds.participant);
   if (!participant) {
     std::fprintf(stderr, "tarmac-replay: %s\n", participant.error().message.c_str());
@@ -162,8 +178,10 @@ int main(int argc, char** argv) {
     return kExitUnavailable;
   }
   std::printf(
-      "tarmac-replay: published %zu scans, stamps %.3f .. %.3f s, worst send delay %.2f ms\n",
-      stats.value().scans, static_cast<double>(stats.value().first_stamp_ns) / 1e9,
+      "tarmac-replay: published %zu scans (and %zu corrected trajectories), stamps %.3f .. %.3f "
+      "s, worst send delay %.2f ms\n",
+      stats.value().scans, stats.value().corrections,
+      static_cast<double>(stats.value().first_stamp_ns) / 1e9,
       static_cast<double>(stats.value().last_stamp_ns) / 1e9, stats.value().max_late_ms);
   return g_stop ? 130 : 0;
 }

@@ -12,6 +12,7 @@
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
 #include "geometry_msgsPubSubTypes.h"
+#include "nav_msgsPubSubTypes.h"
 #include "sensor_msgsPubSubTypes.h"
 #include "tarmac/daemon/clock.hpp"
 #include "tarmac/transport/qos.hpp"
@@ -28,11 +29,25 @@ void sleep_until_realtime(std::int64_t t_ns) {
   daemon::clock_sleep_until_ns(CLOCK_REALTIME, t_ns);
 }
 
+enum class EventKind : std::uint8_t { kScan, kPose, kCorrection };
+
 struct Event {
   std::int64_t publish_ns;
-  std::size_t scan;
-  bool is_pose;
+  std::size_t index;  ///< scan (kScan, kPose) or correction (kCorrection)
+  EventKind kind;
 };
+
+/// The replay stamp of a sequence stamp: that of the scan with this time when there is one (bit
+/// for bit), else re-based the same way.
+std::int64_t replay_stamp(std::int64_t t_ns, const KittiSequence& seq, std::size_t n,
+                          const std::vector<std::int64_t>& stamps, std::int64_t start,
+                          double rate_scale) {
+  for (std::size_t k = 0; k < n; ++k) {
+    if (std::llround(seq.times_s[k] * 1e9) == t_ns) return stamps[k];
+  }
+  return start +
+         std::llround((static_cast<double>(t_ns) / 1e9 - seq.times_s[0]) * 1e9 / rate_scale);
+}
 
 }  // namespace
 
@@ -46,6 +61,7 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   using CloudWriter = transport::Writer<sensor_msgs::msg::dds_::PointCloud2_PubSubType>;
   using PoseWriter =
       transport::Writer<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType>;
+  using PathWriter = transport::Writer<nav_msgs::msg::dds_::Path_PubSubType>;
   if (!(options.rate_scale > 0.0)) return core::Error{"replay.options", "rate_scale must be > 0"};
   auto clouds = CloudWriter::create(participant, options.lidar_topic, options.lidar_qos);
   if (!clouds) return clouds.error();
@@ -54,10 +70,17 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   pose_qos.history_depth = 100;
   auto poses = PoseWriter::create(participant, options.pose_topic, pose_qos);
   if (!poses) return poses.error();
+  std::unique_ptr<PathWriter> paths;
+  if (!options.corrections.empty()) {
+    auto created = PathWriter::create(participant, options.correction_topic, pose_qos);
+    if (!created) return created.error();
+    paths = std::move(created).value();
+  }
   const auto wait = std::chrono::milliseconds(
       static_cast<std::int64_t>(std::llround(options.wait_for_readers_s * 1000.0)));
   if (!clouds.value()->wait_for_readers(1, wait) ||
-      (options.publish_poses && !poses.value()->wait_for_readers(1, wait))) {
+      (options.publish_poses && !poses.value()->wait_for_readers(1, wait)) ||
+      (paths && !paths->wait_for_readers(1, wait))) {
     return core::Error{"replay.no_reader", "no reader matched " + options.lidar_topic + " and " +
                                                options.pose_topic + " (is tarmacd running on " +
                                                "this domain?)"};
@@ -89,10 +112,22 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   std::vector<Event> events;
   events.reserve(2 * total);
   for (std::size_t k = 0; k < total; ++k) {
-    events.push_back({stamps[k] + std::llround(jitter(rng)), k, false});
+    events.push_back({stamps[k] + std::llround(jitter(rng)), k, EventKind::kScan});
     if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count)) {
-      events.push_back({stamps[k] + std::llround(jitter(rng)), k, true});
+      events.push_back({stamps[k] + std::llround(jitter(rng)), k, EventKind::kPose});
     }
+  }
+  // After its scan whatever the jitter: a localiser corrects what it has seen.
+  const auto jitter_bound = static_cast<std::int64_t>(std::ceil(jitter.max())) + 1;
+  for (std::size_t c = 0; c < options.corrections.size(); ++c) {
+    const std::size_t after = options.corrections[c].after_scan;
+    if (after >= n || options.corrections[c].trajectory_W_S.empty()) {
+      return core::Error{"replay.options", "correction " + std::to_string(c) + ": after scan " +
+                                               std::to_string(after) + " of " + std::to_string(n) +
+                                               ", or empty"};
+    }
+    events.push_back({stamps[after] + jitter_bound - std::llround(options.correction_lead_s * 1e9),
+                      c, EventKind::kCorrection});
   }
   std::stable_sort(events.begin(), events.end(),
                    [](const Event& a, const Event& b) { return a.publish_ns < b.publish_ns; });
@@ -101,18 +136,34 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   std::size_t published_scans = 0;
   for (const Event& e : events) {
     if (stop != nullptr && stop->load()) break;
-    if (e.is_pose) {
+    if (e.kind == EventKind::kPose) {
       transport::PoseStampedMsg msg;
-      msg.header().stamp(transport::to_time_msg(stamps[e.scan]));
+      msg.header().stamp(transport::to_time_msg(stamps[e.index]));
       msg.header().frame_id(options.pose_frame_id);
       msg.pose().pose(
-          transport::to_pose_msg(base_pose(seq.T_W_S[e.scan % n], options.T_base_sensor)));
+          transport::to_pose_msg(base_pose(seq.T_W_S[e.index % n], options.T_base_sensor)));
       sleep_until_realtime(e.publish_ns);
       poses.value()->write(msg);
+    } else if (e.kind == EventKind::kCorrection) {
+      const Correction& c = options.corrections[e.index];
+      transport::PathMsg msg;
+      msg.header().stamp(transport::to_time_msg(stamps[c.after_scan]));
+      msg.header().frame_id(options.pose_frame_id);
+      for (const auto& p : c.trajectory_W_S) {
+        geometry_msgs::msg::dds_::PoseStamped_ ps;
+        ps.header().stamp(transport::to_time_msg(
+            replay_stamp(p.stamp_ns, seq, n, stamps, start, options.rate_scale)));
+        ps.header().frame_id(options.pose_frame_id);
+        ps.pose(transport::to_pose_msg(base_pose(p.T_W_B, options.T_base_sensor)));
+        msg.poses().push_back(std::move(ps));
+      }
+      sleep_until_realtime(e.publish_ns);
+      paths->write(msg);
+      ++stats.corrections;
     } else {
-      if (auto read = read_kitti_scan(seq.scans[e.scan % n], cloud); !read) return read.error();
+      if (auto read = read_kitti_scan(seq.scans[e.index % n], cloud); !read) return read.error();
       cloud.frame_id = options.frame_id;
-      cloud.stamp_ns = stamps[e.scan];
+      cloud.stamp_ns = stamps[e.index];
       const auto msg = transport::to_point_cloud2(cloud);
       sleep_until_realtime(e.publish_ns);
       stats.max_late_ms =
@@ -123,6 +174,7 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
     }
   }
   poses.value()->wait_for_acknowledgments(std::chrono::milliseconds(2000));
+  if (paths) paths->wait_for_acknowledgments(std::chrono::milliseconds(2000));
   stats.scans = published_scans;
   stats.first_stamp_ns = stamps.front();
   stats.last_stamp_ns = stamps[total - 1];

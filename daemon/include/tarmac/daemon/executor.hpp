@@ -33,8 +33,9 @@ struct ExecutorTotals {
   std::uint64_t tsdf_saves_skipped = 0;      ///< periodic saves skipped: the previous still writing
   std::uint64_t pose_jumps = 0;              ///< jumps in the pose stream taken as corrections
   std::uint64_t trajectory_corrections = 0;  ///< corrected trajectories (nav_msgs/Path) applied
-  std::uint64_t rebuilds_completed = 0;      ///< rebuilt windows swapped in
-  std::uint64_t scans_reintegrated = 0;      ///< retained scans re-integrated by rebuilds
+  std::uint64_t late_corrections = 0;    ///< of those, applied out of stamp order (arrived late)
+  std::uint64_t rebuilds_completed = 0;  ///< rebuilt windows swapped in
+  std::uint64_t scans_reintegrated = 0;  ///< retained scans re-integrated by rebuilds
 };
 
 /// What load_tsdf() found in the state directory.

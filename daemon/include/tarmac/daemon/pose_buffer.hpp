@@ -43,12 +43,13 @@ class PoseBuffer {
   /// changed. RT-safe.
   std::size_t rebase_before(std::int64_t before_stamp_ns, const Eigen::Isometry3d& delta);
 
-  /// A corrected trajectory (sorted by stamp): every sample within its span takes the
-  /// trajectory's pose at its stamp (interpolated), and the newer samples are re-expressed by the
-  /// correction at the trajectory's end (delta = T_corrected · T_old⁻¹ there, T_old looked up in
-  /// this buffer; when it cannot be looked up they are left alone). Returns the samples changed.
-  /// RT-safe.
-  std::size_t apply_trajectory(std::span<const core::StampedPose> trajectory);
+  /// A corrected trajectory (sorted by stamp) made at `made_ns`: every sample within its span
+  /// takes the trajectory's pose at its stamp (interpolated), and the newer samples up to
+  /// `made_ns` are re-expressed by the correction at the trajectory's end (delta =
+  /// T_corrected · T_old⁻¹ there, T_old looked up in this buffer; when it cannot be looked up
+  /// they are left alone). Samples after `made_ns` came from the corrected localiser and are
+  /// kept. Returns the samples changed. RT-safe.
+  std::size_t apply_trajectory(std::span<const core::StampedPose> trajectory, std::int64_t made_ns);
   /// The newest min(2, size()) samples, oldest first, into `out`; returns how many.
   std::size_t newest_two(core::StampedPose (&out)[2]) const;
 

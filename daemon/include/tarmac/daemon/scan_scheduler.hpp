@@ -71,6 +71,8 @@ class ScanScheduler {
   void release(std::uint32_t slot) { slots_[slot].state = State::kFree; }
 
   [[nodiscard]] std::size_t pending() const;
+  /// Stamp of the oldest pending scan (INT64_MAX when none).
+  [[nodiscard]] std::int64_t oldest_pending_stamp() const;
   /// Newest committed stamp per sensor (0 when none yet).
   [[nodiscard]] std::int64_t newest_stamp(std::uint32_t sensor) const { return newest_[sensor]; }
 

@@ -103,8 +103,10 @@ class PoseInput {
 class TrajectorySink {
  public:
   virtual ~TrajectorySink() = default;
-  /// `poses` is valid during the call only.
-  virtual void trajectory(std::span<const PoseSample> poses) = 0;
+  /// `stamp_ns`: when the correction was made (the Path's header stamp; a zero stamp there
+  /// means the newest pose's): it applies after every scan stamped up to it. `poses` is valid
+  /// during the call only.
+  virtual void trajectory(std::int64_t stamp_ns, std::span<const PoseSample> poses) = 0;
   virtual void reject(std::string_view reason) = 0;
 };
 

@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 
 #include "tarmac/core/point_cloud.hpp"
+#include "tarmac/core/pose_correction.hpp"
 #include "tarmac/core/result.hpp"
 
 namespace tarmac::tools {
@@ -28,5 +29,17 @@ core::Result<KittiSequence> open_kitti(const std::filesystem::path& dir,
 /// Reads one scan into `cloud` (points in the sensor frame, intensity). Rejects files whose size
 /// is not a multiple of 16 bytes.
 core::Status read_kitti_scan(const std::filesystem::path& file, core::PointCloud& cloud);
+
+/// One corrected trajectory of a corrections file (tarmac-sim --correct-at writes
+/// corrections.txt), applied after scan `after_scan`.
+struct Correction {
+  std::size_t after_scan = 0;
+  std::vector<core::StampedPose> trajectory_W_S;  ///< T_world_sensor, as poses.txt; stamps in s·1e9
+};
+
+/// Reads a corrections file: lines "K stamp_s r00 r01 r02 tx r10 r11 r12 ty r20 r21 r22 tz";
+/// consecutive lines with the same K form one correction, stamps increasing within it.
+/// Errors: "corrections.open", "corrections.format" (with the line number).
+core::Result<std::vector<Correction>> read_corrections(const std::filesystem::path& path);
 
 }  // namespace tarmac::tools

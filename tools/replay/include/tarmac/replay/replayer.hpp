@@ -14,6 +14,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -48,6 +49,15 @@ struct ReplayOptions {
   bool publish_poses = true;
   /// QoS of the scan writer; must be compatible with the daemon's `dds.qos.lidar`.
   transport::QosSpec lidar_qos = transport::qos::kLidar;
+  /// Corrected trajectories (read_corrections(), e.g. tarmac-sim's corrections.txt), each
+  /// published once as a nav_msgs/Path on `correction_topic` right after scan `after_scan` of
+  /// the first loop, its header stamped like that scan (the correction applies after it), its
+  /// poses as T_world_base, stamped like the scans they belong to.
+  std::vector<Correction> corrections;
+  std::string correction_topic = "rt/tarmac/pose_correction";
+  /// Each correction is sent this long before its scan instead (its stamp unchanged): tests
+  /// that tarmacd applies it by stamp, not on arrival.
+  double correction_lead_s = 0.0;
   /// Called after each scan is published (index, count); e.g. a progress bar.
   std::function<void(std::size_t, std::size_t)> progress;
 };
@@ -56,7 +66,8 @@ struct ReplayStats {
   std::size_t scans = 0;
   std::int64_t first_stamp_ns = 0;
   std::int64_t last_stamp_ns = 0;
-  double max_late_ms = 0.0;  ///< worst publish time behind schedule (excluding jitter)
+  double max_late_ms = 0.0;     ///< worst publish time behind schedule (excluding jitter)
+  std::size_t corrections = 0;  ///< corrected trajectories published
 };
 
 /// T_world_base for a scan whose sensor pose is T_W_S.
