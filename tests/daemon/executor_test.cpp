@@ -184,8 +184,8 @@ class Daemon : public ::testing::Test {
   /// costmap stamped with the last scan.
   std::string replayed_digest(std::uint32_t domain, std::uint32_t workers, double jitter_ms,
                               const std::function<void(config::Config&)>& tweak = {},
-                              const tools::KittiSequence& seq = sequence(),
-                              double rate_scale = 2.0) {
+                              const tools::KittiSequence& seq = sequence(), double rate_scale = 2.0,
+                              const std::function<void(tools::ReplayOptions&)>& replay_tweak = {}) {
     const auto n_scans = static_cast<std::uint64_t>(seq.scans.size());
     auto cfg = test_config(domain, workers);
     if (tweak) tweak(cfg);
@@ -198,6 +198,7 @@ class Daemon : public ::testing::Test {
     options.rate_scale = rate_scale;  // default 20 Hz into a 10 Hz executor: two scans per tick
     options.jitter_ms = jitter_ms;
     options.seed = 7;
+    if (replay_tweak) replay_tweak(options);
     auto stats = tools::replay(participant, seq, options);
     EXPECT_TRUE(stats.ok()) << (stats.ok() ? "" : stats.error().message);
     if (!stats.ok()) return "";
@@ -211,7 +212,9 @@ class Daemon : public ::testing::Test {
       std::this_thread::sleep_for(20ms);
     }
     EXPECT_EQ(executor.get().totals().scans_integrated, n_scans);
+    first_stamp_ns_ = stats.value().first_stamp_ns;
     last_stamp_ns_ = stats.value().last_stamp_ns;
+    corrections_sent_ = stats.value().corrections;
     executor.stop();
     totals_ = executor.get().totals();
     tsdf_digest_ = executor.get().tsdf().digest();
@@ -222,7 +225,9 @@ class Daemon : public ::testing::Test {
   void check_path_correction(std::uint32_t domain, double lead_s);
 
   std::unique_ptr<test::RtpsSniffer> sniffer_;
+  std::int64_t first_stamp_ns_ = 0;
   std::int64_t last_stamp_ns_ = 0;
+  std::size_t corrections_sent_ = 0;
   ExecutorTotals totals_;
   std::uint64_t tsdf_digest_ = 0;
   std::size_t tsdf_voxels_ = 0;
@@ -297,37 +302,68 @@ void pose_jump_config(config::Config& c) {
   c.mapping.corrections.rebuild_points_per_cycle = 20000;  // 2-3 of these scans per step
 }
 
-/// The core offline with the daemon's correction logic: jump detection on the wire poses, a
-/// rigid correction of the retained scans, a rebuild step after each scan.
-std::string offline_corrected_digest(const config::Config& cfg, std::uint64_t* jumps,
-                                     std::uint64_t* rebuilds) {
+/// The drift sequence's pose of a scan as the daemon sees it after a wire round trip
+/// (quaternions).
+core::StampedPose wire_pose(std::int64_t stamp_ns, const Eigen::Isometry3d& T_W_S,
+                            const Eigen::Isometry3d& T_B_S) {
+  return {stamp_ns,
+          transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(T_W_S, T_B_S))).value()};
+}
+
+struct OfflineCorrected {
+  std::string costmap_digest;
+  std::uint64_t jumps = 0;
+  std::uint64_t rebuilds = 0;
+};
+
+/// The core offline on the drift sequence with the daemon's correction logic: jump detection on
+/// the wire poses (a rigid correction of the retained scans), the corrected trajectory
+/// `correction` (if any) applied right after its scan as `tarmac-map --corrections` does, a
+/// rebuild step after each scan. `stamps`: the scans' stamps (the replay's; empty: 100 ms apart).
+OfflineCorrected offline_corrected(const config::Config& cfg,
+                                   const std::vector<std::int64_t>& stamps = {},
+                                   const tools::Correction* correction = nullptr) {
   core::Mapper mapper(cfg.mapping);
   core::PoseJumpDetector detector(cfg.mapping.corrections);
   core::SerialRunner runner;
   const auto& seq = drift_sequence();
   const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
+  const auto stamp_of = [&](std::size_t k) {
+    return stamps.empty() ? static_cast<std::int64_t>(k) * 100'000'000 : stamps[k];
+  };
+  OfflineCorrected out;
   core::PointCloud cloud;
-  *jumps = 0;
   for (std::size_t k = 0; k < seq.scans.size(); ++k) {
     EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
-    const auto wire =
-        transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(seq.T_W_S[k], T_B_S)));
-    const std::int64_t stamp = static_cast<std::int64_t>(k) * 100'000'000;
-    if (const auto jump = detector.feed({stamp, wire.value()})) {
-      mapper.correct_rigid(*jump, stamp);
-      ++*jumps;
+    const core::StampedPose wire = wire_pose(stamp_of(k), seq.T_W_S[k], T_B_S);
+    if (const auto jump = detector.feed(wire)) {
+      mapper.correct_rigid(*jump, wire.stamp_ns);
+      ++out.jumps;
     }
-    cloud.stamp_ns = stamp;
-    mapper.ingest(cloud, wire.value(), T_B_S);
+    cloud.stamp_ns = wire.stamp_ns;
+    mapper.ingest(cloud, wire.T_W_B, T_B_S);
     mapper.integrate(runner);
     mapper.integrate_tsdf(runner);
     if (mapper.rebuilding()) mapper.rebuild_step(runner);
+    if (correction == nullptr || k != correction->after_scan) continue;
+    std::vector<core::StampedPose> trajectory;
+    for (const auto& p : correction->trajectory_W_S) {
+      const auto i = static_cast<std::size_t>(
+          std::find_if(seq.times_s.begin(), seq.times_s.end(),
+                       [&](double t) { return std::llround(t * 1e9) == p.stamp_ns; }) -
+          seq.times_s.begin());
+      EXPECT_LT(i, seq.scans.size()) << "correction stamp off the scan stamps";
+      if (i < seq.scans.size()) trajectory.push_back(wire_pose(stamp_of(i), p.T_W_B, T_B_S));
+    }
+    EXPECT_GT(mapper.correct_trajectory(trajectory), 0u);
   }
   EXPECT_FALSE(mapper.rebuilding());
-  *rebuilds = mapper.correction_stats().rebuilds_completed;
+  out.rebuilds = mapper.correction_stats().rebuilds_completed;
   mapper.update_costmap({}, 0, runner);
   const auto& cells = mapper.costmap().costmap.cells();
-  return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
+  out.costmap_digest =
+      tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
+  return out;
 }
 
 TEST_F(Daemon, PoseJump_RebuildsTheWindow_CostmapEqualsOfflineCore) {
@@ -336,63 +372,16 @@ TEST_F(Daemon, PoseJump_RebuildsTheWindow_CostmapEqualsOfflineCore) {
       replayed_digest(test::kDomainDaemonPoseJump, 2, 0.0, pose_jump_config, drift_sequence(), 1.0);
   auto cfg = test_config(0, 2);
   pose_jump_config(cfg);
-  std::uint64_t jumps = 0, rebuilds = 0;
-  const std::string want = offline_corrected_digest(cfg, &jumps, &rebuilds);
-  EXPECT_EQ(jumps, 1u);
-  EXPECT_EQ(rebuilds, 1u);
+  const OfflineCorrected want = offline_corrected(cfg);
+  EXPECT_EQ(want.jumps, 1u);
+  EXPECT_EQ(want.rebuilds, 1u);
   EXPECT_EQ(totals_.pose_jumps, 1u);
   EXPECT_EQ(totals_.rebuilds_completed, 1u);
   EXPECT_GE(totals_.scans_reintegrated, 10u);
-  EXPECT_EQ(got, want);
+  EXPECT_EQ(got, want.costmap_digest);
   // Without the correction handling the costmap differs (the drifted wall stays).
   cfg.mapping.corrections.enabled = false;
-  EXPECT_NE(want, offline_corrected_digest(cfg, &jumps, &rebuilds));
-}
-
-/// The drift sequence's poses as the daemon sees them after a wire round trip (quaternions).
-core::StampedPose wire_pose(std::int64_t stamp_ns, const Eigen::Isometry3d& T_W_S,
-                            const Eigen::Isometry3d& T_B_S) {
-  return {stamp_ns,
-          transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(T_W_S, T_B_S))).value()};
-}
-
-/// The core offline with the sequence's corrected trajectory (corrections.txt, true poses of
-/// scans 0..19) applied right after its scan, as `tarmac-map --corrections` does; `stamps`
-/// are the replay's.
-std::string offline_path_corrected_digest(const config::Config& cfg,
-                                          const tools::Correction& correction,
-                                          const std::vector<std::int64_t>& stamps,
-                                          std::uint64_t* rebuilds) {
-  core::Mapper mapper(cfg.mapping);
-  core::SerialRunner runner;
-  const auto& seq = drift_sequence();
-  const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
-  core::PointCloud cloud;
-  for (std::size_t k = 0; k < seq.scans.size(); ++k) {
-    EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
-    cloud.stamp_ns = stamps[k];
-    mapper.ingest(cloud, wire_pose(stamps[k], seq.T_W_S[k], T_B_S).T_W_B, T_B_S);
-    mapper.integrate(runner);
-    mapper.integrate_tsdf(runner);
-    if (mapper.rebuilding()) mapper.rebuild_step(runner);
-    if (k == correction.after_scan) {
-      std::vector<core::StampedPose> trajectory;
-      for (const auto& p : correction.trajectory_W_S) {
-        const auto i = static_cast<std::size_t>(
-            std::find_if(seq.times_s.begin(), seq.times_s.end(),
-                         [&](double t) { return std::llround(t * 1e9) == p.stamp_ns; }) -
-            seq.times_s.begin());
-        EXPECT_LT(i, stamps.size()) << "correction stamp off the scan stamps";
-        if (i < stamps.size()) trajectory.push_back(wire_pose(stamps[i], p.T_W_B, T_B_S));
-      }
-      EXPECT_GT(mapper.correct_trajectory(trajectory), 0u);
-    }
-  }
-  EXPECT_FALSE(mapper.rebuilding());
-  *rebuilds = mapper.correction_stats().rebuilds_completed;
-  mapper.update_costmap({}, 0, runner);
-  const auto& cells = mapper.costmap().costmap.cells();
-  return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
+  EXPECT_NE(want.costmap_digest, offline_corrected(cfg).costmap_digest);
 }
 
 /// The localiser publishes its corrected trajectory (nav_msgs/Path) stamped with scan 19,
@@ -411,54 +400,30 @@ void Daemon::check_path_correction(std::uint32_t domain, double lead_s) {
     c.mapping.corrections.jump_threshold_m = 1000.0;
     c.mapping.corrections.jump_threshold_deg = 180.0;
   };
-  auto cfg = test_config(domain, 2);
-  tweak(cfg);
-  RunningExecutor executor(cfg);
-  auto participant = peer(domain);
-  auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
-  ASSERT_TRUE(grids.ok());
-  tools::ReplayOptions options;
-  options.lidar_qos = cfg.dds.qos.lidar;
-  options.corrections = corrections.value();
-  options.correction_topic = cfg.pose.correction_topic;
-  options.correction_lead_s = lead_s;
-  options.start_ns = (std::chrono::duration_cast<std::chrono::nanoseconds>(
-                          std::chrono::system_clock::now().time_since_epoch())
-                              .count() /
-                          100'000'000 +
-                      5) *
-                     100'000'000;  // 0.4-0.5 s ahead, on the 100 ms grid
-  auto stats = tools::replay(participant, seq, options);
-  ASSERT_TRUE(stats.ok()) << stats.error().message;
-  EXPECT_EQ(stats.value().corrections, 1u);
-  transport::OccupancyGridMsg grid;
-  ASSERT_TRUE(wait_for_costmap(*grids.value(), stats.value().last_stamp_ns, grid));
-  for (int i = 0; i < 50 && executor.get().totals().scans_integrated < seq.scans.size(); ++i) {
-    std::this_thread::sleep_for(20ms);
-  }
-  executor.stop();
-  const auto totals = executor.get().totals();
-  EXPECT_EQ(totals.scans_integrated, seq.scans.size());
-  EXPECT_EQ(totals.trajectory_corrections, 1u);
-  EXPECT_EQ(totals.late_corrections, 0u);
-  EXPECT_EQ(totals.pose_jumps, 0u);
-  EXPECT_EQ(totals.rebuilds_completed, 1u);
+  const std::string got =
+      replayed_digest(domain, 2, 0.0, tweak, seq, 1.0, [&](tools::ReplayOptions& o) {
+        o.corrections = corrections.value();
+        o.correction_lead_s = lead_s;
+      });
+  EXPECT_EQ(corrections_sent_, 1u);
+  EXPECT_EQ(totals_.trajectory_corrections, 1u);
+  EXPECT_EQ(totals_.late_corrections, 0u);
+  EXPECT_EQ(totals_.pose_jumps, 0u);
+  EXPECT_EQ(totals_.rebuilds_completed, 1u);
 
   std::vector<std::int64_t> stamps(seq.scans.size());
   for (std::size_t k = 0; k < stamps.size(); ++k) {
-    stamps[k] = options.start_ns + std::llround((seq.times_s[k] - seq.times_s[0]) * 1e9);
+    stamps[k] = first_stamp_ns_ + std::llround((seq.times_s[k] - seq.times_s[0]) * 1e9);
   }
-  EXPECT_EQ(stamps.back(), stats.value().last_stamp_ns);
+  EXPECT_EQ(stamps.back(), last_stamp_ns_);
   auto offline_cfg = test_config(0, 2);
   tweak(offline_cfg);
-  std::uint64_t rebuilds = 0;
-  const std::string want =
-      offline_path_corrected_digest(offline_cfg, corrections.value()[0], stamps, &rebuilds);
-  EXPECT_EQ(rebuilds, 1u);
-  EXPECT_EQ(digest_of(grid), want);
+  const OfflineCorrected want = offline_corrected(offline_cfg, stamps, &corrections.value()[0]);
+  EXPECT_EQ(want.jumps, 0u);
+  EXPECT_EQ(want.rebuilds, 1u);
+  EXPECT_EQ(got, want.costmap_digest);
   // Without the Path the drifted walls stay: a different costmap.
-  std::uint64_t jumps = 0;
-  EXPECT_NE(want, offline_corrected_digest(offline_cfg, &jumps, &rebuilds));
+  EXPECT_NE(want.costmap_digest, offline_corrected(offline_cfg, stamps).costmap_digest);
 }
 
 TEST_F(Daemon, PathCorrection_RightAfterItsScan_CostmapEqualsOfflineCore) {
