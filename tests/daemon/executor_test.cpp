@@ -15,6 +15,7 @@
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
 #include "geometry_msgs.h"
+#include "loopback_only.hpp"
 #include "nav_msgsPubSubTypes.h"
 #include "rtps_sniffer.hpp"
 #include "tarmac/config/config.hpp"
@@ -164,21 +165,9 @@ bool wait_for_costmap(GridReader& reader, std::int64_t stamp_ns, transport::Occu
   return false;
 }
 
-class Daemon : public ::testing::Test {
+class Daemon : public test::LoopbackOnly {
  protected:
-  void SetUp() override {
-    auto sniffer = test::RtpsSniffer::start();
-    TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable: " +
-                                             (sniffer.ok() ? "" : sniffer.error().message));
-    sniffer_ = std::move(sniffer).value();
-  }
-  void TearDown() override {
-    if (!sniffer_) return;
-    std::this_thread::sleep_for(200ms);
-    const auto counts = sniffer_->counts();
-    EXPECT_EQ(counts.off_host, 0u) << "RTPS left loopback: " << counts.first_off_host;
-    EXPECT_GT(counts.loopback, 0u) << "the capture saw no loopback RTPS either";
-  }
+  Daemon() { expect_loopback_traffic_ = true; }
 
   /// Replays the sequence into an executor with `workers` threads and returns the digest of the
   /// costmap stamped with the last scan.
@@ -224,7 +213,6 @@ class Daemon : public ::testing::Test {
 
   void check_path_correction(std::uint32_t domain, double lead_s);
 
-  std::unique_ptr<test::RtpsSniffer> sniffer_;
   std::int64_t first_stamp_ns_ = 0;
   std::int64_t last_stamp_ns_ = 0;
   std::size_t corrections_sent_ = 0;

@@ -8,6 +8,7 @@
 
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
+#include "loopback_only.hpp"
 #include "msg_dump.hpp"
 #include "nav_msgsPubSubTypes.h"
 #include "rtps_sniffer.hpp"
@@ -68,22 +69,7 @@ OccupancyGridMsg sample_grid() {
 
 /// Every test here runs under a packet capture when permitted: no RTPS packet may appear on an
 /// interface other than lo.
-class Loopback : public ::testing::Test {
- protected:
-  void SetUp() override {
-    auto sniffer = test::RtpsSniffer::start();
-    TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable: " +
-                                             (sniffer.ok() ? "" : sniffer.error().message));
-    sniffer_ = std::move(sniffer).value();
-  }
-  void TearDown() override {
-    if (!sniffer_) return;
-    std::this_thread::sleep_for(200ms);  // let the last packets in flight be seen
-    const auto counts = sniffer_->counts();
-    EXPECT_EQ(counts.off_host, 0u) << "RTPS left loopback: " << counts.first_off_host;
-  }
-  std::unique_ptr<test::RtpsSniffer> sniffer_;
-};
+class Loopback : public test::LoopbackOnly {};
 
 TEST_F(Loopback, PointCloud2_EveryFieldArrives) {
   auto pub = make_participant(test::kDomainLoopbackCloud, "cloud-pub");

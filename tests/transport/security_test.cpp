@@ -17,6 +17,7 @@
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
 #include "geometry_msgsPubSubTypes.h"
+#include "loopback_only.hpp"
 #include "rtps_sniffer.hpp"
 #include "sensor_msgsPubSubTypes.h"
 #include "tarmac/transport/participant.hpp"
@@ -41,7 +42,7 @@ bool make_material(const fs::path& dir, std::string& why) {
   return rc == 0;
 }
 
-class DdsSecurity : public ::testing::Test {
+class DdsSecurity : public test::LoopbackOnly {
  protected:
   static void SetUpTestSuite() {
     char pattern[] = "/tmp/tarmac-dds-security-XXXXXX";
@@ -57,18 +58,8 @@ class DdsSecurity : public ::testing::Test {
     TARMAC_REQUIRE_OR_SKIP(std::system("command -v openssl >/dev/null") == 0,
                            "openssl not installed");
     ASSERT_TRUE(ok_) << why_;
-    auto sniffer = test::RtpsSniffer::start();
-    TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable: " +
-                                             (sniffer.ok() ? "" : sniffer.error().message));
-    sniffer_ = std::move(sniffer).value();
+    LoopbackOnly::SetUp();
   }
-  void TearDown() override {
-    if (!sniffer_) return;
-    std::this_thread::sleep_for(200ms);  // let the last packets in flight be seen
-    const auto counts = sniffer_->counts();
-    EXPECT_EQ(counts.off_host, 0u) << "RTPS left loopback: " << counts.first_off_host;
-  }
-  std::unique_ptr<test::RtpsSniffer> sniffer_;
 
   /// The security block of identity `id` from the material set `set` ("fleet" or "rogue").
   static SecurityConfig security(const std::string& set, const std::string& id) {

@@ -9,6 +9,21 @@
 
 namespace tarmac::transport {
 
+namespace {
+
+/// Moves every queued message of `reader` into `batch` (capacity kept across drains), hands each
+/// to `handle`, oldest first, and empties the batch. Returns the number taken.
+template <typename ReaderT, typename Message, typename Handle>
+std::size_t drain_batch(ReaderT& reader, std::vector<Message>& batch, Handle&& handle) {
+  batch.clear();
+  const std::size_t n = reader.take_all(batch);
+  for (auto& message : batch) handle(message);
+  batch.clear();
+  return n;
+}
+
+}  // namespace
+
 // ---- scans ----
 
 class ScanInput::Impl {
@@ -37,23 +52,18 @@ ScanInput::ScanInput(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 ScanInput::~ScanInput() = default;
 
 std::size_t ScanInput::drain(ScanSink& sink) {
-  auto& batch = impl_->batch;
-  batch.clear();
-  const std::size_t n = impl_->reader->take_all(batch);
-  for (auto& msg : batch) {
+  return drain_batch(*impl_->reader, impl_->batch, [&](const PointCloud2Msg& msg) {
     if (msg.header().frame_id() != impl_->frame_id) {
       sink.reject("scan.unknown_frame");
-      continue;
+      return;
     }
     core::PointCloud& cloud = sink.slot();
     if (auto parsed = from_point_cloud2(msg, cloud); !parsed) {
       sink.reject(parsed.error().code);
-      continue;
+      return;
     }
     sink.commit();
-  }
-  batch.clear();
-  return n;
+  });
 }
 
 std::uint64_t ScanInput::overflow_drops() const {
@@ -113,21 +123,9 @@ PoseInput::PoseInput(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 PoseInput::~PoseInput() = default;
 
 std::size_t PoseInput::drain(PoseSink& sink) {
-  std::size_t n = 0;
-  if (impl_->stamped) {
-    auto& batch = impl_->stamped_batch;
-    batch.clear();
-    n = impl_->stamped->take_all(batch);
-    for (const auto& m : batch) impl_->convert(m.header(), m.pose().pose(), sink);
-    batch.clear();
-  } else {
-    auto& batch = impl_->odometry_batch;
-    batch.clear();
-    n = impl_->odometry->take_all(batch);
-    for (const auto& m : batch) impl_->convert(m.header(), m.pose().pose(), sink);
-    batch.clear();
-  }
-  return n;
+  const auto convert = [&](const auto& m) { impl_->convert(m.header(), m.pose().pose(), sink); };
+  return impl_->stamped ? drain_batch(*impl_->stamped, impl_->stamped_batch, convert)
+                        : drain_batch(*impl_->odometry, impl_->odometry_batch, convert);
 }
 
 std::uint64_t PoseInput::overflow_drops() const {
@@ -196,12 +194,8 @@ TrajectoryInput::TrajectoryInput(std::unique_ptr<Impl> impl) : impl_(std::move(i
 TrajectoryInput::~TrajectoryInput() = default;
 
 std::size_t TrajectoryInput::drain(TrajectorySink& sink) {
-  auto& batch = impl_->batch;
-  batch.clear();
-  const std::size_t n = impl_->reader->take_all(batch);
-  for (const auto& m : batch) impl_->convert(m, sink);
-  batch.clear();
-  return n;
+  return drain_batch(*impl_->reader, impl_->batch,
+                     [&](const PathMsg& m) { impl_->convert(m, sink); });
 }
 
 std::uint64_t TrajectoryInput::overflow_drops() const {
