@@ -212,6 +212,12 @@ class Daemon : public test::LoopbackOnly {
   }
 
   void check_path_correction(std::uint32_t domain, double lead_s);
+  /// Runs an executor with `cfg`, replays the first `max_scans` scans at 20 Hz (poses for the
+  /// first `pose_count` only; 0: all) and collects CycleReports until `done`; returns the last
+  /// one. `totals_` holds the executor's totals at that point.
+  transport::CycleReport replay_until_report(
+      const config::Config& cfg, std::size_t max_scans, std::size_t pose_count,
+      const std::function<bool(const transport::CycleReport&)>& done);
 
   std::int64_t first_stamp_ns_ = 0;
   std::int64_t last_stamp_ns_ = 0;
@@ -449,25 +455,35 @@ std::uint64_t total_of(const std::vector<transport::ReasonReport>& list, const s
   return 0;
 }
 
-TEST_F(Daemon, ScanWithoutPose_IsDroppedAndCounted) {
-  const auto cfg = test_config(test::kDomainDaemonNoPose, 2);
+transport::CycleReport Daemon::replay_until_report(
+    const config::Config& cfg, std::size_t max_scans, std::size_t pose_count,
+    const std::function<bool(const transport::CycleReport&)>& done) {
   RunningExecutor executor(cfg);
-  auto participant = peer(test::kDomainDaemonNoPose);
+  auto participant = peer(cfg.dds.participant.domain_id);
   auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
                                       cfg.dds.qos.diagnostics, 200);
-  ASSERT_TRUE(reports.ok());
+  EXPECT_TRUE(reports.ok());
+  if (!reports.ok()) return {};
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
   options.rate_scale = 2.0;
-  options.max_scans = 8;
-  options.pose_count = 5;  // scans 5, 6, 7 never get a pose
+  options.max_scans = max_scans;
+  options.pose_count = pose_count;
   auto stats = tools::replay(participant, sequence(), options);
-  ASSERT_TRUE(stats.ok()) << stats.error().message;
-  const auto last = wait_for_report(*reports.value(), [](const transport::CycleReport& r) {
+  EXPECT_TRUE(stats.ok()) << (stats.ok() ? "" : stats.error().message);
+  const auto last = wait_for_report(*reports.value(), done);
+  totals_ = executor.get().totals();
+  return last;
+}
+
+TEST_F(Daemon, ScanWithoutPose_IsDroppedAndCounted) {
+  const auto cfg = test_config(test::kDomainDaemonNoPose, 2);
+  // Scans 5, 6, 7 never get a pose.
+  const auto last = replay_until_report(cfg, 8, 5, [](const transport::CycleReport& r) {
     return total_of(r.drops, "scan.pose_timeout") >= 3;
   });
   EXPECT_EQ(total_of(last.drops, "scan.pose_timeout"), 3u);
-  EXPECT_EQ(executor.get().totals().scans_integrated, 5u);
+  EXPECT_EQ(totals_.scans_integrated, 5u);
   EXPECT_EQ(last.config_hash, config::config_hash(cfg));
   bool pose_age_reported = false;
   for (const auto& a : last.input_ages) pose_age_reported |= a.input == "pose";
@@ -477,18 +493,8 @@ TEST_F(Daemon, ScanWithoutPose_IsDroppedAndCounted) {
 TEST_F(Daemon, TinyBudget_ProducesOverrunsInCycleReport) {
   auto cfg = test_config(test::kDomainDaemonOverrun, 2);
   cfg.budgets.integrate_ms = 0.001;  // no scan integrates in 1 µs
-  RunningExecutor executor(cfg);
-  auto participant = peer(test::kDomainDaemonOverrun);
-  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
-                                      cfg.dds.qos.diagnostics, 200);
-  ASSERT_TRUE(reports.ok());
-  tools::ReplayOptions options;
-  options.lidar_qos = cfg.dds.qos.lidar;
-  options.rate_scale = 2.0;
-  options.max_scans = 4;
-  ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
-  const auto last = wait_for_report(
-      *reports.value(), [](const transport::CycleReport& r) { return r.points_in > 0; });
+  const auto last = replay_until_report(
+      cfg, 4, 0, [](const transport::CycleReport& r) { return r.points_in > 0; });
   ASSERT_GT(last.points_in, 0u) << "no report of a tick that integrated a scan";
   EXPECT_TRUE(last.overrun);
   bool found = false;
@@ -500,7 +506,7 @@ TEST_F(Daemon, TinyBudget_ProducesOverrunsInCycleReport) {
     EXPECT_FLOAT_EQ(s.budget_ms, 0.001f);
   }
   EXPECT_TRUE(found);
-  EXPECT_GT(executor.get().totals().overruns, 0u);
+  EXPECT_GT(totals_.overruns, 0u);
   // The TSDF stage is reported like the others, with its own budget.
   bool tsdf_found = false;
   for (const auto& s : last.stages) {
