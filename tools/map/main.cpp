@@ -388,7 +388,11 @@ int main(int argc, char** argv) {
     }
     const double c_ms = timed_ms([&] { mapper.update_costmap({}, cloud.stamp_ns, pool); });
     if (clearing) {
-      clearing->observe(static_cast<int>(k), s.times_s[k], mapper.costmap().column_class);
+      // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
+      const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
+      clearing->observe(
+          static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
+          tools::blind_radius_from_ground(sensor_W, mapper.points_W(), T_W_B.translation().z()));
     }
     promotions += occ.promotions;
     demotions += occ.demotions;
@@ -554,14 +558,19 @@ int main(int argc, char** argv) {
     const tools::ClearingReport r = clearing->report();
     std::printf(
         "dynamic clearing: %zu path cells, %zu measured, %zu cleared, %zu not cleared; "
-        "time-to-clear p50 %.2f s, p90 %.2f s, max %.2f s; ghost cells at the end %zu\n",
+        "time-to-clear p50 %.2f s, p90 %.2f s, max %.2f s; ghost cells at the end %zu\n"
+        "  of those, %zu left inside the blind zone (nearer than the scan's nearest ground "
+        "return); "
+        "the others: p50 %.2f s, p90 %.2f s, max %.2f s\n",
         r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
-        r.ghost_cells);
+        r.ghost_cells, r.blind_at_leave, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
     tj << ",\n  \"dynamic_clearing\": {\"path_cells\": " << r.path_cells
        << ", \"measured\": " << r.measured << ", \"cleared\": " << r.cleared
        << ", \"not_cleared\": " << r.not_cleared << ", \"time_to_clear_p50_s\": " << r.p50_s
        << ", \"time_to_clear_p90_s\": " << r.p90_s << ", \"time_to_clear_max_s\": " << r.max_s
-       << ", \"ghost_cells\": " << r.ghost_cells << "}";
+       << ", \"ghost_cells\": " << r.ghost_cells << ", \"blind_at_leave\": " << r.blind_at_leave
+       << ", \"in_view_p50_s\": " << r.in_view_p50_s << ", \"in_view_p90_s\": " << r.in_view_p90_s
+       << ", \"in_view_max_s\": " << r.in_view_max_s << "}";
   }
   tj << "\n}\n";
   if (params.tsdf.enabled) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -53,7 +54,8 @@ core::Result<DynamicTruth> read_dynamic_truth(const std::filesystem::path& file)
 }
 
 void ClearingTracker::observe(int scan, double stamp_s,
-                              const core::Grid2D<std::uint8_t>& column_class) {
+                              const core::Grid2D<std::uint8_t>& column_class,
+                              const Eigen::Vector2d& sensor_xy, double blind_radius_m) {
   const core::GridGeometry2D& g = column_class.geometry();
   const double res = g.resolution_m;
   resolution_m_ = res;
@@ -98,15 +100,35 @@ void ClearingTracker::observe(int scan, double stamp_s,
       cell.blocked_under = cell.blocked_under || c == core::ColumnClass::kObstacle;
       continue;
     }
+    const Eigen::Vector2d centre((key.first + 0.5) * res, (key.second + 0.5) * res);
+    const bool in_view = (centre - sensor_xy).norm() > blind_radius_m;
     if (cell.blocked_under) {  // just left
       cell.blocked_under = false;
       cell.pending = true;
+      cell.blind_at_leave = !in_view;
     }
     if (cell.pending && c == core::ColumnClass::kFree) {
       cell.pending = false;
       ttc_s_.push_back(stamp_s - cell.last_under_s);
+      if (cell.blind_at_leave) {
+        ++blind_at_leave_;
+      } else {
+        in_view_s_.push_back(stamp_s - cell.last_under_s);
+      }
     }
   }
+}
+
+double blind_radius_from_ground(const Eigen::Vector3d& sensor_W,
+                                std::span<const Eigen::Vector3f> points_W, double ground_z_m,
+                                double tolerance_m) {
+  double nearest_sq = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector3f& p : points_W) {
+    if (std::abs(static_cast<double>(p.z()) - ground_z_m) > tolerance_m) continue;
+    nearest_sq =
+        std::min(nearest_sq, (p.head<2>().cast<double>() - sensor_W.head<2>()).squaredNorm());
+  }
+  return std::sqrt(nearest_sq);
 }
 
 ClearingReport ClearingTracker::report() const {
@@ -118,16 +140,19 @@ ClearingReport ClearingTracker::report() const {
     r.ghost_cells += cell.ghost ? 1 : 0;
   }
   r.measured = r.cleared + r.not_cleared;
-  if (!ttc_s_.empty()) {
-    std::vector<double> t = ttc_s_;
+  r.blind_at_leave = blind_at_leave_;
+  const auto quantiles = [](std::vector<double> t, double& p50, double& p90, double& max) {
+    if (t.empty()) return;
     std::sort(t.begin(), t.end());
     const auto at = [&](double q) {
       return t[std::min(t.size() - 1, static_cast<std::size_t>(q * static_cast<double>(t.size())))];
     };
-    r.p50_s = at(0.5);
-    r.p90_s = at(0.9);
-    r.max_s = t.back();
-  }
+    p50 = at(0.5);
+    p90 = at(0.9);
+    max = t.back();
+  };
+  quantiles(ttc_s_, r.p50_s, r.p90_s, r.max_s);
+  quantiles(in_view_s_, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
   return r;
 }
 
