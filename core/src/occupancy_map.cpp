@@ -150,31 +150,48 @@ struct WindowGeometry {
   double voxel_size_m;
 };
 
-/// One axis of a traversal: position in window and ring coordinates, step and crossing times.
+/// One axis of a traversal. A step moves the slot by one stride; `events` counts the steps to the
+/// next place where that is not all: the ring wraps (the slot jumps back by a whole ring) or the
+/// walk leaves the window. So a step tests one counter instead of the window bounds and the ring.
 struct AxisWalk {
-  int rel;         ///< window-relative index, in [0, n) while inside
-  int ring;        ///< ring-buffer index
-  int step;        ///< +1, −1 or 0
-  int n;           ///< window size along the axis
-  int stride;      ///< slot stride of one index
-  double t_max;    ///< ray parameter of the next boundary crossing
-  double t_delta;  ///< parameter length of one voxel
+  std::int64_t delta;  ///< slot change of one step (step · stride)
+  std::int64_t wrap;   ///< slot correction where the ring wraps (−step · n · stride)
+  double t_max;        ///< ray parameter of the next boundary crossing
+  double t_delta;      ///< parameter length of one voxel
+  int events;          ///< steps until the next event (wrap or exit)
+  int span;            ///< value `events` started from
+  int to_exit;         ///< steps, counted at the last event, until the walk leaves the window
+  int to_wrap;         ///< steps, counted at the last event, until the ring wraps
+  int n;               ///< window size along the axis
 
+  void init(int rel, int ring, int step, int size, int stride) {
+    n = size;
+    delta = static_cast<std::int64_t>(step) * stride;
+    wrap = -static_cast<std::int64_t>(step) * size * stride;
+    if (step > 0) {
+      to_exit = size - rel;
+      to_wrap = size - ring;
+    } else if (step < 0) {
+      to_exit = rel + 1;
+      to_wrap = ring + 1;
+    } else {
+      to_exit = to_wrap = std::numeric_limits<int>::max();
+    }
+    events = span = std::min(to_exit, to_wrap);
+  }
   /// Steps once; updates the slot; false when the walk left the window.
   bool advance(std::int64_t& slot) {
-    rel += step;
-    if (static_cast<unsigned>(rel) >= static_cast<unsigned>(n)) return false;
-    ring += step;
-    if (ring == n) {
-      ring = 0;
-      slot -= static_cast<std::int64_t>(n - 1) * stride;
-    } else if (ring < 0) {
-      ring = n - 1;
-      slot += static_cast<std::int64_t>(n - 1) * stride;
-    } else {
-      slot += static_cast<std::int64_t>(step) * stride;
-    }
+    slot += delta;
     t_max += t_delta;
+    return --events != 0 || on_event(slot);
+  }
+  bool on_event(std::int64_t& slot) {
+    to_exit -= span;
+    to_wrap -= span;
+    if (to_exit == 0) return false;
+    slot += wrap;  // to_wrap == 0: the ring index went from one end to the other
+    to_wrap = n;
+    events = span = std::min(to_exit, to_wrap);
     return true;
   }
 };
@@ -188,51 +205,46 @@ std::uint64_t traverse(const WindowGeometry& w, const Eigen::Vector3d& origin_W,
   const int strides[3] = {1, w.dims[0], w.dims[0] * w.dims[1]};
   AxisWalk ax[3];  // NOLINT(cppcoreguidelines-pro-type-member-init): every field set below
   std::int64_t remaining = 0;
+  std::int64_t slot = 0;
   for (int a = 0; a < 3; ++a) {
     const int cur = static_cast<int>(std::floor(o[a]));
     const int last = static_cast<int>(std::floor(e[a]));
     remaining += std::abs(last - cur);
+    const int rel = cur - w.min[a];
+    if (static_cast<unsigned>(rel) >= static_cast<unsigned>(w.dims[a])) return 0;
+    const int ring = wrap(cur, w.dims[a]);
+    slot += static_cast<std::int64_t>(ring) * strides[a];
     AxisWalk& k = ax[a];
-    k.rel = cur - w.min[a];
-    k.ring = wrap(cur, w.dims[a]);
-    k.n = w.dims[a];
-    k.stride = strides[a];
     if (d[a] > 0) {
-      k.step = 1;
+      k.init(rel, ring, 1, w.dims[a], strides[a]);
       k.t_delta = 1.0 / d[a];
       k.t_max = (cur + 1 - o[a]) * k.t_delta;
     } else if (d[a] < 0) {
-      k.step = -1;
+      k.init(rel, ring, -1, w.dims[a], strides[a]);
       k.t_delta = -1.0 / d[a];
       k.t_max = (o[a] - cur) * k.t_delta;
     } else {
-      k.step = 0;
+      k.init(rel, ring, 0, w.dims[a], strides[a]);
       k.t_delta = std::numeric_limits<double>::infinity();
       k.t_max = std::numeric_limits<double>::infinity();
     }
   }
-  for (const AxisWalk& k : ax) {
-    if (static_cast<unsigned>(k.rel) >= static_cast<unsigned>(k.n)) return 0;
-  }
   // Scalars the loop keeps in registers; the axis choice breaks ties as x, then y, before z.
   AxisWalk x = ax[0], y = ax[1], z = ax[2];
-  std::int64_t slot = static_cast<std::int64_t>(z.ring) * z.stride +
-                      static_cast<std::int64_t>(y.ring) * y.stride + x.ring;
-  std::uint64_t visits = 0;
-  for (;; --remaining) {
-    if (remaining == 0 && !include_end) break;
+  const std::int64_t steps = remaining;
+  for (; remaining > 0; --remaining) {
     visit(static_cast<std::uint32_t>(slot));
-    ++visits;
-    if (remaining == 0) break;
     bool inside;  // NOLINT(cppcoreguidelines-init-variables): every branch sets it
     if (x.t_max < y.t_max) {
       inside = x.t_max < z.t_max ? x.advance(slot) : z.advance(slot);
     } else {
       inside = y.t_max < z.t_max ? y.advance(slot) : z.advance(slot);
     }
-    if (!inside) break;
+    if (!inside) return static_cast<std::uint64_t>(steps - remaining + 1);
   }
-  return visits;
+  if (!include_end) return static_cast<std::uint64_t>(steps);
+  visit(static_cast<std::uint32_t>(slot));
+  return static_cast<std::uint64_t>(steps + 1);
 }
 
 }  // namespace

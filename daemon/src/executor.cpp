@@ -426,8 +426,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
     const auto t0 = Clock::now();
-    const core::FilterCounts counts =
-        mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], sel.deskew ? &sel.motion : nullptr);
+    const core::FilterCounts counts = mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], *pool,
+                                                    sel.deskew ? &sel.motion : nullptr);
     const auto t1 = Clock::now();
     mapper.integrate(*pool);
     const auto t2 = Clock::now();
