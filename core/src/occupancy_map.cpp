@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <tuple>
+#include <utility>
 
 namespace tarmac::core {
 
@@ -137,6 +138,16 @@ int wrap(int i, int n) {
 /// thread count (determinism contract).
 constexpr std::size_t kRayTasks = 4;
 constexpr std::size_t kApplyTasks = 8;
+/// Point ranges of the per-return part of the hit pass.
+constexpr std::size_t kHitTasks = 8;
+/// No slot: the return does not mark (beyond max range or outside the window).
+constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};
+
+/// floor() to an integer for any finite double in int64 range, without a libm call.
+std::int64_t floor_to_int(double v) {
+  const auto i = static_cast<std::int64_t>(v);  // truncates toward zero
+  return i - static_cast<std::int64_t>(static_cast<double>(i) > v);
+}
 /// Free-space marks are tracked per block of 64 bit words (4096 voxels).
 constexpr int kBlockShift = 6;
 
@@ -321,6 +332,10 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   // scan with more grows it once, then keeps the capacity).
   scan_ground_cols_.reserve(static_cast<std::size_t>(dims_.x()) * dims_.y());
   hit_slots_.reserve(kReservedHitSlots);
+  hit_slot_.reserve(kReservedHitSlots);
+  hit_column_.reserve(kReservedHitSlots);
+  hit_height_.reserve(kReservedHitSlots);
+  hit_rise_.reserve(kReservedHitSlots);
 }
 
 OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
@@ -333,7 +348,9 @@ std::size_t OccupancyMap::memory_bytes() const {
       static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t)) +
       scan_ground_z_.capacity() * sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
-      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t);
+      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t) +
+      (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
+      hit_height_.capacity() * sizeof(float) + hit_rise_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_blocks_) bytes += d.capacity();
   for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
@@ -505,55 +522,94 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const double clear_range = params_.clearing_range_m;
 
   // 1. Hits first, so that a voxel hit by any ray of this scan is never also cleared by it.
-  //    First the scan's own ground: the lowest return (along up_W) per window column; only the
-  //    columns this scan touched are reset next time.
+  //    a) Per return (fixed point ranges, in parallel): its slot and window column, or none
+  //       (beyond max range or outside the window), and its height along up_W.
   const int nx = dims_.x(), ny = dims_.y();
   constexpr float kNone = std::numeric_limits<float>::infinity();
   const Eigen::Vector3f up = up_W.normalized().cast<float>();
+  const std::size_t n_points = points_W.size();
+  hit_slot_.resize(n_points);
+  hit_column_.resize(n_points);
+  hit_height_.resize(n_points);
+  hit_rise_.resize(n_points);
+  const double v_m = params_.voxel_size_m;
+  std::array<int, 3> ring_min{};
+  for (int a = 0; a < 3; ++a) ring_min[a] = wrap(min_[a], dims_[a]);
+  std::array<std::uint64_t, kHitTasks> task_outside{};
+  const auto point_range = [&](std::size_t task) {
+    return std::pair{n_points * task / kHitTasks, n_points * (task + 1) / kHitTasks};
+  };
+  runner.parallel_for(kHitTasks, [&](std::size_t task) {
+    std::uint64_t outside = 0;
+    for (auto [i, end] = point_range(task); i < end; ++i) {
+      const Eigen::Vector3f& p = points_W[i];
+      hit_slot_[i] = kNoSlot;
+      if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
+      std::int64_t slot = 0;
+      std::int64_t stride = 1;
+      bool inside = true;
+      int rel[3];
+      for (int a = 0; a < 3; ++a) {
+        rel[a] = static_cast<int>(floor_to_int(static_cast<double>(p[a]) / v_m)) - min_[a];
+        inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(dims_[a]);
+        int ring = ring_min[a] + rel[a];
+        if (ring >= dims_[a]) ring -= dims_[a];
+        slot += ring * stride;
+        stride *= dims_[a];
+      }
+      if (!inside) {
+        ++outside;
+        continue;
+      }
+      hit_slot_[i] = static_cast<std::uint32_t>(slot);
+      hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
+      hit_height_[i] = up.dot(p);
+    }
+    task_outside[task] = outside;
+  });
+  for (const auto o : task_outside) stats.outside_window += o;
+  //    b) The scan's own ground: the lowest return per window column; only the columns this
+  //       scan touched are reset next time.
   for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
   scan_ground_cols_.clear();
-  const auto in_range = [&](const Eigen::Vector3f& p) {
-    return p.allFinite() && (p.cast<double>() - origin_W).norm() <= max_range;
-  };
-  for (const auto& p : points_W) {
-    if (!in_range(p)) continue;
-    const VoxelIndex v = voxel_of(p.cast<double>());
-    if (!in_window(v)) continue;
-    const auto c = static_cast<std::uint32_t>((v.y() - min_.y()) * nx + (v.x() - min_.x()));
-    float& g = scan_ground_z_[c];
-    if (g == kNone) scan_ground_cols_.push_back(c);
-    g = std::min(g, up.dot(p));
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (hit_slot_[i] == kNoSlot) continue;
+    float& g = scan_ground_z_[hit_column_[i]];
+    if (g == kNone) scan_ground_cols_.push_back(hit_column_[i]);
+    g = std::min(g, hit_height_[i]);
   }
+  //    c) Rise above the lowest return of this scan within ground_radius_m (an object cannot
+  //       hide the ground around it), in parallel.
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+  runner.parallel_for(kHitTasks, [&](std::size_t task) {
+    for (auto [i, end] = point_range(task); i < end; ++i) {
+      if (hit_slot_[i] == kNoSlot) continue;
+      const int cx = static_cast<int>(hit_column_[i] % static_cast<std::uint32_t>(nx));
+      const int cy = static_cast<int>(hit_column_[i] / static_cast<std::uint32_t>(nx));
+      const float h = hit_height_[i];
+      float ground_z = h;
+      for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
+        const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
+        for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
+          ground_z = std::min(ground_z, row[x]);
+        }
+      }
+      hit_rise_[i] =
+          static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
+    }
+  });
+  //    d) One hit per voxel, in point order (promotions enter the static layer in that order).
   const int promote = params_.static_promote_scans;
   hit_slots_.clear();
-  for (const auto& p : points_W) {
-    if (!in_range(p)) continue;
-    const Eigen::Vector3d pd = p.cast<double>();
-    const VoxelIndex v = voxel_of(pd);
-    if (!in_window(v)) {
-      ++stats.outside_window;
-      continue;
-    }
-    // Rise above the lowest return of this scan within ground_radius_m (an object cannot hide
-    // the ground around it).
-    const int cx = v.x() - min_.x(), cy = v.y() - min_.y();
-    const float h = up.dot(p);
-    float ground_z = h;
-    for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
-      const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
-      for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
-        ground_z = std::min(ground_z, row[x]);
-      }
-    }
-    const auto rise =
-        static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
-    const std::size_t s = slot(v);
+  for (std::size_t i = 0; i < n_points; ++i) {
+    const std::uint32_t s = hit_slot_[i];
+    if (s == kNoSlot) continue;
+    const std::uint8_t rise = hit_rise_[i];
     std::uint64_t& word = hit_bits_[s >> 6];
     const std::uint64_t bit = std::uint64_t{1} << (s & 63);
     if ((word & bit) == 0) {
       word |= bit;
-      hit_slots_.push_back(static_cast<std::uint32_t>(s));
+      hit_slots_.push_back(s);
       float& l = log_odds_[s];
       l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
       std::uint8_t& st = state_[s];
@@ -563,7 +619,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         st = 0;  // not reading occupied yet: no run
       } else if ((st & kCount) + 1 >= promote) {
         st = kStatic;
-        static_->insert(v);
+        static_->insert(voxel_of_slot(s));
         ++stats.promotions;
       } else {
         ++st;
@@ -577,7 +633,6 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
 
   // 2. Free space: each ray task marks the voxels its rays pass through in its own bit set
   //    (contiguous ray ranges, so the split does not depend on the thread count).
-  const std::size_t n_points = points_W.size();
   const std::size_t n_rays = n_points + clearing_dirs_W.size();
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
   std::array<std::uint64_t, kRayTasks> task_visits{};
