@@ -152,13 +152,39 @@ std::int64_t floor_to_int(double v) {
 constexpr int kBlockShift = 6;
 
 /// Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing" (Eurographics 1987), on
-/// the lattice [i·v, (i+1)·v), clipped to the window. Calls visit(slot) for each voxel from the
-/// origin's voxel up to the end point's voxel, excluding it unless `include_end`. Stops when the
-/// ray leaves the window (a box: it cannot come back).
+/// the lattice [i·v, (i+1)·v), clipped to the window. Marks each voxel from the origin's voxel up
+/// to the end point's voxel, excluding it unless `include_end`. Stops when the ray leaves the
+/// window (a box: it cannot come back).
 struct WindowGeometry {
   Eigen::Vector3i dims;
   Eigen::Vector3i min;
   double voxel_size_m;
+};
+
+/// Where every ray of a scan starts: the origin's voxel (computed once per scan).
+struct RayStart {
+  Eigen::Vector3d o;  ///< origin in voxel units
+  std::array<int, 3> cur, rel, ring;
+  std::int64_t slot = 0;  ///< slot of the origin's voxel
+  bool inside = false;
+
+  RayStart(const WindowGeometry& w, const Eigen::Vector3d& origin_W)
+      : o(origin_W / w.voxel_size_m), cur{}, rel{}, ring{} {
+    inside = true;
+    for (int a = 0; a < 3; ++a) {
+      cur[a] = static_cast<int>(std::floor(o[a]));
+      rel[a] = cur[a] - w.min[a];
+      inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(w.dims[a]);
+      ring[a] = wrap(cur[a], w.dims[a]);
+    }
+    slot = (static_cast<std::int64_t>(ring[2]) * w.dims[1] + ring[1]) * w.dims[0] + ring[0];
+  }
+};
+
+/// One ray task's marks: a bit per voxel, a flag per block of 64 words.
+struct FreeMarks {
+  std::uint64_t* bits;
+  std::uint8_t* dirty;
 };
 
 /// One axis of a traversal. A step moves the slot by one stride; `events` counts the steps to the
@@ -207,44 +233,44 @@ struct AxisWalk {
   }
 };
 
-template <typename Visit>
-std::uint64_t traverse(const WindowGeometry& w, const Eigen::Vector3d& origin_W,
-                       const Eigen::Vector3d& end_W, bool include_end, Visit&& visit) {
-  const Eigen::Vector3d o = origin_W / w.voxel_size_m;
+std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
+                       bool include_end, FreeMarks marks) {
+  if (!start.inside) return 0;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
-  const Eigen::Vector3d d = e - o;
+  const Eigen::Vector3d d = e - start.o;
   const int strides[3] = {1, w.dims[0], w.dims[0] * w.dims[1]};
   AxisWalk ax[3];  // NOLINT(cppcoreguidelines-pro-type-member-init): every field set below
   std::int64_t remaining = 0;
-  std::int64_t slot = 0;
   for (int a = 0; a < 3; ++a) {
-    const int cur = static_cast<int>(std::floor(o[a]));
-    const int last = static_cast<int>(std::floor(e[a]));
-    remaining += std::abs(last - cur);
-    const int rel = cur - w.min[a];
-    if (static_cast<unsigned>(rel) >= static_cast<unsigned>(w.dims[a])) return 0;
-    const int ring = wrap(cur, w.dims[a]);
-    slot += static_cast<std::int64_t>(ring) * strides[a];
+    const int cur = start.cur[a];
+    remaining += std::abs(static_cast<int>(std::floor(e[a])) - cur);
     AxisWalk& k = ax[a];
-    if (d[a] > 0) {
-      k.init(rel, ring, 1, w.dims[a], strides[a]);
+    const int step = d[a] > 0 ? 1 : (d[a] < 0 ? -1 : 0);
+    k.init(start.rel[a], start.ring[a], step, w.dims[a], strides[a]);
+    if (step > 0) {
       k.t_delta = 1.0 / d[a];
-      k.t_max = (cur + 1 - o[a]) * k.t_delta;
-    } else if (d[a] < 0) {
-      k.init(rel, ring, -1, w.dims[a], strides[a]);
+      k.t_max = (cur + 1 - start.o[a]) * k.t_delta;
+    } else if (step < 0) {
       k.t_delta = -1.0 / d[a];
-      k.t_max = (o[a] - cur) * k.t_delta;
+      k.t_max = (start.o[a] - cur) * k.t_delta;
     } else {
-      k.init(rel, ring, 0, w.dims[a], strides[a]);
       k.t_delta = std::numeric_limits<double>::infinity();
       k.t_max = std::numeric_limits<double>::infinity();
     }
   }
-  // Scalars the loop keeps in registers; the axis choice breaks ties as x, then y, before z.
+  // Scalars the loop keeps in registers (the marks too: a byte store may alias anything, so
+  // they are not read through a reference); ties go to x, then y, before z.
   AxisWalk x = ax[0], y = ax[1], z = ax[2];
+  std::uint64_t* const bits = marks.bits;
+  std::uint8_t* const dirty = marks.dirty;
+  const auto mark = [bits, dirty](std::int64_t s) {
+    bits[s >> 6] |= std::uint64_t{1} << (s & 63);
+    dirty[s >> (6 + kBlockShift)] = 1;
+  };
+  std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
   for (; remaining > 0; --remaining) {
-    visit(static_cast<std::uint32_t>(slot));
+    mark(slot);
     bool inside;  // NOLINT(cppcoreguidelines-init-variables): every branch sets it
     if (x.t_max < y.t_max) {
       inside = x.t_max < z.t_max ? x.advance(slot) : z.advance(slot);
@@ -254,7 +280,7 @@ std::uint64_t traverse(const WindowGeometry& w, const Eigen::Vector3d& origin_W,
     if (!inside) return static_cast<std::uint64_t>(steps - remaining + 1);
   }
   if (!include_end) return static_cast<std::uint64_t>(steps);
-  visit(static_cast<std::uint32_t>(slot));
+  mark(slot);
   return static_cast<std::uint64_t>(steps + 1);
 }
 
@@ -635,14 +661,10 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   //    (contiguous ray ranges, so the split does not depend on the thread count).
   const std::size_t n_rays = n_points + clearing_dirs_W.size();
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
+  const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
   runner.parallel_for(kRayTasks, [&](std::size_t task) {
-    std::uint64_t* bits = free_bits_[task].data();
-    std::uint8_t* dirty = dirty_blocks_[task].data();
-    const auto visit = [bits, dirty](std::uint32_t s) {
-      bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-      dirty[s >> (6 + kBlockShift)] = 1;
-    };
+    const FreeMarks marks{free_bits_[task].data(), dirty_blocks_[task].data()};
     const std::size_t begin = n_rays * task / kRayTasks;
     const std::size_t end = n_rays * (task + 1) / kRayTasks;
     std::uint64_t visits = 0;
@@ -653,17 +675,17 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         const Eigen::Vector3d pd = p.cast<double>();
         const double range = (pd - origin_W).norm();
         if (range <= max_range) {
-          visits += traverse(w, origin_W, pd, false, visit);
+          visits += traverse(w, start, pd, false, marks);
         } else if (clear_range > 0.0) {
-          visits += traverse(w, origin_W, origin_W + (pd - origin_W) * (clear_range / range), true,
-                             visit);
+          visits +=
+              traverse(w, start, origin_W + (pd - origin_W) * (clear_range / range), true, marks);
         }
       } else {
         const Eigen::Vector3f& dir = clearing_dirs_W[i - n_points];
         const double norm = dir.cast<double>().norm();
         if (!dir.allFinite() || norm == 0.0 || clear_range <= 0.0) continue;
-        visits += traverse(w, origin_W, origin_W + dir.cast<double>() * (clear_range / norm), true,
-                           visit);
+        visits +=
+            traverse(w, start, origin_W + dir.cast<double>() * (clear_range / norm), true, marks);
       }
     }
     task_visits[task] = visits;
