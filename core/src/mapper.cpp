@@ -40,6 +40,13 @@ Mapper::Mapper(const MapperParams& params)
 
 FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                             const Eigen::Isometry3d& T_B_S, const ScanMotion* motion) {
+  SerialRunner serial;
+  return ingest(cloud, T_W_B, T_B_S, serial, motion);
+}
+
+FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+                            const Eigen::Isometry3d& T_B_S, TaskRunner& runner,
+                            const ScanMotion* motion) {
   const Eigen::Isometry3d T_W_S = T_W_B * T_B_S;
   sensor_W_ = T_W_S.translation();
   T_W_B_ = T_W_B;
@@ -53,7 +60,7 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
     input = &deskewed_;
   }
   const FilterCounts counts = filter_scan(*input, Eigen::Isometry3d::Identity(), T_B_S,
-                                          params_.filters, points_S_, filter_scratch_);
+                                          params_.filters, points_S_, filter_scratch_, runner);
   transform_points(T_W_S, points_S_, points_W_);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <tuple>
+#include <utility>
 
 namespace tarmac::core {
 
@@ -137,102 +138,150 @@ int wrap(int i, int n) {
 /// thread count (determinism contract).
 constexpr std::size_t kRayTasks = 4;
 constexpr std::size_t kApplyTasks = 8;
+/// Point ranges of the per-return part of the hit pass.
+constexpr std::size_t kHitTasks = 8;
+/// No slot: the return does not mark (beyond max range or outside the window).
+constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};
+
+/// floor() to an integer for any finite double in int64 range, without a libm call.
+std::int64_t floor_to_int(double v) {
+  const auto i = static_cast<std::int64_t>(v);  // truncates toward zero
+  return i - static_cast<std::int64_t>(static_cast<double>(i) > v);
+}
 /// Free-space marks are tracked per block of 64 bit words (4096 voxels).
 constexpr int kBlockShift = 6;
 
 /// Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing" (Eurographics 1987), on
-/// the lattice [i·v, (i+1)·v), clipped to the window. Calls visit(slot) for each voxel from the
-/// origin's voxel up to the end point's voxel, excluding it unless `include_end`. Stops when the
-/// ray leaves the window (a box: it cannot come back).
+/// the lattice [i·v, (i+1)·v), clipped to the window. Marks each voxel from the origin's voxel up
+/// to the end point's voxel, excluding it unless `include_end`. Stops when the ray leaves the
+/// window (a box: it cannot come back).
 struct WindowGeometry {
   Eigen::Vector3i dims;
   Eigen::Vector3i min;
   double voxel_size_m;
 };
 
-/// One axis of a traversal: position in window and ring coordinates, step and crossing times.
-struct AxisWalk {
-  int rel;         ///< window-relative index, in [0, n) while inside
-  int ring;        ///< ring-buffer index
-  int step;        ///< +1, −1 or 0
-  int n;           ///< window size along the axis
-  int stride;      ///< slot stride of one index
-  double t_max;    ///< ray parameter of the next boundary crossing
-  double t_delta;  ///< parameter length of one voxel
+/// Where every ray of a scan starts: the origin's voxel (computed once per scan).
+struct RayStart {
+  Eigen::Vector3d o;  ///< origin in voxel units
+  std::array<int, 3> cur, rel, ring;
+  std::int64_t slot = 0;  ///< slot of the origin's voxel
+  bool inside = false;
 
+  RayStart(const WindowGeometry& w, const Eigen::Vector3d& origin_W)
+      : o(origin_W / w.voxel_size_m), cur{}, rel{}, ring{} {
+    inside = true;
+    for (int a = 0; a < 3; ++a) {
+      cur[a] = static_cast<int>(std::floor(o[a]));
+      rel[a] = cur[a] - w.min[a];
+      inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(w.dims[a]);
+      ring[a] = wrap(cur[a], w.dims[a]);
+    }
+    slot = (static_cast<std::int64_t>(ring[2]) * w.dims[1] + ring[1]) * w.dims[0] + ring[0];
+  }
+};
+
+/// One ray task's marks: a bit per voxel, a flag per block of 64 words.
+struct FreeMarks {
+  std::uint64_t* bits;
+  std::uint8_t* dirty;
+};
+
+/// One axis of a traversal. A step moves the slot by one stride; `events` counts the steps to the
+/// next place where that is not all: the ring wraps (the slot jumps back by a whole ring) or the
+/// walk leaves the window. So a step tests one counter instead of the window bounds and the ring.
+struct AxisWalk {
+  std::int64_t delta;  ///< slot change of one step (step · stride)
+  std::int64_t wrap;   ///< slot correction where the ring wraps (−step · n · stride)
+  double t_max;        ///< ray parameter of the next boundary crossing
+  double t_delta;      ///< parameter length of one voxel
+  int events;          ///< steps until the next event (wrap or exit)
+  int span;            ///< value `events` started from
+  int to_exit;         ///< steps, counted at the last event, until the walk leaves the window
+  int to_wrap;         ///< steps, counted at the last event, until the ring wraps
+  int n;               ///< window size along the axis
+
+  void init(int rel, int ring, int step, int size, int stride) {
+    n = size;
+    delta = static_cast<std::int64_t>(step) * stride;
+    wrap = -static_cast<std::int64_t>(step) * size * stride;
+    if (step > 0) {
+      to_exit = size - rel;
+      to_wrap = size - ring;
+    } else if (step < 0) {
+      to_exit = rel + 1;
+      to_wrap = ring + 1;
+    } else {
+      to_exit = to_wrap = std::numeric_limits<int>::max();
+    }
+    events = span = std::min(to_exit, to_wrap);
+  }
   /// Steps once; updates the slot; false when the walk left the window.
   bool advance(std::int64_t& slot) {
-    rel += step;
-    if (static_cast<unsigned>(rel) >= static_cast<unsigned>(n)) return false;
-    ring += step;
-    if (ring == n) {
-      ring = 0;
-      slot -= static_cast<std::int64_t>(n - 1) * stride;
-    } else if (ring < 0) {
-      ring = n - 1;
-      slot += static_cast<std::int64_t>(n - 1) * stride;
-    } else {
-      slot += static_cast<std::int64_t>(step) * stride;
-    }
+    slot += delta;
     t_max += t_delta;
+    return --events != 0 || on_event(slot);
+  }
+  bool on_event(std::int64_t& slot) {
+    to_exit -= span;
+    to_wrap -= span;
+    if (to_exit == 0) return false;
+    slot += wrap;  // to_wrap == 0: the ring index went from one end to the other
+    to_wrap = n;
+    events = span = std::min(to_exit, to_wrap);
     return true;
   }
 };
 
-template <typename Visit>
-std::uint64_t traverse(const WindowGeometry& w, const Eigen::Vector3d& origin_W,
-                       const Eigen::Vector3d& end_W, bool include_end, Visit&& visit) {
-  const Eigen::Vector3d o = origin_W / w.voxel_size_m;
+std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
+                       bool include_end, FreeMarks marks) {
+  if (!start.inside) return 0;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
-  const Eigen::Vector3d d = e - o;
+  const Eigen::Vector3d d = e - start.o;
   const int strides[3] = {1, w.dims[0], w.dims[0] * w.dims[1]};
   AxisWalk ax[3];  // NOLINT(cppcoreguidelines-pro-type-member-init): every field set below
   std::int64_t remaining = 0;
   for (int a = 0; a < 3; ++a) {
-    const int cur = static_cast<int>(std::floor(o[a]));
-    const int last = static_cast<int>(std::floor(e[a]));
-    remaining += std::abs(last - cur);
+    const int cur = start.cur[a];
+    remaining += std::abs(static_cast<int>(std::floor(e[a])) - cur);
     AxisWalk& k = ax[a];
-    k.rel = cur - w.min[a];
-    k.ring = wrap(cur, w.dims[a]);
-    k.n = w.dims[a];
-    k.stride = strides[a];
-    if (d[a] > 0) {
-      k.step = 1;
+    const int step = d[a] > 0 ? 1 : (d[a] < 0 ? -1 : 0);
+    k.init(start.rel[a], start.ring[a], step, w.dims[a], strides[a]);
+    if (step > 0) {
       k.t_delta = 1.0 / d[a];
-      k.t_max = (cur + 1 - o[a]) * k.t_delta;
-    } else if (d[a] < 0) {
-      k.step = -1;
+      k.t_max = (cur + 1 - start.o[a]) * k.t_delta;
+    } else if (step < 0) {
       k.t_delta = -1.0 / d[a];
-      k.t_max = (o[a] - cur) * k.t_delta;
+      k.t_max = (start.o[a] - cur) * k.t_delta;
     } else {
-      k.step = 0;
       k.t_delta = std::numeric_limits<double>::infinity();
       k.t_max = std::numeric_limits<double>::infinity();
     }
   }
-  for (const AxisWalk& k : ax) {
-    if (static_cast<unsigned>(k.rel) >= static_cast<unsigned>(k.n)) return 0;
-  }
-  // Scalars the loop keeps in registers; the axis choice breaks ties as x, then y, before z.
+  // Scalars the loop keeps in registers (the marks too: a byte store may alias anything, so
+  // they are not read through a reference); ties go to x, then y, before z.
   AxisWalk x = ax[0], y = ax[1], z = ax[2];
-  std::int64_t slot = static_cast<std::int64_t>(z.ring) * z.stride +
-                      static_cast<std::int64_t>(y.ring) * y.stride + x.ring;
-  std::uint64_t visits = 0;
-  for (;; --remaining) {
-    if (remaining == 0 && !include_end) break;
-    visit(static_cast<std::uint32_t>(slot));
-    ++visits;
-    if (remaining == 0) break;
+  std::uint64_t* const bits = marks.bits;
+  std::uint8_t* const dirty = marks.dirty;
+  const auto mark = [bits, dirty](std::int64_t s) {
+    bits[s >> 6] |= std::uint64_t{1} << (s & 63);
+    dirty[s >> (6 + kBlockShift)] = 1;
+  };
+  std::int64_t slot = start.slot;
+  const std::int64_t steps = remaining;
+  for (; remaining > 0; --remaining) {
+    mark(slot);
     bool inside;  // NOLINT(cppcoreguidelines-init-variables): every branch sets it
     if (x.t_max < y.t_max) {
       inside = x.t_max < z.t_max ? x.advance(slot) : z.advance(slot);
     } else {
       inside = y.t_max < z.t_max ? y.advance(slot) : z.advance(slot);
     }
-    if (!inside) break;
+    if (!inside) return static_cast<std::uint64_t>(steps - remaining + 1);
   }
-  return visits;
+  if (!include_end) return static_cast<std::uint64_t>(steps);
+  mark(slot);
+  return static_cast<std::uint64_t>(steps + 1);
 }
 
 }  // namespace
@@ -309,6 +358,10 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   // scan with more grows it once, then keeps the capacity).
   scan_ground_cols_.reserve(static_cast<std::size_t>(dims_.x()) * dims_.y());
   hit_slots_.reserve(kReservedHitSlots);
+  hit_slot_.reserve(kReservedHitSlots);
+  hit_column_.reserve(kReservedHitSlots);
+  hit_height_.reserve(kReservedHitSlots);
+  hit_rise_.reserve(kReservedHitSlots);
 }
 
 OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
@@ -321,7 +374,9 @@ std::size_t OccupancyMap::memory_bytes() const {
       static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t)) +
       scan_ground_z_.capacity() * sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
-      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t);
+      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t) +
+      (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
+      hit_height_.capacity() * sizeof(float) + hit_rise_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_blocks_) bytes += d.capacity();
   for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
@@ -493,55 +548,94 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const double clear_range = params_.clearing_range_m;
 
   // 1. Hits first, so that a voxel hit by any ray of this scan is never also cleared by it.
-  //    First the scan's own ground: the lowest return (along up_W) per window column; only the
-  //    columns this scan touched are reset next time.
+  //    a) Per return (fixed point ranges, in parallel): its slot and window column, or none
+  //       (beyond max range or outside the window), and its height along up_W.
   const int nx = dims_.x(), ny = dims_.y();
   constexpr float kNone = std::numeric_limits<float>::infinity();
   const Eigen::Vector3f up = up_W.normalized().cast<float>();
+  const std::size_t n_points = points_W.size();
+  hit_slot_.resize(n_points);
+  hit_column_.resize(n_points);
+  hit_height_.resize(n_points);
+  hit_rise_.resize(n_points);
+  const double v_m = params_.voxel_size_m;
+  std::array<int, 3> ring_min{};
+  for (int a = 0; a < 3; ++a) ring_min[a] = wrap(min_[a], dims_[a]);
+  std::array<std::uint64_t, kHitTasks> task_outside{};
+  const auto point_range = [&](std::size_t task) {
+    return std::pair{n_points * task / kHitTasks, n_points * (task + 1) / kHitTasks};
+  };
+  runner.parallel_for(kHitTasks, [&](std::size_t task) {
+    std::uint64_t outside = 0;
+    for (auto [i, end] = point_range(task); i < end; ++i) {
+      const Eigen::Vector3f& p = points_W[i];
+      hit_slot_[i] = kNoSlot;
+      if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
+      std::int64_t slot = 0;
+      std::int64_t stride = 1;
+      bool inside = true;
+      int rel[3];
+      for (int a = 0; a < 3; ++a) {
+        rel[a] = static_cast<int>(floor_to_int(static_cast<double>(p[a]) / v_m)) - min_[a];
+        inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(dims_[a]);
+        int ring = ring_min[a] + rel[a];
+        if (ring >= dims_[a]) ring -= dims_[a];
+        slot += ring * stride;
+        stride *= dims_[a];
+      }
+      if (!inside) {
+        ++outside;
+        continue;
+      }
+      hit_slot_[i] = static_cast<std::uint32_t>(slot);
+      hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
+      hit_height_[i] = up.dot(p);
+    }
+    task_outside[task] = outside;
+  });
+  for (const auto o : task_outside) stats.outside_window += o;
+  //    b) The scan's own ground: the lowest return per window column; only the columns this
+  //       scan touched are reset next time.
   for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
   scan_ground_cols_.clear();
-  const auto in_range = [&](const Eigen::Vector3f& p) {
-    return p.allFinite() && (p.cast<double>() - origin_W).norm() <= max_range;
-  };
-  for (const auto& p : points_W) {
-    if (!in_range(p)) continue;
-    const VoxelIndex v = voxel_of(p.cast<double>());
-    if (!in_window(v)) continue;
-    const auto c = static_cast<std::uint32_t>((v.y() - min_.y()) * nx + (v.x() - min_.x()));
-    float& g = scan_ground_z_[c];
-    if (g == kNone) scan_ground_cols_.push_back(c);
-    g = std::min(g, up.dot(p));
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (hit_slot_[i] == kNoSlot) continue;
+    float& g = scan_ground_z_[hit_column_[i]];
+    if (g == kNone) scan_ground_cols_.push_back(hit_column_[i]);
+    g = std::min(g, hit_height_[i]);
   }
+  //    c) Rise above the lowest return of this scan within ground_radius_m (an object cannot
+  //       hide the ground around it), in parallel.
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+  runner.parallel_for(kHitTasks, [&](std::size_t task) {
+    for (auto [i, end] = point_range(task); i < end; ++i) {
+      if (hit_slot_[i] == kNoSlot) continue;
+      const int cx = static_cast<int>(hit_column_[i] % static_cast<std::uint32_t>(nx));
+      const int cy = static_cast<int>(hit_column_[i] / static_cast<std::uint32_t>(nx));
+      const float h = hit_height_[i];
+      float ground_z = h;
+      for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
+        const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
+        for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
+          ground_z = std::min(ground_z, row[x]);
+        }
+      }
+      hit_rise_[i] =
+          static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
+    }
+  });
+  //    d) One hit per voxel, in point order (promotions enter the static layer in that order).
   const int promote = params_.static_promote_scans;
   hit_slots_.clear();
-  for (const auto& p : points_W) {
-    if (!in_range(p)) continue;
-    const Eigen::Vector3d pd = p.cast<double>();
-    const VoxelIndex v = voxel_of(pd);
-    if (!in_window(v)) {
-      ++stats.outside_window;
-      continue;
-    }
-    // Rise above the lowest return of this scan within ground_radius_m (an object cannot hide
-    // the ground around it).
-    const int cx = v.x() - min_.x(), cy = v.y() - min_.y();
-    const float h = up.dot(p);
-    float ground_z = h;
-    for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
-      const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
-      for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
-        ground_z = std::min(ground_z, row[x]);
-      }
-    }
-    const auto rise =
-        static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
-    const std::size_t s = slot(v);
+  for (std::size_t i = 0; i < n_points; ++i) {
+    const std::uint32_t s = hit_slot_[i];
+    if (s == kNoSlot) continue;
+    const std::uint8_t rise = hit_rise_[i];
     std::uint64_t& word = hit_bits_[s >> 6];
     const std::uint64_t bit = std::uint64_t{1} << (s & 63);
     if ((word & bit) == 0) {
       word |= bit;
-      hit_slots_.push_back(static_cast<std::uint32_t>(s));
+      hit_slots_.push_back(s);
       float& l = log_odds_[s];
       l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
       std::uint8_t& st = state_[s];
@@ -551,7 +645,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         st = 0;  // not reading occupied yet: no run
       } else if ((st & kCount) + 1 >= promote) {
         st = kStatic;
-        static_->insert(v);
+        static_->insert(voxel_of_slot(s));
         ++stats.promotions;
       } else {
         ++st;
@@ -565,17 +659,12 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
 
   // 2. Free space: each ray task marks the voxels its rays pass through in its own bit set
   //    (contiguous ray ranges, so the split does not depend on the thread count).
-  const std::size_t n_points = points_W.size();
   const std::size_t n_rays = n_points + clearing_dirs_W.size();
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
+  const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
   runner.parallel_for(kRayTasks, [&](std::size_t task) {
-    std::uint64_t* bits = free_bits_[task].data();
-    std::uint8_t* dirty = dirty_blocks_[task].data();
-    const auto visit = [bits, dirty](std::uint32_t s) {
-      bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-      dirty[s >> (6 + kBlockShift)] = 1;
-    };
+    const FreeMarks marks{free_bits_[task].data(), dirty_blocks_[task].data()};
     const std::size_t begin = n_rays * task / kRayTasks;
     const std::size_t end = n_rays * (task + 1) / kRayTasks;
     std::uint64_t visits = 0;
@@ -586,17 +675,17 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         const Eigen::Vector3d pd = p.cast<double>();
         const double range = (pd - origin_W).norm();
         if (range <= max_range) {
-          visits += traverse(w, origin_W, pd, false, visit);
+          visits += traverse(w, start, pd, false, marks);
         } else if (clear_range > 0.0) {
-          visits += traverse(w, origin_W, origin_W + (pd - origin_W) * (clear_range / range), true,
-                             visit);
+          visits +=
+              traverse(w, start, origin_W + (pd - origin_W) * (clear_range / range), true, marks);
         }
       } else {
         const Eigen::Vector3f& dir = clearing_dirs_W[i - n_points];
         const double norm = dir.cast<double>().norm();
         if (!dir.allFinite() || norm == 0.0 || clear_range <= 0.0) continue;
-        visits += traverse(w, origin_W, origin_W + dir.cast<double>() * (clear_range / norm), true,
-                           visit);
+        visits +=
+            traverse(w, start, origin_W + dir.cast<double>() * (clear_range / norm), true, marks);
       }
     }
     task_visits[task] = visits;

@@ -1,5 +1,7 @@
 #include "tarmac/core/scan_filter.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace tarmac::core {
@@ -20,18 +22,44 @@ Status FilterParams::validate() const {
 
 namespace {
 
+/// Fixed number of point ranges the filter splits a scan into, whatever the runner's threads
+/// (the result does not depend on the split: every decision is per point).
+constexpr std::size_t kFilterTasks = 8;
+
+/// floor() to an integer for any finite float in int64 range, without a libm call.
+std::int64_t floor_to_int(float v) {
+  const auto i = static_cast<std::int64_t>(v);  // truncates toward zero
+  return i - static_cast<std::int64_t>(static_cast<float>(i) > v);
+}
+
+constexpr std::uint64_t kField = 0x1fffff;
+
 /// Packs a cell coordinate (each within ±2^20 cells) into a non-zero key.
 std::uint64_t cell_key(const Eigen::Vector3f& p, float inv_cell) {
   const auto c = [&](float v) {
-    return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(v * inv_cell)) +
-                                      (1 << 20)) &
-           0x1fffff;
+    return static_cast<std::uint64_t>(floor_to_int(v * inv_cell) + (1 << 20)) & kField;
   };
   return (c(p.x()) << 42) | (c(p.y()) << 21) | c(p.z()) | (1ull << 63);
 }
 
+/// Home slot of a key: linear in the cell coordinates with the z coordinate unscaled, so the
+/// cells of one column sit in neighbouring slots and a point's 27 lookups touch about 9 cache
+/// lines instead of 27.
 std::size_t slot_of(std::uint64_t key, std::size_t mask) {
-  return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ull) >> 40) & mask;
+  return static_cast<std::size_t>(((key >> 42) & kField) * 0xC2B2AE3D27D4EB4Full +
+                                  ((key >> 21) & kField) * 0x9E3779B97F4A7C15ull + (key & kField)) &
+         mask;
+}
+
+/// Offsets of the 27 cells around a key, the point's own column first (most often enough to
+/// decide, so the lookup stops early).
+constexpr std::array<std::array<int, 2>, 9> kColumns{
+    {{0, 0}, {-1, 0}, {1, 0}, {0, -1}, {0, 1}, {-1, -1}, {-1, 1}, {1, -1}, {1, 1}}};
+
+std::uint64_t key_offset(int dx, int dy, int dz) {
+  return (static_cast<std::uint64_t>(static_cast<std::int64_t>(dx)) << 42) +
+         (static_cast<std::uint64_t>(static_cast<std::int64_t>(dy)) << 21) +
+         static_cast<std::uint64_t>(static_cast<std::int64_t>(dz));
 }
 
 }  // namespace
@@ -39,51 +67,85 @@ std::size_t slot_of(std::uint64_t key, std::size_t mask) {
 FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
                          std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch) {
-  FilterCounts counts;
-  points_W.clear();
-  scratch.candidates_S.clear();
-  counts.input = cloud.size();
+  SerialRunner serial;
+  return filter_scan(cloud, T_W_S, T_B_S, params, points_W, scratch, serial);
+}
+
+FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
+                         const Eigen::Isometry3d& T_B_S, const FilterParams& params,
+                         std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch,
+                         TaskRunner& runner) {
+  const std::size_t n = cloud.size();
   const double min_sq = params.min_range_m * params.min_range_m;
   const Eigen::Matrix3f R_W_S = T_W_S.linear().cast<float>();
   const Eigen::Vector3f t_W_S = T_W_S.translation().cast<float>();
   const Eigen::Matrix3d R_B_S = T_B_S.linear();
   const Eigen::Vector3d t_B_S = T_B_S.translation();
-  for (const auto& p : cloud.points_S) {
-    if (!p.allFinite()) {
-      ++counts.non_finite;
-      continue;
-    }
-    if (static_cast<double>(p.squaredNorm()) < min_sq) {
-      ++counts.too_close;
-      continue;
-    }
-    if (params.ego_box_enabled) {
-      const Eigen::Vector3d p_B = R_B_S * p.cast<double>() + t_B_S;
-      if ((p_B.array() >= params.ego_box_min_B.array()).all() &&
-          (p_B.array() <= params.ego_box_max_B.array()).all()) {
-        ++counts.ego_vehicle;
-        continue;
-      }
-    }
-    scratch.candidates_S.push_back(p);
-  }
-  // Isolated outliers, counted in the sensor frame: a hash of occupied cells, then each near
-  // point looks at its 27 cells. Membership only, so the result does not depend on order.
-  const auto& cand = scratch.candidates_S;
   const bool outliers = params.outlier_min_neighbors > 0;
   const float inv_cell = static_cast<float>(1.0 / params.outlier_cell_m);
   const float near_sq = static_cast<float>(params.outlier_max_range_m * params.outlier_max_range_m);
+
+  // 1. Per-point tests, each task compacting its candidates to the front of its own range.
+  std::array<FilterCounts, kFilterTasks> task_counts{};
+  std::array<std::size_t, kFilterTasks + 1> first{};  // candidates of task t: [first[t], …)
+  std::array<std::size_t, kFilterTasks> last{};
+  for (std::size_t t = 0; t <= kFilterTasks; ++t) first[t] = n * t / kFilterTasks;
+  scratch.candidates_S.resize(n);
+  scratch.point_key.resize(n);
+  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+    FilterCounts& c = task_counts[task];
+    std::size_t out = first[task];
+    for (std::size_t i = first[task]; i < first[task + 1]; ++i) {
+      const Eigen::Vector3f& p = cloud.points_S[i];
+      if (!p.allFinite()) {
+        ++c.non_finite;
+        continue;
+      }
+      if (static_cast<double>(p.squaredNorm()) < min_sq) {
+        ++c.too_close;
+        continue;
+      }
+      if (params.ego_box_enabled) {
+        const Eigen::Vector3d p_B = R_B_S * p.cast<double>() + t_B_S;
+        if ((p_B.array() >= params.ego_box_min_B.array()).all() &&
+            (p_B.array() <= params.ego_box_max_B.array()).all()) {
+          ++c.ego_vehicle;
+          continue;
+        }
+      }
+      scratch.candidates_S[out] = p;
+      if (outliers) scratch.point_key[out] = cell_key(p, inv_cell);
+      ++out;
+    }
+    last[task] = out;
+  });
+  // Candidates back to back, in input order.
+  std::size_t m = last[0];
+  for (std::size_t t = 1; t < kFilterTasks; ++t) {
+    std::copy(scratch.candidates_S.begin() + static_cast<std::ptrdiff_t>(first[t]),
+              scratch.candidates_S.begin() + static_cast<std::ptrdiff_t>(last[t]),
+              scratch.candidates_S.begin() + static_cast<std::ptrdiff_t>(m));
+    std::copy(scratch.point_key.begin() + static_cast<std::ptrdiff_t>(first[t]),
+              scratch.point_key.begin() + static_cast<std::ptrdiff_t>(last[t]),
+              scratch.point_key.begin() + static_cast<std::ptrdiff_t>(m));
+    m += last[t] - first[t];
+  }
+  scratch.candidates_S.resize(m);
+  scratch.point_key.resize(m);
+
+  // 2. Isolated outliers, counted in the sensor frame: a hash of occupied cells (built in one
+  //    pass), then each near point looks at its 27 cells. Membership only, so the result does
+  //    not depend on order.
+  const auto& cand = scratch.candidates_S;
   std::size_t mask = 0;
   if (outliers) {
     std::size_t capacity = 1024;
-    while (capacity < 2 * cand.size()) capacity *= 2;
+    while (capacity < 2 * m) capacity *= 2;
     mask = capacity - 1;
     scratch.keys.assign(capacity, 0);
     scratch.counts.assign(capacity, 0);
-    scratch.point_key.resize(cand.size());
-    for (std::size_t i = 0; i < cand.size(); ++i) {
-      const std::uint64_t key = cell_key(cand[i], inv_cell);
-      scratch.point_key[i] = key;
+    for (std::size_t i = 0; i < m; ++i) {
+      const std::uint64_t key = scratch.point_key[i];
       std::size_t s = slot_of(key, mask);
       while (scratch.keys[s] != 0 && scratch.keys[s] != key) s = (s + 1) & mask;
       scratch.keys[s] = key;
@@ -98,31 +160,50 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     }
     return 0;
   };
-  for (std::size_t i = 0; i < cand.size(); ++i) {
-    const Eigen::Vector3f& p = cand[i];
-    if (outliers && p.squaredNorm() < near_sq) {
-      std::uint32_t others = 0;
-      const std::uint64_t key = scratch.point_key[i];
-      for (int dx = -1;
-           dx <= 1 && others < static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1; ++dx) {
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dz = -1; dz <= 1; ++dz) {
-            const std::uint64_t k =
-                key + (static_cast<std::uint64_t>(static_cast<std::int64_t>(dx)) << 42) +
-                (static_cast<std::uint64_t>(static_cast<std::int64_t>(dy)) << 21) +
-                static_cast<std::uint64_t>(static_cast<std::int64_t>(dz));
-            others += count_in(k);
-          }
-        }
-      }
-      if (others - 1 < static_cast<std::uint32_t>(params.outlier_min_neighbors)) {  // minus itself
-        ++counts.isolated;
-        continue;
+  // Itself and outlier_min_neighbors others.
+  const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
+  const auto has_neighbours = [&](std::uint64_t key) {
+    std::uint32_t points = 0;
+    for (const auto& [dx, dy] : kColumns) {
+      for (int dz = -1; dz <= 1; ++dz) {
+        points += count_in(key + key_offset(dx, dy, dz));
+        if (points >= needed) return true;
       }
     }
-    points_W.push_back(R_W_S * p + t_W_S);
+    return false;
+  };
+  scratch.keep.resize(m);
+  std::array<std::size_t, kFilterTasks + 1> kept_before{};
+  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+    std::size_t kept = 0;
+    for (std::size_t i = m * task / kFilterTasks; i < m * (task + 1) / kFilterTasks; ++i) {
+      const bool keep =
+          !outliers || cand[i].squaredNorm() >= near_sq || has_neighbours(scratch.point_key[i]);
+      scratch.keep[i] = keep ? 1 : 0;
+      kept += keep ? 1 : 0;
+    }
+    kept_before[task + 1] = kept;
+  });
+  for (std::size_t t = 0; t < kFilterTasks; ++t) kept_before[t + 1] += kept_before[t];
+
+  // 3. Survivors into the world frame, each task writing its own range of the output.
+  points_W.resize(kept_before[kFilterTasks]);
+  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+    std::size_t out = kept_before[task];
+    for (std::size_t i = m * task / kFilterTasks; i < m * (task + 1) / kFilterTasks; ++i) {
+      if (scratch.keep[i] != 0) points_W[out++] = R_W_S * cand[i] + t_W_S;
+    }
+  });
+
+  FilterCounts counts;
+  counts.input = n;
+  for (const FilterCounts& c : task_counts) {
+    counts.non_finite += c.non_finite;
+    counts.too_close += c.too_close;
+    counts.ego_vehicle += c.ego_vehicle;
   }
   counts.kept = points_W.size();
+  counts.isolated = m - counts.kept;
   return counts;
 }
 

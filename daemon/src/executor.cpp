@@ -473,8 +473,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
     if (!pending_corrections.empty()) apply_corrections_before(cloud.stamp_ns);
     const auto t0 = Clock::now();
-    const core::FilterCounts counts =
-        mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], sel.deskew ? &sel.motion : nullptr);
+    const core::FilterCounts counts = mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], *pool,
+                                                    sel.deskew ? &sel.motion : nullptr);
     const auto t1 = Clock::now();
     mapper.integrate(*pool);
     const auto t2 = Clock::now();

@@ -1,8 +1,11 @@
 #include "tarmac/core/scan_filter.hpp"
 
 #include <cmath>
+#include <random>
 
 #include <gtest/gtest.h>
+
+#include "tarmac/daemon/thread_pool.hpp"
 
 namespace tarmac::core {
 namespace {
@@ -83,6 +86,38 @@ TEST(ScanFilter, OutlierDecisionDoesNotDependOnPointOrder) {
   std::sort(sa.begin(), sa.end(), less);
   std::sort(sb.begin(), sb.end(), less);
   EXPECT_EQ(sa, sb);
+}
+
+TEST(ScanFilter, SameResultForOneTwoAndFourThreads) {
+  // Every reason in one cloud: a dense wall, scattered isolated points near and far, points in
+  // the ego box and too close, non-finite ones; the point ranges split it unevenly.
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<float> u(-40.0f, 40.0f);
+  PointCloud cloud = wall_plus({});
+  for (int i = 0; i < 5003; ++i) cloud.points_S.emplace_back(u(rng), u(rng), u(rng) / 8.0f);
+  for (int i = 0; i < 300; ++i) cloud.points_S.emplace_back(u(rng) / 20.0f, u(rng) / 40.0f, 0.5f);
+  cloud.points_S.insert(cloud.points_S.begin() + 17, Eigen::Vector3f(std::nanf(""), 0, 0));
+  Eigen::Isometry3d T_W_S = Eigen::Isometry3d::Identity();
+  T_W_S.translation() = Eigen::Vector3d(3, -2, 1);
+  T_W_S.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  Fixture serial;
+  const FilterCounts expected = serial.run(cloud, T_W_S);
+  EXPECT_GT(expected.isolated, 0u);
+  EXPECT_GT(expected.ego_vehicle, 0u);
+  EXPECT_GT(expected.too_close, 0u);
+  EXPECT_EQ(expected.non_finite, 1u);
+  for (const std::size_t threads : {1u, 2u, 4u}) {
+    daemon::ThreadPool pool(threads);
+    Fixture f;
+    const FilterCounts c = filter_scan(cloud, T_W_S, Eigen::Isometry3d::Identity(), f.params,
+                                       f.out_W, f.scratch, pool);
+    EXPECT_EQ(c.non_finite, expected.non_finite);
+    EXPECT_EQ(c.too_close, expected.too_close);
+    EXPECT_EQ(c.ego_vehicle, expected.ego_vehicle);
+    EXPECT_EQ(c.isolated, expected.isolated);
+    EXPECT_EQ(c.kept, expected.kept);
+    EXPECT_EQ(f.out_W, serial.out_W);  // same points, same order
+  }
 }
 
 }  // namespace

@@ -172,7 +172,7 @@ int main(int argc, char** argv) {
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
     // tarmac, stage by stage.
     core::FilterCounts counts;
-    const double f = timed_ms([&] { counts = mapper.ingest(clouds[k], T_W_B, T_B_S); });
+    const double f = timed_ms([&] { counts = mapper.ingest(clouds[k], T_W_B, T_B_S, pool); });
     const double o = opt.tsdf_only ? 0.0 : timed_ms([&] { mapper.integrate(pool); });
     const double cpu0 = process_cpu_ms();
     const double ts = timed_ms([&] {

@@ -366,7 +366,7 @@ int main(int argc, char** argv) {
     }
     core::FilterCounts counts;
     core::OccupancyUpdateStats occ;
-    const double f_ms = timed_ms([&] { counts = mapper.ingest(cloud, T_W_B, T_B_S); });
+    const double f_ms = timed_ms([&] { counts = mapper.ingest(cloud, T_W_B, T_B_S, pool); });
     const double o_ms = timed_ms([&] { occ = mapper.integrate(pool); });
     const double tsdf_ms = timed_ms([&] {
       const core::TsdfUpdate& up = mapper.integrate_tsdf(pool);

@@ -58,6 +58,11 @@ class Mapper {
   /// T_W_B is the vehicle base pose at the scan stamp, T_B_S the sensor's extrinsic. With
   /// `motion` and per-point times in `cloud`, the points are first motion-compensated into the
   /// sensor frame at the stamp (deskew_points); without either, the sweep is taken as rigid.
+  /// The filters run on `runner` (same result for any runner).
+  FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+                      const Eigen::Isometry3d& T_B_S, TaskRunner& runner,
+                      const ScanMotion* motion = nullptr);
+  /// The same on the calling thread.
   FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                       const Eigen::Isometry3d& T_B_S, const ScanMotion* motion = nullptr);
   /// Reserves `points_per_scan` points in every retained-scan slot (corrections.enabled), so the

@@ -193,6 +193,12 @@ class OccupancyMap {
   /// apply pass skips the untouched part of the window.
   std::vector<std::vector<std::uint8_t>> dirty_blocks_;
   std::vector<std::uint32_t> hit_slots_;  ///< to clear hit_bits_ after the scan
+  /// Per return of the scan being integrated: its slot (or none), window column, height along
+  /// the up axis and rise above the scan's local ground.
+  std::vector<std::uint32_t> hit_slot_;
+  std::vector<std::uint32_t> hit_column_;
+  std::vector<float> hit_height_;
+  std::vector<std::uint8_t> hit_rise_;
   bool placed_ = false;
 };
 

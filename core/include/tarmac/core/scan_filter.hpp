@@ -10,6 +10,7 @@
 
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/result.hpp"
+#include "tarmac/core/task_runner.hpp"
 
 namespace tarmac::core {
 
@@ -45,10 +46,18 @@ struct FilterScratch {
   std::vector<std::uint32_t> counts;     ///< points per table slot
   std::vector<std::uint64_t> point_key;  ///< cell key per candidate point
   std::vector<Eigen::Vector3f> candidates_S;
+  std::vector<std::uint8_t> keep;  ///< per candidate: survives the outlier test
 };
 
 /// Filters `cloud` (sensor frame) and writes survivors into `points_W` (cleared first, capacity
 /// kept). T_W_S: sensor to world; T_B_S: sensor to vehicle base (extrinsic). RT-safe after warm-up.
+/// The work is split into a fixed number of point ranges run on `runner`; the result (points and
+/// their order, counts) is the same for any runner.
+FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
+                         const Eigen::Isometry3d& T_B_S, const FilterParams& params,
+                         std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch,
+                         TaskRunner& runner);
+/// The same on the calling thread.
 FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
                          std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch);
