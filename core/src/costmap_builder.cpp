@@ -54,21 +54,21 @@ constexpr int kBitsChunk = 16;
 
 /// Per-column 32-bit words of layer bits for layers [z0, z1) (bit z − z0; z1 − z0 <= 32) of the
 /// kBitsChunk columns at `offset` of every layer: occupied (log-odds > 0) and observed. The
-/// words stay in registers across the layers, so each voxel costs a load, two compares and ORs.
+/// words stay in registers across the layers, which are taken from the top down, each shifting
+/// the words up by one and adding its bit (a comparison is −1 or 0: subtracting it adds 1).
 void layer_bits_chunk(const float* const* layers, std::size_t offset, int z0, int z1,
                       std::uint32_t* __restrict occupied, std::uint32_t* __restrict known) {
   constexpr int kVectors = kBitsChunk / 4;
   Int4 occ[kVectors] = {}, obs[kVectors] = {};
   const Float4 zero = {0.0f, 0.0f, 0.0f, 0.0f};
   const Float4 unknown = zero + OccupancyMap::kUnknown;
-  for (int z = z0; z < z1; ++z) {
-    const Int4 bit = Int4{} + static_cast<std::int32_t>(std::uint32_t{1} << (z - z0));
+  for (int z = z1 - 1; z >= z0; --z) {
     const float* l = layers[z] + offset;
     for (int j = 0; j < kVectors; ++j) {
       Float4 v;
       std::memcpy(&v, l + 4 * j, sizeof v);
-      occ[j] |= (v > zero) & bit;
-      obs[j] |= (v != unknown) & bit;
+      occ[j] = (occ[j] + occ[j]) - (v > zero);
+      obs[j] = (obs[j] + obs[j]) - (v != unknown);
     }
   }
   std::memcpy(occupied, occ, sizeof occ);
