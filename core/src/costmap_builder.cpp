@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 namespace tarmac::core {
@@ -44,24 +45,93 @@ void mark_envelope(std::uint8_t* __restrict known, std::uint8_t* __restrict obst
   }
 }
 
-/// Accumulates one layer of a row run into per-column 32-bit words of layer bits (`bit` is the
-/// layer's bit in its word): occupied / observed. A select per cell, which vectorises.
-void mark_bits(std::uint32_t* __restrict occupied, std::uint32_t* __restrict known,
-               const float* __restrict log_odds, int count, std::uint32_t bit) {
-  for (int k = 0; k < count; ++k) {
-    const float l = log_odds[k];
-    occupied[k] |= l > 0.0f ? bit : 0u;
-    known[k] |= l != OccupancyMap::kUnknown ? bit : 0u;
+/// Four lanes of 32 bits (GCC/Clang vector extensions, any target): what one SSE/NEON register
+/// holds. Comparisons yield −1 (all bits) or 0 per lane.
+using Float4 = float __attribute__((vector_size(16)));
+using Int4 = std::int32_t __attribute__((vector_size(16)));
+/// Layers per group of the layer-bits pass: a group's layers are read side by side (a few
+/// sequential streams, which the prefetchers follow; all 40 at once were twice as slow).
+constexpr int kLayerGroup = 4;
+/// Columns per block of the layer-bits pass: a group's words for a block stay in L1.
+constexpr std::size_t kBitsBlock = 2048;
+
+/// Adds layers [zb, zt), from the top down, to the per-column words of layer bits (occupied:
+/// log-odds > 0; observed) of 4·kVectors columns at `offset` of every layer: each layer shifts
+/// the words up by one and adds its bit (a comparison is −1 or 0: subtracting it adds 1). The
+/// words stay in registers across the group; `first` starts them at zero.
+template <int kVectors>
+void add_layer_bits(const float* const* layers, std::size_t offset, int zb, int zt, bool first,
+                    std::uint32_t* __restrict occupied, std::uint32_t* __restrict known) {
+  Int4 occ[kVectors] = {}, obs[kVectors] = {};
+  if (!first) {
+    std::memcpy(occ, occupied, sizeof occ);
+    std::memcpy(obs, known, sizeof obs);
+  }
+  const Float4 zero = {0.0f, 0.0f, 0.0f, 0.0f};
+  const Float4 unknown = zero + OccupancyMap::kUnknown;
+  for (int z = zt - 1; z >= zb; --z) {
+    const float* l = layers[z] + offset;
+    for (int j = 0; j < kVectors; ++j) {
+      Float4 v;
+      std::memcpy(&v, l + 4 * j, sizeof v);
+      occ[j] = (occ[j] + occ[j]) - (v > zero);
+      obs[j] = (obs[j] + obs[j]) - (v != unknown);
+    }
+  }
+  std::memcpy(occupied, occ, sizeof occ);
+  std::memcpy(known, obs, sizeof obs);
+}
+
+/// The words of layers [z0, z1) (bit z − z0; z1 − z0 <= 32) for a run of `count` columns at
+/// `offset` of every layer, written to occupied[0, count) and known[0, count): layer groups
+/// from the top down, each over the run in blocks of 16, then 4, then single columns.
+void layer_bits_run(const float* const* layers, std::size_t offset, int count, int z0, int z1,
+                    std::uint32_t* __restrict occupied, std::uint32_t* __restrict known) {
+  if (z0 >= z1) {
+    std::fill(occupied, occupied + count, 0u);
+    std::fill(known, known + count, 0u);
+    return;
+  }
+  for (int zt = z1; zt > z0; zt -= kLayerGroup) {
+    const int zb = std::max(z0, zt - kLayerGroup);
+    const bool first = zt == z1;
+    int k = 0;
+    for (; k + 16 <= count; k += 16) {
+      add_layer_bits<4>(layers, offset + k, zb, zt, first, occupied + k, known + k);
+    }
+    for (; k + 4 <= count; k += 4) {
+      add_layer_bits<1>(layers, offset + k, zb, zt, first, occupied + k, known + k);
+    }
+    for (; k < count; ++k) {
+      std::uint32_t occ = first ? 0u : occupied[k], obs = first ? 0u : known[k];
+      for (int z = zt - 1; z >= zb; --z) {
+        const float l = layers[z][offset + k];
+        occ = 2 * occ + (l > 0.0f ? 1u : 0u);
+        obs = 2 * obs + (l != OccupancyMap::kUnknown ? 1u : 0u);
+      }
+      occupied[k] = occ;
+      known[k] = obs;
+    }
   }
 }
 
-/// Bits [a, b) of a 64-bit set, clamped to [0, 64).
+/// Bits [0, k) of a 64-bit set, k clamped to [0, 64].
+std::uint64_t bits_below(int k) {
+  k = std::clamp(k, 0, 64);
+  return k == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << k) - 1;
+}
+
+/// Bits [a, b) of a 64-bit set, clamped to [0, 64) (empty when a >= b).
 std::uint64_t bit_range(int a, int b) {
-  a = std::clamp(a, 0, 64);
-  b = std::clamp(b, 0, 64);
-  if (a >= b) return 0;
-  const std::uint64_t below_b = b == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << b) - 1;
-  return below_b & ~((std::uint64_t{1} << a) - 1);
+  return bits_below(b) & ~bits_below(a);
+}
+
+/// What the 2D ESDF sees of a column class: obstacles and virtual zones are sites.
+CellState esdf_state(std::uint8_t column_class) {
+  const auto c = static_cast<ColumnClass>(column_class);
+  return c == ColumnClass::kObstacle || c == ColumnClass::kVirtual ? CellState::kOccupied
+         : c == ColumnClass::kUnknown                              ? CellState::kUnknown
+                                                                   : CellState::kFree;
 }
 
 }  // namespace
@@ -137,43 +207,39 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   // 1. Lowest occupied voxel per column (layer by layer, in memory order), then per coarse
   //    ground cell. Unknown (−1e9) and free (< 0) are both "not > 0".
   auto& lowest = out.lowest_occupied;
-  lowest.assign(geometry.cell_count(), -1);
   // Windows of at most 64 layers: one pass over all layers builds per-column bit sets of the
   // occupied and the observed layers; the lowest occupied layer and the envelope tests of step 3
   // are then bit operations per column. Taller windows scan the layers (same results).
   const bool use_bits = nz <= 64;
   auto& occupied_bits = out.occupied_bits;
   auto& known_bits = out.known_bits;
-  // Layers 0..31 in the first cell_count() words, 32..63 in the second.
+  // Layers 0..31 in the first cell_count() words, 32..63 in the second; ring (storage) order.
   const std::size_t cells_n = geometry.cell_count();
   occupied_bits.resize(use_bits ? 2 * cells_n : 0);
   known_bits.resize(use_bits ? 2 * cells_n : 0);
+  if (use_bits) {
+    lowest.resize(cells_n);  // every cell is written below
+  } else {
+    lowest.assign(cells_n, -1);
+  }
+  // Each layer's storage, looked up once per call.
+  std::array<const float*, 64> layer_data{};
+  for (int z = 0; z < std::min(nz, 64); ++z)
+    layer_data[static_cast<std::size_t>(z)] = map.ring_layer(z);
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
-    const std::size_t r0 = static_cast<std::size_t>(y0) * nx;
-    const std::size_t r1 = static_cast<std::size_t>(y1) * nx;
     if (use_bits) {
-      for (const std::size_t half : {std::size_t{0}, cells_n}) {
-        std::fill(occupied_bits.begin() + static_cast<std::ptrdiff_t>(half + r0),
-                  occupied_bits.begin() + static_cast<std::ptrdiff_t>(half + r1), 0u);
-        std::fill(known_bits.begin() + static_cast<std::ptrdiff_t>(half + r0),
-                  known_bits.begin() + static_cast<std::ptrdiff_t>(half + r1), 0u);
-      }
-      for (int z = 0; z < nz; ++z) {
-        const float* layer = map.ring_layer(z);
-        const std::size_t half = z < 32 ? 0 : cells_n;
-        const std::uint32_t bit = std::uint32_t{1} << (z & 31);
-        for (int y = y0; y < y1; ++y) {
-          const std::size_t row = half + static_cast<std::size_t>(y) * nx;
-          for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
-            mark_bits(&occupied_bits[row + x0], &known_bits[row + x0], l, count, bit);
-          });
+      // In storage (ring) order, so each layer is read as one contiguous stream per block; the
+      // words are kept in ring order too. Written, not ORed: no zeroing pass.
+      const std::size_t c0 = cells_n * task / kRowTasks, c1 = cells_n * (task + 1) / kRowTasks;
+      for (std::size_t b0 = c0; b0 < c1; b0 += kBitsBlock) {
+        const int count = static_cast<int>(std::min(kBitsBlock, c1 - b0));
+        for (const std::size_t half : {std::size_t{0}, cells_n}) {
+          layer_bits_run(layer_data.data(), b0, count, half == 0 ? 0 : 32,
+                         half == 0 ? std::min(nz, 32) : nz, &occupied_bits[half + b0],
+                         &known_bits[half + b0]);
         }
-      }
-      for (std::size_t i = r0; i < r1; ++i) {
-        const std::uint64_t b = occupied_bits[i] | std::uint64_t{occupied_bits[cells_n + i]} << 32;
-        lowest[i] = b == 0 ? std::int16_t{-1} : static_cast<std::int16_t>(std::countr_zero(b));
       }
       return;
     }
@@ -190,6 +256,22 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       }
     }
   });
+  if (use_bits) {
+    runner.parallel_for(kRowTasks, [&](std::size_t task) {
+      const int y0 = static_cast<int>(ny * task / kRowTasks);
+      const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
+        std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+        for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
+          const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
+          const std::uint64_t b = occupied_bits[sl] | std::uint64_t{occupied_bits[cells_n + sl]}
+                                                          << 32;
+          low[x] = b == 0 ? std::int16_t{-1} : static_cast<std::int16_t>(std::countr_zero(b));
+        }
+      }
+    });
+  }
   const int g = std::max(1, static_cast<int>(std::lround(params.ground_cell_m / v)));
   const int gx = (nx + g - 1) / g, gy = (ny + g - 1) / g;
   // Coarse ground buffers live in `out` and keep their capacity: no allocation after warm-up.
@@ -351,81 +433,21 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   //    obstacle) and starts below ground + vehicle height + clearance.
   const double hi_m = params.vehicle_height_m + params.clearance_m;
   const int lo_layers = 1 + static_cast<int>(std::ceil(params.min_obstacle_height_m / v - 1e-9));
+  // A voxel counts when its bottom lies below ground + envelope top.
+  const int top_layers = static_cast<int>(std::ceil(hi_m / v + 0.5));  // above − 0.5 < hi/v
   auto& ground_layer = out.ground_layer;
   ground_layer.resize(geometry.cell_count());
   auto& classes = out.column_class.cells();
   auto& any_known = out.any_known;
   auto& any_obstacle = out.any_obstacle;
-  any_known.resize(geometry.cell_count());
-  any_obstacle.resize(geometry.cell_count());
+  any_known.resize(use_bits ? 0 : geometry.cell_count());
+  any_obstacle.resize(use_bits ? 0 : geometry.cell_count());
   // The rounded estimate per coarse cell, once per coarse cell instead of once per column
   // (coarse_next is free after the fill; whole layers are exact in float).
   auto& estimates = out.coarse_next;
   for (std::size_t i = 0; i < filtered.size(); ++i) {
     estimates[i] = static_cast<float>(std::lround(filtered[i]));
   }
-  runner.parallel_for(kRowTasks, [&](std::size_t task) {
-    const int y0 = static_cast<int>(ny * task / kRowTasks);
-    const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
-    // The column's ground: its lowest occupied voxel if within one voxel of the estimate.
-    for (int y = y0; y < y1; ++y) {
-      const float* estimate_row = &estimates[static_cast<std::size_t>(y / g) * gx];
-      for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
-        const int estimate = static_cast<int>(estimate_row[cx]);
-        for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
-          const std::size_t i = static_cast<std::size_t>(y) * nx + x;
-          const int low = lowest[i];
-          const int ground = low >= 0 && std::abs(low - estimate) <= 1 ? low : estimate;
-          ground_layer[i] = static_cast<std::int16_t>(ground);
-          out.ground_z_m.cells()[i] = static_cast<float>((wmin.z() + ground + 0.5) * v);
-        }
-      }
-    }
-    // Layer by layer, only through the layers some column's envelope reaches: a voxel counts
-    // when its bottom lies below ground + envelope top. A column is an obstacle when any
-    // envelope voxel at least lo_layers above its ground is occupied, free when any envelope
-    // voxel is known, unknown otherwise (so the result does not depend on the layer order).
-    const int top_layers = static_cast<int>(std::ceil(hi_m / v + 0.5));  // above − 0.5 < hi/v
-    const std::size_t r0 = static_cast<std::size_t>(y0) * nx;
-    const std::size_t r1 = static_cast<std::size_t>(y1) * nx;
-    if (r0 == r1) return;
-    if (use_bits) {
-      for (std::size_t i = r0; i < r1; ++i) {
-        const int gl = ground_layer[i];
-        const std::uint64_t known = known_bits[i] | std::uint64_t{known_bits[cells_n + i]} << 32;
-        const std::uint64_t occupied = occupied_bits[i] | std::uint64_t{occupied_bits[cells_n + i]}
-                                                              << 32;
-        any_known[i] = (known & bit_range(gl, gl + top_layers)) != 0;
-        any_obstacle[i] = (occupied & bit_range(gl + lo_layers, gl + top_layers)) != 0;
-      }
-    } else {
-      const auto [gmin, gmax] =
-          std::minmax_element(ground_layer.begin() + static_cast<std::ptrdiff_t>(r0),
-                              ground_layer.begin() + static_cast<std::ptrdiff_t>(r1));
-      std::fill(any_known.begin() + static_cast<std::ptrdiff_t>(r0),
-                any_known.begin() + static_cast<std::ptrdiff_t>(r1), 0);
-      std::fill(any_obstacle.begin() + static_cast<std::ptrdiff_t>(r0),
-                any_obstacle.begin() + static_cast<std::ptrdiff_t>(r1), 0);
-      const int z_begin = std::max(0, static_cast<int>(*gmin));
-      const int z_end = std::min(nz, static_cast<int>(*gmax) + top_layers);
-      for (int z = z_begin; z < z_end; ++z) {
-        const float* layer = map.ring_layer(z);
-        for (int y = y0; y < y1; ++y) {
-          const std::size_t row = static_cast<std::size_t>(y) * nx;
-          for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
-            mark_envelope(&any_known[row + x0], &any_obstacle[row + x0], &ground_layer[row + x0], l,
-                          count, z, lo_layers, top_layers);
-          });
-        }
-      }
-    }
-    for (std::size_t i = r0; i < r1; ++i) {
-      classes[i] = static_cast<std::uint8_t>(any_obstacle[i] != 0 ? ColumnClass::kObstacle
-                                             : any_known[i] != 0  ? ColumnClass::kFree
-                                                                  : ColumnClass::kUnknown);
-    }
-  });
-
   // 3b. Objects lower than the voxels that separate them from the ground (10 cm debris shares a
   //     20 cm voxel with the ground under it): a free column becomes an obstacle when the latest
   //     returns of a voxel below the voxel rule's reach rise at least min_obstacle_height above
@@ -435,24 +457,135 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   std::array<const std::uint8_t*, 64> rise_layers{};
   for (int z = 0; z < std::min(nz, 64); ++z)
     rise_layers[static_cast<std::size_t>(z)] = map.ring_layer_rise_cm(z);
+  // Whether a free column (ring slot sl, ground layer gz) holds such a low object.
+  const auto low_object = [&](std::size_t sl, int gz) {
+    bool rises = false;
+    for (int z = std::max(0, gz), z1 = std::min(nz, gz + lo_layers); z < z1; ++z) {
+      const std::uint8_t* rise =
+          z < 64 ? rise_layers[static_cast<std::size_t>(z)] : map.ring_layer_rise_cm(z);
+      rises |= rise[sl] >= min_rise_cm;
+    }
+    return rises;
+  };
+  const auto column_class = [](bool obstacle, bool known) {
+    return static_cast<std::uint8_t>(obstacle ? ColumnClass::kObstacle
+                                     : known  ? ColumnClass::kFree
+                                              : ColumnClass::kUnknown);
+  };
+  // What a column's test needs of its ground layer gl: the envelope's masks (observed, obstacle),
+  // the ground height, the layers of the low-object test. Tabulated once per call for gl in
+  // [−nz, 2·nz) (computed when a ground lies outside).
+  struct GroundEntry {
+    std::uint64_t seen_mask, obstacle_mask;
+    float z_m;
+    int rise_begin, rise_end;
+  };
+  const auto ground_entry = [&](int gl) {
+    return GroundEntry{bit_range(gl, gl + top_layers), bit_range(gl + lo_layers, gl + top_layers),
+                       static_cast<float>((wmin.z() + gl + 0.5) * v), std::max(0, gl),
+                       std::min(nz, gl + lo_layers)};
+  };
+  std::array<GroundEntry, 3 * 64> by_ground;
+  const int ground_first = -nz;
+  const int ground_count = use_bits ? 3 * nz : 0;
+  for (int k = 0; k < ground_count; ++k) {
+    by_ground[static_cast<std::size_t>(k)] = ground_entry(ground_first + k);
+  }
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    float* __restrict ground_z = out.ground_z_m.cells().data();
+    std::int16_t* __restrict ground_of = ground_layer.data();
+    const std::int16_t* __restrict low_of = lowest.data();
+    if (use_bits) {
+      // One pass per column: its ground, the envelope tests as bit masks, the low-object test.
+      // A column is an obstacle when any envelope voxel at least lo_layers above its ground is
+      // occupied, free when any envelope voxel is known, unknown otherwise.
+      std::uint8_t* __restrict cls = classes.data();
+      CellState* __restrict esdf_in = out.esdf_input.data();
+      const std::uint32_t* __restrict occ_bits = occupied_bits.data();
+      const std::uint32_t* __restrict obs_bits = known_bits.data();
+      for (int y = y0; y < y1; ++y) {
+        const float* estimate_row = &estimates[static_cast<std::size_t>(y / g) * gx];
+        const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
+        int rx = map.ring_x(0);
+        for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
+          const int estimate = static_cast<int>(estimate_row[cx]);
+          for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
+            const std::size_t i = static_cast<std::size_t>(y) * nx + x;
+            // The column's ground: its lowest occupied voxel if within one voxel of the estimate.
+            const int low = low_of[i];
+            const int gl = low >= 0 && std::abs(low - estimate) <= 1 ? low : estimate;
+            const auto t = static_cast<unsigned>(gl - ground_first);
+            const GroundEntry e =
+                t < static_cast<unsigned>(ground_count) ? by_ground[t] : ground_entry(gl);
+            ground_of[i] = static_cast<std::int16_t>(gl);
+            ground_z[i] = e.z_m;
+            const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
+            const std::uint64_t known = obs_bits[sl] | std::uint64_t{obs_bits[cells_n + sl]} << 32;
+            const std::uint64_t occupied = occ_bits[sl] | std::uint64_t{occ_bits[cells_n + sl]}
+                                                              << 32;
+            const bool obstacle = (occupied & e.obstacle_mask) != 0;
+            const bool seen = (known & e.seen_mask) != 0;
+            bool low_obj = false;
+            if (!obstacle && seen) {
+              for (int z = e.rise_begin; z < e.rise_end; ++z) {
+                low_obj |= rise_layers[static_cast<std::size_t>(z)][sl] >= min_rise_cm;
+              }
+            }
+            cls[i] = column_class(obstacle || low_obj, seen);
+            esdf_in[i] = esdf_state(cls[i]);
+          }
+        }
+      }
+      return;
+    }
+    for (int y = y0; y < y1; ++y) {
+      const float* estimate_row = &estimates[static_cast<std::size_t>(y / g) * gx];
+      for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
+        const int estimate = static_cast<int>(estimate_row[cx]);
+        for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
+          const std::size_t i = static_cast<std::size_t>(y) * nx + x;
+          const int low = low_of[i];
+          const int ground = low >= 0 && std::abs(low - estimate) <= 1 ? low : estimate;
+          ground_of[i] = static_cast<std::int16_t>(ground);
+          ground_z[i] = static_cast<float>((wmin.z() + ground + 0.5) * v);
+        }
+      }
+    }
+    // Layer by layer, only through the layers some column's envelope reaches (so the result
+    // does not depend on the layer order), then the low-object test per free column.
+    const std::size_t r0 = static_cast<std::size_t>(y0) * nx;
+    const std::size_t r1 = static_cast<std::size_t>(y1) * nx;
+    if (r0 == r1) return;
+    const auto [gmin, gmax] =
+        std::minmax_element(ground_layer.begin() + static_cast<std::ptrdiff_t>(r0),
+                            ground_layer.begin() + static_cast<std::ptrdiff_t>(r1));
+    std::fill(any_known.begin() + static_cast<std::ptrdiff_t>(r0),
+              any_known.begin() + static_cast<std::ptrdiff_t>(r1), 0);
+    std::fill(any_obstacle.begin() + static_cast<std::ptrdiff_t>(r0),
+              any_obstacle.begin() + static_cast<std::ptrdiff_t>(r1), 0);
+    const int z_begin = std::max(0, static_cast<int>(*gmin));
+    const int z_end = std::min(nz, static_cast<int>(*gmax) + top_layers);
+    for (int z = z_begin; z < z_end; ++z) {
+      const float* layer = map.ring_layer(z);
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t row = static_cast<std::size_t>(y) * nx;
+        for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
+          mark_envelope(&any_known[row + x0], &any_obstacle[row + x0], &ground_layer[row + x0], l,
+                        count, z, lo_layers, top_layers);
+        });
+      }
+    }
     for (int y = y0; y < y1; ++y) {
       const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
       for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
         const std::size_t i = static_cast<std::size_t>(y) * nx + x;
-        if (classes[i] != static_cast<std::uint8_t>(ColumnClass::kFree)) continue;
-        const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
-        const int gz = ground_layer[i];
-        for (int z = std::max(0, gz); z < std::min(nz, gz + lo_layers); ++z) {
-          const std::uint8_t* rise =
-              z < 64 ? rise_layers[static_cast<std::size_t>(z)] : map.ring_layer_rise_cm(z);
-          if (rise[sl] >= min_rise_cm) {
-            classes[i] = static_cast<std::uint8_t>(ColumnClass::kObstacle);
-            break;
-          }
-        }
+        const bool free = any_obstacle[i] == 0 && any_known[i] != 0;
+        classes[i] = column_class(
+            any_obstacle[i] != 0 || (free && low_object(ring_row + rx, ground_layer[i])),
+            any_known[i] != 0);
+        out.esdf_input[i] = esdf_state(classes[i]);
       }
     }
   });
@@ -480,19 +613,14 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
         // A no-go zone blocks every cell; a restricted zone blocks only what was not observed.
         if (!zone.restricted || cls == static_cast<std::uint8_t>(ColumnClass::kUnknown)) {
           cls = static_cast<std::uint8_t>(ColumnClass::kVirtual);
+          out.esdf_input[static_cast<std::size_t>(y) * nx + x] = CellState::kOccupied;
         }
       }
     }
   }
 
-  // 5. Exact distance to the nearest obstacle cell, then Nav2 inflation.
-  for (std::size_t i = 0; i < classes.size(); ++i) {
-    const auto c = static_cast<ColumnClass>(classes[i]);
-    out.esdf_input[i] = c == ColumnClass::kObstacle || c == ColumnClass::kVirtual
-                            ? CellState::kOccupied
-                        : c == ColumnClass::kUnknown ? CellState::kUnknown
-                                                     : CellState::kFree;
-  }
+  // 5. Exact distance to the nearest obstacle cell (esdf_input was set with the classes), then
+  //    Nav2 inflation.
   compute_distance_field(out.esdf_input, Eigen::Vector3i(nx, ny, 1), v,
                          UnknownPolicy::kReportUnknown, out.obstacle_distance, out.scratch, runner);
   const std::int8_t unknown_value = params.unknown_cost == UnknownCost::kLethal ? kCostLethal
@@ -517,19 +645,23 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   const auto free_value = [&](float distance) {
     if (distance > params.inflation_radius_m) return std::int8_t{0};
     const double r = distance / v;
-    const auto k = static_cast<std::size_t>(std::max(0.0, std::round(r * r)));
+    // Any k is safe (the entry is checked); this one is the nearest integer to r² >= 0.
+    const auto k = static_cast<std::size_t>(r * r + 0.5);
     if (k < table_size && table_distance[k] == distance) return table_value[k];
     return to_occupancy_value(nav2_cost(distance, params));
   };
   auto& cells = out.costmap.cells();
-  for (std::size_t i = 0; i < cells.size(); ++i) {
-    switch (static_cast<ColumnClass>(classes[i])) {
-      case ColumnClass::kObstacle:
-      case ColumnClass::kVirtual: cells[i] = kCostLethal; break;
-      case ColumnClass::kUnknown: cells[i] = unknown_value; break;
-      case ColumnClass::kFree: cells[i] = free_value(out.obstacle_distance.distance_m[i]); break;
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    const std::size_t i0 = cells_n * task / kRowTasks, i1 = cells_n * (task + 1) / kRowTasks;
+    for (std::size_t i = i0; i < i1; ++i) {
+      switch (static_cast<ColumnClass>(classes[i])) {
+        case ColumnClass::kObstacle:
+        case ColumnClass::kVirtual: cells[i] = kCostLethal; break;
+        case ColumnClass::kUnknown: cells[i] = unknown_value; break;
+        case ColumnClass::kFree: cells[i] = free_value(out.obstacle_distance.distance_m[i]); break;
+      }
     }
-  }
+  });
 }
 
 }  // namespace tarmac::core

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "tarmac/core/assert.hpp"
 
@@ -235,40 +236,43 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
         }
         continue;
       }
-      if (three_d) {
-        scan_envelope(width, e, [&](int q, int root) {
-          ox[q] = q - root;
-          o0[q] = a0[root];
-          o1[q] = a1[root];
-        });
-      } else {
-        scan_envelope(width, e, [&](int q, int root) {
-          ox[q] = q - root;
-          o0[q] = a0[root];
-        });
-        std::fill(o1, o1 + nx, 0);
-      }
-      // Three branch-free loops so each vectorises: unknown cells get zero offsets (so a zero
+      // Branch-free loops so each vectorises: unknown cells get zero offsets (so a zero
       // gradient), then metres and gradients (an obstacle, r = 0, multiplies 0 by 1), then NaN.
+      // Written once for both dimensions; the 2D instance drops the third offset (always 0:
+      // adding 0² and multiplying 0 by 1/r leave the same bits).
       const std::uint8_t unknown_state =
           report_unknown ? static_cast<std::uint8_t>(CellState::kUnknown) : 0xff;
-      for (int x = 0; x < width; ++x) {
-        const std::int32_t keep = -static_cast<std::int32_t>(st[x] != unknown_state);
-        ox[x] &= keep;
-        o0[x] &= keep;
-        o1[x] &= keep;
-      }
-      float* __restrict g_pass1 = three_d ? gz : gy;  // gradient along pass 1's axis
-      float* __restrict g_y3 = three_d ? gy : gz;     // y in 3D; z (all zero) in 2D
-      const double cell = cell_size_m;
-      for (int x = 0; x < width; ++x) {
-        const double ex = ox[x], e0 = o0[x], e1 = o1[x];
-        const double r = std::sqrt(ex * ex + e0 * e0 + e1 * e1);
-        const double inv = 1.0 / (r + (r == 0.0));  // 1 / r; 1 for an obstacle (r = 0)
-        dist[x] = static_cast<float>(r * cell);
-        gx[x] = static_cast<float>(ex * inv);
-        g_pass1[x] = static_cast<float>(e0 * inv);
-        g_y3[x] = static_cast<float>(e1 * inv);
+      const auto finish = [&](auto three_d_tag) {
+        constexpr bool k3d = decltype(three_d_tag)::value;
+        scan_envelope(width, e, [&](int q, int root) {
+          ox[q] = q - root;
+          o0[q] = a0[root];
+          if constexpr (k3d) o1[q] = a1[root];
+        });
+        for (int x = 0; x < width; ++x) {
+          const std::int32_t keep = -static_cast<std::int32_t>(st[x] != unknown_state);
+          ox[x] &= keep;
+          o0[x] &= keep;
+          if constexpr (k3d) o1[x] &= keep;
+        }
+        float* __restrict g_pass1 = k3d ? gz : gy;  // gradient along pass 1's axis
+        float* __restrict g_y3 = k3d ? gy : gz;     // y in 3D; z (all zero) in 2D
+        const double cell = cell_size_m;
+        for (int x = 0; x < width; ++x) {
+          const double ex = ox[x], e0 = o0[x];
+          const double e1 = k3d ? o1[x] : 0.0;
+          const double r = std::sqrt(k3d ? ex * ex + e0 * e0 + e1 * e1 : ex * ex + e0 * e0);
+          const double inv = 1.0 / (r + (r == 0.0));  // 1 / r; 1 for an obstacle (r = 0)
+          dist[x] = static_cast<float>(r * cell);
+          gx[x] = static_cast<float>(ex * inv);
+          g_pass1[x] = static_cast<float>(e0 * inv);
+          g_y3[x] = k3d ? static_cast<float>(e1 * inv) : 0.0f;
+        }
+      };
+      if (three_d) {
+        finish(std::true_type{});
+      } else {
+        finish(std::false_type{});
       }
       if (report_unknown) {
         for (int x = 0; x < width; ++x) {

@@ -79,8 +79,9 @@ struct CostmapLayers {
   std::vector<float> ground_offsets;       ///< coarse cells' offsets from the vehicle's plane
   std::vector<std::uint8_t> any_known;     ///< per cell: some envelope voxel observed
   std::vector<std::uint8_t> any_obstacle;  ///< per cell: some envelope voxel is an obstacle
-  /// Per cell, bit z set when window layer z is occupied / observed (windows of <= 64 layers;
-  /// layers 0..31 in the first cell-count words, 32..63 in the second).
+  /// Per cell in the occupancy window's ring (storage) order, bit z set when window layer z is
+  /// occupied / observed (windows of <= 64 layers; layers 0..31 in the first cell-count words,
+  /// 32..63 in the second).
   std::vector<std::uint32_t> occupied_bits, known_bits;
   std::vector<std::uint16_t> ground_scan;  ///< per cell: scan of those returns
 };
