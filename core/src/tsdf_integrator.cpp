@@ -162,6 +162,9 @@ struct TsdfIntegrator::Scratch {
   std::vector<SampleBin> bins = std::vector<SampleBin>(kRayChunks * kPartitions);
   std::vector<std::uint64_t> chunk_rays = std::vector<std::uint64_t>(kRayChunks);
   std::vector<Partition> partitions = std::vector<Partition>(kPartitions);
+  /// Spare leaves per partition (taken in slot order by that partition's task only).
+  std::vector<std::vector<std::unique_ptr<Leaf>>> spares =
+      std::vector<std::vector<std::unique_ptr<Leaf>>>(kPartitions);
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -181,6 +184,7 @@ Status TsdfParams::validate() const {
   if (!(max_range_m > 0.0f && max_range_m <= 1000.0f)) {
     return bad("max_range_m", "must be in (0, 1000] m");
   }
+  if (reserve_blocks > 10'000'000) return bad("reserve_blocks", "must be in [0, 1e7]");
   return Ok{};
 }
 
@@ -303,10 +307,29 @@ TsdfLayer::Grids& TsdfLayer::grids() {
 TsdfIntegrator::TsdfIntegrator(const TsdfParams& params)
     : params_(params), scratch_(std::make_unique<Scratch>()) {
   TARMAC_ASSERT(params.validate().ok(), "TsdfParams must be validated first");
+  reserve_blocks(params.reserve_blocks);
 }
 TsdfIntegrator::~TsdfIntegrator() = default;
 TsdfIntegrator::TsdfIntegrator(TsdfIntegrator&&) noexcept = default;
 TsdfIntegrator& TsdfIntegrator::operator=(TsdfIntegrator&&) noexcept = default;
+
+void TsdfIntegrator::reserve_blocks(std::size_t blocks) {
+  const std::size_t per_partition = (blocks + kPartitions - 1) / kPartitions;
+  // Built with the background value, as integrate builds a new leaf: the buffer is touched here.
+  const Value background(params_.truncation_m, 0.0f);
+  for (auto& spares : scratch_->spares) {
+    spares.reserve(per_partition);
+    while (spares.size() < per_partition) {
+      spares.push_back(std::make_unique<Leaf>(openvdb::Coord(0, 0, 0), background, false));
+    }
+  }
+}
+
+std::size_t TsdfIntegrator::spare_blocks() const {
+  std::size_t n = 0;
+  for (const auto& spares : scratch_->spares) n += spares.size();
+  return n;
+}
 
 TsdfLayer TsdfIntegrator::make_layer() const {
   return TsdfLayer(params_.voxel_size_m, params_.truncation_m);
@@ -572,7 +595,15 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
                                       b.z() * kTsdfBlockEdge);
           Leaf* leaf = acc_tree.probeLeaf(origin);
           if (leaf == nullptr) {
-            part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
+            // A spare (all background, inactive, as a new leaf) when there is one.
+            auto& spares = s.spares[p];
+            if (spares.empty()) {
+              part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
+            } else {
+              part.new_leaves.push_back(std::move(spares.back()));
+              spares.pop_back();
+              part.new_leaves.back()->setOrigin(origin);
+            }
             leaf = part.new_leaves.back().get();
           }
           cache.table[h] = TsdfLeafCache::Entry{key, leaf, leaf->buffer().data()};

@@ -37,6 +37,7 @@ struct Options {
   bool esdf = true;
   float tsdf_voxel_m = 0.1f;
   float tsdf_truncation_m = 0.3f;
+  std::uint32_t tsdf_reserve_blocks = 0;
   bool tsdf_only = false;
 };
 
@@ -100,6 +101,8 @@ int main(int argc, char** argv) {
       opt.tsdf_voxel_m = static_cast<float>(std::atof(argv[++i]));
     else if (a == "--tsdf-truncation" && v)
       opt.tsdf_truncation_m = static_cast<float>(std::atof(argv[++i]));
+    else if (a == "--tsdf-reserve-blocks" && v)
+      opt.tsdf_reserve_blocks = static_cast<std::uint32_t>(std::atol(argv[++i]));
     else if (a == "--tsdf-only")
       opt.tsdf_only = true;
     else {
@@ -107,7 +110,8 @@ int main(int argc, char** argv) {
           stderr,
           "usage: tarmac-bench --dataset DIR [--resolution M] [--max-range M] [--threads N]\n"
           "                    [--scans N] [--poses FILE] [--sensor-height M] [--no-esdf]\n"
-          "                    [--tsdf-voxel M] [--tsdf-truncation M] [--tsdf-only]\n");
+          "                    [--tsdf-voxel M] [--tsdf-truncation M] [--tsdf-only]\n"
+          "                    [--tsdf-reserve-blocks N]\n");
       return a == "--help" ? 0 : 64;
     }
   }
@@ -138,6 +142,7 @@ int main(int argc, char** argv) {
   // TSDF at its own resolution (default 0.1 m / 0.3 m, VDBFusion's KITTI setting), same max range.
   params.tsdf.voxel_size_m = opt.tsdf_voxel_m;
   params.tsdf.truncation_m = opt.tsdf_truncation_m;
+  params.tsdf.reserve_blocks = opt.tsdf_reserve_blocks;
   params.tsdf.max_range_m = static_cast<float>(opt.max_range_m);
   if (auto valid = params.validate(); !valid) {
     std::fprintf(stderr, "tarmac-bench: %s\n", valid.error().message.c_str());
