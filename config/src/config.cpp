@@ -276,6 +276,7 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     r.scalar<float>("max_weight", t.max_weight, 1.0f, 1e6f);
     r.scalar<float>("max_range_m", t.max_range_m, 0.1f, 1000.0f);
     r.scalar<bool>("space_carving", t.space_carving, false, true);
+    r.scalar<std::uint32_t>("reserve_blocks", t.reserve_blocks, 0, 10'000'000);
   });
   root.map("corrections", [&](MapReader& r) {
     auto& k = p.corrections;
@@ -688,6 +689,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "max_weight" << YAML::Value << t.max_weight;
   out << YAML::Key << "max_range_m" << YAML::Value << t.max_range_m;
   out << YAML::Key << "space_carving" << YAML::Value << t.space_carving;
+  out << YAML::Key << "reserve_blocks" << YAML::Value << t.reserve_blocks;
   out << YAML::EndMap;
   const auto& k = m.corrections;
   out << YAML::Key << "corrections" << YAML::Value << YAML::BeginMap;

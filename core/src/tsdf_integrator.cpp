@@ -51,36 +51,43 @@ std::size_t partition_of(std::uint64_t key) {
 }
 static_assert(kPartitions == 16, "partition_of takes the top 4 bits");
 
-/// One (ray, voxel) pair inside the band.
+/// One (ray, voxel) pair inside the band; its block is that of the run holding it.
 struct Sample {
-  std::uint64_t block_key;
   std::uint32_t offset;  // voxel inside the block, OpenVDB leaf order
   float sdf_m;
 };
 
-/// Band samples of one (ray chunk, partition), stored without initialisation (a vector would
-/// zero what it grows into) and read back in order.
-struct SampleBin {
-  std::unique_ptr<Sample[]> data;
-  std::size_t capacity = 0;
-  std::size_t count = 0;
-
-  const Sample* begin() const { return data.get(); }
-  const Sample* end() const { return data.get() + count; }
-  std::size_t size() const { return count; }
-  void grow(std::size_t min_capacity) {
-    const std::size_t cap = std::max({min_capacity, 2 * capacity, std::size_t{1024}});
-    auto bigger = std::make_unique_for_overwrite<Sample[]>(cap);
-    std::copy(begin(), end(), bigger.get());
-    data = std::move(bigger);
-    capacity = cap;
-  }
+/// Consecutive samples of one bin in one block (a ray crosses a block in one run; consecutive
+/// rays in the same block extend it): samples [begin, next run's begin) of the bin.
+struct Run {
+  std::uint64_t block_key;
+  std::uint32_t begin;
 };
 
-/// One sample after grouping by block.
-struct GroupedSample {
-  std::uint32_t offset;
-  float sdf_m;
+/// Band samples of one (ray chunk, partition) and their runs, stored without initialisation (a
+/// vector would zero what it grows into) and read back in order. Every run holds at least one
+/// sample, so `runs` needs no more room than `samples`: both share one capacity.
+struct SampleBin {
+  std::unique_ptr<Sample[]> samples;
+  std::unique_ptr<Run[]> runs;
+  std::size_t capacity = 0;
+  std::size_t count = 0;  // samples
+  std::size_t run_count = 0;
+
+  std::size_t size() const { return count; }
+  std::uint32_t run_end(std::size_t r) const {
+    return r + 1 < run_count ? runs[r + 1].begin : static_cast<std::uint32_t>(count);
+  }
+  void grow(std::size_t min_capacity) {
+    const std::size_t cap = std::max({min_capacity, 2 * capacity, std::size_t{1024}});
+    auto more_samples = std::make_unique_for_overwrite<Sample[]>(cap);
+    auto more_runs = std::make_unique_for_overwrite<Run[]>(cap);
+    std::copy(samples.get(), samples.get() + count, more_samples.get());
+    std::copy(runs.get(), runs.get() + run_count, more_runs.get());
+    samples = std::move(more_samples);
+    runs = std::move(more_runs);
+    capacity = cap;
+  }
 };
 
 /// Per-partition state: blocks met this scan (open addressing), grouped samples, new leaves.
@@ -91,11 +98,9 @@ struct Partition {
   std::vector<std::uint32_t> slot_hash_pos;
   std::vector<std::uint32_t> slot_count;
   std::vector<std::uint32_t> slot_start;
-  /// Runs of consecutive samples of one block (a ray crosses a block in a run): the slot of
-  /// each run, and its length. Slot lookups and scatter bookkeeping are per run, not per sample.
+  /// The slot of each run (bins in chunk order): slot lookups are per run, not per sample.
   std::vector<std::uint32_t> run_slot;
-  std::vector<std::uint32_t> run_length;
-  std::vector<GroupedSample> grouped;
+  std::vector<Sample> grouped;
   std::vector<std::uint64_t> slot_lines;  // cache lines (8 voxels) of the block touched
   std::vector<TsdfLeafCache::Entry> slot_entry;
   std::vector<std::unique_ptr<Leaf>> new_leaves;
@@ -123,6 +128,7 @@ struct Partition {
     slot_keys.push_back(key);
     slot_hash_pos.push_back(static_cast<std::uint32_t>(h));
     slot_count.push_back(0);
+    slot_lines.push_back(0);
     if (2 * slot_keys.size() > table_keys.size()) grow();  // at most half full
     return slot;
   }
@@ -146,6 +152,7 @@ struct Partition {
     slot_keys.clear();
     slot_hash_pos.clear();
     slot_count.clear();
+    slot_lines.clear();
   }
 };
 
@@ -155,6 +162,9 @@ struct TsdfIntegrator::Scratch {
   std::vector<SampleBin> bins = std::vector<SampleBin>(kRayChunks * kPartitions);
   std::vector<std::uint64_t> chunk_rays = std::vector<std::uint64_t>(kRayChunks);
   std::vector<Partition> partitions = std::vector<Partition>(kPartitions);
+  /// Spare leaves per partition (taken in slot order by that partition's task only).
+  std::vector<std::vector<std::unique_ptr<Leaf>>> spares =
+      std::vector<std::vector<std::unique_ptr<Leaf>>>(kPartitions);
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -174,6 +184,7 @@ Status TsdfParams::validate() const {
   if (!(max_range_m > 0.0f && max_range_m <= 1000.0f)) {
     return bad("max_range_m", "must be in (0, 1000] m");
   }
+  if (reserve_blocks > 10'000'000) return bad("reserve_blocks", "must be in [0, 1e7]");
   return Ok{};
 }
 
@@ -296,10 +307,29 @@ TsdfLayer::Grids& TsdfLayer::grids() {
 TsdfIntegrator::TsdfIntegrator(const TsdfParams& params)
     : params_(params), scratch_(std::make_unique<Scratch>()) {
   TARMAC_ASSERT(params.validate().ok(), "TsdfParams must be validated first");
+  reserve_blocks(params.reserve_blocks);
 }
 TsdfIntegrator::~TsdfIntegrator() = default;
 TsdfIntegrator::TsdfIntegrator(TsdfIntegrator&&) noexcept = default;
 TsdfIntegrator& TsdfIntegrator::operator=(TsdfIntegrator&&) noexcept = default;
+
+void TsdfIntegrator::reserve_blocks(std::size_t blocks) {
+  const std::size_t per_partition = (blocks + kPartitions - 1) / kPartitions;
+  // Built with the background value, as integrate builds a new leaf: the buffer is touched here.
+  const Value background(params_.truncation_m, 0.0f);
+  for (auto& spares : scratch_->spares) {
+    spares.reserve(per_partition);
+    while (spares.size() < per_partition) {
+      spares.push_back(std::make_unique<Leaf>(openvdb::Coord(0, 0, 0), background, false));
+    }
+  }
+}
+
+std::size_t TsdfIntegrator::spare_blocks() const {
+  std::size_t n = 0;
+  for (const auto& spares : scratch_->spares) n += spares.size();
+  return n;
+}
 
 TsdfLayer TsdfIntegrator::make_layer() const {
   return TsdfLayer(params_.voxel_size_m, params_.truncation_m);
@@ -317,6 +347,7 @@ struct ChunkBins {
     room = std::numeric_limits<std::size_t>::max();
     for (std::size_t p = 0; p < kPartitions; ++p) {
       bins[p].count = 0;
+      bins[p].run_count = 0;
       room = std::min(room, bins[p].capacity);
     }
   }
@@ -344,7 +375,12 @@ template <bool kCarve>
 std::size_t band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double range,
                          double t0, double t1, double v, double trunc, ChunkBins& out) {
   const Eigen::Vector3d q0 = (o + t0 * dir) / v;  // voxel units
-  Eigen::Vector3i idx = q0.array().floor().cast<int>();
+  // floor() inline (without SSE4.1 std::floor is a libm call); exact: |q0| < 2^23 here.
+  Eigen::Vector3i idx;
+  for (int a = 0; a < 3; ++a) {
+    idx[a] = static_cast<int>(q0[a]);
+    idx[a] -= q0[a] < static_cast<double>(idx[a]) ? 1 : 0;
+  }
   int step[3];
   double t_max[3], t_delta[3];
   // A huge finite value for axes the ray does not cross (0 · kNever must stay 0 below).
@@ -382,10 +418,15 @@ std::size_t band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, d
       if (key != last_key) {
         last_key = key;
         bin = &out.bins[partition_of(key)];
+        if (kCarve && bin->count == bin->capacity) bin->grow(bin->count + 1);
+        // Room: run_count <= count < capacity (every run holds a sample).
+        if (bin->run_count == 0 || bin->runs[bin->run_count - 1].block_key != key) {
+          bin->runs[bin->run_count++] = Run{key, static_cast<std::uint32_t>(bin->count)};
+        }
       }
       if (kCarve && bin->count == bin->capacity) bin->grow(bin->count + 1);
       const auto offset = static_cast<std::uint32_t>(tsdf_voxel_offset(ix & 7, iy & 7, iz & 7));
-      bin->data[bin->count++] = Sample{key, offset, static_cast<float>(sdf)};
+      bin->samples[bin->count++] = Sample{offset, static_cast<float>(sdf)};
       ++written;
     }
     const bool xy = tx < ty, xz = tx < tz, yz = ty < tz;
@@ -466,28 +507,25 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
   grids.leaf_cache.resize(kPartitions);
   runner.parallel_for(kPartitions, [&](std::size_t p) {
     Partition& part = s.partitions[p];
-    std::size_t total = 0;
-    for (std::size_t c = 0; c < kRayChunks; ++c) total += s.bins[c * kPartitions + p].size();
+    std::size_t total = 0, total_runs = 0;
+    for (std::size_t c = 0; c < kRayChunks; ++c) {
+      total += s.bins[c * kPartitions + p].size();
+      total_runs += s.bins[c * kPartitions + p].run_count;
+    }
     if (part.table_keys.empty()) part.grow();
-    part.run_slot.resize(total);
-    part.run_length.resize(total);
+    part.run_slot.resize(total_runs);
     part.grouped.resize(total);
     part.new_leaves.clear();
     part.voxel_updates = 0;
+    // Count the samples of each block, run by run (the samples themselves are not read here).
     std::size_t runs = 0;
     for (std::size_t c = 0; c < kRayChunks; ++c) {
       const SampleBin& bin = s.bins[c * kPartitions + p];
-      for (std::size_t i = 0; i < bin.count;) {
-        const std::uint64_t key = bin.data[i].block_key;
-        std::size_t j = i + 1;
-        while (j < bin.count && bin.data[j].block_key == key) ++j;
-        const std::uint32_t slot = part.slot_for(key);
-        const auto len = static_cast<std::uint32_t>(j - i);
-        part.slot_count[slot] += len;
-        part.run_slot[runs] = slot;
-        part.run_length[runs] = len;
-        ++runs;
-        i = j;
+      for (std::size_t r = 0; r < bin.run_count; ++r) {
+        const Run& run = bin.runs[r];
+        const std::uint32_t slot = part.slot_for(run.block_key);
+        part.slot_count[slot] += bin.run_end(r) - run.begin;
+        part.run_slot[runs++] = slot;
       }
     }
     const std::size_t slots = part.slot_keys.size();
@@ -500,21 +538,20 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     part.slot_start[slots] = acc;
     // Scatter (stable: ray order within each block), run by run in the order counted.
     for (std::size_t sl = 0; sl < slots; ++sl) part.slot_count[sl] = part.slot_start[sl];
-    part.slot_lines.assign(slots, 0);
     {
-      std::size_t r = 0;
+      std::size_t k = 0;
       for (std::size_t c = 0; c < kRayChunks; ++c) {
         const SampleBin& bin = s.bins[c * kPartitions + p];
-        for (std::size_t i = 0; i < bin.count; ++r) {
-          const std::uint32_t slot = part.run_slot[r];
-          GroupedSample* dst = &part.grouped[part.slot_count[slot]];
+        for (std::size_t r = 0; r < bin.run_count; ++r) {
+          const std::uint32_t slot = part.run_slot[k++];
+          const std::uint32_t begin = bin.runs[r].begin, len = bin.run_end(r) - begin;
+          Sample* dst = &part.grouped[part.slot_count[slot]];
           std::uint64_t lines = 0;
-          for (const std::size_t end = i + part.run_length[r]; i < end; ++i) {
-            const Sample& smp = bin.data[i];
-            *dst++ = {smp.offset, smp.sdf_m};
-            lines |= std::uint64_t{1} << (smp.offset >> 3);
+          for (std::uint32_t i = begin; i < begin + len; ++i) {
+            *dst++ = bin.samples[i];
+            lines |= std::uint64_t{1} << (bin.samples[i].offset >> 3);
           }
-          part.slot_count[slot] += part.run_length[r];
+          part.slot_count[slot] += len;
           part.slot_lines[slot] |= lines;
         }
       }
@@ -558,7 +595,15 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
                                       b.z() * kTsdfBlockEdge);
           Leaf* leaf = acc_tree.probeLeaf(origin);
           if (leaf == nullptr) {
-            part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
+            // A spare (all background, inactive, as a new leaf) when there is one.
+            auto& spares = s.spares[p];
+            if (spares.empty()) {
+              part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
+            } else {
+              part.new_leaves.push_back(std::move(spares.back()));
+              spares.pop_back();
+              part.new_leaves.back()->setOrigin(origin);
+            }
             leaf = part.new_leaves.back().get();
           }
           cache.table[h] = TsdfLeafCache::Entry{key, leaf, leaf->buffer().data()};
@@ -602,7 +647,7 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
       // The voxels of the block, each once in first-touch order (branch-free: whether a sample
       // is a voxel's first is unpredictable).
       for (std::uint32_t g = part.slot_start[sl]; g < part.slot_start[sl + 1]; ++g) {
-        const GroupedSample gs = part.grouped[g];
+        const Sample gs = part.grouped[g];
         const std::uint32_t c = part.count[gs.offset];
         touched[nt] = gs.offset;
         nt += c == 0;

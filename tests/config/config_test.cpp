@@ -99,7 +99,7 @@ TEST(Config, SyntaxErrorsAreReportedNotThrown) {
 TEST(Config, TsdfSectionAppliesAndIsValidated) {
   auto config = load_config_string(
       "version: 1\ntsdf: {enabled: false, voxel_size_m: 0.2, truncation_m: 0.6, max_weight: 20,\n"
-      "       max_range_m: 80, space_carving: true}\n");
+      "       max_range_m: 80, space_carving: true, reserve_blocks: 4096}\n");
   ASSERT_TRUE(config.ok()) << config.error().message;
   const auto& t = config.value().mapping.tsdf;
   EXPECT_FALSE(t.enabled);
@@ -108,6 +108,7 @@ TEST(Config, TsdfSectionAppliesAndIsValidated) {
   EXPECT_FLOAT_EQ(t.max_weight, 20.f);
   EXPECT_FLOAT_EQ(t.max_range_m, 80.f);
   EXPECT_TRUE(t.space_carving);
+  EXPECT_EQ(t.reserve_blocks, 4096u);
   EXPECT_NE(config_hash(config.value()), config_hash(Config{}));
   EXPECT_EQ(error_of("version: 1\ntsdf: {trunction_m: 0.3}\n"), "tsdf.trunction_m: unknown key");
   EXPECT_EQ(error_of("version: 1\ntsdf: {max_weight: 0}\n"),

@@ -323,6 +323,28 @@ TEST(TsdfIntegrator, Determinism_DigestIdenticalFor1To4Threads) {
   EXPECT_EQ(counts[0], counts[2]);
 }
 
+TEST(TsdfIntegrator, ReserveBlocks_SameMapAndSparesTakenFirst) {
+  const auto scans = synthetic_scans();
+  SerialRunner runner;
+  TsdfIntegrator plain(params_01());
+  TsdfLayer plain_layer = plain.make_layer();
+  TsdfParams reserved_params = params_01();
+  reserved_params.reserve_blocks = 100;  // fewer than the scans create: spares run out
+  TsdfIntegrator reserved(reserved_params);
+  TsdfLayer reserved_layer = reserved.make_layer();
+  ASSERT_EQ(reserved.spare_blocks(), 112u);  // 7 per partition
+  std::size_t created = 0;
+  for (const auto& [o, pts] : scans) {
+    plain.integrate(o, pts, plain_layer, runner);
+    created += reserved.integrate(o, pts, reserved_layer, runner).blocks_created;
+  }
+  ASSERT_GT(created, 112u);
+  EXPECT_EQ(reserved.spare_blocks(), 0u);
+  EXPECT_EQ(plain_layer.digest(), reserved_layer.digest());
+  reserved.reserve_blocks(20);
+  EXPECT_EQ(reserved.spare_blocks(), 32u);  // 2 per partition
+}
+
 TEST(TsdfIntegrator, Update_ReportsEveryChangedBlockOnce) {
   const auto scans = synthetic_scans();
   TsdfIntegrator integrator(params_01());

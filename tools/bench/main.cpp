@@ -37,6 +37,7 @@ struct Options {
   bool esdf = true;
   float tsdf_voxel_m = 0.1f;
   float tsdf_truncation_m = 0.3f;
+  std::uint32_t tsdf_reserve_blocks = 0;
   bool tsdf_only = false;
   /// Occupancy window in voxels (x, y, z); 0: derived from the max range (x, y) and 8 m (z).
   int window_x = 0, window_y = 0, window_z = 0;
@@ -102,6 +103,8 @@ int main(int argc, char** argv) {
       opt.tsdf_voxel_m = static_cast<float>(std::atof(argv[++i]));
     else if (a == "--tsdf-truncation" && v)
       opt.tsdf_truncation_m = static_cast<float>(std::atof(argv[++i]));
+    else if (a == "--tsdf-reserve-blocks" && v)
+      opt.tsdf_reserve_blocks = static_cast<std::uint32_t>(std::atol(argv[++i]));
     else if (a == "--tsdf-only")
       opt.tsdf_only = true;
     else if (a == "--window" && v) {
@@ -117,7 +120,8 @@ int main(int argc, char** argv) {
           "                    [--scans N] [--poses FILE] [--sensor-height M] [--no-esdf]\n"
           "                    [--tsdf-voxel M] [--tsdf-truncation M] [--tsdf-only]\n"
           "                    [--window X,Y,Z]   (voxels; default: 2*ceil(range/res)+2 x same x "
-          "8 m)\n");
+          "8 m)\n"
+          "                    [--tsdf-reserve-blocks N]\n");
       return a == "--help" ? 0 : 64;
     }
   }
@@ -150,6 +154,7 @@ int main(int argc, char** argv) {
   // TSDF at its own resolution (default 0.1 m / 0.3 m, VDBFusion's KITTI setting), same max range.
   params.tsdf.voxel_size_m = opt.tsdf_voxel_m;
   params.tsdf.truncation_m = opt.tsdf_truncation_m;
+  params.tsdf.reserve_blocks = opt.tsdf_reserve_blocks;
   params.tsdf.max_range_m = static_cast<float>(opt.max_range_m);
   if (auto valid = params.validate(); !valid) {
     std::fprintf(stderr, "tarmac-bench: %s\n", valid.error().message.c_str());
