@@ -19,6 +19,7 @@ enum Domain : std::uint32_t {
   kDomainSharedMemoryOnly = 113,
   kDomainCycloneInterop = 114,
   kDomainConfinement = 115,
+  kDomainLoopbackPath = 120,
   // DDS Security (tests/transport/security_test.cpp): 116..119
   kDomainSecurityExchange = 116,
   kDomainSecurityUnauthenticated = 117,

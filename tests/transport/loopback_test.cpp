@@ -3,6 +3,11 @@
 
 #include <chrono>
 #include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -13,6 +18,7 @@
 #include "nav_msgsPubSubTypes.h"
 #include "rtps_sniffer.hpp"
 #include "sensor_msgsPubSubTypes.h"
+#include "tarmac/transport/inputs.hpp"
 #include "tarmac/transport/participant.hpp"
 #include "test_env.hpp"
 
@@ -126,6 +132,69 @@ TEST_F(Loopback, ReaderQueue_OverflowDropsOldestAndCounts) {
   EXPECT_EQ(reader->dropped(), 3u);
   EXPECT_EQ(got[0].header().stamp().sec(), 103);  // the two newest, oldest first
   EXPECT_EQ(got[1].header().stamp().sec(), 104);
+}
+
+/// What a TrajectoryInput hands on: the accepted paths (made-at stamp, pose stamps) and the
+/// rejection reasons, in order.
+class RecordingTrajectorySink final : public TrajectorySink {
+ public:
+  void trajectory(std::int64_t stamp_ns, std::span<const PoseSample> poses) override {
+    std::vector<std::int64_t> stamps;
+    for (const auto& p : poses) stamps.push_back(p.stamp_ns);
+    accepted.emplace_back(stamp_ns, stamps);
+  }
+  void reject(std::string_view reason) override { rejected.emplace_back(reason); }
+  std::vector<std::pair<std::int64_t, std::vector<std::int64_t>>> accepted;
+  std::vector<std::string> rejected;
+};
+
+PathMsg path_of(const std::string& frame, std::int64_t made_ns,
+                const std::vector<std::int64_t>& stamps) {
+  PathMsg path;
+  path.header().frame_id(frame);
+  path.header().stamp(to_time_msg(made_ns));
+  for (const std::int64_t t : stamps) {
+    geometry_msgs::msg::dds_::PoseStamped_ ps;
+    ps.header().stamp(to_time_msg(t));
+    ps.pose(to_pose_msg(Eigen::Isometry3d::Identity()));
+    path.poses().push_back(ps);
+  }
+  return path;
+}
+
+TEST_F(Loopback, PathCorrection_AcceptedOrRejectedWholeWithItsReason) {
+  using PathWriter = Writer<nav_msgs::msg::dds_::Path_PubSubType>;
+  auto pub = make_participant(test::kDomainLoopbackPath, "path-pub");
+  auto sub = make_participant(test::kDomainLoopbackPath, "path-sub");
+  const QosSpec reliable{Reliability::kReliable, Durability::kVolatile, 10};
+  auto input = must(TrajectoryInput::create(sub, "rt/tarmac/pose_correction", "map", reliable, 8));
+  auto writer = must(PathWriter::create(pub, "rt/tarmac/pose_correction", reliable));
+  ASSERT_TRUE(writer->wait_for_readers(1, 10s));
+  ASSERT_TRUE(writer->write(path_of("map", 500, {100, 200, 300})));  // accepted
+  ASSERT_TRUE(writer->write(path_of("odom", 500, {100, 200})));      // another frame
+  ASSERT_TRUE(writer->write(path_of("map", 500, {})));               // no pose
+  ASSERT_TRUE(writer->write(path_of("map", 500, {200, 100})));       // stamps not increasing
+  auto bad_pose = path_of("map", 500, {100});
+  bad_pose.poses()[0].pose().orientation().w(0.0);  // zero quaternion
+  ASSERT_TRUE(writer->write(bad_pose));
+  ASSERT_TRUE(writer->write(path_of("map", 0, {400, 450})));  // no made-at stamp: the newest pose's
+  ASSERT_TRUE(writer->wait_for_acknowledgments(10000ms));
+  RecordingTrajectorySink sink;
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  std::size_t taken = 0;
+  while (taken < 6 && std::chrono::steady_clock::now() < deadline) {
+    taken += input->drain(sink);
+    std::this_thread::sleep_for(5ms);
+  }
+  ASSERT_EQ(taken, 6u);
+  ASSERT_EQ(sink.accepted.size(), 2u);
+  EXPECT_EQ(sink.accepted[0].first, 500);
+  EXPECT_EQ(sink.accepted[0].second, (std::vector<std::int64_t>{100, 200, 300}));
+  EXPECT_EQ(sink.accepted[1].first, 450);
+  EXPECT_EQ(sink.rejected,
+            (std::vector<std::string>{"correction.unknown_frame", "correction.empty",
+                                      "correction.unsorted", "pose.bad_quaternion"}));
+  EXPECT_EQ(input->overflow_drops(), 0u);
 }
 
 TEST_F(Loopback, SharedMemoryOnly_RoundTrip) {
