@@ -133,6 +133,15 @@ struct StateConfig {
   double save_period_s = 300.0;
 };
 
+/// The core's defaults, except where the daemon wants otherwise: 8192 TSDF blocks reserved at
+/// start (32 MB), so the first scans from an empty map cost no page faults (the core's own
+/// default is 0, for tools and tests that build many mappers).
+inline core::MapperParams daemon_mapping_defaults() {
+  core::MapperParams p;
+  p.tsdf.reserve_blocks = 8192;
+  return p;
+}
+
 struct Config {
   int version = kConfigVersion;
   DdsConfig dds;
@@ -143,7 +152,8 @@ struct Config {
   QuotaConfig quotas;
   OutputConfig outputs;
   StateConfig state;
-  core::MapperParams mapping;  ///< YAML sections filters, occupancy, costmap, tsdf
+  core::MapperParams mapping =
+      daemon_mapping_defaults();  ///< YAML filters, occupancy, costmap, tsdf
 };
 
 /// Parses YAML text. Error code "config.<reason>", message "<key.path>: <why>".
