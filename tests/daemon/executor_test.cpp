@@ -75,6 +75,13 @@ config::Config test_config(std::uint32_t domain, std::uint32_t workers) {
   return c;
 }
 
+/// A scan's base pose as the daemon sees it after a wire round trip (quaternions).
+core::StampedPose wire_pose(std::int64_t stamp_ns, const Eigen::Isometry3d& T_W_S,
+                            const Eigen::Isometry3d& T_B_S) {
+  return {stamp_ns,
+          transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(T_W_S, T_B_S))).value()};
+}
+
 /// Runs the core offline, scan by scan, on the poses as they travel over the wire
 /// (quaternions), with the TSDF stage when `tsdf` (no quota shedding).
 void run_offline(core::Mapper& mapper, const config::Config& cfg, std::size_t scans, bool tsdf) {
@@ -84,9 +91,7 @@ void run_offline(core::Mapper& mapper, const config::Config& cfg, std::size_t sc
   core::PointCloud cloud;
   for (std::size_t k = 0; k < scans; ++k) {
     EXPECT_TRUE(tools::read_kitti_scan(seq.scans[k], cloud).ok());
-    const auto wire =
-        transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(seq.T_W_S[k], T_B_S)));
-    mapper.ingest(cloud, wire.value(), T_B_S);
+    mapper.ingest(cloud, wire_pose(0, seq.T_W_S[k], T_B_S).T_W_B, T_B_S);
     mapper.integrate(runner);
     if (tsdf) mapper.integrate_tsdf(runner);
   }
@@ -294,14 +299,6 @@ const tools::KittiSequence& drift_sequence() {
 void pose_jump_config(config::Config& c) {
   c.mapping.corrections.retain_scans = 10;
   c.mapping.corrections.rebuild_points_per_cycle = 20000;  // 2-3 of these scans per step
-}
-
-/// The drift sequence's pose of a scan as the daemon sees it after a wire round trip
-/// (quaternions).
-core::StampedPose wire_pose(std::int64_t stamp_ns, const Eigen::Isometry3d& T_W_S,
-                            const Eigen::Isometry3d& T_B_S) {
-  return {stamp_ns,
-          transport::from_pose_msg(transport::to_pose_msg(tools::base_pose(T_W_S, T_B_S))).value()};
 }
 
 struct OfflineCorrected {

@@ -163,14 +163,16 @@ int main(int argc, char** argv) {
   sigaction(SIGTERM, &sa, nullptr);
   // Say when both readers have matched tarmacd's writers: a script starts its publisher after
   // this line, so the first costmaps (the cold start) are in the figures, not lost to discovery.
+  const auto matched = [&] {
+    return reports.value()->matched_writers() > 0 && grids.value()->matched_writers() > 0;
+  };
   const auto t_wait = std::chrono::steady_clock::now();
-  while (!g_stop &&
-         (reports.value()->matched_writers() == 0 || grids.value()->matched_writers() == 0) &&
+  while (!g_stop && !matched() &&
          std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wait).count() <
              timeout_s) {
     std::this_thread::sleep_for(10ms);
   }
-  if (reports.value()->matched_writers() > 0 && grids.value()->matched_writers() > 0) {
+  if (matched()) {
     std::fprintf(stderr, "tarmac-audit: matched (%s, %s)\n", cfg.outputs.costmap_topic.c_str(),
                  cfg.outputs.cycle_report_topic.c_str());
   }
