@@ -23,6 +23,7 @@ Status MapperParams::validate() const {
   if (auto s = occupancy.validate(); !s) return s;
   if (auto s = tsdf.validate(); !s) return s;
   if (auto s = corrections.validate(); !s) return s;
+  if (auto s = esdf_band.validate(); !s) return s;
   return costmap.validate();
 }
 
@@ -113,6 +114,13 @@ void Mapper::record_tsdf(RetainedScan& scan, const TsdfUpdate& update) {
 void Mapper::update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                             TaskRunner& runner) {
   build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner);
+}
+
+void Mapper::update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                              TaskRunner& runner) {
+  if (!params_.esdf_band.enabled) return;
+  build_esdf_band(map_, layers_, params_.costmap, params_.esdf_band, T_W_B_, zones, stamp_ns, band_,
+                  runner);
 }
 
 std::size_t Mapper::retained_scans() const {

@@ -11,6 +11,7 @@
 
 #include "tarmac/core/costmap_builder.hpp"
 #include "tarmac/core/deskew.hpp"
+#include "tarmac/core/esdf_band.hpp"
 #include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/pose_correction.hpp"
@@ -25,6 +26,7 @@ struct MapperParams {
   CostmapParams costmap;
   TsdfParams tsdf;
   CorrectionParams corrections;
+  EsdfBandParams esdf_band;
 
   [[nodiscard]] Status validate() const;
 };
@@ -74,6 +76,10 @@ class Mapper {
   /// Stage 3: rebuilds the costmap and the 2D distance map from the window.
   void update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                       TaskRunner& runner);
+  /// Stage 3b: the 3D ESDF band (esdf_band.hpp) from the window and the costmap of the last
+  /// update_costmap() call. Does nothing when esdf_band.enabled is false.
+  void update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                        TaskRunner& runner);
   /// Stage 2b: integrates the ingested scan into the TSDF (sparse, whole site). Does nothing
   /// (and returns an empty update) when tsdf.enabled is false.
   const TsdfUpdate& integrate_tsdf(TaskRunner& runner);
@@ -126,6 +132,7 @@ class Mapper {
   /// For loading a saved static occupancy layer (OccupancyMap::import_static).
   [[nodiscard]] OccupancyMap& occupancy() { return map_; }
   [[nodiscard]] const CostmapLayers& costmap() const { return layers_; }
+  [[nodiscard]] const EsdfBand& esdf_band() const { return band_; }
   [[nodiscard]] const MapperParams& params() const { return params_; }
   [[nodiscard]] const TsdfLayer& tsdf() const { return tsdf_; }
   /// For loading a saved map into the mapper (the layer must match tsdf params).
@@ -160,6 +167,7 @@ class Mapper {
   std::vector<Eigen::Vector3f> rebuild_points_W_;
   CorrectionStats correction_stats_;
   CostmapLayers layers_;
+  EsdfBand band_;
   std::vector<Eigen::Vector3f> points_W_;
   FilterScratch filter_scratch_;
   PointCloud deskewed_;  ///< the scan after deskew (points only), reused

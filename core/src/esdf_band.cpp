@@ -1,0 +1,134 @@
+#include "tarmac/core/esdf_band.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "tarmac/core/assert.hpp"
+
+namespace tarmac::core {
+
+namespace {
+
+/// Rows of the window per state task: fixed, so the split does not depend on the runner.
+constexpr std::size_t kRowTasks = 16;
+
+}  // namespace
+
+Status EsdfBandParams::validate() const {
+  const auto bad = [](const char* key, const char* why) {
+    return Status{Error{"esdf_band.invalid", std::string(key) + ": " + why}};
+  };
+  if (!(below_m >= 0.0 && below_m <= 1000.0)) return bad("below_m", "must be in 0..1000");
+  if (!(above_m > 0.0 && above_m <= 1000.0)) return bad("above_m", "must be in (0, 1000]");
+  return Ok{};
+}
+
+void esdf_band_layers(const OccupancyMap& map, const EsdfBandParams& params, double base_z_m,
+                      int& z0, int& z1) {
+  const double v = map.params().voxel_size_m;
+  const int nz = map.window_size().z();
+  const int wz = map.window_min().z();
+  // 1e-9: a bound on a voxel boundary stays there despite rounding of base ± offset.
+  z0 = static_cast<int>(std::floor((base_z_m - params.below_m) / v + 1e-9)) - wz;
+  z1 = static_cast<int>(std::ceil((base_z_m + params.above_m) / v - 1e-9)) - wz;
+  z0 = std::clamp(z0, 0, nz);
+  z1 = std::clamp(z1, z0, nz);
+}
+
+void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
+                     const CostmapParams& costmap, const EsdfBandParams& params,
+                     const Eigen::Isometry3d& T_W_B, std::span<const VirtualZone> zones,
+                     std::int64_t stamp_ns, EsdfBand& out, TaskRunner& runner) {
+  const Eigen::Vector3i wdims = map.window_size();
+  const int nx = wdims.x(), ny = wdims.y();
+  const double v = map.params().voxel_size_m;
+  const VoxelIndex wmin = map.window_min();
+  TARMAC_ASSERT(layers.ground_layer.size() == static_cast<std::size_t>(nx) * ny,
+                "build_costmap must run on this window first");
+  int z0 = 0, z1 = 0;
+  esdf_band_layers(map, params, T_W_B.translation().z(), z0, z1);
+  const int nb = z1 - z0;
+  out.min = VoxelIndex(wmin.x(), wmin.y(), wmin.z() + z0);
+  out.obstacles = 0;
+  if (nb == 0) {
+    out.field.dims = Eigen::Vector3i(nx, ny, 0);
+    out.field.cell_size_m = v;
+    out.field.distance_m.clear();
+    out.field.gradient_x.clear();
+    out.field.gradient_y.clear();
+    out.field.gradient_z.clear();
+    return;
+  }
+  const std::size_t plane = static_cast<std::size_t>(nx) * ny;
+  out.states.resize(plane * static_cast<std::size_t>(nb));
+  out.ring_x.resize(static_cast<std::size_t>(nx));
+  for (int x = 0; x < nx; ++x) out.ring_x[static_cast<std::size_t>(x)] = map.ring_x(x);
+
+  // The costmap's split of a column (costmap_builder.cpp, step 3): obstacles start lo_layers
+  // above the ground voxel; the layers from the ground voxel up to there take the rise rule.
+  const int lo_layers = 1 + static_cast<int>(std::ceil(costmap.min_obstacle_height_m / v - 1e-9));
+  const auto min_rise_cm =
+      static_cast<int>(std::ceil(costmap.min_obstacle_height_m * 100.0 - 1e-9));
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    const int y0 = static_cast<int>(ny * task / kRowTasks);
+    const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    const int* __restrict rx = out.ring_x.data();
+    const std::int16_t* __restrict ground = layers.ground_layer.data();
+    for (int lz = 0; lz < nb; ++lz) {
+      const int z = z0 + lz;
+      const float* __restrict lo = map.ring_layer(z);
+      const std::uint8_t* __restrict rise = map.ring_layer_rise_cm(z);
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
+        const std::size_t row = static_cast<std::size_t>(y) * nx;
+        CellState* __restrict st = out.states.data() + lz * plane + row;
+        for (int x = 0; x < nx; ++x) {
+          const std::size_t sl = ring_row + static_cast<std::size_t>(rx[x]);
+          const float l = lo[sl];
+          const int above = z - ground[row + static_cast<std::size_t>(x)];  // layers above ground
+          const bool obstacle = above >= lo_layers ? l > 0.0f
+                                : above >= 0       ? rise[sl] >= min_rise_cm
+                                                   : false;
+          st[x] = l == OccupancyMap::kUnknown && !obstacle ? CellState::kUnknown
+                  : obstacle                               ? CellState::kOccupied
+                                                           : CellState::kFree;
+        }
+      }
+    }
+  });
+
+  // Virtual zones, in their order (each voxel's result does not depend on it: zones only add).
+  for (const auto& zone : zones) {
+    if (zone.polygon_W.size() < 3 || (zone.expiry_ns != 0 && zone.expiry_ns <= stamp_ns)) continue;
+    // Layers whose voxel [bottom, top) meets the zone's [min_z, max_z].
+    const int lz0 = std::max(0, static_cast<int>(std::floor(zone.min_z_m / v)) - out.min.z());
+    const int lz1 = std::min(nb, static_cast<int>(std::floor(zone.max_z_m / v)) + 1 - out.min.z());
+    if (lz0 >= lz1) continue;
+    Eigen::Vector2d lo = zone.polygon_W[0], hi = zone.polygon_W[0];
+    for (const auto& p : zone.polygon_W) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    const int x0 = std::max(0, static_cast<int>(std::floor(lo.x() / v)) - wmin.x());
+    const int x1 = std::min(nx, static_cast<int>(std::floor(hi.x() / v)) + 1 - wmin.x());
+    const int y0 = std::max(0, static_cast<int>(std::floor(lo.y() / v)) - wmin.y());
+    const int y1 = std::min(ny, static_cast<int>(std::floor(hi.y() / v)) + 1 - wmin.y());
+    for (int y = y0; y < y1; ++y) {
+      for (int x = x0; x < x1; ++x) {
+        const Eigen::Vector2d centre((wmin.x() + x + 0.5) * v, (wmin.y() + y + 0.5) * v);
+        if (!polygon_contains(zone.polygon_W, centre)) continue;
+        for (int lz = lz0; lz < lz1; ++lz) {
+          CellState& s = out.states[lz * plane + static_cast<std::size_t>(y) * nx + x];
+          if (!zone.restricted || s == CellState::kUnknown) s = CellState::kOccupied;
+        }
+      }
+    }
+  }
+  out.obstacles = static_cast<std::uint64_t>(
+      std::count(out.states.begin(), out.states.end(), CellState::kOccupied));
+
+  compute_distance_field(out.states, Eigen::Vector3i(nx, ny, nb), v, params.unknown, out.field,
+                         out.scratch, runner);
+}
+
+}  // namespace tarmac::core

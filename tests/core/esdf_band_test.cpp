@@ -1,0 +1,183 @@
+#include "tarmac/core/esdf_band.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include <gtest/gtest.h>
+
+#include "tarmac/daemon/thread_pool.hpp"
+
+namespace tarmac::core {
+namespace {
+
+/// A flat apron (ground returns at z 0.05 every 0.1 m within 12 m) seen from a sensor 2 m above
+/// the vehicle base at the origin, plus the scene's objects; the window is 32 × 32 × 8 m at 0.2 m,
+/// its bottom 3 m below the base.
+class Band : public ::testing::Test {
+ protected:
+  Band() : map_(params()) { map_.recenter(Eigen::Vector3d::Zero()); }
+
+  static OccupancyParams params() {
+    OccupancyParams p;
+    p.window_x_vox = 160;
+    p.window_y_vox = 160;
+    p.window_z_vox = 40;
+    p.window_below_m = 3.0;
+    p.max_range_m = 40.0;
+    return p;
+  }
+
+  static void box(std::vector<Eigen::Vector3f>& pts, Eigen::Vector3f lo, Eigen::Vector3f hi) {
+    for (float x = lo.x(); x <= hi.x(); x += 0.05f)
+      for (float y = lo.y(); y <= hi.y(); y += 0.05f)
+        for (float z = lo.z(); z <= hi.z(); z += 0.05f) pts.emplace_back(x, y, z);
+  }
+
+  /// The scene: a wing 3.0–3.2 m up (above vehicle height 2.5 + clearance 0.3: the costmap
+  /// ignores it), a 1.5 m pole, a 10 cm debris object.
+  void scan_scene() {
+    std::vector<Eigen::Vector3f> points;
+    box(points, {4.0f, -3.0f, 3.0f}, {8.0f, 3.0f, 3.15f});        // wing
+    box(points, {-5.1f, -0.1f, 0.05f}, {-4.9f, 0.1f, 1.5f});      // pole
+    box(points, {2.95f, -4.05f, 0.15f}, {3.05f, -3.95f, 0.15f});  // debris top, 10 cm up
+    for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+      for (float y = -12.0f; y <= 12.0f; y += 0.1f)
+        points.emplace_back(x + 0.013f, y + 0.017f, 0.05f);
+    }
+    SerialRunner runner;
+    for (int i = 0; i < 3; ++i)
+      map_.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
+  }
+
+  void build(TaskRunner& runner, std::span<const VirtualZone> zones = {}, EsdfBand* out = nullptr) {
+    build_costmap(map_, CostmapParams{}, Eigen::Isometry3d::Identity(), zones, 0, layers_, runner);
+    build_esdf_band(map_, layers_, CostmapParams{}, band_params_, Eigen::Isometry3d::Identity(),
+                    zones, 0, out != nullptr ? *out : band_, runner);
+  }
+
+  /// Band cell of a world point.
+  std::size_t cell(double x, double y, double z) const {
+    const Eigen::Vector3i d = band_.field.dims;
+    const double v = 0.2;
+    const int ix = static_cast<int>(std::floor(x / v)) - band_.min.x();
+    const int iy = static_cast<int>(std::floor(y / v)) - band_.min.y();
+    const int iz = static_cast<int>(std::floor(z / v)) - band_.min.z();
+    EXPECT_TRUE(ix >= 0 && ix < d.x() && iy >= 0 && iy < d.y() && iz >= 0 && iz < d.z());
+    return (static_cast<std::size_t>(iz) * d.y() + iy) * d.x() + ix;
+  }
+  float distance(double x, double y, double z) const {
+    return band_.field.distance_m[cell(x, y, z)];
+  }
+  float slice_distance(double x, double y) const {
+    const auto c = layers_.costmap.geometry().cell_of(x, y);
+    return layers_.obstacle_distance
+        .distance_m[static_cast<std::size_t>(c->y()) * layers_.obstacle_distance.dims.x() + c->x()];
+  }
+
+  EsdfBandParams band_params_{true, 0.2, 3.4, UnknownPolicy::kReportUnknown};
+  OccupancyMap map_;
+  CostmapLayers layers_;
+  EsdfBand band_;
+};
+
+TEST_F(Band, LayersAroundTheBaseClippedToTheWindow) {
+  int z0 = 0, z1 = 0;
+  // Window bottom at −3 m = layer −15: the base at 0 gives [−0.2, 3.4) = layers 14..31.
+  esdf_band_layers(map_, band_params_, 0.0, z0, z1);
+  EXPECT_EQ(z0, 14);
+  EXPECT_EQ(z1, 32);
+  esdf_band_layers(map_, band_params_, 4.0, z0, z1);  // top clipped to the window's 40 layers
+  EXPECT_EQ(z0, 34);
+  EXPECT_EQ(z1, 40);
+  esdf_band_layers(map_, band_params_, 20.0, z0, z1);  // entirely above: empty
+  EXPECT_EQ(z0, z1);
+}
+
+TEST_F(Band, OverhangIsAnObstacleIn3D_GroundIsNot_DebrisIs) {
+  scan_scene();
+  SerialRunner runner;
+  build(runner);
+  ASSERT_EQ(band_.field.dims, Eigen::Vector3i(160, 160, 18));
+  // Under the wing just above the roof: 2D says far (the wing is above the envelope), 3D says
+  // the wing's voxel [3.0, 3.2) is 0.4 m above the voxel [2.6, 2.8).
+  EXPECT_GT(slice_distance(6.1, 0.1), 3.0f);
+  EXPECT_NEAR(distance(6.1, 0.1, 2.7), 0.4f, 1e-6f);
+  EXPECT_EQ(distance(6.1, 0.1, 3.1), 0.0f);
+  EXPECT_EQ(band_.field.gradient_z[cell(6.1, 0.1, 2.7)], -1.0f) << "pointing away from the wing";
+  // The ground is not an obstacle: its voxel, far from everything, is as far as the pole (the
+  // nearest obstacle), not 0.
+  EXPECT_GT(distance(-9.9, -9.9, 0.1), 5.0f);
+  // The pole, and the debris in the ground layer (sub-voxel rise rule).
+  EXPECT_EQ(distance(-5.0, 0.0, 1.0), 0.0f);
+  EXPECT_EQ(distance(3.0, -4.0, 0.1), 0.0f);
+  EXPECT_NEAR(distance(3.3, -4.0, 0.1), 0.2f, 1e-6f);  // next voxel along x: one voxel away
+  // Unknown (beyond the observed 12 m square, above the sensor's view) reports NaN.
+  EXPECT_TRUE(std::isnan(distance(15.1, 15.1, 0.1)));
+  EXPECT_GE(band_.obstacles, 3u);
+}
+
+TEST_F(Band, DistancesEqualBruteForceOverTheBandsObstacles) {
+  scan_scene();
+  SerialRunner runner;
+  build(runner);
+  const Eigen::Vector3i d = band_.field.dims;
+  std::vector<Eigen::Vector3i> sites;
+  for (int z = 0; z < d.z(); ++z)
+    for (int y = 0; y < d.y(); ++y)
+      for (int x = 0; x < d.x(); ++x)
+        if (band_.states[(static_cast<std::size_t>(z) * d.y() + y) * d.x() + x] ==
+            CellState::kOccupied)
+          sites.emplace_back(x, y, z);
+  ASSERT_FALSE(sites.empty());
+  // Every 7th voxel (a prime stride covers all rows and layers).
+  for (std::size_t i = 0; i < band_.states.size(); i += 7) {
+    const int x = static_cast<int>(i % d.x()), y = static_cast<int>((i / d.x()) % d.y()),
+              z = static_cast<int>(i / (static_cast<std::size_t>(d.x()) * d.y()));
+    long best = std::numeric_limits<long>::max();
+    for (const auto& s : sites) {
+      const long dx = x - s.x(), dy = y - s.y(), dz = z - s.z();
+      best = std::min(best, dx * dx + dy * dy + dz * dz);
+    }
+    const float expected = static_cast<float>(std::sqrt(static_cast<double>(best)) * 0.2);
+    if (band_.states[i] == CellState::kUnknown) {
+      EXPECT_TRUE(std::isnan(band_.field.distance_m[i]));
+    } else {
+      ASSERT_EQ(band_.field.distance_m[i], expected) << "voxel " << x << "," << y << "," << z;
+    }
+  }
+}
+
+TEST_F(Band, VirtualZonesBurnInWithinTheirHeightRange) {
+  scan_scene();
+  const std::vector<VirtualZone> zones{
+      {"spill", {{-3, 2}, {-2, 2}, {-2, 3}, {-3, 3}}, -1.0, 0.9, 0, false},
+      {"stand", {{10, 10}, {15.8, 10}, {15.8, 15.8}, {10, 15.8}}, -5.0, 5.0, 0, true}};
+  SerialRunner runner;
+  build(runner, zones);
+  EXPECT_EQ(distance(-2.5, 2.5, 0.5), 0.0f);  // inside the no-go zone's z range
+  // Voxel [1.2, 1.4): the zone's top voxel is [0.8, 1.0), two voxels below.
+  EXPECT_NEAR(distance(-2.5, 2.5, 1.3), 0.4f, 1e-6f);
+  // Restricted: unknown inside is an obstacle, observed (the ground voxel) stays free.
+  EXPECT_EQ(distance(15.1, 15.1, 0.1), 0.0f);
+  EXPECT_GT(distance(11.1, 11.1, 0.1), 0.0f);
+}
+
+TEST_F(Band, SameBitsOnOneAndTwoThreads) {
+  scan_scene();
+  SerialRunner serial;
+  daemon::ThreadPool pool(2);
+  EsdfBand a, b;
+  build(serial, {}, &a);
+  build(pool, {}, &b);
+  ASSERT_EQ(a.field.distance_m.size(), b.field.distance_m.size());
+  EXPECT_EQ(0, std::memcmp(a.field.distance_m.data(), b.field.distance_m.data(),
+                           a.field.distance_m.size() * sizeof(float)));
+  EXPECT_EQ(a.field.gradient_x, b.field.gradient_x);
+  EXPECT_EQ(a.field.gradient_y, b.field.gradient_y);
+  EXPECT_EQ(a.field.gradient_z, b.field.gradient_z);
+  EXPECT_EQ(a.states, b.states);
+}
+
+}  // namespace
+}  // namespace tarmac::core
