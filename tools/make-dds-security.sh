@@ -122,6 +122,7 @@ correction=rt/tarmac/pose_correction
 obstacles=rt/tarmac/virtual_obstacles
 costmap=rt/tarmac/costmap
 slice=rt/tarmac/esdf_slice
+band=rt/tarmac/esdf_band
 report=rt/tarmac/diagnostics
 diag=rt/diagnostics
 grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS (already rendered, may be empty)
@@ -142,11 +143,11 @@ grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS (already rendered, may be 
   echo '<dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"'
   echo '     xsi:noNamespaceSchemaLocation="http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd">'
   echo '  <permissions>'
-  grant tarmacd "$(topics "$costmap" "$slice" "$report" "$diag")" \
+  grant tarmacd "$(topics "$costmap" "$slice" "$band" "$report" "$diag")" \
     "$(topics "$lidar" "$pose" "$correction" "$obstacles")"
   grant publisher "$(topics "$lidar" "$pose" "$correction")" ""
   grant obstacles "$(topics "$obstacles")" "$(topics "$costmap")"
-  grant monitor "" "$(topics "$lidar" "$pose" "$correction" "$obstacles" "$costmap" "$slice" "$report" "$diag")"
+  grant monitor "" "$(topics "$lidar" "$pose" "$correction" "$obstacles" "$costmap" "$slice" "$band" "$report" "$diag")"
   echo '  </permissions>'
   echo '</dds>'
 } > permissions.xml

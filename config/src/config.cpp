@@ -211,11 +211,14 @@ void read_dds(MapReader& r, DdsConfig& dds, const std::string& base_dir) {
     q.map("virtual_obstacles", [&](MapReader& m) { read_qos(m, dds.qos.virtual_obstacles); });
     q.map("costmap", [&](MapReader& m) { read_qos(m, dds.qos.costmap); });
     q.map("esdf_slice", [&](MapReader& m) { read_qos(m, dds.qos.esdf_slice); });
+    q.map("esdf_band", [&](MapReader& m) { read_qos(m, dds.qos.esdf_band); });
     q.map("diagnostics", [&](MapReader& m) { read_qos(m, dds.qos.diagnostics); });
   });
 }
 
 const std::vector<std::string> kUnknownCost = {"unknown", "lethal", "free"};
+/// core::UnknownPolicy, in its order.
+const std::vector<std::string> kUnknownPolicy = {"report", "occupied"};
 
 void read_vector3(MapReader& r, const std::string& key, Eigen::Vector3d& v) {
   r.map(key, [&](MapReader& m) {
@@ -267,6 +270,16 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     if (const int i = r.choice("unknown_cost", kUnknownCost); i >= 0) {
       c.unknown_cost = static_cast<core::UnknownCost>(i);
     }
+  });
+  root.map("esdf_band", [&](MapReader& r) {
+    auto& e = p.esdf_band;
+    r.scalar<bool>("enabled", e.enabled, false, true);
+    r.scalar<double>("below_m", e.below_m, 0.0, 1000.0);
+    r.scalar<double>("above_m", e.above_m, 0.001, 1000.0);
+    if (const int i = r.choice("unknown", kUnknownPolicy); i >= 0) {
+      e.unknown = static_cast<core::UnknownPolicy>(i);
+    }
+    r.scalar<double>("publish_radius_m", e.publish_radius_m, 0.0, 10000.0);
   });
   root.map("tsdf", [&](MapReader& r) {
     auto& t = p.tsdf;
@@ -398,6 +411,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<double>("tsdf_ms", b.tsdf_ms, 0.001, 10000.0);
     r.scalar<double>("rebuild_ms", b.rebuild_ms, 0.001, 10000.0);
     r.scalar<double>("costmap_ms", b.costmap_ms, 0.001, 10000.0);
+    r.scalar<double>("esdf_band_ms", b.esdf_band_ms, 0.001, 10000.0);
     r.scalar<double>("publish_ms", b.publish_ms, 0.001, 10000.0);
     r.scalar<double>("cycle_ms", b.cycle_ms, 0.001, 10000.0);
   });
@@ -414,6 +428,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.string("frame_id", o.frame_id);
     r.string("costmap_topic", o.costmap_topic);
     r.string("esdf_slice_topic", o.esdf_slice_topic);
+    r.string("esdf_band_topic", o.esdf_band_topic);
     r.string("cycle_report_topic", o.cycle_report_topic);
     r.string("diagnostic_array_topic", o.diagnostic_array_topic);
     r.string("virtual_obstacles_topic", o.virtual_obstacles_topic);
@@ -441,6 +456,9 @@ core::Status validate_daemon(const Config& c) {
     if (s.topic == c.pose.topic) return err("pose.topic", "same topic as sensor " + s.id);
   }
   if (c.outputs.frame_id.empty()) return err("outputs.frame_id", "must not be empty");
+  if (c.mapping.esdf_band.enabled && c.outputs.esdf_band_topic.empty()) {
+    return err("outputs.esdf_band_topic", "must not be empty when esdf_band.enabled is true");
+  }
   if (c.budgets.cycle_ms > 1000.0 / c.executor.rate_hz) {
     return err("budgets.cycle_ms", "exceeds the period of executor.rate_hz (" +
                                        std::to_string(1000.0 / c.executor.rate_hz) + " ms)");
@@ -551,6 +569,7 @@ std::string to_yaml(const Config& config) {
   emit_qos(out, "virtual_obstacles", config.dds.qos.virtual_obstacles);
   emit_qos(out, "costmap", config.dds.qos.costmap);
   emit_qos(out, "esdf_slice", config.dds.qos.esdf_slice);
+  emit_qos(out, "esdf_band", config.dds.qos.esdf_band);
   emit_qos(out, "diagnostics", config.dds.qos.diagnostics);
   out << YAML::EndMap << YAML::EndMap;
   out << YAML::Key << "sensors" << YAML::Value << YAML::BeginSeq;
@@ -605,6 +624,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "tsdf_ms" << YAML::Value << b.tsdf_ms;
   out << YAML::Key << "rebuild_ms" << YAML::Value << b.rebuild_ms;
   out << YAML::Key << "costmap_ms" << YAML::Value << b.costmap_ms;
+  out << YAML::Key << "esdf_band_ms" << YAML::Value << b.esdf_band_ms;
   out << YAML::Key << "publish_ms" << YAML::Value << b.publish_ms;
   out << YAML::Key << "cycle_ms" << YAML::Value << b.cycle_ms;
   out << YAML::EndMap;
@@ -621,6 +641,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "frame_id" << YAML::Value << ou.frame_id;
   out << YAML::Key << "costmap_topic" << YAML::Value << ou.costmap_topic;
   out << YAML::Key << "esdf_slice_topic" << YAML::Value << ou.esdf_slice_topic;
+  out << YAML::Key << "esdf_band_topic" << YAML::Value << ou.esdf_band_topic;
   out << YAML::Key << "cycle_report_topic" << YAML::Value << ou.cycle_report_topic;
   out << YAML::Key << "diagnostic_array_topic" << YAML::Value << ou.diagnostic_array_topic;
   out << YAML::Key << "virtual_obstacles_topic" << YAML::Value << ou.virtual_obstacles_topic;
@@ -680,6 +701,14 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "ground_tolerance_m" << YAML::Value << c.ground_tolerance_m;
   out << YAML::Key << "unknown_cost" << YAML::Value
       << kUnknownCost[static_cast<int>(c.unknown_cost)];
+  out << YAML::EndMap;
+  const auto& band = m.esdf_band;
+  out << YAML::Key << "esdf_band" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "enabled" << YAML::Value << band.enabled;
+  out << YAML::Key << "below_m" << YAML::Value << band.below_m;
+  out << YAML::Key << "above_m" << YAML::Value << band.above_m;
+  out << YAML::Key << "unknown" << YAML::Value << kUnknownPolicy[static_cast<int>(band.unknown)];
+  out << YAML::Key << "publish_radius_m" << YAML::Value << band.publish_radius_m;
   out << YAML::EndMap;
   const auto& t = m.tsdf;
   out << YAML::Key << "tsdf" << YAML::Value << YAML::BeginMap;

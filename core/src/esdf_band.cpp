@@ -16,10 +16,13 @@ constexpr std::size_t kRowTasks = 16;
 
 Status EsdfBandParams::validate() const {
   const auto bad = [](const char* key, const char* why) {
-    return Status{Error{"esdf_band.invalid", std::string(key) + ": " + why}};
+    return Status{Error{"config.range", std::string("esdf_band.") + key + ": " + why}};
   };
   if (!(below_m >= 0.0 && below_m <= 1000.0)) return bad("below_m", "must be in 0..1000");
   if (!(above_m > 0.0 && above_m <= 1000.0)) return bad("above_m", "must be in (0, 1000]");
+  if (!(publish_radius_m >= 0.0 && publish_radius_m <= 10000.0)) {
+    return bad("publish_radius_m", "must be in 0..10000");
+  }
   return Ok{};
 }
 

@@ -24,6 +24,17 @@ Status MapperParams::validate() const {
   if (auto s = tsdf.validate(); !s) return s;
   if (auto s = corrections.validate(); !s) return s;
   if (auto s = esdf_band.validate(); !s) return s;
+  if (esdf_band.enabled) {
+    const double top_m = occupancy.window_z_vox * occupancy.voxel_size_m - occupancy.window_below_m;
+    if (esdf_band.below_m > occupancy.window_below_m) {
+      return Error{"config.range",
+                   "esdf_band.below_m: reaches below the window (occupancy.window_below_m)"};
+    }
+    if (esdf_band.above_m > top_m) {
+      return Error{"config.range", "esdf_band.above_m: reaches above the window's top (" +
+                                       std::to_string(top_m) + " m above the base)"};
+    }
+  }
   return costmap.validate();
 }
 

@@ -91,11 +91,12 @@ enum Stage : std::size_t {
   kTsdf,
   kRebuild,
   kCostmap,
+  kEsdfBand,
   kPublish,
   kStageCount
 };
 constexpr const char* kStageNames[kStageCount] = {"drain",   "ingest",  "integrate", "tsdf",
-                                                  "rebuild", "costmap", "publish"};
+                                                  "rebuild", "costmap", "esdf_band", "publish"};
 
 }  // namespace
 
@@ -186,7 +187,7 @@ class Executor::Impl {
     const double budgets[kStageCount] = {config.budgets.drain_ms,     config.budgets.ingest_ms,
                                          config.budgets.integrate_ms, config.budgets.tsdf_ms,
                                          config.budgets.rebuild_ms,   config.budgets.costmap_ms,
-                                         config.budgets.publish_ms};
+                                         config.budgets.esdf_band_ms, config.budgets.publish_ms};
     for (std::size_t i = 0; i < kStageCount; ++i) {
       report.stages[i].name = kStageNames[i];
       report.stages[i].budget_ms = budgets[i];
@@ -233,7 +234,7 @@ class Executor::Impl {
     overflow_seen.assign(config.sensors.size(), 0);
     diag.name = "tarmacd: executor";
     diag.hardware_id = config.dds.participant.name;
-    diag.values.resize(11);
+    diag.values.resize(12);
   }
 
   void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped);
@@ -550,6 +551,11 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   }
   const auto t_costmap1 = Clock::now();
   stage_ms[kCostmap] = ms_between(t_costmap0, t_costmap1);
+  // ---- 3D ESDF band (esdf_band.enabled), from the costmap's ground ----
+  const bool band = update && config.mapping.esdf_band.enabled;
+  if (band) mapper.update_esdf_band(zones, newest_stamp_ns, *pool);
+  const auto t_band1 = Clock::now();
+  stage_ms[kEsdfBand] = ms_between(t_costmap1, t_band1);
 
   // ---- publish ----
   if (update) {
@@ -558,8 +564,13 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     outputs->publish_slice(layers.obstacle_distance, layers.costmap.geometry(), newest_stamp_ns,
                            config.outputs.frame_id);
   }
+  if (band) {
+    const auto& p = config.mapping.esdf_band;
+    outputs->publish_band(mapper.esdf_band(), mapper.vehicle_pose().translation().head<2>(),
+                          p.publish_radius_m, newest_stamp_ns, config.outputs.frame_id);
+  }
   const auto t_published = Clock::now();
-  stage_ms[kPublish] = ms_between(t_costmap1, t_published);
+  stage_ms[kPublish] = ms_between(t_band1, t_published);
   // Measured, never used to decide: newest integrated scan stamp -> costmap handed to DDS.
   double stamp_to_publish_ms = -1.0;
   if (update && !selected.empty()) {
@@ -635,6 +646,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     put(8, "stamp_to_publish_p99_ms", stamp_to_publish.percentile(0.99));
     put(9, "tsdf_ms", stage_ms[kTsdf]);
     put(10, "rebuild_ms", stage_ms[kRebuild]);
+    put(11, "esdf_band_ms", stage_ms[kEsdfBand]);
     outputs->publish_diagnostics(diag);
   }
   ++cycle_index;
@@ -673,10 +685,11 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
                                             q.virtual_obstacles);
   if (!zones) return zones.error();
   impl->zone_input = std::move(zones).value();
-  transport::OutputTopics topics{cfg.outputs.costmap_topic, cfg.outputs.esdf_slice_topic,
-                                 cfg.outputs.cycle_report_topic,
-                                 cfg.outputs.diagnostic_array_topic};
-  transport::OutputQos oq{q.costmap, q.esdf_slice, q.diagnostics, q.diagnostics};
+  transport::OutputTopics topics{
+      cfg.outputs.costmap_topic, cfg.outputs.esdf_slice_topic,
+      cfg.mapping.esdf_band.enabled ? cfg.outputs.esdf_band_topic : std::string(),
+      cfg.outputs.cycle_report_topic, cfg.outputs.diagnostic_array_topic};
+  transport::OutputQos oq{q.costmap, q.esdf_slice, q.esdf_band, q.diagnostics, q.diagnostics};
   auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
   if (!outputs) return outputs.error();
   impl->outputs = std::move(outputs).value();

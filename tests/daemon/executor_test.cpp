@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <functional>
 #include <thread>
@@ -36,6 +37,7 @@ namespace {
 using namespace std::chrono_literals;
 using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
 using ReportReader = transport::Reader<tarmac_msgs::msg::dds_::CycleReport_PubSubType>;
+using VolumeReader = transport::Reader<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>;
 
 constexpr int kScans = 20;
 
@@ -261,6 +263,65 @@ TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_WithRandomPublishJitter) {
   const std::string got = replayed_digest(test::kDomainDaemonJitter, 2, 25.0);
   EXPECT_EQ(got, offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_));
   EXPECT_EQ(tsdf_digest_, offline_tsdf_digest(test_config(0, 2), kScans));
+}
+
+TEST_F(Daemon, EsdfBand_PublishedBoxEqualsOfflineCore) {
+  const auto band_config = [](config::Config& c) {
+    c.mapping.esdf_band.enabled = true;
+    c.mapping.esdf_band.publish_radius_m = 5.0;
+    // The band is placed from the base: the simulated LiDAR sits 2 m above it.
+    c.sensors[0].T_base_sensor.translation() = Eigen::Vector3d(0.0, 0.0, 2.0);
+    // Reliable here: the comparison needs the last band, not the newest that made it.
+    c.dds.qos.esdf_band = {transport::Reliability::kReliable, transport::Durability::kVolatile, 1};
+  };
+  config::Config cfg = test_config(test::kDomainDaemonEsdfBand, 2);
+  band_config(cfg);
+  auto participant = peer(test::kDomainDaemonEsdfBand);
+  auto volumes =
+      VolumeReader::create(participant, cfg.outputs.esdf_band_topic, cfg.dds.qos.esdf_band, 64);
+  ASSERT_TRUE(volumes.ok());
+  const std::string costmap = replayed_digest(
+      test::kDomainDaemonEsdfBand, 2, 0.0, band_config, sequence(), 2.0,
+      [&](tools::ReplayOptions& o) { o.T_base_sensor = cfg.sensors[0].T_base_sensor; });
+  config::Config plain = test_config(0, 2);
+  plain.sensors[0].T_base_sensor = cfg.sensors[0].T_base_sensor;
+  EXPECT_EQ(costmap, offline_costmap_digest(plain, kScans, last_stamp_ns_))
+      << "the band stage leaves the costmap alone";
+  std::vector<transport::DistanceMapVolumeMsg> got;
+  for (int i = 0; i < 50 && got.empty(); ++i) {
+    volumes.value()->wait_for_sample(100ms);
+    volumes.value()->take_all(got);
+  }
+  volumes.value()->take_all(got);
+  ASSERT_FALSE(got.empty()) << "no band published";
+  const auto last = std::find_if(got.begin(), got.end(), [&](const auto& m) {
+    return transport::from_time_msg(m.header().stamp()) == last_stamp_ns_;
+  });
+  ASSERT_NE(last, got.end()) << "no band stamped with the last scan";
+
+  // The core offline on the same scans, its band boxed by the same rule.
+  core::Mapper mapper(cfg.mapping);
+  run_offline(mapper, cfg, kScans, false);
+  core::SerialRunner runner;
+  mapper.update_costmap({}, last_stamp_ns_, runner);
+  mapper.update_esdf_band({}, last_stamp_ns_, runner);
+  transport::DistanceMapVolumeMsg want;
+  transport::fill_distance_volume(mapper.esdf_band(), mapper.vehicle_pose().translation().head<2>(),
+                                  5.0, last_stamp_ns_, "map", want);
+  EXPECT_EQ(last->width(), 51u);  // 2 · 25 + 1 voxels of 0.2 m around the vehicle's voxel
+  EXPECT_EQ(last->height(), 51u);
+  EXPECT_EQ(last->depth(), want.depth());
+  EXPECT_GE(last->depth(), 16u);
+  EXPECT_EQ(last->origin().position().x(), want.origin().position().x());
+  EXPECT_EQ(last->origin().position().z(), want.origin().position().z());
+  ASSERT_EQ(last->distance().size(), want.distance().size());
+  EXPECT_EQ(0, std::memcmp(last->distance().data(), want.distance().data(),
+                           want.distance().size() * sizeof(float)));
+  EXPECT_EQ(last->gradient_z(), want.gradient_z());
+  // Not a trivial field: obstacles in the band, some within a few metres of the box's voxels.
+  EXPECT_GT(mapper.esdf_band().obstacles, 0u);
+  const auto& d = last->distance();
+  EXPECT_GT(std::count_if(d.begin(), d.end(), [](float x) { return x < 5.0f; }), 0);
 }
 
 TEST_F(Daemon, TsdfQuota_ShedsTheTsdfStageFirst_OccupancyAndCostmapUnchanged) {

@@ -43,6 +43,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonPoseJump = 144,
   kDomainDaemonPathCorrection = 145,
   kDomainDaemonPathEarly = 146,
+  kDomainDaemonEsdfBand = 147,
 };
 
 inline bool running_in_ci() {

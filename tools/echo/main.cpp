@@ -63,6 +63,17 @@ void print(const transport::DistanceMapSliceMsg& m) {
               m.resolution(), nearest);
 }
 
+void print(const transport::DistanceMapVolumeMsg& m) {
+  float nearest = INFINITY;
+  for (const float d : m.distance()) {
+    if (!std::isnan(d)) nearest = std::min(nearest, d);
+  }
+  std::printf(
+      "esdf_band stamp %.3f frame %s %ux%ux%u @ %.2f m from z %.2f m, min distance %.2f m\n",
+      seconds(m.header().stamp()), m.header().frame_id().c_str(), m.width(), m.height(), m.depth(),
+      m.resolution(), m.origin().position().z(), nearest);
+}
+
 void print(const transport::CycleReportMsg& m) {
   std::string stages;
   for (const auto& s : m.stages()) {
@@ -190,6 +201,9 @@ int main(int argc, char** argv) {
   }
   if (topic == o.esdf_slice_topic) {
     return echo<tarmac_msgs::msg::dds_::DistanceMapSlice_PubSubType>(p, topic, q.esdf_slice, count);
+  }
+  if (topic == o.esdf_band_topic) {
+    return echo<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>(p, topic, q.esdf_band, count);
   }
   if (topic == o.cycle_report_topic) {
     return echo<tarmac_msgs::msg::dds_::CycleReport_PubSubType>(p, topic, q.diagnostics, count);

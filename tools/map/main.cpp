@@ -341,7 +341,8 @@ int main(int argc, char** argv) {
   const std::size_t n = opt.max_scans == 0 ? seq.value().scans.size()
                                            : std::min(opt.max_scans, seq.value().scans.size());
   StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
-      t_cost{"costmap+esdf2d", {}}, t_tsdf{"tsdf", {}}, t_total{"pipeline", {}};
+      t_cost{"costmap+esdf2d", {}}, t_tsdf{"tsdf", {}}, t_band{"esdf_band", {}},
+      t_total{"pipeline", {}};
   std::uint64_t tsdf_samples = 0, tsdf_updates = 0;
   std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
                 dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0, promotions = 0,
@@ -387,6 +388,8 @@ int main(int argc, char** argv) {
       if (step.scans > 0) rebuild_ms.push_back(ms);  // not the calls waiting for the start
     }
     const double c_ms = timed_ms([&] { mapper.update_costmap({}, cloud.stamp_ns, pool); });
+    // The 3D band (esdf_band.enabled), every scan as the daemon does every cycle.
+    const double b_ms = timed_ms([&] { mapper.update_esdf_band({}, cloud.stamp_ns, pool); });
     if (clearing) {
       // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
       const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
@@ -400,7 +403,8 @@ int main(int argc, char** argv) {
     t_occ.ms.push_back(o_ms);
     t_cost.ms.push_back(c_ms);
     if (params.tsdf.enabled) t_tsdf.ms.push_back(tsdf_ms);
-    t_total.ms.push_back(f_ms + o_ms + tsdf_ms + c_ms);
+    if (params.esdf_band.enabled) t_band.ms.push_back(b_ms);
+    t_total.ms.push_back(f_ms + o_ms + tsdf_ms + c_ms + b_ms);
     points_in += counts.input;
     points_used += counts.kept;
     dropped_nonfinite += counts.non_finite;
@@ -421,7 +425,10 @@ int main(int argc, char** argv) {
     rebuild_ms.push_back(ms);
     ++rebuild_steps_after_end;
   }
-  if (rebuild_steps_after_end > 0) mapper.update_costmap({}, cloud.stamp_ns, pool);
+  if (rebuild_steps_after_end > 0) {
+    mapper.update_costmap({}, cloud.stamp_ns, pool);
+    mapper.update_esdf_band({}, cloud.stamp_ns, pool);
+  }
 
   // ---- outputs ----
   const auto& occ_map = mapper.occupancy();
@@ -463,6 +470,14 @@ int main(int argc, char** argv) {
   writes.push_back(tools::write_npy(out / "occupancy.npy", probability, shape3));
   writes.push_back(tools::write_npy(out / "esdf.npy", esdf3d.distance_m, shape3));
   writes.push_back(tools::write_npy(out / "esdf_slice.npy", slice.distance_m, shape2));
+  const core::EsdfBand& band = mapper.esdf_band();
+  const bool have_band = params.esdf_band.enabled && band.field.dims.z() > 0;
+  if (have_band) {
+    const std::vector<std::size_t> shape_band{static_cast<std::size_t>(band.field.dims.z()),
+                                              static_cast<std::size_t>(dims.y()),
+                                              static_cast<std::size_t>(dims.x())};
+    writes.push_back(tools::write_npy(out / "esdf_band.npy", band.field.distance_m, shape_band));
+  }
   writes.push_back(tools::write_npy(out / "costmap.npy", layers.costmap.cells(), shape2));
   writes.push_back(
       tools::write_png(out / "costmap.png", render_costmap(layers), dims.x(), dims.y()));
@@ -495,14 +510,23 @@ int main(int argc, char** argv) {
          "fastest\",\n"
       << "  \"shape_3d\": [" << dims.z() << ", " << dims.y() << ", " << dims.x() << "],\n"
       << "  \"shape_2d\": [" << dims.y() << ", " << dims.x() << "],\n"
-      << "  \"scans\": " << n << ",\n"
-      << "  \"files\": {\n"
+      << "  \"scans\": " << n << ",\n";
+    if (have_band) {
+      j << "  \"esdf_band\": {\"origin_m\": [" << band.min.x() * v << ", " << band.min.y() * v
+        << ", " << band.min.z() * v << "], \"shape\": [" << band.field.dims.z() << ", " << dims.y()
+        << ", " << dims.x() << "], \"obstacles\": " << band.obstacles << "},\n";
+    }
+    j << "  \"files\": {\n"
       << "    \"occupancy.npy\": \"float32 occupancy probability, NaN = unknown (3D window at the "
          "end)\",\n"
       << "    \"esdf.npy\": \"float32 m to the nearest occupied voxel, ground layer excluded, NaN "
          "= unknown, inf = none in window\",\n"
       << "    \"esdf_slice.npy\": \"float32 m to the nearest costmap obstacle cell (vehicle height "
          "band), NaN = unknown\",\n"
+      << (have_band ? "    \"esdf_band.npy\": \"float32 m to the nearest obstacle voxel of the 3D "
+                      "band around the vehicle (esdf_band: costmap rules per voxel, overhangs "
+                      "included), NaN = unknown; origin and shape under esdf_band\",\n"
+                    : "")
       << "    \"costmap.npy\": \"int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 "
          "lethal, -1 unknown\",\n"
       << "    \"costmap.png\": \"white free, yellow-orange inflated, dark red inscribed, black "
@@ -526,6 +550,7 @@ int main(int argc, char** argv) {
   std::ofstream tj(out / "timing.json");
   tj << "{\n  \"scans\": " << n << ",\n  \"threads\": " << opt.threads << ",\n  \"stages_ms\": {\n";
   std::vector<const StageTimes*> stages = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
+  if (params.esdf_band.enabled) stages.insert(stages.end() - 1, &t_band);
   if (params.tsdf.enabled) stages.insert(stages.begin() + 3, &t_tsdf);
   for (std::size_t i = 0; i < stages.size(); ++i) {
     const auto& s = *stages[i];
@@ -625,12 +650,15 @@ int main(int argc, char** argv) {
               tools::digest(bytes(slice.distance_m)).c_str(),
               tools::digest(bytes(esdf3d.distance_m)).c_str(),
               static_cast<unsigned long long>(mapper.tsdf().digest()));
+  if (have_band) {
+    std::printf("digest: esdf_band %s\n", tools::digest(bytes(band.field.distance_m)).c_str());
+  }
   std::printf(
       "wrote "
       "%s/"
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
-      "timing.json%s}\n",
-      opt.out.c_str(),
+      "timing.json%s%s}\n",
+      opt.out.c_str(), have_band ? ",esdf_band.npy" : "",
       params.tsdf.enabled ? (prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
                                    : ",tsdf.vdb,tsdf.json,mesh.ply")
                           : "");

@@ -367,6 +367,51 @@ void fill_distance_slice(const core::DistanceField& field, const core::GridGeome
   msg.gradient_y().assign(field.gradient_y.begin(), field.gradient_y.end());
 }
 
+void fill_distance_volume(const core::EsdfBand& band, const Eigen::Vector2d& centre_W,
+                          double radius_m, std::int64_t stamp_ns, const std::string& frame_id,
+                          DistanceMapVolumeMsg& msg) {
+  const core::DistanceField& f = band.field;
+  const int nx = f.dims.x(), ny = f.dims.y(), nz = f.dims.z();
+  const double v = f.cell_size_m;
+  int x0 = 0, x1 = nx, y0 = 0, y1 = ny;
+  if (radius_m > 0.0) {
+    const int half = static_cast<int>(std::ceil(radius_m / v - 1e-9));
+    const int cx = static_cast<int>(std::floor(centre_W.x() / v)) - band.min.x();
+    const int cy = static_cast<int>(std::floor(centre_W.y() / v)) - band.min.y();
+    x0 = std::clamp(cx - half, 0, nx);
+    x1 = std::clamp(cx + half + 1, x0, nx);
+    y0 = std::clamp(cy - half, 0, ny);
+    y1 = std::clamp(cy + half + 1, y0, ny);
+  }
+  const int w = x1 - x0, h = y1 - y0;
+  msg.header().stamp(to_time_msg(stamp_ns));
+  msg.header().frame_id(frame_id);
+  msg.resolution(static_cast<float>(v));
+  msg.width(static_cast<std::uint32_t>(w));
+  msg.height(static_cast<std::uint32_t>(h));
+  msg.depth(static_cast<std::uint32_t>(nz));
+  msg.origin().position().x((band.min.x() + x0) * v);
+  msg.origin().position().y((band.min.y() + y0) * v);
+  msg.origin().position().z(band.min.z() * v);
+  msg.origin().orientation().w(1.0);
+  msg.unknown_value(std::numeric_limits<float>::quiet_NaN());
+  const std::size_t n = static_cast<std::size_t>(w) * h * nz;
+  const auto copy = [&](const std::vector<float>& in, std::vector<float>& out) {
+    out.resize(n);
+    float* o = out.data();
+    for (int z = 0; z < nz; ++z) {
+      for (int y = y0; y < y1; ++y) {
+        const float* row = in.data() + (static_cast<std::size_t>(z) * ny + y) * nx;
+        o = std::copy(row + x0, row + x1, o);
+      }
+    }
+  };
+  copy(f.distance_m, msg.distance());
+  copy(f.gradient_x, msg.gradient_x());
+  copy(f.gradient_y, msg.gradient_y());
+  copy(f.gradient_z, msg.gradient_z());
+}
+
 namespace {
 void fill_reasons(const std::vector<ReasonReport>& in,
                   std::vector<tarmac_msgs::msg::dds_::ReasonCount_>& out) {

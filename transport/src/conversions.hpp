@@ -17,6 +17,7 @@
 #include "sensor_msgs.h"
 #include "tarmac/core/costmap_builder.hpp"
 #include "tarmac/core/distance_field.hpp"
+#include "tarmac/core/esdf_band.hpp"
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/result.hpp"
@@ -33,6 +34,7 @@ using PoseStampedMsg = geometry_msgs::msg::dds_::PoseWithCovarianceStamped_;
 using OdometryMsg = nav_msgs::msg::dds_::Odometry_;
 using PathMsg = nav_msgs::msg::dds_::Path_;
 using DistanceMapSliceMsg = tarmac_msgs::msg::dds_::DistanceMapSlice_;
+using DistanceMapVolumeMsg = tarmac_msgs::msg::dds_::DistanceMapVolume_;
 using CycleReportMsg = tarmac_msgs::msg::dds_::CycleReport_;
 using VirtualObstacleArrayMsg = tarmac_msgs::msg::dds_::VirtualObstacleArray_;
 using DiagnosticArrayMsg = diagnostic_msgs::msg::dds_::DiagnosticArray_;
@@ -72,6 +74,14 @@ core::Result<Eigen::Isometry3d> from_pose_msg(const PoseMsg& msg);
 void fill_distance_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
                          std::int64_t stamp_ns, const std::string& frame_id,
                          DistanceMapSliceMsg& msg);
+
+/// The 3D ESDF band -> DistanceMapVolume: the box of the band's voxels whose x and y lie within
+/// `radius_m` (rounded out to whole voxels) of `centre_W` (the vehicle), clipped to the band;
+/// radius_m 0 takes the whole band. NaN where unknown (the sentinel says so), +inf where no
+/// obstacle is in the window. Reuses the message's buffers.
+void fill_distance_volume(const core::EsdfBand& band, const Eigen::Vector2d& centre_W,
+                          double radius_m, std::int64_t stamp_ns, const std::string& frame_id,
+                          DistanceMapVolumeMsg& msg);
 
 /// CycleReport -> tarmac_msgs/CycleReport, reusing the message's buffers.
 void fill_cycle_report(const CycleReport& report, CycleReportMsg& msg);

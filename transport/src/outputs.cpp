@@ -12,11 +12,13 @@ class MapOutputs::Impl {
  public:
   std::unique_ptr<Writer<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>> costmap;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapSlice_PubSubType>> slice;
+  std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>> band;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::CycleReport_PubSubType>> report;
   std::unique_ptr<Writer<diagnostic_msgs::msg::dds_::DiagnosticArray_PubSubType>> diagnostics;
   // Kept and refilled: their buffers are reused from tick to tick.
   OccupancyGridMsg costmap_msg;
   DistanceMapSliceMsg slice_msg;
+  DistanceMapVolumeMsg band_msg;
   CycleReportMsg report_msg;
   DiagnosticArrayMsg diagnostics_msg;
 };
@@ -33,6 +35,12 @@ core::Result<std::unique_ptr<MapOutputs>> MapOutputs::create(const Participant& 
       decltype(impl->slice)::element_type::create(participant, topics.esdf_slice, qos.esdf_slice);
   if (!slice) return slice.error();
   impl->slice = std::move(slice).value();
+  if (!topics.esdf_band.empty()) {
+    auto band =
+        decltype(impl->band)::element_type::create(participant, topics.esdf_band, qos.esdf_band);
+    if (!band) return band.error();
+    impl->band = std::move(band).value();
+  }
   auto report = decltype(impl->report)::element_type::create(participant, topics.cycle_report,
                                                              qos.cycle_report);
   if (!report) return report.error();
@@ -58,6 +66,13 @@ bool MapOutputs::publish_slice(const core::DistanceField& field,
                                const std::string& frame_id) {
   fill_distance_slice(field, geometry, stamp_ns, frame_id, impl_->slice_msg);
   return impl_->slice->write(impl_->slice_msg);
+}
+
+bool MapOutputs::publish_band(const core::EsdfBand& band, const Eigen::Vector2d& centre_W,
+                              double radius_m, std::int64_t stamp_ns, const std::string& frame_id) {
+  if (!impl_->band) return false;
+  fill_distance_volume(band, centre_W, radius_m, stamp_ns, frame_id, impl_->band_msg);
+  return impl_->band->write(impl_->band_msg);
 }
 
 bool MapOutputs::publish_report(const CycleReport& report) {

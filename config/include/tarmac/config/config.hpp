@@ -26,6 +26,7 @@ struct QosConfig {
   transport::QosSpec virtual_obstacles = transport::qos::kVirtualObstacles;
   transport::QosSpec costmap = transport::qos::kCostmap;
   transport::QosSpec esdf_slice = transport::qos::kEsdfSlice;
+  transport::QosSpec esdf_band = transport::qos::kEsdfBand;
   transport::QosSpec diagnostics = transport::qos::kDiagnostics;
 };
 
@@ -87,6 +88,7 @@ struct BudgetConfig {
   double tsdf_ms = 30.0;       ///< TSDF integration, all scans of the tick that run it
   double rebuild_ms = 50.0;    ///< pose-correction rebuild work of the tick (corrections.*)
   double costmap_ms = 35.0;    ///< costmap + 2D ESDF, once per tick
+  double esdf_band_ms = 40.0;  ///< 3D ESDF band, once per tick (esdf_band.enabled)
   double publish_ms = 10.0;    ///< costmap, ESDF slice, reports
   double cycle_ms = 90.0;      ///< the whole tick
 };
@@ -115,6 +117,7 @@ struct OutputConfig {
   std::string frame_id = "map";
   std::string costmap_topic = transport::topics::kCostmap;
   std::string esdf_slice_topic = transport::topics::kEsdfSlice;
+  std::string esdf_band_topic = transport::topics::kEsdfBand;  ///< when esdf_band.enabled
   std::string cycle_report_topic = transport::topics::kDiagnostics;
   std::string diagnostic_array_topic = transport::topics::kDiagnosticArray;
   std::string virtual_obstacles_topic = transport::topics::kVirtualObstacles;  ///< input
@@ -152,8 +155,8 @@ struct Config {
   QuotaConfig quotas;
   OutputConfig outputs;
   StateConfig state;
-  core::MapperParams mapping =
-      daemon_mapping_defaults();  ///< YAML filters, occupancy, costmap, tsdf
+  core::MapperParams mapping = daemon_mapping_defaults();  ///< YAML filters, occupancy, costmap,
+                                                           ///< esdf_band, tsdf, corrections
 };
 
 /// Parses YAML text. Error code "config.<reason>", message "<key.path>: <why>".

@@ -36,6 +36,10 @@ struct EsdfBandParams {
   double below_m = 0.2;
   double above_m = 3.0;  ///< default: vehicle height 2.5 + clearance 0.3 + one 0.2 m voxel
   UnknownPolicy unknown = UnknownPolicy::kReportUnknown;
+  /// What the daemon publishes of the band: the voxels within this of the vehicle in x and y
+  /// (a box; 0: the whole window's band). The band itself always covers the window, so the
+  /// distances in the box are exact to obstacles anywhere in the window.
+  double publish_radius_m = 10.0;
 
   [[nodiscard]] Status validate() const;
 };

@@ -128,6 +128,8 @@ class Mapper {
   /// The last ingested scan's surviving points, world frame, and the sensor origin.
   [[nodiscard]] const std::vector<Eigen::Vector3f>& points_W() const { return points_W_; }
   [[nodiscard]] const Eigen::Vector3d& sensor_W() const { return sensor_W_; }
+  /// The vehicle base pose of the last ingested scan (revised by a correction).
+  [[nodiscard]] const Eigen::Isometry3d& vehicle_pose() const { return T_W_B_; }
   [[nodiscard]] const OccupancyMap& occupancy() const { return map_; }
   /// For loading a saved static occupancy layer (OccupancyMap::import_static).
   [[nodiscard]] OccupancyMap& occupancy() { return map_; }

@@ -1,14 +1,16 @@
 #pragma once
 /// @file tarmacd's DDS outputs, in core types: the costmap (nav_msgs/OccupancyGrid), the ESDF
-/// slice (tarmac_msgs/DistanceMapSlice), the per-tick tarmac_msgs/CycleReport and a
-/// diagnostic_msgs/DiagnosticArray. Each writer keeps its message and refills it, so publishing
-/// does not allocate on our side after the first tick (Fast DDS serialises into its own pool).
+/// slice (tarmac_msgs/DistanceMapSlice), the 3D ESDF band (tarmac_msgs/DistanceMapVolume), the
+/// per-tick tarmac_msgs/CycleReport and a diagnostic_msgs/DiagnosticArray. Each writer keeps its
+/// message and refills it, so publishing does not allocate on our side after the first tick (Fast
+/// DDS serialises into its own pool).
 
 #include <cstdint>
 #include <memory>
 #include <string>
 
 #include "tarmac/core/distance_field.hpp"
+#include "tarmac/core/esdf_band.hpp"
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/transport/cycle_report.hpp"
@@ -20,6 +22,7 @@ namespace tarmac::transport {
 struct OutputTopics {
   std::string costmap;
   std::string esdf_slice;
+  std::string esdf_band;  ///< empty: no band writer (esdf_band disabled)
   std::string cycle_report;
   std::string diagnostic_array;
 };
@@ -27,6 +30,7 @@ struct OutputTopics {
 struct OutputQos {
   QosSpec costmap = qos::kCostmap;
   QosSpec esdf_slice = qos::kEsdfSlice;
+  QosSpec esdf_band = qos::kEsdfBand;
   QosSpec cycle_report = qos::kDiagnostics;
   QosSpec diagnostic_array = qos::kDiagnostics;
 };
@@ -46,6 +50,10 @@ class MapOutputs {
   /// `field` is a 2D field laid out on `geometry` (same cells as the costmap).
   bool publish_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
                      std::int64_t stamp_ns, const std::string& frame_id);
+  /// The band's voxels within `radius_m` of `centre_W` in x and y (0: the whole band). False
+  /// also when no band topic was given.
+  bool publish_band(const core::EsdfBand& band, const Eigen::Vector2d& centre_W, double radius_m,
+                    std::int64_t stamp_ns, const std::string& frame_id);
   bool publish_report(const CycleReport& report);
   bool publish_diagnostics(const DiagnosticReport& report);
 

@@ -33,6 +33,8 @@ inline constexpr QosSpec kVirtualObstacles{Reliability::kReliable, Durability::k
 inline constexpr QosSpec kCostmap{Reliability::kReliable, Durability::kTransientLocal, 1};
 /// ESDF slices out: best effort, keep last 1 (the safety filter wants the newest only).
 inline constexpr QosSpec kEsdfSlice{Reliability::kBestEffort, Durability::kVolatile, 1};
+/// 3D ESDF band out: best effort, keep last 1 (megabytes per sample; the newest only).
+inline constexpr QosSpec kEsdfBand{Reliability::kBestEffort, Durability::kVolatile, 1};
 /// Diagnostics out: reliable, keep last 20 (the auditor must not miss a cycle).
 inline constexpr QosSpec kDiagnostics{Reliability::kReliable, Durability::kVolatile, 20};
 }  // namespace qos
@@ -43,6 +45,7 @@ inline constexpr const char* kPose = "rt/tarmac/pose";
 inline constexpr const char* kVirtualObstacles = "rt/tarmac/virtual_obstacles";
 inline constexpr const char* kCostmap = "rt/tarmac/costmap";
 inline constexpr const char* kEsdfSlice = "rt/tarmac/esdf_slice";
+inline constexpr const char* kEsdfBand = "rt/tarmac/esdf_band";
 inline constexpr const char* kDiagnostics = "rt/tarmac/diagnostics";
 inline constexpr const char* kDiagnosticArray = "rt/diagnostics";
 }  // namespace topics
