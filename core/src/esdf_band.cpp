@@ -26,16 +26,19 @@ Status EsdfBandParams::validate() const {
   return Ok{};
 }
 
+int esdf_band_max_layers(const EsdfBandParams& params, double voxel_size_m) {
+  return static_cast<int>(std::ceil((params.below_m + params.above_m) / voxel_size_m - 1e-9)) + 1;
+}
+
 void esdf_band_layers(const OccupancyMap& map, const EsdfBandParams& params, double base_z_m,
                       int& z0, int& z1) {
   const double v = map.params().voxel_size_m;
   const int nz = map.window_size().z();
   const int wz = map.window_min().z();
-  // 1e-9: a bound on a voxel boundary stays there despite rounding of base ± offset.
-  z0 = static_cast<int>(std::floor((base_z_m - params.below_m) / v + 1e-9)) - wz;
-  z1 = static_cast<int>(std::ceil((base_z_m + params.above_m) / v - 1e-9)) - wz;
-  z0 = std::clamp(z0, 0, nz);
-  z1 = std::clamp(z1, z0, nz);
+  // 1e-9: a bound on a voxel boundary stays there despite rounding of base − below.
+  const int first = static_cast<int>(std::floor((base_z_m - params.below_m) / v + 1e-9)) - wz;
+  z0 = std::clamp(first, 0, nz);
+  z1 = std::clamp(first + esdf_band_max_layers(params, v), z0, nz);
 }
 
 void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
@@ -64,6 +67,16 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
   }
   const std::size_t plane = static_cast<std::size_t>(nx) * ny;
   out.states.resize(plane * static_cast<std::size_t>(nb));
+  // A band clipped by the window edge is smaller; the first call reserves for the full one, so
+  // the cycle does not allocate when the band comes back whole.
+  const std::size_t full = plane * static_cast<std::size_t>(esdf_band_max_layers(params, v));
+  for (auto* buffer : {&out.field.distance_m, &out.field.gradient_x, &out.field.gradient_y,
+                       &out.field.gradient_z}) {
+    buffer->reserve(full);
+  }
+  out.states.reserve(full);
+  out.scratch.off[0].reserve(full);
+  out.scratch.off[1].reserve(full);
   out.ring_x.resize(static_cast<std::size_t>(nx));
   for (int x = 0; x < nx; ++x) out.ring_x[static_cast<std::size_t>(x)] = map.ring_x(x);
 

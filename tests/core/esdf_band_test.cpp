@@ -83,10 +83,15 @@ class Band : public ::testing::Test {
 
 TEST_F(Band, LayersAroundTheBaseClippedToTheWindow) {
   int z0 = 0, z1 = 0;
-  // Window bottom at −3 m = layer −15: the base at 0 gives [−0.2, 3.4) = layers 14..31.
+  // 3.6 m of band at 0.2 m: 19 layers (one more than 18, for a base between voxel boundaries).
+  EXPECT_EQ(esdf_band_max_layers(band_params_, 0.2), 19);
+  // Window bottom at −3 m = layer −15: the base at 0 starts at −0.2 m = window layer 14.
   esdf_band_layers(map_, band_params_, 0.0, z0, z1);
   EXPECT_EQ(z0, 14);
-  EXPECT_EQ(z1, 32);
+  EXPECT_EQ(z1, 33);
+  esdf_band_layers(map_, band_params_, 0.1, z0, z1);  // [−0.1, 3.5) needs all 19
+  EXPECT_EQ(z0, 14);
+  EXPECT_EQ(z1, 33);
   esdf_band_layers(map_, band_params_, 4.0, z0, z1);  // top clipped to the window's 40 layers
   EXPECT_EQ(z0, 34);
   EXPECT_EQ(z1, 40);
@@ -98,7 +103,7 @@ TEST_F(Band, OverhangIsAnObstacleIn3D_GroundIsNot_DebrisIs) {
   scan_scene();
   SerialRunner runner;
   build(runner);
-  ASSERT_EQ(band_.field.dims, Eigen::Vector3i(160, 160, 18));
+  ASSERT_EQ(band_.field.dims, Eigen::Vector3i(160, 160, 19));
   // Under the wing just above the roof: 2D says far (the wing is above the envelope), 3D says
   // the wing's voxel [3.0, 3.2) is 0.4 m above the voxel [2.6, 2.8).
   EXPECT_GT(slice_distance(6.1, 0.1), 3.0f);

@@ -210,6 +210,8 @@ TEST(Allocations, SteadyStateTicks_AllocateNothingOnTheExecutorThreads) {
   // by DESIGN.md §3, thousands per tick while the map grows) and would swamp the stack record;
   // the executor's side of that stage is one call into the core.
   cfg.mapping.tsdf.enabled = false;
+  // With the 3D ESDF band and its publication: fixed shape, reserved on the first cycle.
+  cfg.mapping.esdf_band.enabled = true;
   auto created = Executor::create(cfg);
   ASSERT_TRUE(created.ok()) << created.error().message;
   Executor& executor = *created.value();

@@ -31,8 +31,9 @@ namespace tarmac::core {
 
 struct EsdfBandParams {
   bool enabled = false;  ///< the daemon and tarmac-map compute the band every cycle / scan
-  /// The band spans world z [base − below_m, base + above_m), base = the vehicle base pose's z,
-  /// rounded outwards to whole voxels and clipped to the window.
+  /// The band starts at the voxel holding world z = base − below_m (base = the vehicle base
+  /// pose's z) and has esdf_band_max_layers() layers, so it covers [base − below_m, base +
+  /// above_m) whatever the base's height; clipped to the window.
   double below_m = 0.2;
   double above_m = 3.0;  ///< default: vehicle height 2.5 + clearance 0.3 + one 0.2 m voxel
   UnknownPolicy unknown = UnknownPolicy::kReportUnknown;
@@ -54,6 +55,11 @@ struct EsdfBand {
   DistanceFieldScratch scratch;
   std::vector<int> ring_x;  ///< window x -> ring x, per call
 };
+
+/// Layers of the band: ceil((below_m + above_m) / voxel) + 1, the most [base − below_m,
+/// base + above_m) can meet, whatever the base's height, so the band's shape is fixed (unless
+/// clipped by the window).
+int esdf_band_max_layers(const EsdfBandParams& params, double voxel_size_m);
 
 /// Window layers [z0, z1) of the band for a vehicle base at world height base_z_m (empty when
 /// the band misses the window).
