@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/apron_scene.hpp"
+
 namespace tarmac::core {
 namespace {
 
@@ -35,27 +37,10 @@ TEST(Polygon, EvenOddContainment) {
 /// plus whatever `extra` adds.
 class Envelope : public ::testing::Test {
  protected:
-  Envelope() : map_(params()) { map_.recenter(Eigen::Vector3d::Zero()); }
-
-  static OccupancyParams params() {
-    OccupancyParams p;
-    p.window_x_vox = 160;
-    p.window_y_vox = 160;
-    p.window_z_vox = 40;
-    p.window_below_m = 3.0;
-    p.max_range_m = 40.0;
-    return p;
-  }
+  Envelope() : map_(test::apron_window_params()) { map_.recenter(Eigen::Vector3d::Zero()); }
 
   void scan(const std::vector<Eigen::Vector3f>& extra, int times = 3) {
-    std::vector<Eigen::Vector3f> points = extra;
-    for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
-      for (float y = -12.0f; y <= 12.0f; y += 0.1f)
-        points.emplace_back(x + 0.013f, y + 0.017f, 0.05f);
-    }
-    SerialRunner runner;
-    for (int i = 0; i < times; ++i)
-      map_.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
+    test::scan_apron(map_, extra, times);
   }
 
   std::int8_t cost_at(double x, double y) const {
@@ -72,9 +57,7 @@ class Envelope : public ::testing::Test {
   }
 
   static void box(std::vector<Eigen::Vector3f>& pts, Eigen::Vector3f lo, Eigen::Vector3f hi) {
-    for (float x = lo.x(); x <= hi.x(); x += 0.05f)
-      for (float y = lo.y(); y <= hi.y(); y += 0.05f)
-        for (float z = lo.z(); z <= hi.z(); z += 0.05f) pts.emplace_back(x, y, z);
+    test::add_box(pts, lo, hi);
   }
 
   OccupancyMap map_;

@@ -6,48 +6,26 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/apron_scene.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 
 namespace tarmac::core {
 namespace {
 
-/// A flat apron (ground returns at z 0.05 every 0.1 m within 12 m) seen from a sensor 2 m above
-/// the vehicle base at the origin, plus the scene's objects; the window is 32 × 32 × 8 m at 0.2 m,
-/// its bottom 3 m below the base.
+/// The apron of support/apron_scene.hpp (vehicle base at the origin, sensor 2 m up) with the
+/// scene's objects.
 class Band : public ::testing::Test {
  protected:
-  Band() : map_(params()) { map_.recenter(Eigen::Vector3d::Zero()); }
-
-  static OccupancyParams params() {
-    OccupancyParams p;
-    p.window_x_vox = 160;
-    p.window_y_vox = 160;
-    p.window_z_vox = 40;
-    p.window_below_m = 3.0;
-    p.max_range_m = 40.0;
-    return p;
-  }
-
-  static void box(std::vector<Eigen::Vector3f>& pts, Eigen::Vector3f lo, Eigen::Vector3f hi) {
-    for (float x = lo.x(); x <= hi.x(); x += 0.05f)
-      for (float y = lo.y(); y <= hi.y(); y += 0.05f)
-        for (float z = lo.z(); z <= hi.z(); z += 0.05f) pts.emplace_back(x, y, z);
-  }
+  Band() : map_(test::apron_window_params()) { map_.recenter(Eigen::Vector3d::Zero()); }
 
   /// The scene: a wing 3.0–3.2 m up (above vehicle height 2.5 + clearance 0.3: the costmap
   /// ignores it), a 1.5 m pole, a 10 cm debris object.
   void scan_scene() {
     std::vector<Eigen::Vector3f> points;
-    box(points, {4.0f, -3.0f, 3.0f}, {8.0f, 3.0f, 3.15f});        // wing
-    box(points, {-5.1f, -0.1f, 0.05f}, {-4.9f, 0.1f, 1.5f});      // pole
-    box(points, {2.95f, -4.05f, 0.15f}, {3.05f, -3.95f, 0.15f});  // debris top, 10 cm up
-    for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
-      for (float y = -12.0f; y <= 12.0f; y += 0.1f)
-        points.emplace_back(x + 0.013f, y + 0.017f, 0.05f);
-    }
-    SerialRunner runner;
-    for (int i = 0; i < 3; ++i)
-      map_.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
+    test::add_box(points, {4.0f, -3.0f, 3.0f}, {8.0f, 3.0f, 3.15f});        // wing
+    test::add_box(points, {-5.1f, -0.1f, 0.05f}, {-4.9f, 0.1f, 1.5f});      // pole
+    test::add_box(points, {2.95f, -4.05f, 0.15f}, {3.05f, -3.95f, 0.15f});  // debris, 10 cm up
+    test::scan_apron(map_, points);
   }
 
   void build(TaskRunner& runner, std::span<const VirtualZone> zones = {}, EsdfBand* out = nullptr) {
