@@ -77,38 +77,48 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
   out.states.reserve(full);
   out.scratch.off[0].reserve(full);
   out.scratch.off[1].reserve(full);
-  out.ring_x.resize(static_cast<std::size_t>(nx));
-  for (int x = 0; x < nx; ++x) out.ring_x[static_cast<std::size_t>(x)] = map.ring_x(x);
 
   // The costmap's split of a column (costmap_builder.cpp, step 3): obstacles start lo_layers
   // above the ground voxel; the layers from the ground voxel up to there take the rise rule.
   const int lo_layers = 1 + static_cast<int>(std::ceil(costmap.min_obstacle_height_m / v - 1e-9));
   const auto min_rise_cm =
       static_cast<int>(std::ceil(costmap.min_obstacle_height_m * 100.0 - 1e-9));
+  // One run of window cells whose ring slots are contiguous: branch-free, so it vectorises.
+  const auto classify = [lo_layers, min_rise_cm](int z, int n, const float* __restrict lo,
+                                                 const std::uint8_t* __restrict rise,
+                                                 const std::int16_t* __restrict ground,
+                                                 CellState* __restrict st) {
+    for (int x = 0; x < n; ++x) {
+      const float l = lo[x];
+      const int above = z - ground[x];  // layers above the column's ground voxel
+      // Bitwise, not logical, operators: no branches.
+      const int occupied = static_cast<int>(above >= lo_layers) & static_cast<int>(l > 0.0f);
+      const int low = static_cast<int>(above >= 0) & static_cast<int>(above < lo_layers) &
+                      static_cast<int>(rise[x] >= min_rise_cm);
+      const int obstacle = occupied | low;
+      const int unknown = static_cast<int>(l == OccupancyMap::kUnknown) & (obstacle ^ 1);
+      st[x] = static_cast<CellState>(obstacle | (unknown << 1));
+    }
+  };
+  static_assert(static_cast<int>(CellState::kOccupied) == 1 &&
+                static_cast<int>(CellState::kUnknown) == 2);
+  // Window x maps to ring x = (min.x + x) mod nx: two contiguous runs per row.
+  const int split = nx - map.ring_x(0);  // window x where the ring wraps to slot 0
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
-    const int* __restrict rx = out.ring_x.data();
-    const std::int16_t* __restrict ground = layers.ground_layer.data();
+    const int r0 = map.ring_x(0);
     for (int lz = 0; lz < nb; ++lz) {
       const int z = z0 + lz;
-      const float* __restrict lo = map.ring_layer(z);
-      const std::uint8_t* __restrict rise = map.ring_layer_rise_cm(z);
+      const float* lo = map.ring_layer(z);
+      const std::uint8_t* rise = map.ring_layer_rise_cm(z);
       for (int y = y0; y < y1; ++y) {
         const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
         const std::size_t row = static_cast<std::size_t>(y) * nx;
-        CellState* __restrict st = out.states.data() + lz * plane + row;
-        for (int x = 0; x < nx; ++x) {
-          const std::size_t sl = ring_row + static_cast<std::size_t>(rx[x]);
-          const float l = lo[sl];
-          const int above = z - ground[row + static_cast<std::size_t>(x)];  // layers above ground
-          const bool obstacle = above >= lo_layers ? l > 0.0f
-                                : above >= 0       ? rise[sl] >= min_rise_cm
-                                                   : false;
-          st[x] = l == OccupancyMap::kUnknown && !obstacle ? CellState::kUnknown
-                  : obstacle                               ? CellState::kOccupied
-                                                           : CellState::kFree;
-        }
+        const std::int16_t* ground = layers.ground_layer.data() + row;
+        CellState* st = out.states.data() + lz * plane + row;
+        classify(z, split, lo + ring_row + r0, rise + ring_row + r0, ground, st);
+        classify(z, nx - split, lo + ring_row, rise + ring_row, ground + split, st + split);
       }
     }
   });

@@ -53,7 +53,6 @@ struct EsdfBand {
   std::uint64_t obstacles = 0;  ///< obstacle voxels in the band (virtual zones included)
   std::vector<CellState> states;
   DistanceFieldScratch scratch;
-  std::vector<int> ring_x;  ///< window x -> ring x, per call
 };
 
 /// Layers of the band: ceil((below_m + above_m) / voxel) + 1, the most [base − below_m,
