@@ -343,11 +343,13 @@ struct ChunkBins {
   SampleBin* bins;  // kPartitions
   std::size_t room = 0;
 
-  void begin() {
+  /// Empties the bins, each with room for at least `share` samples.
+  void begin(std::size_t share) {
     room = std::numeric_limits<std::size_t>::max();
     for (std::size_t p = 0; p < kPartitions; ++p) {
       bins[p].count = 0;
       bins[p].run_count = 0;
+      if (bins[p].capacity < share) bins[p].grow(share);
       room = std::min(room, bins[p].capacity);
     }
   }
@@ -471,9 +473,14 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
   // 1. Band samples per ray chunk, binned by the partition owning their block.
   const std::size_t n = points_W.size();
   const std::size_t per_chunk = (n + kRayChunks - 1) / kRayChunks;
+  // Each bin starts with room for a 16th of the chunk's bound on samples (3·(L/v + 1) + 1 per
+  // ray, L <= 2·trunc without carving): ~3.5x a bin's mean share on MulRan, so that bins stop
+  // growing (allocating) within the first scans instead of whenever one meets a new maximum.
+  const std::size_t share =
+      carve ? 0 : per_chunk * (3 * static_cast<std::size_t>(2.0 * trunc / v) + 7) / kPartitions;
   runner.parallel_for(kRayChunks, [&](std::size_t c) {
     ChunkBins out{&s.bins[c * kPartitions]};
-    out.begin();
+    out.begin(share);
     std::uint64_t rays = 0;
     const std::size_t end = std::min(n, (c + 1) * per_chunk);
     for (std::size_t i = c * per_chunk; i < end; ++i) {
