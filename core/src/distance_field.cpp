@@ -159,12 +159,13 @@ struct RowsJob {
 /// One task's buffers for pass 2; Key holds d2 · 2^zb + z (int32 when it fits, else int64).
 template <typename Key>
 struct RowsBuffers {
-  std::int32_t* f;    // nx: envelope input
-  Parabola* env;      // nx + 1: the envelope
-  std::int32_t* e;    // 3 · nx: final offsets x, y, z
-  Key* best;          // nx (3D): the best key per cell of a row
-  std::int32_t* oxy;  // nz · nx: packed x / carried y offsets per layer row
-  Key* keys;          // nz · nx (3D): keys per layer row
+  std::int32_t* f;       // nx: envelope input
+  Parabola* env;         // nx + 1: the envelope
+  std::int32_t* e;       // 3 · nx: final offsets x, y, z
+  Key* best;             // nx (3D): the best key per cell of a row
+  std::int32_t* oxy;     // nz · nx: packed x / carried y offsets per layer row
+  Key* keys;             // nz · nx (3D): keys per layer row
+  std::int32_t* layers;  // nz: the layers whose row has a site
 };
 
 /// Pass 2 for the rows y0 ≤ y < y1 of every layer: the envelope along x of each layer's row
@@ -186,8 +187,9 @@ template <typename Key>
   std::int32_t* __restrict ez = ey + nx;
   Key* __restrict best = b.best;
   const double cell = job.cell;
+  std::int32_t* __restrict layers = b.layers;  // the layers whose row has a site
   for (int y = y0; y < y1; ++y) {
-    bool any_site = false;
+    int n_layers = 0;
     for (int z = 0; z < nz; ++z) {
       const std::size_t base = (static_cast<std::size_t>(z) * ny + y) * nx;
       const std::int16_t* __restrict a0 = job.off + base;
@@ -202,7 +204,7 @@ template <typename Key>
         if (three_d) std::fill(kz, kz + nx, no_key);
         continue;
       }
-      any_site = true;
+      layers[n_layers++] = z;
       if (three_d) {
         fill_row<true>(a0, k, b.env, oxy, kz, zb, z);
       } else {
@@ -216,7 +218,7 @@ template <typename Key>
       float* __restrict gx = job.gx + base;
       float* __restrict gy = job.gy + base;
       float* __restrict gz = job.gz + base;
-      if (!any_site) {  // no obstacle in the grid (every layer's row is empty only then)
+      if (n_layers == 0) {  // no obstacle in the grid (every layer's row is empty only then)
         for (int x = 0; x < nx; ++x) {
           dist[x] = st[x] == unknown_state ? std::numeric_limits<float>::quiet_NaN() : kInf;
           gx[x] = gy[x] = gz[x] = 0.0f;
@@ -227,7 +229,8 @@ template <typename Key>
       if (three_d) {
         const Key* __restrict k0 = b.keys + static_cast<std::size_t>(z) * nx;
         for (int x = 0; x < nx; ++x) best[x] = k0[x];
-        for (int zz = 0; zz < nz; ++zz) {
+        for (int i = 0; i < n_layers; ++i) {
+          const int zz = layers[i];
           if (zz == z) continue;
           const Key c = static_cast<Key>((z - zz) * (z - zz)) << zb;
           const Key* __restrict kk = b.keys + static_cast<std::size_t>(zz) * nx;
@@ -236,7 +239,7 @@ template <typename Key>
         const Key zmask = (Key{1} << zb) - 1;
         for (int x = 0; x < nx; ++x) {
           const auto zz = static_cast<std::int32_t>(best[x] & zmask);
-          ey[x] = oxy[static_cast<std::size_t>(zz) * nx + x];  // packed, unpacked below
+          ey[x] = oxy[zz * nx + x];  // packed, unpacked below (nz · nx < 2^31)
           ez[x] = z - zz;
         }
       } else {
@@ -278,21 +281,23 @@ RowsBuffers<Key> carve(std::vector<std::int64_t>& v, int nx, int nz) {
   const std::size_t row_cells = static_cast<std::size_t>(nx) * nz;
   const std::size_t sizes[] = {nx * sizeof(std::int32_t),        (nx + 1) * sizeof(Parabola),
                                3 * nx * sizeof(std::int32_t),    nx * sizeof(Key),
-                               row_cells * sizeof(std::int32_t), row_cells * sizeof(Key)};
+                               row_cells * sizeof(std::int32_t), row_cells * sizeof(Key),
+                               nz * sizeof(std::int32_t)};
   std::size_t total = 64;
   for (const std::size_t sz : sizes) total += (sz + 63) / 64 * 64;
   v.resize(total / sizeof(std::int64_t));
   auto* p = reinterpret_cast<unsigned char*>(v.data());
   p += (64 - reinterpret_cast<std::uintptr_t>(p) % 64) % 64;
-  unsigned char* piece[6];
-  for (int i = 0; i < 6; ++i) {
+  unsigned char* piece[7];
+  for (int i = 0; i < 7; ++i) {
     piece[i] = p;
     p += (sizes[i] + 63) / 64 * 64;
   }
   return RowsBuffers<Key>{
       reinterpret_cast<std::int32_t*>(piece[0]), reinterpret_cast<Parabola*>(piece[1]),
       reinterpret_cast<std::int32_t*>(piece[2]), reinterpret_cast<Key*>(piece[3]),
-      reinterpret_cast<std::int32_t*>(piece[4]), reinterpret_cast<Key*>(piece[5])};
+      reinterpret_cast<std::int32_t*>(piece[4]), reinterpret_cast<Key*>(piece[5]),
+      reinterpret_cast<std::int32_t*>(piece[6])};
 }
 
 TARMAC_ESDF_CLONES
