@@ -37,6 +37,11 @@ constexpr auto kRecip = [] {
   return r;
 }();
 
+/// Columns compared on each side when pruning envelope candidates (see transform_rows), and
+/// the padding value for "no site": above every squared distance, and + kPrune² fits int32.
+constexpr int kPrune = 4;
+constexpr std::int32_t kFar = std::int32_t{1} << 29;
+
 /// One parabola x ↦ (x − s)² + g of a lower envelope, lowest from x = t on; v is its value at t.
 struct Parabola {
   std::int32_t s, t, v, g;
@@ -166,6 +171,7 @@ struct RowsBuffers {
   std::int32_t* oxy;     // nz · nx: packed x / carried y offsets per layer row
   Key* keys;             // nz · nx (3D): keys per layer row
   std::int32_t* layers;  // nz: the layers whose row has a site
+  std::int32_t* fp;      // nx + 2 kPrune: the envelope input before pruning
 };
 
 /// Pass 2 for the rows y0 ≤ y < y1 of every layer: the envelope along x of each layer's row
@@ -182,6 +188,8 @@ template <typename Key>
       job.report_unknown ? static_cast<std::uint8_t>(CellState::kUnknown) : 0xff;
   const Key no_key = Key{1} << (sizeof(Key) * 8 - 2);  // above every real key, room to add
   std::int32_t* __restrict f = b.f;
+  std::int32_t* __restrict fp = b.fp;  // kPrune + nx + kPrune: f padded, kFar for no site
+  for (int j = 0; j < kPrune; ++j) fp[j] = fp[kPrune + nx + j] = kFar;
   std::int32_t* __restrict ex = b.e;
   std::int32_t* __restrict ey = ex + nx;
   std::int32_t* __restrict ez = ey + nx;
@@ -193,9 +201,22 @@ template <typename Key>
     for (int z = 0; z < nz; ++z) {
       const std::size_t base = (static_cast<std::size_t>(z) * ny + y) * nx;
       const std::int16_t* __restrict a0 = job.off + base;
+      // Envelope input: the squared y distance per column, −1 where the column has no site or
+      // where its parabola is dominated on both sides, so never strictly lowest: by a column p
+      // left of it with f[p] + (x − p)² <= f[x] (then p is at most as low as x's parabola at
+      // every cell left of x) and by one right of it likewise; kPrune columns each side.
       for (int x = 0; x < nx; ++x) {
         const std::int32_t u = a0[x];
-        f[x] = u == kNone ? -1 : u * u;
+        fp[kPrune + x] = u == kNone ? kFar : u * u;
+      }
+      for (int x = 0; x < nx; ++x) {
+        const std::int32_t c = fp[kPrune + x];
+        std::int32_t left = kFar, right = kFar;
+        for (int j = 1; j <= kPrune; ++j) {
+          left = std::min(left, fp[kPrune + x - j] + j * j);
+          right = std::min(right, fp[kPrune + x + j] + j * j);
+        }
+        f[x] = c == kFar || (c >= left && c >= right) ? -1 : c;
       }
       std::int32_t* oxy = b.oxy + static_cast<std::size_t>(z) * nx;
       Key* kz = b.keys + static_cast<std::size_t>(z) * nx;
@@ -279,17 +300,18 @@ template <typename Key>
 template <typename Key>
 RowsBuffers<Key> carve(std::vector<std::int64_t>& v, int nx, int nz) {
   const std::size_t row_cells = static_cast<std::size_t>(nx) * nz;
-  const std::size_t sizes[] = {nx * sizeof(std::int32_t),        (nx + 1) * sizeof(Parabola),
-                               3 * nx * sizeof(std::int32_t),    nx * sizeof(Key),
-                               row_cells * sizeof(std::int32_t), row_cells * sizeof(Key),
-                               nz * sizeof(std::int32_t)};
+  const std::size_t sizes[] = {
+      nx * sizeof(std::int32_t),        (nx + 1) * sizeof(Parabola),
+      3 * nx * sizeof(std::int32_t),    nx * sizeof(Key),
+      row_cells * sizeof(std::int32_t), row_cells * sizeof(Key),
+      nz * sizeof(std::int32_t),        (nx + 2 * kPrune) * sizeof(std::int32_t)};
   std::size_t total = 64;
   for (const std::size_t sz : sizes) total += (sz + 63) / 64 * 64;
   v.resize(total / sizeof(std::int64_t));
   auto* p = reinterpret_cast<unsigned char*>(v.data());
   p += (64 - reinterpret_cast<std::uintptr_t>(p) % 64) % 64;
-  unsigned char* piece[7];
-  for (int i = 0; i < 7; ++i) {
+  unsigned char* piece[8];
+  for (int i = 0; i < 8; ++i) {
     piece[i] = p;
     p += (sizes[i] + 63) / 64 * 64;
   }
@@ -297,7 +319,7 @@ RowsBuffers<Key> carve(std::vector<std::int64_t>& v, int nx, int nz) {
       reinterpret_cast<std::int32_t*>(piece[0]), reinterpret_cast<Parabola*>(piece[1]),
       reinterpret_cast<std::int32_t*>(piece[2]), reinterpret_cast<Key*>(piece[3]),
       reinterpret_cast<std::int32_t*>(piece[4]), reinterpret_cast<Key*>(piece[5]),
-      reinterpret_cast<std::int32_t*>(piece[6])};
+      reinterpret_cast<std::int32_t*>(piece[6]), reinterpret_cast<std::int32_t*>(piece[7])};
 }
 
 TARMAC_ESDF_CLONES
