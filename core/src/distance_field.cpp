@@ -39,7 +39,7 @@ constexpr auto kRecip = [] {
 
 /// Columns compared on each side when pruning envelope candidates (see transform_rows), and
 /// the padding value for "no site": above every squared distance, and + kPrune² fits int32.
-constexpr int kPrune = 4;
+constexpr int kPrune = 6;
 constexpr std::int32_t kFar = std::int32_t{1} << 29;
 
 /// One parabola x ↦ (x − s)² + g of a lower envelope, lowest from x = t on; v is its value at t.
