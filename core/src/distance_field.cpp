@@ -54,31 +54,35 @@ struct Parabola {
 /// f <= (kMaxSide − 1)², so every value is below 2^25. The last parabola is dropped when the
 /// new one is strictly lower at its first cell; a tie at a cell goes to the one added first.
 inline int lower_envelope(const std::int32_t* __restrict f, int n, Parabola* __restrict e) {
+  // The last parabola lives in registers (top); e[0 .. k − 2] hold the ones below it.
   int k = 0;
+  Parabola top{0, 0, 0, 0};
   for (int u = 0; u < n; ++u) {
     const std::int32_t fu = f[u];
     if (fu < 0) continue;
     while (k > 0) {
-      const std::int32_t b = e[k - 1].t - u;
-      if (e[k - 1].v <= b * b + fu) break;
-      --k;
+      const std::int32_t b = top.t - u;
+      if (top.v <= b * b + fu) break;
+      if (--k > 0) top = e[k - 1];
     }
     if (k == 0) {
-      e[0] = Parabola{u, 0, u * u + fu, fu};
+      top = Parabola{u, 0, u * u + fu, fu};
       k = 1;
       continue;
     }
-    // The new parabola is not lower at e[k − 1].t, so it takes over strictly after the crossing
-    // x* = num / (2 (u − p)) >= e[k − 1].t >= 0: from floor(x*) + 1.
-    const std::int32_t p = e[k - 1].s;
-    const std::int32_t num = (u - p) * (u + p) + fu - e[k - 1].g;
+    // The new parabola is not lower at top.t, so it takes over strictly after the crossing
+    // x* = num / (2 (u − p)) >= top.t >= 0: from floor(x*) + 1.
+    const std::int32_t p = top.s;
+    const std::int32_t num = (u - p) * (u + p) + fu - top.g;
     const auto w = static_cast<std::int32_t>(
         (static_cast<std::uint64_t>(num) * kRecip[static_cast<std::size_t>(u - p)]) >> 40);
     if (w + 1 < n) {
-      e[k] = Parabola{u, w + 1, (w + 1 - u) * (w + 1 - u) + fu, fu};
+      e[k - 1] = top;
+      top = Parabola{u, w + 1, (w + 1 - u) * (w + 1 - u) + fu, fu};
       ++k;
     }
   }
+  if (k > 0) e[k - 1] = top;
   e[k].t = n;
   return k;
 }
