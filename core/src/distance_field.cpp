@@ -222,7 +222,8 @@ template <typename Key>
         }
         f[x] = c == kFar || (c >= left && c >= right) ? -1 : c;
       }
-      std::int32_t* oxy = b.oxy + static_cast<std::size_t>(z) * nx;
+      // 2D: straight into the final stage's input (packed, unpacked there).
+      std::int32_t* oxy = three_d ? b.oxy + static_cast<std::size_t>(z) * nx : ey;
       Key* kz = b.keys + static_cast<std::size_t>(z) * nx;
       const int k = lower_envelope(f, nx, b.env);
       if (k == 0) {
@@ -268,10 +269,7 @@ template <typename Key>
           ez[x] = z - zz;
         }
       } else {
-        for (int x = 0; x < nx; ++x) {
-          ey[x] = oxy[x];
-          ez[x] = 0;
-        }
+        for (int x = 0; x < nx; ++x) ez[x] = 0;  // ey holds the packed offsets already
       }
       // Branch-free loops so each vectorises: unknown cells get zero offsets (so a zero
       // gradient), then metres and gradients (an obstacle, r = 0, multiplies 0 by 1), then NaN.
