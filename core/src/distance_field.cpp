@@ -1,9 +1,11 @@
 #include "tarmac/core/distance_field.hpp"
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <limits>
-#include <type_traits>
 
 #include "tarmac/core/assert.hpp"
 
@@ -13,9 +15,6 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr std::size_t kTasksPerPass = 16;
-/// Lines along y (3D middle pass) are processed this many adjacent ones at a time: their cells
-/// are contiguous in memory, so the gathers and scatters read and write whole cache lines.
-constexpr int kBlock = 16;
 /// Offset (cell − site, cells) meaning "no site on this line"; larger than any real offset.
 constexpr std::int32_t kNone = 1 << 14;
 
@@ -24,49 +23,315 @@ std::uint8_t site_mask(UnknownPolicy policy) {
   return policy == UnknownPolicy::kUnknownIsOccupied ? 3 : 1;
 }
 
-/// One parabola of a lower envelope: its root v, F = f[v] + v², and its left breakpoint as the
-/// fraction zn / (2·zd) (zd > 0; the first parabola's is −inf and never read).
+/// Largest grid side: every value of the envelopes below stays under 2^25 (see kRecip).
+constexpr int kMaxSide = 4096;
+
+/// floor(num / (2 d)) = (num · kRecip[d]) >> 40 for 0 <= num < 2^25 and 1 <= d <= kMaxSide
+/// (Granlund & Montgomery 1994): with M = ceil(2^40 / D), D = 2d <= 2^13, and e = M·D − 2^40 < D,
+/// num·M / 2^40 = num / D + num·e / (D·2^40), and num·e / (D·2^40) < 2^−15 < 1/D, so the
+/// fraction never carries into the quotient; num·M < 2^25 · 2^39 fits 64 bits.
+constexpr auto kRecip = [] {
+  std::array<std::uint64_t, kMaxSide + 1> r{};
+  for (std::uint64_t d = 1; d <= kMaxSide; ++d)
+    r[d] = ((std::uint64_t{1} << 40) + 2 * d - 1) / (2 * d);
+  return r;
+}();
+
+/// Columns compared on each side when pruning envelope candidates (see transform_rows), and
+/// the padding value for "no site": above every squared distance, and + kPrune² fits int32.
+constexpr int kPrune = 6;
+constexpr std::int32_t kFar = std::int32_t{1} << 29;
+
+/// One parabola x ↦ (x − s)² + g of a lower envelope, lowest from x = t on; v is its value at t.
 struct Parabola {
-  std::int64_t F, zn, zd;
-  std::int64_t v;
+  std::int32_t s, t, v, g;
 };
 
-/// Lower envelope (FH Algorithm 1) of the parabolas q ↦ (q − p)² + f[p] over the p with
-/// f[p] >= 0 (f[p] < 0: no site), in exact integer arithmetic. The breakpoint between
-/// parabolas p < q is z = (F_q − F_p) / (2 (q − p)); breakpoints are kept as fractions and
-/// compared by cross-multiplying, so no division. A new parabola replaces the last one when it
-/// is as low at that one's left breakpoint (ties go to the parabola added last). Returns the
-/// number of parabolas, followed in `e` by a sentinel whose breakpoint is never passed.
-/// @pre e holds n + 1 entries.
-int lower_envelope(const std::int32_t* __restrict f, int n, Parabola* __restrict e) {
-  int k = -1;
-  for (int q = 0; q < n; ++q) {
-    if (f[q] < 0) continue;
-    const std::int64_t Fq = f[q] + std::int64_t{q} * q;
-    // s(q, v_k) <= z_k  ⟺  (F_q − F_k)·zd_k <= zn_k·(q − v_k); the first parabola stays.
-    while (k > 0 && (Fq - e[k].F) * e[k].zd <= e[k].zn * (q - e[k].v)) --k;
-    if (k >= 0) {
-      e[k + 1] = Parabola{Fq, Fq - e[k].F, q - e[k].v, q};
-    } else {
-      e[0] = Parabola{Fq, 0, 1, q};
+/// Lower envelope of the parabolas x ↦ (x − u)² + f[u] over the u with f[u] >= 0 (f[u] < 0:
+/// no site), restricted to the integers [0, n) (Meijster, Roerdink & Hesselink 2000; the
+/// envelope of Felzenszwalb & Huttenlocher): parabola j is lowest on [e[j].t, e[j + 1].t).
+/// Returns their number k, with e[k].t = n. Exact int32 arithmetic: n <= kMaxSide and
+/// f <= (kMaxSide − 1)², so every value is below 2^25. The last parabola is dropped when the
+/// new one is strictly lower at its first cell; a tie at a cell goes to the one added first.
+inline int lower_envelope(const std::int32_t* __restrict f, int n, Parabola* __restrict e) {
+  // The last parabola lives in registers (top); e[0 .. k − 2] hold the ones below it.
+  int k = 0;
+  Parabola top{0, 0, 0, 0};
+  for (int u = 0; u < n; ++u) {
+    const std::int32_t fu = f[u];
+    if (fu < 0) continue;
+    while (k > 0) {
+      const std::int32_t b = top.t - u;
+      if (top.v <= b * b + fu) break;
+      if (--k > 0) top = e[k - 1];
     }
-    ++k;
+    if (k == 0) {
+      top = Parabola{u, 0, u * u + fu, fu};
+      k = 1;
+      continue;
+    }
+    // The new parabola is not lower at top.t, so it takes over strictly after the crossing
+    // x* = num / (2 (u − p)) >= top.t >= 0: from floor(x*) + 1.
+    const std::int32_t p = top.s;
+    const std::int32_t num = (u - p) * (u + p) + fu - top.g;
+    const auto w = static_cast<std::int32_t>(
+        (static_cast<std::uint64_t>(num) * kRecip[static_cast<std::size_t>(u - p)]) >> 40);
+    if (w + 1 < n) {
+      e[k - 1] = top;
+      top = Parabola{u, w + 1, (w + 1 - u) * (w + 1 - u) + fu, fu};
+      ++k;
+    }
   }
-  e[k + 1] = Parabola{0, 1, 0, 0};  // 1 < 2·q·0 never holds
-  return k + 1;
+  if (k > 0) e[k - 1] = top;
+  e[k].t = n;
+  return k;
 }
 
-/// For each q, the root of the envelope's parabola that is lowest at q: the last one whose
-/// breakpoint z lies strictly below q (a tie at q stays with the earlier parabola).
-/// Calls emit(q, root) in order of q. @pre the envelope is not empty.
-template <typename Emit>
-void scan_envelope(int n, const Parabola* __restrict e, Emit&& emit) {
-  int j = 0;
-  for (int q = 0; q < n; ++q) {
-    // z_{j+1} < q  ⟺  zn < 2·q·zd
-    while (e[j + 1].zn < 2 * std::int64_t{q} * e[j + 1].zd) ++j;
-    emit(q, static_cast<int>(e[j].v));
+/// Per-cell result of one row's envelope, packed in one int32: the x offset to the site (low
+/// 16 bits) and the site's carried y offset (high 16 bits); in 3D also the key
+/// (squared 2D distance) · 2^zb + z of each cell.
+template <bool kKeys, typename Key>
+inline void fill_row(const std::int16_t* __restrict oy_in, int k, const Parabola* __restrict e,
+                     std::int32_t* __restrict oxy, Key* __restrict key, int zb, int z) {
+  for (int j = 0; j < k; ++j) {
+    const std::int32_t site = e[j].s, g = e[j].g;
+    const std::int32_t carried = static_cast<std::int32_t>(
+        static_cast<std::uint32_t>(static_cast<std::uint16_t>(oy_in[site])) << 16);
+    const int x1 = e[j + 1].t;
+    for (int x = e[j].t; x < x1; ++x) {
+      const std::int32_t dx = x - site;
+      oxy[x] = carried | static_cast<std::uint16_t>(dx);
+      if constexpr (kKeys) key[x] = (static_cast<Key>(dx * dx + g) << zb) | z;
+    }
   }
+}
+
+/// Where x86-64 CPUs have AVX2, the hot loops run in an AVX2 build of the same source
+/// (8-lane integer min, 4-lane double sqrt and division), picked once at load time; the
+/// baseline build (SSE2) stays for other CPUs. Integer and IEEE float operations give the same
+/// bits in both (no FMA contraction: the file builds with -ffp-contract=off).
+#if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__)
+#define TARMAC_ESDF_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define TARMAC_ESDF_CLONES
+#endif
+
+/// Pass 1, along y in each layer, for the (layer, x) lanes [l0, l1): the nearest site on each
+/// column, by a sweep up and a sweep down across contiguous x lanes. off = cell − site (y),
+/// kNone when the column has no site; a tie between the site below and above goes below.
+TARMAC_ESDF_CLONES
+void sweep_columns(const std::uint8_t* states, std::int16_t* off_all, int nx, int ny,
+                   std::uint8_t mask, std::size_t l0, std::size_t l1, std::int32_t* last) {
+  const std::size_t plane = static_cast<std::size_t>(nx) * ny;
+  for (std::size_t l = l0; l < l1;) {
+    const std::size_t z = l / nx, c0 = l % nx;
+    const std::size_t c1 = std::min<std::size_t>(nx, c0 + (l1 - l));
+    l += c1 - c0;
+    const std::uint8_t* layer = states + z * plane;
+    std::int16_t* off = off_all + z * plane;
+    for (std::size_t c = c0; c < c1; ++c) last[c] = -kNone;
+    for (int p = 0; p < ny; ++p) {
+      const std::uint8_t* __restrict st = layer + static_cast<std::size_t>(p) * nx;
+      std::int16_t* __restrict o = off + static_cast<std::size_t>(p) * nx;
+      for (std::size_t c = c0; c < c1; ++c) {
+        last[c] = (st[c] & mask) != 0 ? p : last[c];
+        o[c] = static_cast<std::int16_t>(std::min(p - last[c], kNone));
+      }
+    }
+    for (std::size_t c = c0; c < c1; ++c) last[c] = ny + kNone;  // now "next"
+    for (int p = ny - 1; p >= 0; --p) {
+      const std::uint8_t* __restrict st = layer + static_cast<std::size_t>(p) * nx;
+      std::int16_t* __restrict o = off + static_cast<std::size_t>(p) * nx;
+      for (std::size_t c = c0; c < c1; ++c) {
+        last[c] = (st[c] & mask) != 0 ? p : last[c];
+        const std::int32_t down = std::min(last[c] - p, kNone);
+        const std::int32_t up = o[c];
+        o[c] = static_cast<std::int16_t>(down < up ? -down : up);
+      }
+    }
+  }
+}
+
+/// What pass 2 reads and writes; per-task buffers come separately.
+struct RowsJob {
+  const std::uint8_t* states;
+  const std::int16_t* off;  // pass 1's y offsets
+  int nx, ny, nz, zb;
+  bool report_unknown;
+  double cell;
+  float* dist;
+  float* gx;
+  float* gy;
+  float* gz;
+};
+
+/// One task's buffers for pass 2; Key holds d2 · 2^zb + z (int32 when it fits, else int64).
+template <typename Key>
+struct RowsBuffers {
+  std::int32_t* f;       // nx: envelope input
+  Parabola* env;         // nx + 1: the envelope
+  std::int32_t* e;       // 3 · nx: final offsets x, y, z
+  Key* best;             // nx (3D): the best key per cell of a row
+  std::int32_t* oxy;     // nz · nx: packed x / carried y offsets per layer row
+  Key* keys;             // nz · nx (3D): keys per layer row
+  std::int32_t* layers;  // nz: the layers whose row has a site
+  std::int32_t* fp;      // nx + 2 kPrune: the envelope input before pruning
+};
+
+/// Pass 2 for the rows y0 ≤ y < y1 of every layer: the envelope along x of each layer's row
+/// gives each cell its nearest site within its layer; in 3D the nearest site over all layers
+/// is then the minimum over the layers z' of d2(z') + (z − z')² (ties to the lowest z'), taken
+/// exactly by brute force across contiguous x lanes (bands and windows have few layers); then
+/// metres and gradient.
+template <typename Key>
+[[gnu::always_inline]] inline void transform_rows(const RowsJob& job, const RowsBuffers<Key>& b,
+                                                  int y0, int y1) {
+  const int nx = job.nx, ny = job.ny, nz = job.nz, zb = job.zb;
+  const bool three_d = nz > 1;
+  const std::uint8_t unknown_state =
+      job.report_unknown ? static_cast<std::uint8_t>(CellState::kUnknown) : 0xff;
+  const Key no_key = Key{1} << (sizeof(Key) * 8 - 2);  // above every real key, room to add
+  std::int32_t* __restrict f = b.f;
+  std::int32_t* __restrict fp = b.fp;  // kPrune + nx + kPrune: f padded, kFar for no site
+  for (int j = 0; j < kPrune; ++j) fp[j] = fp[kPrune + nx + j] = kFar;
+  std::int32_t* __restrict ex = b.e;
+  std::int32_t* __restrict ey = ex + nx;
+  std::int32_t* __restrict ez = ey + nx;
+  Key* __restrict best = b.best;
+  const double cell = job.cell;
+  std::int32_t* __restrict layers = b.layers;  // the layers whose row has a site
+  for (int y = y0; y < y1; ++y) {
+    int n_layers = 0;
+    for (int z = 0; z < nz; ++z) {
+      const std::size_t base = (static_cast<std::size_t>(z) * ny + y) * nx;
+      const std::int16_t* __restrict a0 = job.off + base;
+      // Envelope input: the squared y distance per column, −1 where the column has no site or
+      // where its parabola is dominated on both sides, so never strictly lowest: by a column p
+      // left of it with f[p] + (x − p)² <= f[x] (then p is at most as low as x's parabola at
+      // every cell left of x) and by one right of it likewise; kPrune columns each side.
+      for (int x = 0; x < nx; ++x) {
+        const std::int32_t u = a0[x];
+        fp[kPrune + x] = u == kNone ? kFar : u * u;
+      }
+      for (int x = 0; x < nx; ++x) {
+        const std::int32_t c = fp[kPrune + x];
+        std::int32_t left = kFar, right = kFar;
+        for (int j = 1; j <= kPrune; ++j) {
+          left = std::min(left, fp[kPrune + x - j] + j * j);
+          right = std::min(right, fp[kPrune + x + j] + j * j);
+        }
+        f[x] = c == kFar || (c >= left && c >= right) ? -1 : c;
+      }
+      // 2D: straight into the final stage's input (packed, unpacked there).
+      std::int32_t* oxy = three_d ? b.oxy + static_cast<std::size_t>(z) * nx : ey;
+      Key* kz = b.keys + static_cast<std::size_t>(z) * nx;
+      const int k = lower_envelope(f, nx, b.env);
+      if (k == 0) {
+        if (three_d) std::fill(kz, kz + nx, no_key);
+        continue;
+      }
+      layers[n_layers++] = z;
+      if (three_d) {
+        fill_row<true>(a0, k, b.env, oxy, kz, zb, z);
+      } else {
+        fill_row<false, Key>(a0, k, b.env, oxy, nullptr, 0, 0);
+      }
+    }
+    for (int z = 0; z < nz; ++z) {
+      const std::size_t base = (static_cast<std::size_t>(z) * ny + y) * nx;
+      const std::uint8_t* __restrict st = job.states + base;
+      float* __restrict dist = job.dist + base;
+      float* __restrict gx = job.gx + base;
+      float* __restrict gy = job.gy + base;
+      float* __restrict gz = job.gz + base;
+      if (n_layers == 0) {  // no obstacle in the grid (every layer's row is empty only then)
+        for (int x = 0; x < nx; ++x) {
+          dist[x] = st[x] == unknown_state ? std::numeric_limits<float>::quiet_NaN() : kInf;
+          gx[x] = gy[x] = gz[x] = 0.0f;
+        }
+        continue;
+      }
+      const std::int32_t* __restrict oxy = b.oxy;
+      if (three_d) {
+        const Key* __restrict k0 = b.keys + static_cast<std::size_t>(z) * nx;
+        for (int x = 0; x < nx; ++x) best[x] = k0[x];
+        for (int i = 0; i < n_layers; ++i) {
+          const int zz = layers[i];
+          if (zz == z) continue;
+          const Key c = static_cast<Key>((z - zz) * (z - zz)) << zb;
+          const Key* __restrict kk = b.keys + static_cast<std::size_t>(zz) * nx;
+          for (int x = 0; x < nx; ++x) best[x] = std::min(best[x], kk[x] + c);
+        }
+        const Key zmask = (Key{1} << zb) - 1;
+        for (int x = 0; x < nx; ++x) {
+          const auto zz = static_cast<std::int32_t>(best[x] & zmask);
+          ey[x] = oxy[zz * nx + x];  // packed, unpacked below (nz · nx < 2^31)
+          ez[x] = z - zz;
+        }
+      } else {
+        for (int x = 0; x < nx; ++x) ez[x] = 0;  // ey holds the packed offsets already
+      }
+      // Branch-free loops so each vectorises: unknown cells get zero offsets (so a zero
+      // gradient), then metres and gradients (an obstacle, r = 0, multiplies 0 by 1), then NaN.
+      for (int x = 0; x < nx; ++x) {
+        const std::int32_t keep = -static_cast<std::int32_t>(st[x] != unknown_state);
+        const std::int32_t packed = ey[x];
+        ex[x] = static_cast<std::int16_t>(packed & 0xffff) & keep;
+        ey[x] = (packed >> 16) & keep;
+        ez[x] &= keep;
+      }
+      for (int x = 0; x < nx; ++x) {
+        const double e0 = ex[x], e1 = ey[x], e2 = ez[x];
+        const double r = std::sqrt(e0 * e0 + e1 * e1 + e2 * e2);
+        const double inv = 1.0 / (r + (r == 0.0));  // 1 / r; 1 for an obstacle (r = 0)
+        dist[x] = static_cast<float>(r * cell);
+        gx[x] = static_cast<float>(e0 * inv);
+        gy[x] = static_cast<float>(e1 * inv);
+        gz[x] = static_cast<float>(e2 * inv);
+      }
+      if (job.report_unknown) {
+        for (int x = 0; x < nx; ++x) {
+          dist[x] = st[x] == unknown_state ? std::numeric_limits<float>::quiet_NaN() : dist[x];
+        }
+      }
+    }
+  }
+}
+
+/// Carves one task's buffers out of its scratch vector (64-byte aligned pieces).
+template <typename Key>
+RowsBuffers<Key> carve(std::vector<std::int64_t>& v, int nx, int nz) {
+  const std::size_t row_cells = static_cast<std::size_t>(nx) * nz;
+  const std::size_t sizes[] = {
+      nx * sizeof(std::int32_t),        (nx + 1) * sizeof(Parabola),
+      3 * nx * sizeof(std::int32_t),    nx * sizeof(Key),
+      row_cells * sizeof(std::int32_t), row_cells * sizeof(Key),
+      nz * sizeof(std::int32_t),        (nx + 2 * kPrune) * sizeof(std::int32_t)};
+  std::size_t total = 64;
+  for (const std::size_t sz : sizes) total += (sz + 63) / 64 * 64;
+  v.resize(total / sizeof(std::int64_t));
+  auto* p = reinterpret_cast<unsigned char*>(v.data());
+  p += (64 - reinterpret_cast<std::uintptr_t>(p) % 64) % 64;
+  unsigned char* piece[8];
+  for (int i = 0; i < 8; ++i) {
+    piece[i] = p;
+    p += (sizes[i] + 63) / 64 * 64;
+  }
+  return RowsBuffers<Key>{
+      reinterpret_cast<std::int32_t*>(piece[0]), reinterpret_cast<Parabola*>(piece[1]),
+      reinterpret_cast<std::int32_t*>(piece[2]), reinterpret_cast<Key*>(piece[3]),
+      reinterpret_cast<std::int32_t*>(piece[4]), reinterpret_cast<Key*>(piece[5]),
+      reinterpret_cast<std::int32_t*>(piece[6]), reinterpret_cast<std::int32_t*>(piece[7])};
+}
+
+TARMAC_ESDF_CLONES
+void transform_rows_32(const RowsJob& job, std::vector<std::int64_t>& v, int y0, int y1) {
+  transform_rows(job, carve<std::int32_t>(v, job.nx, job.nz), y0, y1);
+}
+
+TARMAC_ESDF_CLONES
+void transform_rows_64(const RowsJob& job, std::vector<std::int64_t>& v, int y0, int y1) {
+  transform_rows(job, carve<std::int64_t>(v, job.nx, job.nz), y0, y1);
 }
 
 }  // namespace
@@ -77,208 +342,64 @@ void compute_distance_field(const std::vector<CellState>& states, const Eigen::V
   const int nx = dims.x(), ny = dims.y(), nz = dims.z();
   const std::size_t n = static_cast<std::size_t>(nx) * ny * nz;
   TARMAC_ASSERT(states.size() == n, "states must match dims");
-  TARMAC_ASSERT(nx < kNone && ny < kNone && nz < kNone, "dims must be below 16384");
+  TARMAC_ASSERT(nx >= 1 && ny >= 1 && nz >= 1 && nx <= kMaxSide && ny <= kMaxSide && nz <= kMaxSide,
+                "dims must be in [1, 4096]");
+  const bool three_d = nz > 1;
+  const int zb = three_d ? std::bit_width(static_cast<unsigned>(nz - 1)) : 0;
+  // Layer keys d2 · 2^zb + z in int32 when every one, plus (z − z')² · 2^zb, stays below 2^30.
+  const std::int64_t max_d2 = std::int64_t{nx - 1} * (nx - 1) + std::int64_t{ny - 1} * (ny - 1) +
+                              std::int64_t{nz - 1} * (nz - 1);
+  const bool wide_keys = ((max_d2 + 1) << zb) >= (std::int64_t{1} << 30);
   out.dims = dims;
   out.cell_size_m = cell_size_m;
   out.distance_m.resize(n);
   out.gradient_x.resize(n);
   out.gradient_y.resize(n);
   out.gradient_z.resize(n);
-  const bool three_d = nz > 1;
-  const std::size_t plane = static_cast<std::size_t>(nx) * ny;
-  // Per cell, the offset (cell − nearest site so far) along each axis done: off[0] along the
-  // first pass's axis (z in 3D, y in 2D), off[1] along y (3D only). The squared distance of a
-  // cell after a pass is the sum of the squares of its offsets, so it is never stored.
-  s.off[0].resize(n);
-  s.off[1].resize(three_d ? n : 0);
-  const int longest = std::max({nx, ny, nz});
-  const std::size_t line_len = static_cast<std::size_t>(longest) + 1;
-  const auto ensure = [&](auto& lines, std::size_t size) {
-    lines.resize(kTasksPerPass);
-    for (auto& l : lines) l.resize(size);
-  };
-  ensure(s.line_f, line_len * kBlock);
-  ensure(s.line_e, (line_len + 1) * 4);  // Parabola = 4 × int64
-  ensure(s.line_a, line_len * kBlock);
-  ensure(s.line_b, line_len * kBlock);
-  ensure(s.line_c, line_len);
-  const std::uint8_t mask = site_mask(policy);
-  const bool report_unknown = policy == UnknownPolicy::kReportUnknown;
+  const auto* st_all = reinterpret_cast<const std::uint8_t*>(states.data());
+  s.off.resize(n);
+  s.task.resize(kTasksPerPass);
+  for (auto& t : s.task) {
+    if (wide_keys) {
+      (void)carve<std::int64_t>(t, nx, nz);
+    } else {
+      (void)carve<std::int32_t>(t, nx, nz);
+    }
+  }
 
-  // Pass 1, along the outermost axis (z in 3D, y in 2D): the nearest site on each line, by a
-  // sweep up and a sweep down that run across the contiguous lanes of a plane (or row) at once.
-  // A tie between the site below and the one above goes to the one below.
+  // Pass 1: (layer, x) lanes split into tasks of at least 64 lanes (short runs of lanes do not
+  // vectorise well); each cell's result is independent of the split.
   {
-    const std::size_t lanes = three_d ? plane : static_cast<std::size_t>(nx);
-    const int len = three_d ? nz : ny;
-    s.lane.resize(lanes);
-    // At least 64 lanes per task (a 2D row is few lanes): short lane runs do not vectorise well.
-    // Each cell's result is independent of the split.
+    const std::size_t lanes = static_cast<std::size_t>(nx) * nz;
     const std::size_t tasks = std::clamp<std::size_t>(lanes / 64, 1, kTasksPerPass);
+    const std::uint8_t mask = site_mask(policy);
     runner.parallel_for(tasks, [&](std::size_t task) {
-      const std::size_t c0 = lanes * task / tasks;
-      const std::size_t c1 = lanes * (task + 1) / tasks;
-      std::int32_t* __restrict last = s.lane.data();
-      for (std::size_t c = c0; c < c1; ++c) last[c] = -kNone;
-      for (int p = 0; p < len; ++p) {
-        const auto* __restrict st =
-            reinterpret_cast<const std::uint8_t*>(states.data()) + p * lanes;
-        std::int16_t* __restrict o = s.off[0].data() + p * lanes;
-        for (std::size_t c = c0; c < c1; ++c) {
-          last[c] = (st[c] & mask) != 0 ? p : last[c];
-          o[c] = static_cast<std::int16_t>(std::min(p - last[c], kNone));
-        }
-      }
-      for (std::size_t c = c0; c < c1; ++c) last[c] = len + kNone;  // now "next"
-      for (int p = len - 1; p >= 0; --p) {
-        const auto* __restrict st =
-            reinterpret_cast<const std::uint8_t*>(states.data()) + p * lanes;
-        std::int16_t* __restrict o = s.off[0].data() + p * lanes;
-        for (std::size_t c = c0; c < c1; ++c) {
-          last[c] = (st[c] & mask) != 0 ? p : last[c];
-          const std::int32_t down = std::min(last[c] - p, kNone);
-          const std::int32_t up = o[c];
-          o[c] = static_cast<std::int16_t>(down < up ? -down : up);
-        }
-      }
+      auto* last = reinterpret_cast<std::int32_t*>(s.task[task].data());
+      sweep_columns(st_all, s.off.data(), nx, ny, mask, lanes * task / tasks,
+                    lanes * (task + 1) / tasks, last);
     });
   }
 
-  // Pass 2 (3D only), along y: blocks of kBlock adjacent columns of one z plane are gathered,
-  // transformed, and scattered back in place (a block's cells are touched by that block only).
-  // Each cell takes the y offset to its envelope's root and carries that root's z offset.
-  if (three_d) {
-    const std::size_t groups_per_plane = (static_cast<std::size_t>(nx) + kBlock - 1) / kBlock;
-    const std::size_t groups = groups_per_plane * static_cast<std::size_t>(nz);
-    runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
-      std::int32_t* f = s.line_f[task].data();
-      std::int32_t* a = s.line_a[task].data();  // gathered z offsets
-      Parabola* e = reinterpret_cast<Parabola*>(s.line_e[task].data());
-      std::int16_t* __restrict off0 = s.off[0].data();
-      std::int16_t* __restrict off1 = s.off[1].data();
-      const int len = ny;
-      const std::size_t stride = static_cast<std::size_t>(nx);
-      const std::size_t first = groups * task / kTasksPerPass;
-      const std::size_t last = groups * (task + 1) / kTasksPerPass;
-      for (std::size_t group = first; group < last; ++group) {
-        const std::size_t zplane = group / groups_per_plane;
-        const std::size_t start = (group % groups_per_plane) * kBlock;
-        const int width = static_cast<int>(std::min<std::size_t>(kBlock, nx - start));
-        const std::size_t base = zplane * plane + start;
-        for (int q = 0; q < len; ++q) {
-          const std::int16_t* o = off0 + base + q * stride;
-          for (int b = 0; b < width; ++b) {
-            const std::int32_t dz = o[b];
-            a[b * len + q] = dz;
-            f[b * len + q] = dz == kNone ? -1 : dz * dz;
-          }
-        }
-        for (int b = 0; b < width; ++b) {
-          const std::int32_t* fl = f + b * len;
-          const std::int32_t* al = a + b * len;
-          const std::size_t col = base + b;
-          if (lower_envelope(fl, len, e) == 0) {
-            for (int q = 0; q < len; ++q) {
-              off0[col + q * stride] = kNone;
-              off1[col + q * stride] = kNone;
-            }
-            continue;
-          }
-          scan_envelope(len, e, [&](int q, int root) {
-            off0[col + q * stride] = static_cast<std::int16_t>(al[root]);
-            off1[col + q * stride] = static_cast<std::int16_t>(q - root);
-          });
-        }
-      }
-    });
-  }
-
-  // Last pass, along x (rows are contiguous): the envelope of each row over the squared
-  // distances of the passes before, then metres and gradient per cell. Each cell's squared
-  // distance is the exact integer dx² + dy² (+ dz²); its metres are
-  // float(sqrt(double(sq)) · cell_size_m) and its gradient (cell − site) / |cell − site|.
-  const std::size_t rows = static_cast<std::size_t>(ny) * nz;
+  // Pass 2: y rows (of all layers) split into fixed tasks.
+  const RowsJob job{st_all,
+                    s.off.data(),
+                    nx,
+                    ny,
+                    nz,
+                    zb,
+                    policy == UnknownPolicy::kReportUnknown,
+                    cell_size_m,
+                    out.distance_m.data(),
+                    out.gradient_x.data(),
+                    out.gradient_y.data(),
+                    out.gradient_z.data()};
   runner.parallel_for(kTasksPerPass, [&](std::size_t task) {
-    std::int32_t* f = s.line_f[task].data();
-    Parabola* e = reinterpret_cast<Parabola*>(s.line_e[task].data());
-    std::int32_t* __restrict ox = s.line_c[task].data();  // per cell: x offset to its site
-    std::int32_t* __restrict o0 = s.line_a[task].data();  // carried offset along pass 1's axis
-    std::int32_t* __restrict o1 = s.line_b[task].data();  // carried y offset (3D)
-    const int width = nx;  // a local copy: stores through the buffers cannot change it
-    const std::size_t first = rows * task / kTasksPerPass;
-    const std::size_t last = rows * (task + 1) / kTasksPerPass;
-    for (std::size_t row = first; row < last; ++row) {
-      const std::size_t base = row * static_cast<std::size_t>(nx);
-      const std::int16_t* __restrict a0 = s.off[0].data() + base;
-      const std::int16_t* __restrict a1 = three_d ? s.off[1].data() + base : nullptr;
-      if (three_d) {
-        for (int x = 0; x < width; ++x) {
-          const std::int32_t u = a0[x], w = a1[x];
-          f[x] = u == kNone ? -1 : u * u + w * w;
-        }
-      } else {
-        for (int x = 0; x < width; ++x) {
-          const std::int32_t u = a0[x];
-          f[x] = u == kNone ? -1 : u * u;
-        }
-      }
-      const auto* __restrict st = reinterpret_cast<const std::uint8_t*>(states.data()) + base;
-      float* __restrict dist = out.distance_m.data() + base;
-      float* __restrict gx = out.gradient_x.data() + base;
-      float* __restrict gy = out.gradient_y.data() + base;
-      float* __restrict gz = out.gradient_z.data() + base;
-      if (lower_envelope(f, width, e) == 0) {  // no obstacle in the grid
-        for (int x = 0; x < width; ++x) {
-          const bool unknown =
-              report_unknown && st[x] == static_cast<std::uint8_t>(CellState::kUnknown);
-          dist[x] = unknown ? std::numeric_limits<float>::quiet_NaN() : kInf;
-          gx[x] = gy[x] = gz[x] = 0.0f;
-        }
-        continue;
-      }
-      // Branch-free loops so each vectorises: unknown cells get zero offsets (so a zero
-      // gradient), then metres and gradients (an obstacle, r = 0, multiplies 0 by 1), then NaN.
-      // Written once for both dimensions; the 2D instance drops the third offset (always 0:
-      // adding 0² and multiplying 0 by 1/r leave the same bits).
-      const std::uint8_t unknown_state =
-          report_unknown ? static_cast<std::uint8_t>(CellState::kUnknown) : 0xff;
-      const auto finish = [&](auto three_d_tag) {
-        constexpr bool k3d = decltype(three_d_tag)::value;
-        scan_envelope(width, e, [&](int q, int root) {
-          ox[q] = q - root;
-          o0[q] = a0[root];
-          if constexpr (k3d) o1[q] = a1[root];
-        });
-        for (int x = 0; x < width; ++x) {
-          const std::int32_t keep = -static_cast<std::int32_t>(st[x] != unknown_state);
-          ox[x] &= keep;
-          o0[x] &= keep;
-          if constexpr (k3d) o1[x] &= keep;
-        }
-        float* __restrict g_pass1 = k3d ? gz : gy;  // gradient along pass 1's axis
-        float* __restrict g_y3 = k3d ? gy : gz;     // y in 3D; z (all zero) in 2D
-        const double cell = cell_size_m;
-        for (int x = 0; x < width; ++x) {
-          const double ex = ox[x], e0 = o0[x];
-          const double e1 = k3d ? o1[x] : 0.0;
-          const double r = std::sqrt(k3d ? ex * ex + e0 * e0 + e1 * e1 : ex * ex + e0 * e0);
-          const double inv = 1.0 / (r + (r == 0.0));  // 1 / r; 1 for an obstacle (r = 0)
-          dist[x] = static_cast<float>(r * cell);
-          gx[x] = static_cast<float>(ex * inv);
-          g_pass1[x] = static_cast<float>(e0 * inv);
-          g_y3[x] = k3d ? static_cast<float>(e1 * inv) : 0.0f;
-        }
-      };
-      if (three_d) {
-        finish(std::true_type{});
-      } else {
-        finish(std::false_type{});
-      }
-      if (report_unknown) {
-        for (int x = 0; x < width; ++x) {
-          dist[x] = st[x] == unknown_state ? std::numeric_limits<float>::quiet_NaN() : dist[x];
-        }
-      }
+    const int y0 = static_cast<int>(static_cast<std::size_t>(ny) * task / kTasksPerPass);
+    const int y1 = static_cast<int>(static_cast<std::size_t>(ny) * (task + 1) / kTasksPerPass);
+    if (wide_keys) {
+      transform_rows_64(job, s.task[task], y0, y1);
+    } else {
+      transform_rows_32(job, s.task[task], y0, y1);
     }
   });
 }

@@ -166,6 +166,34 @@ TEST(DistanceField, ReusedAcrossShapes_EqualsBruteForce) {
   }
 }
 
+// Many layers (the z pass is a minimum over all layers, keyed by layer in the low bits) and the
+// longest sides the transform takes (4096, the window limit): the envelope's integer division
+// by reciprocal and the 64-bit layer keys (sides too long for 32-bit ones) stay exact.
+TEST(DistanceField, ManyLayersAndLongestSides_EqualBruteForce) {
+  SerialRunner runner;
+  DistanceField field;
+  DistanceFieldScratch scratch;
+  const Eigen::Vector3i tall(13, 11, 70);
+  const auto states = random_states(tall, 0.004, 0.1, 7);
+  compute_distance_field(states, tall, 0.2, UnknownPolicy::kReportUnknown, field, scratch, runner);
+  check_against_brute_force(tall, states, UnknownPolicy::kReportUnknown, field);
+  const Eigen::Vector3i wide(4096, 3, 65);  // 64-bit layer keys
+  auto sparse = random_states(wide, 0.0, 0.05, 8);
+  for (const int i : {0, 4095 + 4096 * 2, 4096 * 3 * 64 + 2000, 4096 * 3 * 40 + 4096 + 17}) {
+    sparse[static_cast<std::size_t>(i)] = CellState::kOccupied;
+  }
+  compute_distance_field(sparse, wide, 0.2, UnknownPolicy::kReportUnknown, field, scratch, runner);
+  check_against_brute_force(wide, sparse, UnknownPolicy::kReportUnknown, field);
+  // 2D, 4096 × 4096, three corner sites: squared distances up to 2 · 4095².
+  const Eigen::Vector3i big(4096, 4096, 1);
+  std::vector<CellState> corners(static_cast<std::size_t>(big.prod()), CellState::kFree);
+  corners[0] = CellState::kOccupied;
+  corners[4095] = CellState::kOccupied;
+  corners[static_cast<std::size_t>(4096) * 4095 + 1] = CellState::kOccupied;
+  compute_distance_field(corners, big, 0.2, UnknownPolicy::kReportUnknown, field, scratch, runner);
+  check_against_brute_force(big, corners, UnknownPolicy::kReportUnknown, field);
+}
+
 TEST(DistanceField, NoObstacle_IsInfinite) {
   SerialRunner runner;
   const Eigen::Vector3i dims(5, 4, 1);

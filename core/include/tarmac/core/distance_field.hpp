@@ -6,7 +6,11 @@
 /// parabolas, one pass per axis, O(n) per line. Squared distances between cell centres are
 /// integers in cell units, so the result is exact (not quasi-Euclidean); the nearest obstacle
 /// cell is tracked through the passes, which makes the gradient exact too:
-/// ∇d = (p − site) / |p − site| (zero on obstacles).
+/// ∇d = (p − site) / |p − site| (zero on obstacles). Passes: the nearest site along y in each
+/// layer (two sweeps), the envelope along x of each layer's row (Meijster et al.'s integer
+/// form), then in 3D the minimum over the layers z' of d²(z') + (z − z')², exact brute force
+/// across x lanes: windows and bands have few layers, and this replaces the envelope pass per
+/// column that cost most.
 
 #include <cstdint>
 #include <vector>
@@ -41,15 +45,14 @@ struct DistanceField {
 
 /// Scratch buffers, reused across calls so the cycle does not allocate after warm-up.
 struct DistanceFieldScratch {
-  std::vector<std::int16_t> off[2];  // per cell: offset to the nearest site along done axes
-  std::vector<std::int32_t> lane;    // first pass: last site seen per lane
-  std::vector<std::vector<std::int32_t>> line_f, line_a, line_b, line_c;  // per task
-  std::vector<std::vector<std::int64_t>> line_e;  // per task: the envelope's parabolas
+  std::vector<std::int16_t> off;  // per cell: y offset to the nearest site in its column
+  std::vector<std::vector<std::int64_t>> task;  // per task: line and layer-row buffers
 };
 
 /// Computes the exact distance field of `states` (dims.z() == 1 for 2D). Lines are split into a
 /// fixed number of tasks per pass; the result is identical for any runner.
-/// @pre states.size() == dims.prod().
+/// @pre states.size() == dims.prod(); every dimension in [1, 4096] (the occupancy window's
+///      limit, OccupancyParams::validate).
 void compute_distance_field(const std::vector<CellState>& states, const Eigen::Vector3i& dims,
                             double cell_size_m, UnknownPolicy policy, DistanceField& out,
                             DistanceFieldScratch& scratch, TaskRunner& runner);
