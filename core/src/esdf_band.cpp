@@ -75,8 +75,7 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
     buffer->reserve(full);
   }
   out.states.reserve(full);
-  out.scratch.off[0].reserve(full);
-  out.scratch.off[1].reserve(full);
+  out.scratch.off.reserve(full);
 
   // The costmap's split of a column (costmap_builder.cpp, step 3): obstacles start lo_layers
   // above the ground voxel; the layers from the ground voxel up to there take the rise rule.
