@@ -181,10 +181,9 @@ struct RayStart {
   }
 };
 
-/// One ray task's marks: a bit per voxel, a flag per block of 64 words.
+/// One ray task's marks: a bit per voxel.
 struct FreeMarks {
   std::uint64_t* bits;
-  std::uint8_t* dirty;
 };
 
 /// One axis of a traversal. A step moves the slot by one stride; `events` counts the steps to the
@@ -262,11 +261,7 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   // they are not read through a reference); ties go to x, then y, before z.
   AxisWalk x = ax[0], y = ax[1], z = ax[2];
   std::uint64_t* const bits = marks.bits;
-  std::uint8_t* const dirty = marks.dirty;
-  const auto mark = [bits, dirty](std::int64_t s) {
-    bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-    dirty[s >> (6 + kBlockShift)] = 1;
-  };
+  const auto mark = [bits](std::int64_t s) { bits[s >> 6] |= std::uint64_t{1} << (s & 63); };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
   for (; remaining > 0; --remaining) {
@@ -349,10 +344,8 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
                         std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;
-  const std::size_t blocks = (words >> kBlockShift) + 1;
   hit_bits_.assign(words, 0);
   free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
-  dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>(blocks, 0));
   // Reserved up front so scans do not grow them in the cycle (DESIGN.md §3): every window column
   // can hold a ground return; the hit list takes a 64-beam scan's distinct return voxels (a
   // scan with more grows it once, then keeps the capacity).
@@ -378,7 +371,6 @@ std::size_t OccupancyMap::memory_bytes() const {
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
       hit_height_.capacity() * sizeof(float) + hit_rise_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
-  for (const auto& d : dirty_blocks_) bytes += d.capacity();
   for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
   return bytes;
 }
@@ -664,7 +656,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
   runner.parallel_for(kRayTasks, [&](std::size_t task) {
-    const FreeMarks marks{free_bits_[task].data(), dirty_blocks_[task].data()};
+    const FreeMarks marks{free_bits_[task].data()};
     const std::size_t begin = n_rays * task / kRayTasks;
     const std::size_t end = n_rays * (task + 1) / kRayTasks;
     std::uint64_t visits = 0;
@@ -694,8 +686,10 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   // 3. Apply: fixed ranges of blocks, each voxel marked by any task and not hit gets one miss.
   //    The marks are cleared as they are read, ready for the next scan. Only voxels reading
   //    occupied carry static-layer state (free space costs no extra memory access).
-  const std::size_t n_blocks = dirty_blocks_[0].size();
   const std::size_t n_words = hit_bits_.size();
+  const std::size_t n_blocks = (n_words >> kBlockShift) + 1;
+  std::array<std::uint64_t*, kRayTasks> task_bits{};
+  for (std::size_t t = 0; t < kRayTasks; ++t) task_bits[t] = free_bits_[t].data();
   std::array<std::uint64_t, kApplyTasks> task_updates{};
   const int demote = params_.static_demote_scans;
   const float l_floor = l_hit_;
@@ -705,21 +699,26 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     demoted.clear();
     const std::size_t b_begin = n_blocks * task / kApplyTasks;
     const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
+    std::array<std::uint64_t, std::size_t{1} << kBlockShift> block_marks;
     for (std::size_t b = b_begin; b < b_end; ++b) {
-      bool any = false;
-      for (std::size_t t = 0; t < kRayTasks; ++t) {
-        any = any || dirty_blocks_[t][b] != 0;
-        dirty_blocks_[t][b] = 0;
-      }
-      if (!any) continue;
-      const std::size_t w_begin = b << kBlockShift;
+      // The tasks' marks of this block ORed (a loop the compiler vectorises); a block no ray
+      // passed through is skipped, a marked one is cleared for the next scan.
+      const std::size_t w_begin = std::min(n_words, b << kBlockShift);
       const std::size_t w_end = std::min(n_words, (b + 1) << kBlockShift);
+      const std::size_t count = w_end - w_begin;
+      std::uint64_t any = 0;
+      for (std::size_t k = 0; k < count; ++k) {
+        std::uint64_t m = 0;
+        for (std::size_t t = 0; t < kRayTasks; ++t) m |= task_bits[t][w_begin + k];
+        block_marks[k] = m;
+        any |= m;
+      }
+      if (any == 0) continue;
+      for (std::size_t t = 0; t < kRayTasks; ++t) {
+        std::fill_n(task_bits[t] + w_begin, count, std::uint64_t{0});
+      }
       for (std::size_t wi = w_begin; wi < w_end; ++wi) {
-        std::uint64_t marks = 0;
-        for (std::size_t t = 0; t < kRayTasks; ++t) {
-          marks |= free_bits_[t][wi];
-          free_bits_[t][wi] = 0;
-        }
+        std::uint64_t marks = block_marks[wi - w_begin];
         marks &= ~hit_bits_[wi];
         while (marks != 0) {
           const int bit = std::countr_zero(marks);
