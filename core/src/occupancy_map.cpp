@@ -348,13 +348,18 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
   // Reserved up front so scans do not grow them in the cycle (DESIGN.md §3): every window column
   // can hold a ground return; the hit list takes a 64-beam scan's distinct return voxels (a
-  // scan with more grows it once, then keeps the capacity).
-  scan_ground_cols_.reserve(static_cast<std::size_t>(dims_.x()) * dims_.y());
-  hit_slots_.reserve(kReservedHitSlots);
-  hit_slot_.reserve(kReservedHitSlots);
-  hit_column_.reserve(kReservedHitSlots);
-  hit_height_.reserve(kReservedHitSlots);
-  hit_rise_.reserve(kReservedHitSlots);
+  // scan with more grows it once, then keeps the capacity). Written once here, so the first
+  // scan does not pay their page faults either.
+  const auto warm = [](auto& v, std::size_t n) {
+    v.resize(n);
+    v.clear();
+  };
+  warm(scan_ground_cols_, static_cast<std::size_t>(dims_.x()) * dims_.y());
+  warm(hit_slots_, kReservedHitSlots);
+  warm(hit_slot_, kReservedHitSlots);
+  warm(hit_column_, kReservedHitSlots);
+  warm(hit_height_, kReservedHitSlots);
+  warm(hit_rise_, kReservedHitSlots);
 }
 
 OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
