@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <tuple>
 #include <utility>
@@ -277,6 +278,58 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   if (!include_end) return static_cast<std::uint64_t>(steps);
   mark(slot);
   return static_cast<std::uint64_t>(steps + 1);
+}
+
+/// Four lanes of 32 bits (GCC/Clang vector extensions, any target); comparisons give −1 or 0.
+using Float4 = float __attribute__((vector_size(16)));
+using Int4 = std::int32_t __attribute__((vector_size(16)));
+
+/// Bit k set when lane k of a comparison mask is set.
+unsigned lane_bits(Int4 mask) {
+  return static_cast<unsigned>((mask[0] & 1) | (mask[1] & 2) | (mask[2] & 4) | (mask[3] & 8));
+}
+
+/// Words with at least this many voxels to miss take the four-lanes path.
+constexpr int kDenseWord = 8;
+
+/// The miss update's constants, four lanes each.
+struct MissLanes {
+  Float4 miss, min, zero, unknown;
+  MissLanes(float l_miss, float l_min)
+      : miss{l_miss, l_miss, l_miss, l_miss},
+        min{l_min, l_min, l_min, l_min},
+        zero{0.0f, 0.0f, 0.0f, 0.0f},
+        unknown{OccupancyMap::kUnknown, OccupancyMap::kUnknown, OccupancyMap::kUnknown,
+                OccupancyMap::kUnknown} {}
+};
+
+/// The miss of every voxel of one mark word (64 consecutive slots at `l`, bit k of `marks`
+/// for slot k) that reads free or unknown, four lanes at a time: the same arithmetic as one at a
+/// time (kUnknown counts as 0, then max(l + miss, min)); unmarked and occupied lanes are
+/// written back unchanged. Sets in `occupied` the marked voxels reading occupied (left to the
+/// caller's static-layer logic) and in `void_heights` those that reach the lower clamp now.
+void miss_free_word(float* l, std::uint64_t marks, const MissLanes& c, std::uint64_t& occupied,
+                    std::uint64_t& void_heights) {
+  const Int4 lane = {1, 2, 4, 8};
+  for (int g = 0; g < 16; ++g) {
+    const auto nibble = static_cast<std::int32_t>((marks >> (4 * g)) & 15);
+    if (nibble == 0) continue;
+    const Int4 marked = (lane & nibble) != 0;
+    Float4 v;
+    std::memcpy(&v, l + 4 * g, sizeof v);
+    const Int4 free = marked & (v <= c.zero);
+    const Float4 known = reinterpret_cast<Float4>(reinterpret_cast<Int4>(v) & ~(v == c.unknown));
+    const Float4 sum = known + c.miss;
+    const Int4 below = sum < c.min;
+    const Float4 next = reinterpret_cast<Float4>((reinterpret_cast<Int4>(c.min) & below) |
+                                                 (reinterpret_cast<Int4>(sum) & ~below));
+    const Int4 voided = free & (next == c.min) & (v > c.min);
+    const Float4 out = reinterpret_cast<Float4>((reinterpret_cast<Int4>(next) & free) |
+                                                (reinterpret_cast<Int4>(v) & ~free));
+    std::memcpy(l + 4 * g, &out, sizeof out);
+    occupied |= std::uint64_t{lane_bits(marked & (v > c.zero))} << (4 * g);
+    void_heights |= std::uint64_t{lane_bits(voided)} << (4 * g);
+  }
 }
 
 }  // namespace
@@ -698,6 +751,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   std::array<std::uint64_t, kApplyTasks> task_updates{};
   const int demote = params_.static_demote_scans;
   const float l_floor = l_hit_;
+  const MissLanes miss_lanes(l_miss_, l_min_);
   runner.parallel_for(kApplyTasks, [&](std::size_t task) {
     std::uint64_t updates = 0;
     std::vector<std::uint32_t>& demoted = demoted_[task];
@@ -725,20 +779,35 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       for (std::size_t wi = w_begin; wi < w_end; ++wi) {
         std::uint64_t marks = block_marks[wi - w_begin];
         marks &= ~hit_bits_[wi];
-        while (marks != 0) {
-          const int bit = std::countr_zero(marks);
-          marks &= marks - 1;
-          const std::size_t s = (wi << 6) + static_cast<std::size_t>(bit);
-          float& l = log_odds_[s];
-          ++updates;
-          if (l <= 0.0f) {  // free or unknown (kUnknown < 0): no static state
+        updates += static_cast<std::uint64_t>(std::popcount(marks));
+        const std::size_t base = wi << 6;
+        std::uint64_t occupied = 0;  // marked voxels reading occupied: static-layer logic below
+        if (std::popcount(marks) >= kDenseWord) {
+          // Mostly free space near the sensor: the whole word's voxels four at a time.
+          std::uint64_t void_heights = 0;
+          miss_free_word(log_odds_.data() + base, marks, miss_lanes, occupied, void_heights);
+          for (; void_heights != 0; void_heights &= void_heights - 1) {
+            rise_cm_[base + static_cast<std::size_t>(std::countr_zero(void_heights))] = 0;
+          }
+        } else {
+          for (; marks != 0; marks &= marks - 1) {
+            const std::size_t s = base + static_cast<std::size_t>(std::countr_zero(marks));
+            float& l = log_odds_[s];
+            if (l > 0.0f) {
+              occupied |= std::uint64_t{1} << (s & 63);
+              continue;
+            }
+            // Free or unknown (kUnknown < 0): no static state.
             const float next = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);
             // Reaching the lower clamp (observed free scan after scan): the sub-voxel heights
             // of older returns are void too (a tug's edge hit once leaves no ghost).
             if (next == l_min_ && l > l_min_) rise_cm_[s] = 0;
             l = next;  // a miss only lowers
-            continue;
           }
+        }
+        for (; occupied != 0; occupied &= occupied - 1) {
+          const std::size_t s = base + static_cast<std::size_t>(std::countr_zero(occupied));
+          float& l = log_odds_[s];
           std::uint8_t& st = state_[s];
           if ((st & kStatic) == 0) {
             l = std::max(l + l_miss_, l_min_);
