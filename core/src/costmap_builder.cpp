@@ -404,6 +404,10 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   const auto n_levels = static_cast<std::size_t>(max_level) + 1;
   auto& level_first = out.level_first;
   auto& level_cells = out.level_cells;
+  // Sized for the most levels and gap cells a window can have, so no later scan grows them.
+  level_first.reserve(filtered.size() + 2);
+  out.level_next.reserve(filtered.size() + 2);
+  level_cells.reserve(filtered.size());
   level_first.assign(n_levels + 1, 0);
   for (const float l : level) {
     if (l >= 1.0f && l != kUnreached) ++level_first[static_cast<std::size_t>(l) + 1];
