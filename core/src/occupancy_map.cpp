@@ -182,10 +182,17 @@ struct RayStart {
   }
 };
 
-/// One ray task's marks: a bit per voxel.
+/// One ray task's marks: a bit per voxel, and (large windows only) a flag per block of 64 words.
 struct FreeMarks {
   std::uint64_t* bits;
+  std::uint8_t* dirty;
 };
+
+/// Windows up to this many voxels (2 MB of marks per ray task) skip the per-visit block flags:
+/// the apply pass reads all their marks, which costs less than a flag store on each of millions
+/// of visits. Larger windows (0.1 m voxels over 100 m) flag the blocks the rays touch, so the
+/// apply pass reads only those. Either way the same voxels are marked and updated.
+constexpr std::size_t kUnflaggedVoxels = std::size_t{16} << 20;
 
 /// One axis of a traversal. A step moves the slot by one stride; `events` counts the steps to the
 /// next place where that is not all: the ring wraps (the slot jumps back by a whole ring) or the
@@ -233,6 +240,7 @@ struct AxisWalk {
   }
 };
 
+template <bool kFlagBlocks>
 std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
                        bool include_end, FreeMarks marks) {
   if (!start.inside) return 0;
@@ -262,7 +270,11 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   // they are not read through a reference); ties go to x, then y, before z.
   AxisWalk x = ax[0], y = ax[1], z = ax[2];
   std::uint64_t* const bits = marks.bits;
-  const auto mark = [bits](std::int64_t s) { bits[s >> 6] |= std::uint64_t{1} << (s & 63); };
+  std::uint8_t* const dirty = marks.dirty;
+  const auto mark = [bits, dirty](std::int64_t s) {
+    bits[s >> 6] |= std::uint64_t{1} << (s & 63);
+    if constexpr (kFlagBlocks) dirty[s >> (6 + kBlockShift)] = 1;
+  };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
   for (; remaining > 0; --remaining) {
@@ -399,6 +411,9 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   const std::size_t words = (n + 63) / 64;
   hit_bits_.assign(words, 0);
   free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
+  if (n > kUnflaggedVoxels) {
+    dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>((words >> kBlockShift) + 1, 0));
+  }
   // Reserved up front so scans do not grow them in the cycle (DESIGN.md §3): every window column
   // can hold a ground return; the hit list takes a 64-beam scan's distinct return voxels (a
   // scan with more grows it once, then keeps the capacity). Written once here, so the first
@@ -429,6 +444,7 @@ std::size_t OccupancyMap::memory_bytes() const {
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
       hit_height_.capacity() * sizeof(float) + hit_rise_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
+  for (const auto& d : dirty_blocks_) bytes += d.capacity();
   for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
   return bytes;
 }
@@ -713,8 +729,11 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
   const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
+  const bool flag_blocks = !dirty_blocks_.empty();
   runner.parallel_for(kRayTasks, [&](std::size_t task) {
-    const FreeMarks marks{free_bits_[task].data()};
+    const FreeMarks marks{free_bits_[task].data(),
+                          flag_blocks ? dirty_blocks_[task].data() : nullptr};
+    const auto traverse = flag_blocks ? &core::traverse<true> : &core::traverse<false>;
     const std::size_t begin = n_rays * task / kRayTasks;
     const std::size_t end = n_rays * (task + 1) / kRayTasks;
     std::uint64_t visits = 0;
@@ -760,6 +779,14 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
     std::array<std::uint64_t, std::size_t{1} << kBlockShift> block_marks;
     for (std::size_t b = b_begin; b < b_end; ++b) {
+      if (flag_blocks) {
+        bool any_flag = false;
+        for (auto& d : dirty_blocks_) {
+          any_flag = any_flag || d[b] != 0;
+          d[b] = 0;
+        }
+        if (!any_flag) continue;
+      }
       // The tasks' marks of this block ORed (a loop the compiler vectorises); a block no ray
       // passed through is skipped, a marked one is cleared for the next scan.
       const std::size_t w_begin = std::min(n_words, b << kBlockShift);
