@@ -5,6 +5,10 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 #include <limits>
 #include <tuple>
 #include <utility>
@@ -296,9 +300,21 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
 using Float4 = float __attribute__((vector_size(16)));
 using Int4 = std::int32_t __attribute__((vector_size(16)));
 
-/// Bit k set when lane k of a comparison mask is set.
+/// Bit k set when lane k of a comparison mask is set (one instruction with SSE).
 unsigned lane_bits(Int4 mask) {
+#if defined(__SSE2__)
+  return static_cast<unsigned>(_mm_movemask_ps(reinterpret_cast<__m128>(mask)));
+#else
   return static_cast<unsigned>((mask[0] & 1) | (mask[1] & 2) | (mask[2] & 4) | (mask[3] & 8));
+#endif
+}
+
+/// Set bits of a word. (std::popcount is a library call on x86-64 builds without POPCNT.)
+int bit_count(std::uint64_t x) {
+  x -= (x >> 1) & 0x5555555555555555ull;
+  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+  x = (x + (x >> 4)) & 0x0f0f0f0f0f0f0f0full;
+  return static_cast<int>((x * 0x0101010101010101ull) >> 56);
 }
 
 /// Words with at least this many voxels to miss take the four-lanes path.
@@ -806,10 +822,11 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       for (std::size_t wi = w_begin; wi < w_end; ++wi) {
         std::uint64_t marks = block_marks[wi - w_begin];
         marks &= ~hit_bits_[wi];
-        updates += static_cast<std::uint64_t>(std::popcount(marks));
+        const int count = bit_count(marks);
+        updates += static_cast<std::uint64_t>(count);
         const std::size_t base = wi << 6;
         std::uint64_t occupied = 0;  // marked voxels reading occupied: static-layer logic below
-        if (std::popcount(marks) >= kDenseWord) {
+        if (count >= kDenseWord) {
           // Mostly free space near the sensor: the whole word's voxels four at a time.
           std::uint64_t void_heights = 0;
           miss_free_word(log_odds_.data() + base, marks, miss_lanes, occupied, void_heights);
