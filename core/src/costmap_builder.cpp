@@ -278,22 +278,26 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   auto& coarse = out.coarse_ground;
   coarse.assign(static_cast<std::size_t>(gx) * gy, kNoGround);
   // Per coarse cell, the minimum over its g×g columns (an integer, so the order is irrelevant);
-  // walked in blocks of g columns so no cell needs a division.
-  for (int y = 0; y < ny; ++y) {
-    const std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
-    float* coarse_row = &coarse[static_cast<std::size_t>(y / g) * gx];
-    for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
-      int m = std::numeric_limits<int>::max();
-      for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
-        const int z = low[x];
-        m = z >= 0 ? std::min(m, z) : m;
-      }
-      float& c = coarse_row[cx];
-      if (m != std::numeric_limits<int>::max() && (std::isnan(c) || m < c)) {
-        c = static_cast<float>(m);
+  // walked in blocks of g columns so no cell needs a division; tasks own whole coarse rows.
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    const int cy0 = static_cast<int>(static_cast<std::size_t>(gy) * task / kRowTasks);
+    const int cy1 = static_cast<int>(static_cast<std::size_t>(gy) * (task + 1) / kRowTasks);
+    for (int y = cy0 * g, y_end = std::min(ny, cy1 * g); y < y_end; ++y) {
+      const std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+      float* coarse_row = &coarse[static_cast<std::size_t>(y / g) * gx];
+      for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
+        int m = std::numeric_limits<int>::max();
+        for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
+          const int z = low[x];
+          m = z >= 0 ? std::min(m, z) : m;
+        }
+        float& c = coarse_row[cx];
+        if (m != std::numeric_limits<int>::max() && (std::isnan(c) || m < c)) {
+          c = static_cast<float>(m);
+        }
       }
     }
-  }
+  });
 
   // 2. Reject cells that cannot be ground: far off the plane of the vehicle's own wheels
   //    (extended with the steepest slope allowed; the world frame need not be gravity-aligned,
@@ -395,26 +399,51 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       if (l != kUnreached) max_level = std::max(max_level, l);
     }
   }
-  for (float pass = 1.0f; pass <= max_level; pass += 1.0f) {
-    for (int cy = 0; cy < gy; ++cy) {
-      for (int cx = 0; cx < gx; ++cx) {
-        const std::size_t i = static_cast<std::size_t>(cy) * gx + cx;
-        if (level[i] != pass) continue;
-        float sum = 0.0f;
-        int count = 0;
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int ux = cx + dx, uy = cy + dy;
-            if (ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
-            const std::size_t u = static_cast<std::size_t>(uy) * gx + ux;
-            if (level[u] < pass) {  // filled in an earlier pass (or before the first)
-              sum += filtered[u];
-              ++count;
-            }
+  // The gap cells by level (a counting sort, row-major within a level), so each pass visits its
+  // own cells only instead of every coarse cell.
+  const auto n_levels = static_cast<std::size_t>(max_level) + 1;
+  auto& level_first = out.level_first;
+  auto& level_cells = out.level_cells;
+  // Sized for the most levels and gap cells a window can have, so no later scan grows them.
+  level_first.reserve(filtered.size() + 2);
+  out.level_next.reserve(filtered.size() + 2);
+  level_cells.reserve(filtered.size());
+  level_first.assign(n_levels + 1, 0);
+  for (const float l : level) {
+    if (l >= 1.0f && l != kUnreached) ++level_first[static_cast<std::size_t>(l) + 1];
+  }
+  for (std::size_t k = 1; k <= n_levels; ++k) level_first[k] += level_first[k - 1];
+  level_cells.resize(level_first[n_levels]);
+  {
+    auto& next = out.level_next;
+    next.assign(level_first.begin(), level_first.end() - 1);
+    for (std::size_t i = 0; i < level.size(); ++i) {
+      const float l = level[i];
+      if (l >= 1.0f && l != kUnreached) {
+        level_cells[next[static_cast<std::size_t>(l)]++] = static_cast<std::uint32_t>(i);
+      }
+    }
+  }
+  for (std::size_t pass_index = 1; pass_index < n_levels; ++pass_index) {
+    const auto pass = static_cast<float>(pass_index);
+    for (std::size_t k = level_first[pass_index]; k < level_first[pass_index + 1]; ++k) {
+      const std::size_t i = level_cells[k];
+      const int cx = static_cast<int>(i % static_cast<std::size_t>(gx));
+      const int cy = static_cast<int>(i / static_cast<std::size_t>(gx));
+      float sum = 0.0f;
+      int count = 0;
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int ux = cx + dx, uy = cy + dy;
+          if (ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+          const std::size_t u = static_cast<std::size_t>(uy) * gx + ux;
+          if (level[u] < pass) {  // filled in an earlier pass (or before the first)
+            sum += filtered[u];
+            ++count;
           }
         }
-        filtered[i] = sum / static_cast<float>(count);  // count >= 1: a neighbour is nearer
       }
+      filtered[i] = sum / static_cast<float>(count);  // count >= 1: a neighbour is nearer
     }
   }
   for (int cy = 0; cy < gy; ++cy) {

@@ -6,6 +6,9 @@ namespace tarmac::core {
 
 namespace {
 
+/// Points per scan the buffers are warmed up for (a 64-beam LiDAR's sweep).
+constexpr std::size_t kWarmUpPoints = std::size_t{1} << 17;
+
 /// Sensor-frame points into the world frame, the arithmetic filter_scan uses (float), so a scan
 /// re-integrated from retention lands exactly where a fresh ingest would put it.
 void transform_points(const Eigen::Isometry3d& T_W_S, std::span<const Eigen::Vector3f> points_S,
@@ -48,6 +51,16 @@ Mapper::Mapper(const MapperParams& params)
     retained_.resize(static_cast<std::size_t>(params.corrections.retain_scans));
     spare_ = std::make_unique<OccupancyMap>(params.occupancy);
   }
+  // Warm-up, so the first cycle costs what the others do: the per-point buffers sized for a
+  // 64-beam scan and written once, and one costmap of the empty window (all unknown: it sizes
+  // and writes every costmap and 2D ESDF buffer; the first update_costmap() replaces it).
+  filter_scratch_.reserve(kWarmUpPoints);
+  for (auto* points : {&points_S_, &points_W_}) {
+    points->assign(kWarmUpPoints, Eigen::Vector3f::Zero());
+    points->clear();
+  }
+  SerialRunner serial;
+  build_costmap(map_, params_.costmap, T_W_B_, {}, 0, layers_, serial);
 }
 
 FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,

@@ -4,6 +4,11 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstring>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 #include <limits>
 #include <tuple>
 #include <utility>
@@ -181,11 +186,17 @@ struct RayStart {
   }
 };
 
-/// One ray task's marks: a bit per voxel, a flag per block of 64 words.
+/// One ray task's marks: a bit per voxel, and (large windows only) a flag per block of 64 words.
 struct FreeMarks {
   std::uint64_t* bits;
   std::uint8_t* dirty;
 };
+
+/// Windows up to this many voxels (2 MB of marks per ray task) skip the per-visit block flags:
+/// the apply pass reads all their marks, which costs less than a flag store on each of millions
+/// of visits. Larger windows (0.1 m voxels over 100 m) flag the blocks the rays touch, so the
+/// apply pass reads only those. Either way the same voxels are marked and updated.
+constexpr std::size_t kUnflaggedVoxels = std::size_t{16} << 20;
 
 /// One axis of a traversal. A step moves the slot by one stride; `events` counts the steps to the
 /// next place where that is not all: the ring wraps (the slot jumps back by a whole ring) or the
@@ -233,6 +244,7 @@ struct AxisWalk {
   }
 };
 
+template <bool kFlagBlocks>
 std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
                        bool include_end, FreeMarks marks) {
   if (!start.inside) return 0;
@@ -265,7 +277,7 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   std::uint8_t* const dirty = marks.dirty;
   const auto mark = [bits, dirty](std::int64_t s) {
     bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-    dirty[s >> (6 + kBlockShift)] = 1;
+    if constexpr (kFlagBlocks) dirty[s >> (6 + kBlockShift)] = 1;
   };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
@@ -282,6 +294,70 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   if (!include_end) return static_cast<std::uint64_t>(steps);
   mark(slot);
   return static_cast<std::uint64_t>(steps + 1);
+}
+
+/// Four lanes of 32 bits (GCC/Clang vector extensions, any target); comparisons give −1 or 0.
+using Float4 = float __attribute__((vector_size(16)));
+using Int4 = std::int32_t __attribute__((vector_size(16)));
+
+/// Bit k set when lane k of a comparison mask is set (one instruction with SSE).
+unsigned lane_bits(Int4 mask) {
+#if defined(__SSE2__)
+  return static_cast<unsigned>(_mm_movemask_ps(reinterpret_cast<__m128>(mask)));
+#else
+  return static_cast<unsigned>((mask[0] & 1) | (mask[1] & 2) | (mask[2] & 4) | (mask[3] & 8));
+#endif
+}
+
+/// Set bits of a word. (std::popcount is a library call on x86-64 builds without POPCNT.)
+int bit_count(std::uint64_t x) {
+  x -= (x >> 1) & 0x5555555555555555ull;
+  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+  x = (x + (x >> 4)) & 0x0f0f0f0f0f0f0f0full;
+  return static_cast<int>((x * 0x0101010101010101ull) >> 56);
+}
+
+/// Words with at least this many voxels to miss take the four-lanes path.
+constexpr int kDenseWord = 8;
+
+/// The miss update's constants, four lanes each.
+struct MissLanes {
+  Float4 miss, min, zero, unknown;
+  MissLanes(float l_miss, float l_min)
+      : miss{l_miss, l_miss, l_miss, l_miss},
+        min{l_min, l_min, l_min, l_min},
+        zero{0.0f, 0.0f, 0.0f, 0.0f},
+        unknown{OccupancyMap::kUnknown, OccupancyMap::kUnknown, OccupancyMap::kUnknown,
+                OccupancyMap::kUnknown} {}
+};
+
+/// The miss of every voxel of one mark word (64 consecutive slots at `l`, bit k of `marks`
+/// for slot k) that reads free or unknown, four lanes at a time: the same arithmetic as one at a
+/// time (kUnknown counts as 0, then max(l + miss, min)); unmarked and occupied lanes are
+/// written back unchanged. Sets in `occupied` the marked voxels reading occupied (left to the
+/// caller's static-layer logic) and in `void_heights` those that reach the lower clamp now.
+void miss_free_word(float* l, std::uint64_t marks, const MissLanes& c, std::uint64_t& occupied,
+                    std::uint64_t& void_heights) {
+  const Int4 lane = {1, 2, 4, 8};
+  for (int g = 0; g < 16; ++g) {
+    const auto nibble = static_cast<std::int32_t>((marks >> (4 * g)) & 15);
+    if (nibble == 0) continue;
+    const Int4 marked = (lane & nibble) != 0;
+    Float4 v;
+    std::memcpy(&v, l + 4 * g, sizeof v);
+    const Int4 free = marked & (v <= c.zero);
+    const Float4 known = reinterpret_cast<Float4>(reinterpret_cast<Int4>(v) & ~(v == c.unknown));
+    const Float4 sum = known + c.miss;
+    const Int4 below = sum < c.min;
+    const Float4 next = reinterpret_cast<Float4>((reinterpret_cast<Int4>(c.min) & below) |
+                                                 (reinterpret_cast<Int4>(sum) & ~below));
+    const Int4 voided = free & (next == c.min) & (v > c.min);
+    const Float4 out = reinterpret_cast<Float4>((reinterpret_cast<Int4>(next) & free) |
+                                                (reinterpret_cast<Int4>(v) & ~free));
+    std::memcpy(l + 4 * g, &out, sizeof out);
+    occupied |= std::uint64_t{lane_bits(marked & (v > c.zero))} << (4 * g);
+    void_heights |= std::uint64_t{lane_bits(voided)} << (4 * g);
+  }
 }
 
 }  // namespace
@@ -349,19 +425,25 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
                         std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;
-  const std::size_t blocks = (words >> kBlockShift) + 1;
   hit_bits_.assign(words, 0);
   free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
-  dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>(blocks, 0));
+  if (n > kUnflaggedVoxels) {
+    dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>((words >> kBlockShift) + 1, 0));
+  }
   // Reserved up front so scans do not grow them in the cycle (DESIGN.md §3): every window column
   // can hold a ground return; the hit list takes a 64-beam scan's distinct return voxels (a
-  // scan with more grows it once, then keeps the capacity).
-  scan_ground_cols_.reserve(static_cast<std::size_t>(dims_.x()) * dims_.y());
-  hit_slots_.reserve(kReservedHitSlots);
-  hit_slot_.reserve(kReservedHitSlots);
-  hit_column_.reserve(kReservedHitSlots);
-  hit_height_.reserve(kReservedHitSlots);
-  hit_rise_.reserve(kReservedHitSlots);
+  // scan with more grows it once, then keeps the capacity). Written once here, so the first
+  // scan does not pay their page faults either.
+  const auto warm = [](auto& v, std::size_t n) {
+    v.resize(n);
+    v.clear();
+  };
+  warm(scan_ground_cols_, static_cast<std::size_t>(dims_.x()) * dims_.y());
+  warm(hit_slots_, kReservedHitSlots);
+  warm(hit_slot_, kReservedHitSlots);
+  warm(hit_column_, kReservedHitSlots);
+  warm(hit_height_, kReservedHitSlots);
+  warm(hit_rise_, kReservedHitSlots);
 }
 
 OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
@@ -663,8 +745,11 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
   const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
+  const bool flag_blocks = !dirty_blocks_.empty();
   runner.parallel_for(kRayTasks, [&](std::size_t task) {
-    const FreeMarks marks{free_bits_[task].data(), dirty_blocks_[task].data()};
+    const FreeMarks marks{free_bits_[task].data(),
+                          flag_blocks ? dirty_blocks_[task].data() : nullptr};
+    const auto traverse = flag_blocks ? &core::traverse<true> : &core::traverse<false>;
     const std::size_t begin = n_rays * task / kRayTasks;
     const std::size_t end = n_rays * (task + 1) / kRayTasks;
     std::uint64_t visits = 0;
@@ -694,47 +779,79 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   // 3. Apply: fixed ranges of blocks, each voxel marked by any task and not hit gets one miss.
   //    The marks are cleared as they are read, ready for the next scan. Only voxels reading
   //    occupied carry static-layer state (free space costs no extra memory access).
-  const std::size_t n_blocks = dirty_blocks_[0].size();
   const std::size_t n_words = hit_bits_.size();
+  const std::size_t n_blocks = (n_words >> kBlockShift) + 1;
+  std::array<std::uint64_t*, kRayTasks> task_bits{};
+  for (std::size_t t = 0; t < kRayTasks; ++t) task_bits[t] = free_bits_[t].data();
   std::array<std::uint64_t, kApplyTasks> task_updates{};
   const int demote = params_.static_demote_scans;
   const float l_floor = l_hit_;
+  const MissLanes miss_lanes(l_miss_, l_min_);
   runner.parallel_for(kApplyTasks, [&](std::size_t task) {
     std::uint64_t updates = 0;
     std::vector<std::uint32_t>& demoted = demoted_[task];
     demoted.clear();
     const std::size_t b_begin = n_blocks * task / kApplyTasks;
     const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
+    std::array<std::uint64_t, std::size_t{1} << kBlockShift> block_marks;
     for (std::size_t b = b_begin; b < b_end; ++b) {
-      bool any = false;
-      for (std::size_t t = 0; t < kRayTasks; ++t) {
-        any = any || dirty_blocks_[t][b] != 0;
-        dirty_blocks_[t][b] = 0;
-      }
-      if (!any) continue;
-      const std::size_t w_begin = b << kBlockShift;
-      const std::size_t w_end = std::min(n_words, (b + 1) << kBlockShift);
-      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
-        std::uint64_t marks = 0;
-        for (std::size_t t = 0; t < kRayTasks; ++t) {
-          marks |= free_bits_[t][wi];
-          free_bits_[t][wi] = 0;
+      if (flag_blocks) {
+        bool any_flag = false;
+        for (auto& d : dirty_blocks_) {
+          any_flag = any_flag || d[b] != 0;
+          d[b] = 0;
         }
+        if (!any_flag) continue;
+      }
+      // The tasks' marks of this block ORed (a loop the compiler vectorises); a block no ray
+      // passed through is skipped, a marked one is cleared for the next scan.
+      const std::size_t w_begin = std::min(n_words, b << kBlockShift);
+      const std::size_t w_end = std::min(n_words, (b + 1) << kBlockShift);
+      const std::size_t count = w_end - w_begin;
+      std::uint64_t any = 0;
+      for (std::size_t k = 0; k < count; ++k) {
+        std::uint64_t m = 0;
+        for (std::size_t t = 0; t < kRayTasks; ++t) m |= task_bits[t][w_begin + k];
+        block_marks[k] = m;
+        any |= m;
+      }
+      if (any == 0) continue;
+      for (std::size_t t = 0; t < kRayTasks; ++t) {
+        std::fill_n(task_bits[t] + w_begin, count, std::uint64_t{0});
+      }
+      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
+        std::uint64_t marks = block_marks[wi - w_begin];
         marks &= ~hit_bits_[wi];
-        while (marks != 0) {
-          const int bit = std::countr_zero(marks);
-          marks &= marks - 1;
-          const std::size_t s = (wi << 6) + static_cast<std::size_t>(bit);
-          float& l = log_odds_[s];
-          ++updates;
-          if (l <= 0.0f) {  // free or unknown (kUnknown < 0): no static state
+        const int count = bit_count(marks);
+        updates += static_cast<std::uint64_t>(count);
+        const std::size_t base = wi << 6;
+        std::uint64_t occupied = 0;  // marked voxels reading occupied: static-layer logic below
+        if (count >= kDenseWord) {
+          // Mostly free space near the sensor: the whole word's voxels four at a time.
+          std::uint64_t void_heights = 0;
+          miss_free_word(log_odds_.data() + base, marks, miss_lanes, occupied, void_heights);
+          for (; void_heights != 0; void_heights &= void_heights - 1) {
+            rise_cm_[base + static_cast<std::size_t>(std::countr_zero(void_heights))] = 0;
+          }
+        } else {
+          for (; marks != 0; marks &= marks - 1) {
+            const std::size_t s = base + static_cast<std::size_t>(std::countr_zero(marks));
+            float& l = log_odds_[s];
+            if (l > 0.0f) {
+              occupied |= std::uint64_t{1} << (s & 63);
+              continue;
+            }
+            // Free or unknown (kUnknown < 0): no static state.
             const float next = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);
             // Reaching the lower clamp (observed free scan after scan): the sub-voxel heights
             // of older returns are void too (a tug's edge hit once leaves no ghost).
             if (next == l_min_ && l > l_min_) rise_cm_[s] = 0;
             l = next;  // a miss only lowers
-            continue;
           }
+        }
+        for (; occupied != 0; occupied &= occupied - 1) {
+          const std::size_t s = base + static_cast<std::size_t>(std::countr_zero(occupied));
+          float& l = log_odds_[s];
           std::uint8_t& st = state_[s];
           if ((st & kStatic) == 0) {
             l = std::max(l + l_miss_, l_min_);

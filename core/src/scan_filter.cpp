@@ -64,6 +64,16 @@ std::uint64_t key_offset(int dx, int dy, int dz) {
 
 }  // namespace
 
+void FilterScratch::reserve(std::size_t points) {
+  std::size_t capacity = 1024;
+  while (capacity < 2 * points) capacity *= 2;
+  keys.assign(capacity, 0);
+  counts.assign(capacity, 0);
+  point_key.assign(points, 0);
+  candidates_S.assign(points, Eigen::Vector3f::Zero());
+  keep.assign(points, 0);
+}
+
 FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
                          std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch) {

@@ -76,7 +76,11 @@ struct CostmapLayers {
   std::vector<std::int16_t> lowest_occupied;  ///< per cell, window layer or −1
   std::vector<std::int16_t> ground_layer;     ///< per cell, window layer of the ground voxel
   std::vector<float> coarse_ground, coarse_filtered, coarse_next;  ///< ground estimate scratch
-  std::vector<float> ground_offsets;       ///< coarse cells' offsets from the vehicle's plane
+  std::vector<float> ground_offsets;  ///< coarse cells' offsets from the vehicle's plane
+  /// Coarse gap cells ordered by fill level (level_cells[level_first[l] .. level_first[l + 1]])
+  /// and the counting sort's cursor per level.
+  std::vector<std::size_t> level_first, level_next;
+  std::vector<std::uint32_t> level_cells;
   std::vector<std::uint8_t> any_known;     ///< per cell: some envelope voxel observed
   std::vector<std::uint8_t> any_obstacle;  ///< per cell: some envelope voxel is an obstacle
   /// Per cell in the occupancy window's ring (storage) order, bit z set when window layer z is

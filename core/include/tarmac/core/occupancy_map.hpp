@@ -189,8 +189,8 @@ class OccupancyMap {
   /// membership is all that decides an update, so the result is independent of ray order.
   std::vector<std::uint64_t> hit_bits_;
   std::vector<std::vector<std::uint64_t>> free_bits_;
-  /// Per ray task, one flag per block of 64 words (4096 voxels) that holds any free bit, so the
-  /// apply pass skips the untouched part of the window.
+  /// Large windows only: per ray task, one flag per block of 64 words (4096 voxels) its rays
+  /// passed through, so the apply pass skips the untouched part of the window.
   std::vector<std::vector<std::uint8_t>> dirty_blocks_;
   std::vector<std::uint32_t> hit_slots_;  ///< to clear hit_bits_ after the scan
   /// Per return of the scan being integrated: its slot (or none), window column, height along

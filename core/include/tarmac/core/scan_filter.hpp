@@ -47,6 +47,10 @@ struct FilterScratch {
   std::vector<std::uint64_t> point_key;  ///< cell key per candidate point
   std::vector<Eigen::Vector3f> candidates_S;
   std::vector<std::uint8_t> keep;  ///< per candidate: survives the outlier test
+
+  /// Sizes (and writes once, so the first scan does not pay their page faults) every buffer for
+  /// scans of up to `points` points.
+  void reserve(std::size_t points);
 };
 
 /// Filters `cloud` (sensor frame) and writes survivors into `points_W` (cleared first, capacity
