@@ -61,6 +61,11 @@ Mapper::Mapper(const MapperParams& params)
   }
   SerialRunner serial;
   build_costmap(map_, params_.costmap, T_W_B_, {}, 0, layers_, serial);
+  // The 3D band likewise (about 50 MB of states, scratch and field at the default window).
+  if (params_.esdf_band.enabled) {
+    build_esdf_band(map_, layers_, params_.costmap, params_.esdf_band, T_W_B_, {}, 0, band_,
+                    serial);
+  }
 }
 
 FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
