@@ -157,13 +157,14 @@ int main(int argc, char** argv) {
     } else if (a == "--count" && i + 1 < argc) {
       count = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
     } else if (a == "--help" || a == "-h" || (!a.empty() && a[0] == '-')) {
-      std::fprintf(a[0] == '-' && a != "--help" && a != "-h" ? stderr : stdout,
-                   "usage: tarmac-echo TOPIC [--config FILE] [--count N] [--identity DIR]\n"
-                   "  TOPIC: any topic of the config (costmap, esdf slice, cycle report,\n"
-                   "  DiagnosticArray, pose, a sensor's points, virtual obstacles), e.g.\n"
-                   "  rt/tarmac/costmap. One line per sample until --count or SIGINT.\n"
-                   "  --identity DIR: DDS Security identity DIR/cert.pem, DIR/key.pem instead\n"
-                   "  of the config's (dds.security; e.g. make-dds-security.sh's 'monitor').\n");
+      std::fprintf(
+          a[0] == '-' && a != "--help" && a != "-h" ? stderr : stdout,
+          "usage: tarmac-echo TOPIC [--config FILE] [--count N] [--identity DIR]\n"
+          "  TOPIC: any topic of the config (costmap, esdf slice, esdf band, cycle report,\n"
+          "  DiagnosticArray, pose, a sensor's points, virtual obstacles), e.g.\n"
+          "  rt/tarmac/costmap. One line per sample until --count or SIGINT.\n"
+          "  --identity DIR: DDS Security identity DIR/cert.pem, DIR/key.pem instead\n"
+          "  of the config's (dds.security; e.g. make-dds-security.sh's 'monitor').\n");
       return a == "--help" || a == "-h" ? 0 : 64;
     } else {
       topic = a;
