@@ -627,12 +627,11 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       lo = lo.cwiseMin(p);
       hi = hi.cwiseMax(p);
     }
-    const int x0 = std::max(0, static_cast<int>(std::floor((lo.x() - geometry.origin_x_m) / v)));
-    const int x1 =
-        std::min(nx - 1, static_cast<int>(std::floor((hi.x() - geometry.origin_x_m) / v)));
-    const int y0 = std::max(0, static_cast<int>(std::floor((lo.y() - geometry.origin_y_m) / v)));
-    const int y1 =
-        std::min(ny - 1, static_cast<int>(std::floor((hi.y() - geometry.origin_y_m) / v)));
+    // Clamped in double first: a vertex may lie far outside the int range (finite, though).
+    const int x0 = clamped_floor((lo.x() - geometry.origin_x_m) / v, 0, nx);
+    const int x1 = clamped_floor((hi.x() - geometry.origin_x_m) / v, -1, nx - 1);
+    const int y0 = clamped_floor((lo.y() - geometry.origin_y_m) / v, 0, ny);
+    const int y1 = clamped_floor((hi.y() - geometry.origin_y_m) / v, -1, ny - 1);
     for (int y = y0; y <= y1; ++y) {
       for (int x = x0; x <= x1; ++x) {
         if (!polygon_contains(zone.polygon_W, geometry.center_of(x, y))) continue;

@@ -126,18 +126,19 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
   for (const auto& zone : zones) {
     if (zone.polygon_W.size() < 3 || (zone.expiry_ns != 0 && zone.expiry_ns <= stamp_ns)) continue;
     // Layers whose voxel [bottom, top) meets the zone's [min_z, max_z].
-    const int lz0 = std::max(0, static_cast<int>(std::floor(zone.min_z_m / v)) - out.min.z());
-    const int lz1 = std::min(nb, static_cast<int>(std::floor(zone.max_z_m / v)) + 1 - out.min.z());
+    // Clamped in double first: a zone spanning all heights may say ±1e9 m or ±inf.
+    const int lz0 = clamped_floor(zone.min_z_m / v - out.min.z(), 0, nb);
+    const int lz1 = clamped_floor(zone.max_z_m / v - out.min.z(), -1, nb - 1) + 1;
     if (lz0 >= lz1) continue;
     Eigen::Vector2d lo = zone.polygon_W[0], hi = zone.polygon_W[0];
     for (const auto& p : zone.polygon_W) {
       lo = lo.cwiseMin(p);
       hi = hi.cwiseMax(p);
     }
-    const int x0 = std::max(0, static_cast<int>(std::floor(lo.x() / v)) - wmin.x());
-    const int x1 = std::min(nx, static_cast<int>(std::floor(hi.x() / v)) + 1 - wmin.x());
-    const int y0 = std::max(0, static_cast<int>(std::floor(lo.y() / v)) - wmin.y());
-    const int y1 = std::min(ny, static_cast<int>(std::floor(hi.y() / v)) + 1 - wmin.y());
+    const int x0 = clamped_floor(lo.x() / v - wmin.x(), 0, nx);
+    const int x1 = clamped_floor(hi.x() / v - wmin.x(), -1, nx - 1) + 1;
+    const int y0 = clamped_floor(lo.y() / v - wmin.y(), 0, ny);
+    const int y1 = clamped_floor(hi.y() / v - wmin.y(), -1, ny - 1) + 1;
     for (int y = y0; y < y1; ++y) {
       for (int x = x0; x < x1; ++x) {
         const Eigen::Vector2d centre((wmin.x() + x + 0.5) * v, (wmin.y() + y + 0.5) * v);

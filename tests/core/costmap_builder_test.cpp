@@ -104,6 +104,14 @@ TEST_F(Envelope, UnknownPolicyAndVirtualZones) {
   EXPECT_EQ(cost_at(-14.5, -14.5), kCostLethal) << "unknown inside a restricted zone is lethal";
   build(CostmapParams{}, zones, 6'000);  // the spill zone expired at 5 µs
   EXPECT_EQ(cost_at(3.0, 3.0), kCostFree);
+
+  // Vertices far outside the int range of cell indices: clamped, every cell inside lethal.
+  const std::vector<VirtualZone> huge{
+      {"huge", {{-1e30, -1e30}, {1e30, -1e30}, {1e30, -9.0}, {-1e30, -9.0}}}};
+  build(CostmapParams{}, huge, 0);
+  EXPECT_EQ(cost_at(-15.9, -15.9), kCostLethal);
+  EXPECT_EQ(cost_at(15.9, -9.1), kCostLethal);
+  EXPECT_EQ(cost_at(0.1, 5.0), kCostFree);
 }
 
 }  // namespace

@@ -146,6 +146,25 @@ TEST_F(Band, VirtualZonesBurnInWithinTheirHeightRange) {
   EXPECT_GT(distance(11.1, 11.1, 0.1), 0.0f);
 }
 
+TEST_F(Band, ZonesOverAllHeightsAndFarVertices) {
+  scan_scene();
+  // The default z range (±1e9 m) and ±inf, vertices 1e30 m away: clamped, never cast out of
+  // range; every band voxel inside is an obstacle.
+  VirtualZone all_heights{"all", {{-8, 6}, {-6, 6}, {-6, 8}, {-8, 8}}};
+  VirtualZone everything{"huge",
+                         {{-1e30, -1e30}, {1e30, -1e30}, {1e30, -9.0}, {-1e30, -9.0}},
+                         -std::numeric_limits<double>::infinity(),
+                         std::numeric_limits<double>::infinity()};
+  const std::vector<VirtualZone> zones{all_heights, everything};
+  SerialRunner runner;
+  build(runner, zones);
+  EXPECT_EQ(distance(-7.0, 7.0, -0.1), 0.0f);
+  EXPECT_EQ(distance(-7.0, 7.0, 3.3), 0.0f);
+  EXPECT_EQ(distance(-15.9, -15.9, 1.1), 0.0f);
+  EXPECT_EQ(distance(15.9, -9.1, 3.3), 0.0f);
+  EXPECT_NEAR(distance(0.1, -8.9, 0.1), 0.2f, 1e-6f) << "one voxel north of the huge zone";
+}
+
 TEST_F(Band, SameBitsOnOneAndTwoThreads) {
   scan_scene();
   SerialRunner serial;

@@ -2,6 +2,7 @@
 /// @file A dense 2D grid on the horizontal plane of the map frame (costmaps, ESDF slices).
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -28,6 +29,15 @@ struct GridGeometry2D {
   [[nodiscard]] Eigen::Vector2d center_of(int ix, int iy) const;
   friend bool operator==(const GridGeometry2D&, const GridGeometry2D&) = default;
 };
+
+/// floor(value) clamped to [lo, hi] as an int: safe for values far outside the int range,
+/// infinities and NaN (→ lo), e.g. a virtual zone's vertex 1e30 m away or its z range ±1e9 m.
+inline int clamped_floor(double value, int lo, int hi) {
+  const double f = std::floor(value);
+  if (!(f > lo)) return lo;
+  if (!(f < hi)) return hi;
+  return static_cast<int>(f);
+}
 
 /// Dense row-major grid of T. Move-only: grids are large and copies should be deliberate
 /// (use clone()).
