@@ -117,6 +117,34 @@ TEST(Config, TsdfSectionAppliesAndIsValidated) {
             "tsdf.truncation_m: must be in [voxel_size_m, 32 * voxel_size_m]");
 }
 
+TEST(Config, EsdfBandSectionAppliesAndIsValidated) {
+  auto config = load_config_string(
+      "version: 1\nesdf_band: {enabled: true, below_m: 0.4, above_m: 2.0, unknown: occupied,\n"
+      "            publish_radius_m: 0}\nbudgets: {esdf_band_ms: 12}\n"
+      "outputs: {esdf_band_topic: rt/vehicle7/esdf_band}\n"
+      "dds: {qos: {esdf_band: {reliability: reliable}}}\n");
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  const auto& c = config.value();
+  EXPECT_TRUE(c.mapping.esdf_band.enabled);
+  EXPECT_EQ(c.mapping.esdf_band.below_m, 0.4);
+  EXPECT_EQ(c.mapping.esdf_band.above_m, 2.0);
+  EXPECT_EQ(c.mapping.esdf_band.unknown, core::UnknownPolicy::kUnknownIsOccupied);
+  EXPECT_EQ(c.mapping.esdf_band.publish_radius_m, 0.0);
+  EXPECT_EQ(c.budgets.esdf_band_ms, 12.0);
+  EXPECT_EQ(c.outputs.esdf_band_topic, "rt/vehicle7/esdf_band");
+  EXPECT_EQ(c.dds.qos.esdf_band.reliability, transport::Reliability::kReliable);
+  EXPECT_FALSE(Config{}.mapping.esdf_band.enabled) << "off by default";
+  // The band must fit the window (default: 3 m below the base, 5 m above).
+  EXPECT_EQ(error_of("version: 1\nesdf_band: {enabled: true, above_m: 10}\n"),
+            "esdf_band.above_m: reaches above the window's top (5.000000 m above the base)");
+  EXPECT_EQ(error_of("version: 1\nesdf_band: {enabled: true, below_m: 4}\n"),
+            "esdf_band.below_m: reaches below the window (occupancy.window_below_m)");
+  EXPECT_EQ(error_of("version: 1\nesdf_band: {unknown: maybe}\n"),
+            "esdf_band.unknown: must be one of {report, occupied}, got 'maybe'");
+  EXPECT_EQ(error_of("version: 1\nesdf_band: {enabled: true}\noutputs: {esdf_band_topic: \"\"}\n"),
+            "outputs.esdf_band_topic: must not be empty when esdf_band.enabled is true");
+}
+
 TEST(Config, ShippedDefaultsAreOneFrontLidarOnTheDesignTopics) {
   const Config c;
   ASSERT_EQ(c.sensors.size(), 1u);
