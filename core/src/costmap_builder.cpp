@@ -621,30 +621,17 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
 
   // 4. Virtual zones: active, and their z range meets the vehicle's envelope at that cell.
   for (const auto& zone : zones) {
-    if (zone.polygon_W.size() < 3 || (zone.expiry_ns != 0 && zone.expiry_ns <= stamp_ns)) continue;
-    Eigen::Vector2d lo = zone.polygon_W[0], hi = zone.polygon_W[0];
-    for (const auto& p : zone.polygon_W) {
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
-    }
-    // Clamped in double first: a vertex may lie far outside the int range (finite, though).
-    const int x0 = clamped_floor((lo.x() - geometry.origin_x_m) / v, 0, nx);
-    const int x1 = clamped_floor((hi.x() - geometry.origin_x_m) / v, -1, nx - 1);
-    const int y0 = clamped_floor((lo.y() - geometry.origin_y_m) / v, 0, ny);
-    const int y1 = clamped_floor((hi.y() - geometry.origin_y_m) / v, -1, ny - 1);
-    for (int y = y0; y <= y1; ++y) {
-      for (int x = x0; x <= x1; ++x) {
-        if (!polygon_contains(zone.polygon_W, geometry.center_of(x, y))) continue;
-        const double ground_m = out.ground_z_m.at(x, y);
-        if (zone.max_z_m < ground_m || zone.min_z_m > ground_m + hi_m) continue;
-        auto& cls = out.column_class.at(x, y);
-        // A no-go zone blocks every cell; a restricted zone blocks only what was not observed.
-        if (!zone.restricted || cls == static_cast<std::uint8_t>(ColumnClass::kUnknown)) {
-          cls = static_cast<std::uint8_t>(ColumnClass::kVirtual);
-          out.esdf_input[static_cast<std::size_t>(y) * nx + x] = CellState::kOccupied;
-        }
+    if (!zone.active(stamp_ns)) continue;
+    for_each_cell_inside(geometry, zone.polygon_W, [&](int x, int y) {
+      const double ground_m = out.ground_z_m.at(x, y);
+      if (zone.max_z_m < ground_m || zone.min_z_m > ground_m + hi_m) return;
+      auto& cls = out.column_class.at(x, y);
+      // A no-go zone blocks every cell; a restricted zone blocks only what was not observed.
+      if (!zone.restricted || cls == static_cast<std::uint8_t>(ColumnClass::kUnknown)) {
+        cls = static_cast<std::uint8_t>(ColumnClass::kVirtual);
+        out.esdf_input[static_cast<std::size_t>(y) * nx + x] = CellState::kOccupied;
       }
-    }
+    });
   }
 
   // 5. Exact distance to the nearest obstacle cell (esdf_input was set with the classes), then

@@ -41,6 +41,11 @@ void esdf_band_layers(const OccupancyMap& map, const EsdfBandParams& params, dou
   z1 = std::clamp(first + esdf_band_max_layers(params, v), z0, nz);
 }
 
+std::uint64_t esdf_band_obstacles(const EsdfBand& band) {
+  return static_cast<std::uint64_t>(
+      std::count(band.states.begin(), band.states.end(), CellState::kOccupied));
+}
+
 void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
                      const CostmapParams& costmap, const EsdfBandParams& params,
                      const Eigen::Isometry3d& T_W_B, std::span<const VirtualZone> zones,
@@ -55,7 +60,6 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
   esdf_band_layers(map, params, T_W_B.translation().z(), z0, z1);
   const int nb = z1 - z0;
   out.min = VoxelIndex(wmin.x(), wmin.y(), wmin.z() + z0);
-  out.obstacles = 0;
   if (nb == 0) {
     out.field.dims = Eigen::Vector3i(nx, ny, 0);
     out.field.cell_size_m = v;
@@ -102,11 +106,11 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
   static_assert(static_cast<int>(CellState::kOccupied) == 1 &&
                 static_cast<int>(CellState::kUnknown) == 2);
   // Window x maps to ring x = (min.x + x) mod nx: two contiguous runs per row.
-  const int split = nx - map.ring_x(0);  // window x where the ring wraps to slot 0
+  const int r0 = map.ring_x(0);
+  const int split = nx - r0;  // window x where the ring wraps to slot 0
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int y0 = static_cast<int>(ny * task / kRowTasks);
     const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
-    const int r0 = map.ring_x(0);
     for (int lz = 0; lz < nb; ++lz) {
       const int z = z0 + lz;
       const float* lo = map.ring_layer(z);
@@ -122,36 +126,22 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
     }
   });
 
-  // Virtual zones, in their order (each voxel's result does not depend on it: zones only add).
+  // Virtual zones, in their order (each voxel's result does not depend on it: zones only add),
+  // on the cells the costmap burns them into (its geometry is the window's).
   for (const auto& zone : zones) {
-    if (zone.polygon_W.size() < 3 || (zone.expiry_ns != 0 && zone.expiry_ns <= stamp_ns)) continue;
+    if (!zone.active(stamp_ns)) continue;
     // Layers whose voxel [bottom, top) meets the zone's [min_z, max_z].
     // Clamped in double first: a zone spanning all heights may say ±1e9 m or ±inf.
     const int lz0 = clamped_floor(zone.min_z_m / v - out.min.z(), 0, nb);
     const int lz1 = clamped_floor(zone.max_z_m / v - out.min.z(), -1, nb - 1) + 1;
     if (lz0 >= lz1) continue;
-    Eigen::Vector2d lo = zone.polygon_W[0], hi = zone.polygon_W[0];
-    for (const auto& p : zone.polygon_W) {
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
-    }
-    const int x0 = clamped_floor(lo.x() / v - wmin.x(), 0, nx);
-    const int x1 = clamped_floor(hi.x() / v - wmin.x(), -1, nx - 1) + 1;
-    const int y0 = clamped_floor(lo.y() / v - wmin.y(), 0, ny);
-    const int y1 = clamped_floor(hi.y() / v - wmin.y(), -1, ny - 1) + 1;
-    for (int y = y0; y < y1; ++y) {
-      for (int x = x0; x < x1; ++x) {
-        const Eigen::Vector2d centre((wmin.x() + x + 0.5) * v, (wmin.y() + y + 0.5) * v);
-        if (!polygon_contains(zone.polygon_W, centre)) continue;
-        for (int lz = lz0; lz < lz1; ++lz) {
-          CellState& s = out.states[lz * plane + static_cast<std::size_t>(y) * nx + x];
-          if (!zone.restricted || s == CellState::kUnknown) s = CellState::kOccupied;
-        }
+    for_each_cell_inside(layers.costmap.geometry(), zone.polygon_W, [&](int x, int y) {
+      for (int lz = lz0; lz < lz1; ++lz) {
+        CellState& s = out.states[lz * plane + static_cast<std::size_t>(y) * nx + x];
+        if (!zone.restricted || s == CellState::kUnknown) s = CellState::kOccupied;
       }
-    }
+    });
   }
-  out.obstacles = static_cast<std::uint64_t>(
-      std::count(out.states.begin(), out.states.end(), CellState::kOccupied));
 
   compute_distance_field(out.states, Eigen::Vector3i(nx, ny, nb), v, params.unknown, out.field,
                          out.scratch, runner);

@@ -97,7 +97,7 @@ TEST_F(Band, OverhangIsAnObstacleIn3D_GroundIsNot_DebrisIs) {
   EXPECT_NEAR(distance(3.3, -4.0, 0.1), 0.2f, 1e-6f);  // next voxel along x: one voxel away
   // Unknown (beyond the observed 12 m square, above the sensor's view) reports NaN.
   EXPECT_TRUE(std::isnan(distance(15.1, 15.1, 0.1)));
-  EXPECT_GE(band_.obstacles, 3u);
+  EXPECT_GE(esdf_band_obstacles(band_), 3u);
 }
 
 TEST_F(Band, DistancesEqualBruteForceOverTheBandsObstacles) {

@@ -319,7 +319,7 @@ TEST_F(Daemon, EsdfBand_PublishedBoxEqualsOfflineCore) {
                            want.distance().size() * sizeof(float)));
   EXPECT_EQ(last->gradient_z(), want.gradient_z());
   // Not a trivial field: obstacles in the band, some within a few metres of the box's voxels.
-  EXPECT_GT(mapper.esdf_band().obstacles, 0u);
+  EXPECT_GT(core::esdf_band_obstacles(mapper.esdf_band()), 0u);
   const auto& d = last->distance();
   EXPECT_GT(std::count_if(d.begin(), d.end(), [](float x) { return x < 5.0f; }), 0);
 }

@@ -514,7 +514,7 @@ int main(int argc, char** argv) {
     if (have_band) {
       j << "  \"esdf_band\": {\"origin_m\": [" << band.min.x() * v << ", " << band.min.y() * v
         << ", " << band.min.z() * v << "], \"shape\": [" << band.field.dims.z() << ", " << dims.y()
-        << ", " << dims.x() << "], \"obstacles\": " << band.obstacles << "},\n";
+        << ", " << dims.x() << "], \"obstacles\": " << core::esdf_band_obstacles(band) << "},\n";
     }
     j << "  \"files\": {\n"
       << "    \"occupancy.npy\": \"float32 occupancy probability, NaN = unknown (3D window at the "

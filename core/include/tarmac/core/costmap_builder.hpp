@@ -60,6 +60,11 @@ struct VirtualZone {
   /// false: a no-go zone, every cell inside is lethal. true: a restricted area, only cells not
   /// observed (unknown) inside are lethal; observed free cells stay drivable.
   bool restricted = false;
+
+  /// In force at stamp_ns: a polygon (3+ vertices), not expired.
+  [[nodiscard]] bool active(std::int64_t stamp_ns) const {
+    return polygon_W.size() >= 3 && (expiry_ns == 0 || expiry_ns > stamp_ns);
+  }
 };
 
 /// Per-cell class before inflation.
@@ -105,5 +110,30 @@ std::int8_t to_occupancy_value(std::uint8_t nav2_cost);
 
 /// True when the point lies inside the polygon (even-odd rule).
 bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vector2d& p);
+
+/// Calls fn(x, y) for every cell of `geometry` whose centre lies inside `polygon`, row by row.
+/// Only the polygon's bounding box is visited, clamped in double first (a vertex may lie far
+/// outside the int range of cell indices).
+template <typename Fn>
+void for_each_cell_inside(const GridGeometry2D& geometry, std::span<const Eigen::Vector2d> polygon,
+                          Fn&& fn) {
+  if (polygon.empty()) return;
+  Eigen::Vector2d lo = polygon[0], hi = polygon[0];
+  for (const auto& p : polygon) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const double v = geometry.resolution_m;
+  const int nx = static_cast<int>(geometry.width), ny = static_cast<int>(geometry.height);
+  const int x0 = clamped_floor((lo.x() - geometry.origin_x_m) / v, 0, nx);
+  const int x1 = clamped_floor((hi.x() - geometry.origin_x_m) / v, -1, nx - 1);
+  const int y0 = clamped_floor((lo.y() - geometry.origin_y_m) / v, 0, ny);
+  const int y1 = clamped_floor((hi.y() - geometry.origin_y_m) / v, -1, ny - 1);
+  for (int y = y0; y <= y1; ++y) {
+    for (int x = x0; x <= x1; ++x) {
+      if (polygon_contains(polygon, geometry.center_of(x, y))) fn(x, y);
+    }
+  }
+}
 
 }  // namespace tarmac::core

@@ -49,8 +49,8 @@ struct EsdfBandParams {
 struct EsdfBand {
   /// dims (window x, window y, band layers); x fastest; cell (0,0,0) is voxel `min`.
   DistanceField field;
-  VoxelIndex min{0, 0, 0};      ///< world voxel index of the band's first cell
-  std::uint64_t obstacles = 0;  ///< obstacle voxels in the band (virtual zones included)
+  VoxelIndex min{0, 0, 0};  ///< world voxel index of the band's first cell
+  /// Per voxel, what the transform saw (virtual zones included), in the field's order.
   std::vector<CellState> states;
   DistanceFieldScratch scratch;
 };
@@ -64,6 +64,10 @@ int esdf_band_max_layers(const EsdfBandParams& params, double voxel_size_m);
 /// the band misses the window).
 void esdf_band_layers(const OccupancyMap& map, const EsdfBandParams& params, double base_z_m,
                       int& z0, int& z1);
+
+/// Obstacle voxels of the band (virtual zones included): a pass over its states, for tools and
+/// tests, kept out of the cycle.
+std::uint64_t esdf_band_obstacles(const EsdfBand& band);
 
 /// Computes the band from the window and the costmap built from it in the same cycle
 /// (build_costmap: its ground_layer). Deterministic for any runner. Leaves `out.field` with zero
