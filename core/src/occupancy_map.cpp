@@ -141,7 +141,11 @@ int wrap(int i, int n) {
 /// Rays are split into a fixed number of tasks, each marking its own bit set, and the marks are
 /// applied in fixed ranges of the window, so the work splits the same way whatever the runner's
 /// thread count (determinism contract).
-constexpr std::size_t kRayTasks = 4;
+constexpr std::size_t kRayTasks = 2;
+/// Rays are dealt to the tasks in chunks of this many, round robin: every task gets rays of every
+/// direction, so the tasks take about as long (contiguous ranges did not: a quarter of a scan
+/// that faces a far wall walks twice the voxels of one facing a near wall).
+constexpr std::size_t kRayChunk = 64;
 constexpr std::size_t kApplyTasks = 8;
 /// Point ranges of the per-return part of the hit pass.
 constexpr std::size_t kHitTasks = 8;
@@ -192,6 +196,29 @@ struct FreeMarks {
   std::uint8_t* dirty;
 };
 
+/// The window-relative box (inclusive, per axis) that holds every voxel a set of rays marked;
+/// empty while lo > hi. The apply pass reads the marks inside it only: indoors the rays end at
+/// the walls, and most of a window sized for 50 m outdoors is never passed through.
+struct MarkBox {
+  std::array<int, 3> lo{std::numeric_limits<int>::max(), std::numeric_limits<int>::max(),
+                        std::numeric_limits<int>::max()};
+  std::array<int, 3> hi{std::numeric_limits<int>::min(), std::numeric_limits<int>::min(),
+                        std::numeric_limits<int>::min()};
+
+  void add(int axis, int a, int b) {
+    lo[axis] = std::min(lo[axis], std::min(a, b));
+    hi[axis] = std::max(hi[axis], std::max(a, b));
+  }
+  void add(const MarkBox& o) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], o.lo[a]);
+      hi[a] = std::max(hi[a], o.hi[a]);
+    }
+  }
+  [[nodiscard]] bool empty() const { return lo[0] > hi[0]; }
+  [[nodiscard]] bool holds(int axis, int rel) const { return rel >= lo[axis] && rel <= hi[axis]; }
+};
+
 /// Windows up to this many voxels (2 MB of marks per ray task) skip the per-visit block flags:
 /// the apply pass reads all their marks, which costs less than a flag store on each of millions
 /// of visits. Larger windows (0.1 m voxels over 100 m) flag the blocks the rays touch, so the
@@ -211,9 +238,12 @@ struct AxisWalk {
   int to_exit;         ///< steps, counted at the last event, until the walk leaves the window
   int to_wrap;         ///< steps, counted at the last event, until the ring wraps
   int n;               ///< window size along the axis
+  int step;            ///< −1, 0 or +1
+  int exit0;           ///< to_exit at the start
 
-  void init(int rel, int ring, int step, int size, int stride) {
+  void init(int rel, int ring, int step_sign, int size, int stride) {
     n = size;
+    step = step_sign;
     delta = static_cast<std::int64_t>(step) * stride;
     wrap = -static_cast<std::int64_t>(step) * size * stride;
     if (step > 0) {
@@ -226,6 +256,14 @@ struct AxisWalk {
       to_exit = to_wrap = std::numeric_limits<int>::max();
     }
     events = span = std::min(to_exit, to_wrap);
+    exit0 = to_exit;
+  }
+  /// Window-relative index along the axis where the walk ended, clamped into the window (a walk
+  /// that left it last marked the boundary voxel; the step out over-counts, the clamp undoes it).
+  [[nodiscard]] int end_rel(int rel) const {
+    if (step == 0) return rel;
+    const int taken = (exit0 - to_exit) + (span - events);
+    return std::clamp(rel + step * taken, 0, n - 1);
   }
   /// Steps once; updates the slot; false when the walk left the window.
   bool advance(std::int64_t& slot) {
@@ -246,7 +284,7 @@ struct AxisWalk {
 
 template <bool kFlagBlocks>
 std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
-                       bool include_end, FreeMarks marks) {
+                       bool include_end, FreeMarks marks, MarkBox& box) {
   if (!start.inside) return 0;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - start.o;
@@ -281,6 +319,12 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
+  // Every axis moves one way, so the voxels marked span the start and end of the walk.
+  const auto add_box = [&] {
+    box.add(0, start.rel[0], x.end_rel(start.rel[0]));
+    box.add(1, start.rel[1], y.end_rel(start.rel[1]));
+    box.add(2, start.rel[2], z.end_rel(start.rel[2]));
+  };
   for (; remaining > 0; --remaining) {
     mark(slot);
     bool inside;  // NOLINT(cppcoreguidelines-init-variables): every branch sets it
@@ -289,8 +333,12 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
     } else {
       inside = y.t_max < z.t_max ? y.advance(slot) : z.advance(slot);
     }
-    if (!inside) return static_cast<std::uint64_t>(steps - remaining + 1);
+    if (!inside) {
+      add_box();
+      return static_cast<std::uint64_t>(steps - remaining + 1);
+    }
   }
+  if (steps > 0 || include_end) add_box();
   if (!include_end) return static_cast<std::uint64_t>(steps);
   mark(slot);
   return static_cast<std::uint64_t>(steps + 1);
@@ -335,9 +383,10 @@ struct MissLanes {
 /// for slot k) that reads free or unknown, four lanes at a time: the same arithmetic as one at a
 /// time (kUnknown counts as 0, then max(l + miss, min)); unmarked and occupied lanes are
 /// written back unchanged. Sets in `occupied` the marked voxels reading occupied (left to the
-/// caller's static-layer logic) and in `void_heights` those that reach the lower clamp now.
+/// caller's static-layer logic), in `void_heights` those that reach the lower clamp now and in
+/// `at_floor` every free one that reads the lower clamp after the miss.
 void miss_free_word(float* l, std::uint64_t marks, const MissLanes& c, std::uint64_t& occupied,
-                    std::uint64_t& void_heights) {
+                    std::uint64_t& void_heights, std::uint64_t& at_floor) {
   const Int4 lane = {1, 2, 4, 8};
   for (int g = 0; g < 16; ++g) {
     const auto nibble = static_cast<std::int32_t>((marks >> (4 * g)) & 15);
@@ -357,6 +406,7 @@ void miss_free_word(float* l, std::uint64_t marks, const MissLanes& c, std::uint
     std::memcpy(l + 4 * g, &out, sizeof out);
     occupied |= std::uint64_t{lane_bits(marked & (v > c.zero))} << (4 * g);
     void_heights |= std::uint64_t{lane_bits(voided)} << (4 * g);
+    at_floor |= std::uint64_t{lane_bits(free & (next == c.min))} << (4 * g);
   }
 }
 
@@ -426,6 +476,7 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
                         std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;
   hit_bits_.assign(words, 0);
+  floor_bits_.assign(words, 0);
   free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
   if (n > kUnflaggedVoxels) {
     dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>((words >> kBlockShift) + 1, 0));
@@ -456,7 +507,8 @@ std::size_t OccupancyMap::memory_bytes() const {
       static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t)) +
       scan_ground_z_.capacity() * sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
-      hit_bits_.capacity() * sizeof(std::uint64_t) + hit_slots_.capacity() * sizeof(std::uint32_t) +
+      (hit_bits_.capacity() + floor_bits_.capacity()) * sizeof(std::uint64_t) +
+      hit_slots_.capacity() * sizeof(std::uint32_t) +
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
       hit_height_.capacity() * sizeof(float) + hit_rise_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
@@ -495,11 +547,13 @@ void OccupancyMap::clear_slab(int axis, int global_index) {
         log_odds_[row + r] = kUnknown;
         rise_cm_[row + r] = 0;
         state_[row + r] = 0;
+        clear_floor_bits(row + r, 1);
       } else {
         const auto first = static_cast<std::ptrdiff_t>(row);
         std::fill_n(log_odds_.begin() + first, nx, kUnknown);
         std::fill_n(rise_cm_.begin() + first, nx, std::uint8_t{0});
         std::fill_n(state_.begin() + first, nx, std::uint8_t{0});
+        clear_floor_bits(row, static_cast<std::size_t>(nx));
       }
     }
   }
@@ -528,6 +582,7 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W) {
       std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
       std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
       std::fill(state_.begin(), state_.end(), std::uint8_t{0});
+      std::fill(floor_bits_.begin(), floor_bits_.end(), std::uint64_t{0});
       lo[a] = target[a];
       hi[a] = target[a] + dims_[a] - 1;
     } else if (shift > 0) {
@@ -561,10 +616,21 @@ void OccupancyMap::restore_static(const VoxelIndex& lo, const VoxelIndex& hi) {
             const std::size_t s = slot(v);
             state_[s] = kStatic;
             log_odds_[s] = std::max(log_odds_[s], l_hit_);
+            clear_floor_bits(s, 1);
           }
         }
       }
     }
+  }
+}
+
+void OccupancyMap::clear_floor_bits(std::size_t first, std::size_t count) {
+  for (std::size_t s = first; s < first + count;) {
+    const std::size_t bit = s & 63;
+    const std::size_t n = std::min<std::size_t>(64 - bit, first + count - s);
+    const std::uint64_t run = n == 64 ? ~std::uint64_t{0} : ((std::uint64_t{1} << n) - 1) << bit;
+    floor_bits_[s >> 6] &= ~run;
+    s += n;
   }
 }
 
@@ -612,7 +678,7 @@ void OccupancyMap::import_static(std::span<const VoxelIndex> voxels) {
   for (std::size_t s = 0; s < state_.size(); ++s) {
     if ((state_[s] & kStatic) != 0) {
       state_[s] = 0;
-      log_odds_[s] = kUnknown;
+      log_odds_[s] = kUnknown;  // static: never at the lower clamp
     }
   }
   static_ = std::make_unique<StaticStore>(static_reservation(dims_));
@@ -709,7 +775,17 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   //    d) One hit per voxel, in point order (promotions enter the static layer in that order).
   const int promote = params_.static_promote_scans;
   hit_slots_.clear();
+  // The voxels of a scan's returns are scattered over the window: their lines are requested a
+  // few returns ahead, so that the misses overlap instead of stalling this loop one by one.
+  constexpr std::size_t kAhead = 16;
   for (std::size_t i = 0; i < n_points; ++i) {
+    if (i + kAhead < n_points && hit_slot_[i + kAhead] != kNoSlot) {
+      const std::uint32_t a = hit_slot_[i + kAhead];
+      __builtin_prefetch(&log_odds_[a], 1);
+      __builtin_prefetch(&state_[a], 1);
+      __builtin_prefetch(&rise_cm_[a], 1);
+      __builtin_prefetch(&hit_bits_[a >> 6], 1);
+    }
     const std::uint32_t s = hit_slot_[i];
     if (s == kNoSlot) continue;
     const std::uint8_t rise = hit_rise_[i];
@@ -717,6 +793,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     const std::uint64_t bit = std::uint64_t{1} << (s & 63);
     if ((word & bit) == 0) {
       word |= bit;
+      floor_bits_[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
       hit_slots_.push_back(s);
       float& l = log_odds_[s];
       l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
@@ -745,40 +822,46 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
   const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
+  std::array<MarkBox, kRayTasks> task_boxes{};
   const bool flag_blocks = !dirty_blocks_.empty();
   runner.parallel_for(kRayTasks, [&](std::size_t task) {
+    MarkBox& box = task_boxes[task];
     const FreeMarks marks{free_bits_[task].data(),
                           flag_blocks ? dirty_blocks_[task].data() : nullptr};
     const auto traverse = flag_blocks ? &core::traverse<true> : &core::traverse<false>;
-    const std::size_t begin = n_rays * task / kRayTasks;
-    const std::size_t end = n_rays * (task + 1) / kRayTasks;
     std::uint64_t visits = 0;
-    for (std::size_t i = begin; i < end; ++i) {
+    for (std::size_t i = task * kRayChunk; i < n_rays;
+         i += (i + 1) % kRayChunk == 0 ? (kRayTasks - 1) * kRayChunk + 1 : 1) {
       if (i < n_points) {
         const Eigen::Vector3f& p = points_W[i];
         if (!p.allFinite()) continue;
         const Eigen::Vector3d pd = p.cast<double>();
         const double range = (pd - origin_W).norm();
         if (range <= max_range) {
-          visits += traverse(w, start, pd, false, marks);
+          visits += traverse(w, start, pd, false, marks, box);
         } else if (clear_range > 0.0) {
-          visits +=
-              traverse(w, start, origin_W + (pd - origin_W) * (clear_range / range), true, marks);
+          visits += traverse(w, start, origin_W + (pd - origin_W) * (clear_range / range), true,
+                             marks, box);
         }
       } else {
         const Eigen::Vector3f& dir = clearing_dirs_W[i - n_points];
         const double norm = dir.cast<double>().norm();
         if (!dir.allFinite() || norm == 0.0 || clear_range <= 0.0) continue;
-        visits +=
-            traverse(w, start, origin_W + dir.cast<double>() * (clear_range / norm), true, marks);
+        visits += traverse(w, start, origin_W + dir.cast<double>() * (clear_range / norm), true,
+                           marks, box);
       }
     }
     task_visits[task] = visits;
   });
 
-  // 3. Apply: fixed ranges of blocks, each voxel marked by any task and not hit gets one miss.
-  //    The marks are cleared as they are read, ready for the next scan. Only voxels reading
-  //    occupied carry static-layer state (free space costs no extra memory access).
+  // 3. Apply: fixed ranges of mark words, each voxel marked by any task and not hit gets one
+  //    miss. Only the words inside the box of all marks are read (small windows) or only the
+  //    blocks a ray flagged (large ones). The marks are cleared as they are read, ready for the
+  //    next scan. Only voxels reading occupied carry static-layer state (free space costs no
+  //    extra memory access). A word may be visited twice (rows share words); the second visit
+  //    finds its marks cleared, so every marked voxel gets exactly one miss.
+  MarkBox marked_box;
+  for (const MarkBox& b : task_boxes) marked_box.add(b);
   const std::size_t n_words = hit_bits_.size();
   const std::size_t n_blocks = (n_words >> kBlockShift) + 1;
   std::array<std::uint64_t*, kRayTasks> task_bits{};
@@ -791,22 +874,10 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     std::uint64_t updates = 0;
     std::vector<std::uint32_t>& demoted = demoted_[task];
     demoted.clear();
-    const std::size_t b_begin = n_blocks * task / kApplyTasks;
-    const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
+    // The misses of the marks of words [w_begin, w_end): the tasks' marks ORed (a loop the
+    // compiler vectorises), then cleared; a range no ray passed through is skipped.
     std::array<std::uint64_t, std::size_t{1} << kBlockShift> block_marks;
-    for (std::size_t b = b_begin; b < b_end; ++b) {
-      if (flag_blocks) {
-        bool any_flag = false;
-        for (auto& d : dirty_blocks_) {
-          any_flag = any_flag || d[b] != 0;
-          d[b] = 0;
-        }
-        if (!any_flag) continue;
-      }
-      // The tasks' marks of this block ORed (a loop the compiler vectorises); a block no ray
-      // passed through is skipped, a marked one is cleared for the next scan.
-      const std::size_t w_begin = std::min(n_words, b << kBlockShift);
-      const std::size_t w_end = std::min(n_words, (b + 1) << kBlockShift);
+    const auto apply_words = [&](std::size_t w_begin, std::size_t w_end) {
       const std::size_t count = w_end - w_begin;
       std::uint64_t any = 0;
       for (std::size_t k = 0; k < count; ++k) {
@@ -815,21 +886,37 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         block_marks[k] = m;
         any |= m;
       }
-      if (any == 0) continue;
+      if (any == 0) return;
       for (std::size_t t = 0; t < kRayTasks; ++t) {
         std::fill_n(task_bits[t] + w_begin, count, std::uint64_t{0});
       }
+      // Voxels already at the lower clamp stay there, their heights already void: a miss
+      // changes nothing, so their log-odds are not even read. The others' log-odds lines are
+      // prefetched for the whole range first: they are scattered over the window, and waiting
+      // for them one by one was most of this pass's time.
+      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
+        std::uint64_t& m = block_marks[wi - w_begin];
+        m &= ~hit_bits_[wi];
+        updates += static_cast<std::uint64_t>(bit_count(m));
+        m &= ~floor_bits_[wi];
+        for (int g = 0; g < 4; ++g) {  // 16 floats per 64-byte line
+          if (((m >> (16 * g)) & 0xffff) != 0) {
+            __builtin_prefetch(log_odds_.data() + (wi << 6) + 16 * g, 1);
+          }
+        }
+      }
       for (std::size_t wi = w_begin; wi < w_end; ++wi) {
         std::uint64_t marks = block_marks[wi - w_begin];
-        marks &= ~hit_bits_[wi];
+        if (marks == 0) continue;
+        std::uint64_t& at_floor = floor_bits_[wi];
         const int count = bit_count(marks);
-        updates += static_cast<std::uint64_t>(count);
         const std::size_t base = wi << 6;
         std::uint64_t occupied = 0;  // marked voxels reading occupied: static-layer logic below
         if (count >= kDenseWord) {
           // Mostly free space near the sensor: the whole word's voxels four at a time.
           std::uint64_t void_heights = 0;
-          miss_free_word(log_odds_.data() + base, marks, miss_lanes, occupied, void_heights);
+          miss_free_word(log_odds_.data() + base, marks, miss_lanes, occupied, void_heights,
+                         at_floor);
           for (; void_heights != 0; void_heights &= void_heights - 1) {
             rise_cm_[base + static_cast<std::size_t>(std::countr_zero(void_heights))] = 0;
           }
@@ -845,7 +932,10 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
             const float next = std::max((l == kUnknown ? 0.0f : l) + l_miss_, l_min_);
             // Reaching the lower clamp (observed free scan after scan): the sub-voxel heights
             // of older returns are void too (a tug's edge hit once leaves no ghost).
-            if (next == l_min_ && l > l_min_) rise_cm_[s] = 0;
+            if (next == l_min_) {
+              if (l > l_min_) rise_cm_[s] = 0;
+              at_floor |= std::uint64_t{1} << (s & 63);
+            }
             l = next;  // a miss only lowers
           }
         }
@@ -868,6 +958,56 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
             ++st;
             l = std::max(l + l_miss_, l_floor);
           }
+        }
+      }
+    };
+    if (flag_blocks) {
+      const std::size_t b_begin = n_blocks * task / kApplyTasks;
+      const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
+      for (std::size_t b = b_begin; b < b_end; ++b) {
+        bool any_flag = false;
+        for (auto& d : dirty_blocks_) {
+          any_flag = any_flag || d[b] != 0;
+          d[b] = 0;
+        }
+        if (!any_flag) continue;
+        apply_words(std::min(n_words, b << kBlockShift), std::min(n_words, (b + 1) << kBlockShift));
+      }
+    } else if (!marked_box.empty()) {
+      // This task's words, row by row (a row: the voxels of one ring z and ring y): the rows
+      // of the box, each as one or two runs of x in ring order.
+      const std::size_t w_begin = n_words * task / kApplyTasks;
+      const std::size_t w_end = n_words * (task + 1) / kApplyTasks;
+      const auto row_len = static_cast<std::size_t>(nx);
+      const std::size_t r_first = (w_begin << 6) / row_len;
+      const std::size_t r_last =
+          std::min((w_end << 6) / row_len + 1, static_cast<std::size_t>(ny) * dims_.z());
+      const auto rel_of = [&](int ring, int axis) {
+        const int r = ring - ring_min[axis];
+        return r < 0 ? r + dims_[axis] : r;
+      };
+      const int x_lo = marked_box.lo[0], x_hi = marked_box.hi[0];
+      const int x0 = ring_min[0] + x_lo >= nx ? ring_min[0] + x_lo - nx : ring_min[0] + x_lo;
+      const int x_count = x_hi - x_lo + 1;
+      const auto run = [&](std::size_t first_slot, std::size_t last_slot) {
+        const std::size_t a = std::max(w_begin, first_slot >> 6);
+        const std::size_t b = std::min(w_end, (last_slot >> 6) + 1);
+        for (std::size_t c = a; c < b; c += std::size_t{1} << kBlockShift) {
+          apply_words(c, std::min(b, c + (std::size_t{1} << kBlockShift)));
+        }
+      };
+      for (std::size_t r = r_first; r < r_last; ++r) {
+        const int ring_y = static_cast<int>(r % static_cast<std::size_t>(ny));
+        const int ring_z = static_cast<int>(r / static_cast<std::size_t>(ny));
+        if (!marked_box.holds(1, rel_of(ring_y, 1)) || !marked_box.holds(2, rel_of(ring_z, 2))) {
+          continue;
+        }
+        const std::size_t row = r * row_len;
+        if (x0 + x_count <= nx) {
+          run(row + static_cast<std::size_t>(x0), row + static_cast<std::size_t>(x0 + x_count - 1));
+        } else {
+          run(row + static_cast<std::size_t>(x0), row + row_len - 1);
+          run(row, row + static_cast<std::size_t>(x0 + x_count - nx - 1));
         }
       }
     }
@@ -918,6 +1058,7 @@ void OccupancyMap::reset() {
   std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
   std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
   std::fill(state_.begin(), state_.end(), std::uint8_t{0});
+  std::fill(floor_bits_.begin(), floor_bits_.end(), std::uint64_t{0});
   // The static layer too: a rebuild re-derives it from the retained scans (what was static
   // before the correction sits in the uncorrected frame).
   static_->clear();

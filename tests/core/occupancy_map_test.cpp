@@ -197,6 +197,62 @@ TEST(OccupancyMap, DynamicLayer_ClearsInFiveMissesFromTheClamp) {
   }
 }
 
+// The apply pass skips voxels it knows to sit at the lower clamp (a miss changes nothing there).
+// Every other write of a voxel's log-odds must end that: a hit, the window scrolling it out and
+// back (per-voxel and whole-row clears), a reset and a static layer import. Each step below
+// fails if the skip outlives that write (the miss would be lost).
+TEST(OccupancyMap, LowerClampSkip_EndsWithEveryOtherWriteOfTheVoxel) {
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  const Target t;
+  const VoxelIndex v = map.voxel_of(t.at.cast<double>());  // free while t.behind is returned
+  const float l_min = map.min_log_odds(), l_hit = map.hit_log_odds(), l_miss = map.miss_log_odds();
+  const auto to_clamp = [&] {
+    for (int i = 0; i < 6; ++i) integrate(map, t.absent());
+    ASSERT_EQ(map.log_odds(v), l_min);
+  };
+  to_clamp();
+  integrate(map, t.present());
+  ASSERT_EQ(map.log_odds(v), l_min + l_hit);
+  integrate(map, t.absent());
+  EXPECT_EQ(map.log_odds(v), std::max(l_min + l_hit + l_miss, l_min)) << "after a hit";
+  // Out along x (one voxel per row cleared) and back: unknown, then one miss.
+  to_clamp();
+  map.recenter(Eigen::Vector3d(15.0, 0.0, 0.0));
+  ASSERT_FALSE(map.in_window(v));
+  map.recenter(Eigen::Vector3d::Zero());
+  ASSERT_EQ(map.log_odds(v), OccupancyMap::kUnknown);
+  integrate(map, t.absent());
+  EXPECT_EQ(map.log_odds(v), l_miss) << "after scrolling along x";
+  // Out along y (whole rows cleared) and back.
+  to_clamp();
+  map.recenter(Eigen::Vector3d(0.0, 12.0, 0.0));
+  ASSERT_FALSE(map.in_window(v));
+  map.recenter(Eigen::Vector3d::Zero());
+  integrate(map, t.absent());
+  EXPECT_EQ(map.log_odds(v), l_miss) << "after scrolling along y";
+  // Out of the window at once (the whole window cleared) and back.
+  to_clamp();
+  map.recenter(Eigen::Vector3d(100.0, 0.0, 0.0));
+  map.recenter(Eigen::Vector3d::Zero());
+  integrate(map, t.absent());
+  EXPECT_EQ(map.log_odds(v), l_miss) << "after leaving the window";
+  to_clamp();
+  map.reset();
+  integrate(map, t.absent());
+  EXPECT_EQ(map.log_odds(v), l_miss) << "after a reset";
+  // Imported as static: the layer's misses count again, and ten of them demote it.
+  to_clamp();
+  const std::vector<VoxelIndex> layer{v};
+  map.import_static(layer);
+  ASSERT_TRUE(map.is_static(v));
+  ASSERT_EQ(map.log_odds(v), l_hit);
+  std::uint64_t demotions = 0;
+  for (int i = 0; i < 10; ++i) demotions += integrate(map, t.absent()).demotions;
+  EXPECT_EQ(demotions, 1u) << "after a static import";
+  EXPECT_FALSE(map.is_static(v));
+}
+
 TEST(OccupancyMap, StaticLayer_PromotedAfterConsecutiveHitsAndOnlyStrongFreeEvidenceRemovesIt) {
   OccupancyParams p = small_params();
   p.static_promote_scans = 20;

@@ -166,6 +166,8 @@ class OccupancyMap {
   /// window) read static.
   void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
   [[nodiscard]] VoxelIndex voxel_of_slot(std::size_t slot) const;
+  /// Clears the floor bits of slots [first, first + count) (their log-odds are being rewritten).
+  void clear_floor_bits(std::size_t first, std::size_t count);
 
   OccupancyParams params_;
   Eigen::Vector3i dims_;
@@ -188,6 +190,12 @@ class OccupancyMap {
   /// traffic than a list of visits (a 400×400×40 window is 0.8 MB of bits, cache-resident), and
   /// membership is all that decides an update, so the result is independent of ray order.
   std::vector<std::uint64_t> hit_bits_;
+  /// One bit per window voxel, slot order: set only where the voxel reads free at the lower
+  /// clamp (log-odds == min_log_odds(), not static), where a miss changes nothing. Most of the
+  /// free space a scan passes through has been observed free scan after scan; the apply pass
+  /// skips it without reading its log-odds. Every other write of a voxel's log-odds clears
+  /// its bit (a clear bit says nothing).
+  std::vector<std::uint64_t> floor_bits_;
   std::vector<std::vector<std::uint64_t>> free_bits_;
   /// Large windows only: per ray task, one flag per block of 64 words (4096 voxels) its rays
   /// passed through, so the apply pass skips the untouched part of the window.
