@@ -141,14 +141,12 @@ int wrap(int i, int n) {
 /// Rays are split into a fixed number of tasks, each marking its own bit set, and the marks are
 /// applied in fixed ranges of the window, so the work splits the same way whatever the runner's
 /// thread count (determinism contract).
-constexpr std::size_t kRayTasks = 2;
+constexpr std::size_t kRayTasks = 3;
 /// Rays are dealt to the tasks in chunks of this many, round robin: every task gets rays of every
 /// direction, so the tasks take about as long (contiguous ranges did not: a quarter of a scan
 /// that faces a far wall walks twice the voxels of one facing a near wall).
 constexpr std::size_t kRayChunk = 64;
 constexpr std::size_t kApplyTasks = 8;
-/// Point ranges of the per-return part of the hit pass.
-constexpr std::size_t kHitTasks = 8;
 /// No slot: the return does not mark (beyond max range or outside the window).
 constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};
 
@@ -282,9 +280,9 @@ struct AxisWalk {
   }
 };
 
-template <bool kFlagBlocks>
-std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
-                       bool include_end, FreeMarks marks, MarkBox& box) {
+inline std::uint64_t traverse(const WindowGeometry& w, const RayStart& start,
+                              const Eigen::Vector3d& end_W, bool include_end, FreeMarks marks,
+                              MarkBox& box) {
   if (!start.inside) return 0;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - start.o;
@@ -315,7 +313,7 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   std::uint8_t* const dirty = marks.dirty;
   const auto mark = [bits, dirty](std::int64_t s) {
     bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-    if constexpr (kFlagBlocks) dirty[s >> (6 + kBlockShift)] = 1;
+    if (dirty != nullptr) dirty[s >> (6 + kBlockShift)] = 1;
   };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
@@ -342,6 +340,59 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   if (!include_end) return static_cast<std::uint64_t>(steps);
   mark(slot);
   return static_cast<std::uint64_t>(steps + 1);
+}
+
+/// The rays of one ray task: returns (within max range: walked to their voxel, not marked;
+/// beyond: walked up to the clearing range, end voxel included) then beams without a return
+/// (clearing range, end included); ray i of the scan is this task's when its chunk of kRayChunk
+/// rays is dealt to it.
+struct TaskRays {
+  std::span<const Eigen::Vector3f> points, dirs;
+  Eigen::Vector3d origin;
+  double max_range, clear_range;
+  std::size_t task;
+};
+
+/// Where x86-64 CPUs have AVX2, the walk runs in an AVX2 build of the same source (picked once at
+/// load time; the baseline SSE2 build stays for other CPUs): floor() inline, shifts and bit scans
+/// without flags. Integer and IEEE double operations give the same bits in both (no FMA: this
+/// file builds with -ffp-contract=off).
+#if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__)
+#define TARMAC_WALK_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define TARMAC_WALK_CLONES
+#endif
+
+/// Walks every ray of a task; returns the voxel visits.
+TARMAC_WALK_CLONES
+std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
+                        FreeMarks marks, MarkBox& box) {
+  const std::size_t n_points = rays.points.size();
+  const std::size_t n_rays = n_points + rays.dirs.size();
+  const Eigen::Vector3d& origin_W = rays.origin;
+  std::uint64_t visits = 0;
+  for (std::size_t i = rays.task * kRayChunk; i < n_rays;
+       i += (i + 1) % kRayChunk == 0 ? (kRayTasks - 1) * kRayChunk + 1 : 1) {
+    if (i < n_points) {
+      const Eigen::Vector3f& p = rays.points[i];
+      if (!p.allFinite()) continue;
+      const Eigen::Vector3d pd = p.cast<double>();
+      const double range = (pd - origin_W).norm();
+      if (range <= rays.max_range) {
+        visits += traverse(w, start, pd, false, marks, box);
+      } else if (rays.clear_range > 0.0) {
+        visits += traverse(w, start, origin_W + (pd - origin_W) * (rays.clear_range / range), true,
+                           marks, box);
+      }
+    } else {
+      const Eigen::Vector3f& dir = rays.dirs[i - n_points];
+      const double norm = dir.cast<double>().norm();
+      if (!dir.allFinite() || norm == 0.0 || rays.clear_range <= 0.0) continue;
+      visits += traverse(w, start, origin_W + dir.cast<double>() * (rays.clear_range / norm), true,
+                         marks, box);
+    }
+  }
+  return visits;
 }
 
 /// Four lanes of 32 bits (GCC/Clang vector extensions, any target); comparisons give −1 or 0.
@@ -695,27 +746,28 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const double max_range = params_.max_range_m;
   const double clear_range = params_.clearing_range_m;
 
-  // 1. Hits first, so that a voxel hit by any ray of this scan is never also cleared by it.
-  //    a) Per return (fixed point ranges, in parallel): its slot and window column, or none
-  //       (beyond max range or outside the window), and its height along up_W.
+  // 1. Hits, in one task beside the ray walks of 2. (they touch disjoint data: the hit pass the
+  //    per-return arrays, the hit bits and the hit voxels' state; the walks their own mark bit
+  //    sets). Applied before any miss in 3., so that a voxel hit by any ray of this scan is
+  //    never also cleared by it.
   const int nx = dims_.x(), ny = dims_.y();
-  constexpr float kNone = std::numeric_limits<float>::infinity();
-  const Eigen::Vector3f up = up_W.normalized().cast<float>();
   const std::size_t n_points = points_W.size();
-  hit_slot_.resize(n_points);
-  hit_column_.resize(n_points);
-  hit_height_.resize(n_points);
-  hit_rise_.resize(n_points);
-  const double v_m = params_.voxel_size_m;
   std::array<int, 3> ring_min{};
   for (int a = 0; a < 3; ++a) ring_min[a] = wrap(min_[a], dims_[a]);
-  std::array<std::uint64_t, kHitTasks> task_outside{};
-  const auto point_range = [&](std::size_t task) {
-    return std::pair{n_points * task / kHitTasks, n_points * (task + 1) / kHitTasks};
-  };
-  runner.parallel_for(kHitTasks, [&](std::size_t task) {
-    std::uint64_t outside = 0;
-    for (auto [i, end] = point_range(task); i < end; ++i) {
+  const auto hit_pass = [&] {
+    //    a) Per return: its slot and window column, or none (beyond max range or outside the
+    //       window), and its height along up_W; and the scan's own ground: the lowest return
+    //       per window column (only the columns this scan touched are reset next time).
+    constexpr float kNone = std::numeric_limits<float>::infinity();
+    const Eigen::Vector3f up = up_W.normalized().cast<float>();
+    hit_slot_.resize(n_points);
+    hit_column_.resize(n_points);
+    hit_height_.resize(n_points);
+    hit_rise_.resize(n_points);
+    const double v_m = params_.voxel_size_m;
+    for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
+    scan_ground_cols_.clear();
+    for (std::size_t i = 0; i < n_points; ++i) {
       const Eigen::Vector3f& p = points_W[i];
       hit_slot_[i] = kNoSlot;
       if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
@@ -732,31 +784,22 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         stride *= dims_[a];
       }
       if (!inside) {
-        ++outside;
+        ++stats.outside_window;
         continue;
       }
+      const auto column = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
+      const float height = up.dot(p);
       hit_slot_[i] = static_cast<std::uint32_t>(slot);
-      hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
-      hit_height_[i] = up.dot(p);
+      hit_column_[i] = column;
+      hit_height_[i] = height;
+      float& g = scan_ground_z_[column];
+      if (g == kNone) scan_ground_cols_.push_back(column);
+      g = std::min(g, height);
     }
-    task_outside[task] = outside;
-  });
-  for (const auto o : task_outside) stats.outside_window += o;
-  //    b) The scan's own ground: the lowest return per window column; only the columns this
-  //       scan touched are reset next time.
-  for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
-  scan_ground_cols_.clear();
-  for (std::size_t i = 0; i < n_points; ++i) {
-    if (hit_slot_[i] == kNoSlot) continue;
-    float& g = scan_ground_z_[hit_column_[i]];
-    if (g == kNone) scan_ground_cols_.push_back(hit_column_[i]);
-    g = std::min(g, hit_height_[i]);
-  }
-  //    c) Rise above the lowest return of this scan within ground_radius_m (an object cannot
-  //       hide the ground around it), in parallel.
-  const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
-  runner.parallel_for(kHitTasks, [&](std::size_t task) {
-    for (auto [i, end] = point_range(task); i < end; ++i) {
+    //    b) Rise above the lowest return of this scan within ground_radius_m (an object cannot
+    //       hide the ground around it).
+    const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+    for (std::size_t i = 0; i < n_points; ++i) {
       if (hit_slot_[i] == kNoSlot) continue;
       const int cx = static_cast<int>(hit_column_[i] % static_cast<std::uint32_t>(nx));
       const int cy = static_cast<int>(hit_column_[i] / static_cast<std::uint32_t>(nx));
@@ -771,86 +814,71 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       hit_rise_[i] =
           static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
     }
-  });
-  //    d) One hit per voxel, in point order (promotions enter the static layer in that order).
-  const int promote = params_.static_promote_scans;
-  hit_slots_.clear();
-  // The voxels of a scan's returns are scattered over the window: their lines are requested a
-  // few returns ahead, so that the misses overlap instead of stalling this loop one by one.
-  constexpr std::size_t kAhead = 16;
-  for (std::size_t i = 0; i < n_points; ++i) {
-    if (i + kAhead < n_points && hit_slot_[i + kAhead] != kNoSlot) {
-      const std::uint32_t a = hit_slot_[i + kAhead];
-      __builtin_prefetch(&log_odds_[a], 1);
-      __builtin_prefetch(&state_[a], 1);
-      __builtin_prefetch(&rise_cm_[a], 1);
-      __builtin_prefetch(&hit_bits_[a >> 6], 1);
-    }
-    const std::uint32_t s = hit_slot_[i];
-    if (s == kNoSlot) continue;
-    const std::uint8_t rise = hit_rise_[i];
-    std::uint64_t& word = hit_bits_[s >> 6];
-    const std::uint64_t bit = std::uint64_t{1} << (s & 63);
-    if ((word & bit) == 0) {
-      word |= bit;
-      floor_bits_[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
-      hit_slots_.push_back(s);
-      float& l = log_odds_[s];
-      l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
-      std::uint8_t& st = state_[s];
-      if ((st & kStatic) != 0) {
-        st = kStatic;  // a return: the run of free observations restarts
-      } else if (l <= 0.0f || promote == 0) {
-        st = 0;  // not reading occupied yet: no run
-      } else if ((st & kCount) + 1 >= promote) {
-        st = kStatic;
-        static_->insert(voxel_of_slot(s));
-        ++stats.promotions;
-      } else {
-        ++st;
+    //    c) One hit per voxel, in point order (promotions enter the static layer in that order).
+    const int promote = params_.static_promote_scans;
+    hit_slots_.clear();
+    // The voxels of a scan's returns are scattered over the window: their lines are requested a
+    // few returns ahead, so that the misses overlap instead of stalling this loop one by one.
+    constexpr std::size_t kAhead = 16;
+    for (std::size_t i = 0; i < n_points; ++i) {
+      if (i + kAhead < n_points && hit_slot_[i + kAhead] != kNoSlot) {
+        const std::uint32_t a = hit_slot_[i + kAhead];
+        __builtin_prefetch(&log_odds_[a], 1);
+        __builtin_prefetch(&state_[a], 1);
+        __builtin_prefetch(&rise_cm_[a], 1);
+        __builtin_prefetch(&hit_bits_[a >> 6], 1);
       }
-      ++stats.hit_updates;
-      rise_cm_[s] = rise;  // the latest scan's returns replace older ones
-    } else {
-      rise_cm_[s] = std::max(rise_cm_[s], rise);
+      const std::uint32_t s = hit_slot_[i];
+      if (s == kNoSlot) continue;
+      const std::uint8_t rise = hit_rise_[i];
+      std::uint64_t& word = hit_bits_[s >> 6];
+      const std::uint64_t bit = std::uint64_t{1} << (s & 63);
+      if ((word & bit) == 0) {
+        word |= bit;
+        floor_bits_[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
+        hit_slots_.push_back(s);
+        float& l = log_odds_[s];
+        l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
+        std::uint8_t& st = state_[s];
+        if ((st & kStatic) != 0) {
+          st = kStatic;  // a return: the run of free observations restarts
+        } else if (l <= 0.0f || promote == 0) {
+          st = 0;  // not reading occupied yet: no run
+        } else if ((st & kCount) + 1 >= promote) {
+          st = kStatic;
+          static_->insert(voxel_of_slot(s));
+          ++stats.promotions;
+        } else {
+          ++st;
+        }
+        ++stats.hit_updates;
+        rise_cm_[s] = rise;  // the latest scan's returns replace older ones
+      } else {
+        rise_cm_[s] = std::max(rise_cm_[s], rise);
+      }
     }
-  }
+  };
 
   // 2. Free space: each ray task marks the voxels its rays pass through in its own bit set
-  //    (contiguous ray ranges, so the split does not depend on the thread count).
+  //    (fixed chunks of rays, so the split does not depend on the thread count).
   const std::size_t n_rays = n_points + clearing_dirs_W.size();
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
   const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
   std::array<MarkBox, kRayTasks> task_boxes{};
   const bool flag_blocks = !dirty_blocks_.empty();
-  runner.parallel_for(kRayTasks, [&](std::size_t task) {
+  runner.parallel_for(1 + kRayTasks, [&](std::size_t job) {
+    if (job == 0) {
+      hit_pass();
+      return;
+    }
+    const std::size_t task = job - 1;
     MarkBox& box = task_boxes[task];
     const FreeMarks marks{free_bits_[task].data(),
                           flag_blocks ? dirty_blocks_[task].data() : nullptr};
-    const auto traverse = flag_blocks ? &core::traverse<true> : &core::traverse<false>;
-    std::uint64_t visits = 0;
-    for (std::size_t i = task * kRayChunk; i < n_rays;
-         i += (i + 1) % kRayChunk == 0 ? (kRayTasks - 1) * kRayChunk + 1 : 1) {
-      if (i < n_points) {
-        const Eigen::Vector3f& p = points_W[i];
-        if (!p.allFinite()) continue;
-        const Eigen::Vector3d pd = p.cast<double>();
-        const double range = (pd - origin_W).norm();
-        if (range <= max_range) {
-          visits += traverse(w, start, pd, false, marks, box);
-        } else if (clear_range > 0.0) {
-          visits += traverse(w, start, origin_W + (pd - origin_W) * (clear_range / range), true,
-                             marks, box);
-        }
-      } else {
-        const Eigen::Vector3f& dir = clearing_dirs_W[i - n_points];
-        const double norm = dir.cast<double>().norm();
-        if (!dir.allFinite() || norm == 0.0 || clear_range <= 0.0) continue;
-        visits += traverse(w, start, origin_W + dir.cast<double>() * (clear_range / norm), true,
-                           marks, box);
-      }
-    }
+    const std::uint64_t visits = walk_task(
+        w, start, TaskRays{points_W, clearing_dirs_W, origin_W, max_range, clear_range, task},
+        marks, box);
     task_visits[task] = visits;
   });
 
@@ -874,40 +902,16 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     std::uint64_t updates = 0;
     std::vector<std::uint32_t>& demoted = demoted_[task];
     demoted.clear();
-    // The misses of the marks of words [w_begin, w_end): the tasks' marks ORed (a loop the
-    // compiler vectorises), then cleared; a range no ray passed through is skipped.
-    std::array<std::uint64_t, std::size_t{1} << kBlockShift> block_marks;
-    const auto apply_words = [&](std::size_t w_begin, std::size_t w_end) {
-      const std::size_t count = w_end - w_begin;
-      std::uint64_t any = 0;
-      for (std::size_t k = 0; k < count; ++k) {
-        std::uint64_t m = 0;
-        for (std::size_t t = 0; t < kRayTasks; ++t) m |= task_bits[t][w_begin + k];
-        block_marks[k] = m;
-        any |= m;
-      }
-      if (any == 0) return;
-      for (std::size_t t = 0; t < kRayTasks; ++t) {
-        std::fill_n(task_bits[t] + w_begin, count, std::uint64_t{0});
-      }
-      // Voxels already at the lower clamp stay there, their heights already void: a miss
-      // changes nothing, so their log-odds are not even read. The others' log-odds lines are
-      // prefetched for the whole range first: they are scattered over the window, and waiting
-      // for them one by one was most of this pass's time.
-      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
-        std::uint64_t& m = block_marks[wi - w_begin];
-        m &= ~hit_bits_[wi];
-        updates += static_cast<std::uint64_t>(bit_count(m));
-        m &= ~floor_bits_[wi];
-        for (int g = 0; g < 4; ++g) {  // 16 floats per 64-byte line
-          if (((m >> (16 * g)) & 0xffff) != 0) {
-            __builtin_prefetch(log_odds_.data() + (wi << 6) + 16 * g, 1);
-          }
-        }
-      }
-      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
-        std::uint64_t marks = block_marks[wi - w_begin];
-        if (marks == 0) continue;
+    // Words whose marks need an update (not hit, not at the lower clamp), collected with their
+    // log-odds lines prefetched, then updated together: the voxels are scattered over the
+    // window, and waiting for them one by one was most of this pass's time.
+    constexpr std::size_t kPending = 256;
+    std::array<std::pair<std::size_t, std::uint64_t>, kPending> pending;
+    std::size_t n_pending = 0;
+    const auto flush = [&] {
+      for (std::size_t p = 0; p < n_pending; ++p) {
+        const std::size_t wi = pending[p].first;
+        std::uint64_t marks = pending[p].second;
         std::uint64_t& at_floor = floor_bits_[wi];
         const int count = bit_count(marks);
         const std::size_t base = wi << 6;
@@ -960,6 +964,31 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
           }
         }
       }
+      n_pending = 0;
+    };
+    // The marks of words [w_begin, w_end): the tasks' marks ORed, then cleared. Voxels already
+    // at the lower clamp stay there, their heights already void: a miss changes nothing, so
+    // their log-odds are not even read.
+    const auto gather = [&](std::size_t w_begin, std::size_t w_end) {
+      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
+        std::uint64_t m = 0;
+        for (std::size_t t = 0; t < kRayTasks; ++t) {
+          m |= task_bits[t][wi];
+          task_bits[t][wi] = 0;
+        }
+        if (m == 0) continue;
+        m &= ~hit_bits_[wi];
+        updates += static_cast<std::uint64_t>(bit_count(m));
+        m &= ~floor_bits_[wi];
+        if (m == 0) continue;
+        for (int g = 0; g < 4; ++g) {  // 16 floats per 64-byte line
+          if (((m >> (16 * g)) & 0xffff) != 0) {
+            __builtin_prefetch(log_odds_.data() + (wi << 6) + 16 * g, 1);
+          }
+        }
+        pending[n_pending++] = {wi, m};
+        if (n_pending == kPending) flush();
+      }
     };
     if (flag_blocks) {
       const std::size_t b_begin = n_blocks * task / kApplyTasks;
@@ -971,7 +1000,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
           d[b] = 0;
         }
         if (!any_flag) continue;
-        apply_words(std::min(n_words, b << kBlockShift), std::min(n_words, (b + 1) << kBlockShift));
+        gather(std::min(n_words, b << kBlockShift), std::min(n_words, (b + 1) << kBlockShift));
       }
     } else if (!marked_box.empty()) {
       // This task's words, row by row (a row: the voxels of one ring z and ring y): the rows
@@ -992,9 +1021,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       const auto run = [&](std::size_t first_slot, std::size_t last_slot) {
         const std::size_t a = std::max(w_begin, first_slot >> 6);
         const std::size_t b = std::min(w_end, (last_slot >> 6) + 1);
-        for (std::size_t c = a; c < b; c += std::size_t{1} << kBlockShift) {
-          apply_words(c, std::min(b, c + (std::size_t{1} << kBlockShift)));
-        }
+        gather(a, b);
       };
       for (std::size_t r = r_first; r < r_last; ++r) {
         const int ring_y = static_cast<int>(r % static_cast<std::size_t>(ny));
@@ -1011,6 +1038,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         }
       }
     }
+    flush();
     task_updates[task] = updates;
   });
   for (const std::uint32_t s : hit_slots_) hit_bits_[s >> 6] = 0;
