@@ -525,6 +525,7 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   for (auto& d : demoted_) d.reserve(4096);  // demotions per scan and task; grows once if more
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
                         std::numeric_limits<float>::infinity());
+  scan_ground_near_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;
   hit_bits_.assign(words, 0);
   floor_bits_.assign(words, 0);
@@ -556,7 +557,7 @@ std::size_t OccupancyMap::memory_bytes() const {
   std::size_t bytes =
       log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() + state_.capacity() +
       static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t)) +
-      scan_ground_z_.capacity() * sizeof(float) +
+      (scan_ground_z_.capacity() + scan_ground_near_z_.capacity()) * sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
       (hit_bits_.capacity() + floor_bits_.capacity()) * sizeof(std::uint64_t) +
       hit_slots_.capacity() * sizeof(std::uint32_t) +
@@ -798,19 +799,25 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     }
     //    b) Rise above the lowest return of this scan within ground_radius_m (an object cannot
     //       hide the ground around it).
+    //       Once per column the scan touched (returns stack up in columns: walls, poles), then
+    //       per return; a return's own column is among them, so its ground is at most its height.
     const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
-    for (std::size_t i = 0; i < n_points; ++i) {
-      if (hit_slot_[i] == kNoSlot) continue;
-      const int cx = static_cast<int>(hit_column_[i] % static_cast<std::uint32_t>(nx));
-      const int cy = static_cast<int>(hit_column_[i] / static_cast<std::uint32_t>(nx));
-      const float h = hit_height_[i];
-      float ground_z = h;
+    for (const std::uint32_t c : scan_ground_cols_) {
+      const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
+      const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
+      float ground_z = kNone;
       for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
         const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
         for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
           ground_z = std::min(ground_z, row[x]);
         }
       }
+      scan_ground_near_z_[c] = ground_z;
+    }
+    for (std::size_t i = 0; i < n_points; ++i) {
+      if (hit_slot_[i] == kNoSlot) continue;
+      const float h = hit_height_[i];
+      const float ground_z = scan_ground_near_z_[hit_column_[i]];
       hit_rise_[i] =
           static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
     }

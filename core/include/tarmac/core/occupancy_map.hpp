@@ -184,6 +184,8 @@ class OccupancyMap {
   /// Per scan: lowest return height per window column (m along the up axis, +inf where none)
   /// and the columns that hold one (reset next scan).
   std::vector<float> scan_ground_z_;
+  /// Per scan, for the columns that hold a return: the lowest return within ground_radius_m.
+  std::vector<float> scan_ground_near_z_;
   std::vector<std::uint32_t> scan_ground_cols_;
   /// Per-scan marks, one bit per window voxel in slot order: the voxels this scan's returns hit,
   /// and, per ray task, the voxels its rays passed through. A bit set costs far less memory
