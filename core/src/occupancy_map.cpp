@@ -188,10 +188,11 @@ struct RayStart {
   }
 };
 
-/// One ray task's marks: a bit per voxel, and (large windows only) a flag per block of 64 words.
+/// One ray task's marks: a bit per voxel, and (large windows only) a bit per mark word that holds
+/// a mark.
 struct FreeMarks {
   std::uint64_t* bits;
-  std::uint8_t* dirty;
+  std::uint64_t* dirty;
 };
 
 /// The window-relative box (inclusive, per axis) that holds every voxel a set of rays marked;
@@ -217,10 +218,12 @@ struct MarkBox {
   [[nodiscard]] bool holds(int axis, int rel) const { return rel >= lo[axis] && rel <= hi[axis]; }
 };
 
-/// Windows up to this many voxels (2 MB of marks per ray task) skip the per-visit block flags:
-/// the apply pass reads all their marks, which costs less than a flag store on each of millions
-/// of visits. Larger windows (0.1 m voxels over 100 m) flag the blocks the rays touch, so the
-/// apply pass reads only those. Either way the same voxels are marked and updated.
+/// Windows up to this many voxels (2 MB of marks per ray task) skip the per-visit word flags: the
+/// apply pass reads their marks inside the box the rays spanned, which costs less than a flag
+/// on each of millions of visits. Larger windows (0.1 m voxels over 100 m: 10 MB of marks per
+/// task) flag each mark word the rays touch, so the apply pass reads only those (a flag per
+/// block of 64 words read 15 MB per scan of BALM hall). Either way the same voxels are marked
+/// and updated.
 constexpr std::size_t kUnflaggedVoxels = std::size_t{16} << 20;
 
 /// One axis of a traversal. A step moves the slot by one stride; `events` counts the steps to the
@@ -310,10 +313,10 @@ inline std::uint64_t traverse(const WindowGeometry& w, const RayStart& start,
   // they are not read through a reference); ties go to x, then y, before z.
   AxisWalk x = ax[0], y = ax[1], z = ax[2];
   std::uint64_t* const bits = marks.bits;
-  std::uint8_t* const dirty = marks.dirty;
+  std::uint64_t* const dirty = marks.dirty;
   const auto mark = [bits, dirty](std::int64_t s) {
     bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-    if (dirty != nullptr) dirty[s >> (6 + kBlockShift)] = 1;
+    if (dirty != nullptr) dirty[s >> (6 + kBlockShift)] |= std::uint64_t{1} << ((s >> 6) & 63);
   };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
@@ -531,7 +534,7 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   floor_bits_.assign(words, 0);
   free_bits_.assign(kRayTasks, std::vector<std::uint64_t>(words, 0));
   if (n > kUnflaggedVoxels) {
-    dirty_blocks_.assign(kRayTasks, std::vector<std::uint8_t>((words >> kBlockShift) + 1, 0));
+    dirty_words_.assign(kRayTasks, std::vector<std::uint64_t>((words >> kBlockShift) + 1, 0));
   }
   // Reserved up front so scans do not grow them in the cycle (DESIGN.md §3): every window column
   // can hold a ground return; the hit list takes a 64-beam scan's distinct return voxels (a
@@ -564,7 +567,7 @@ std::size_t OccupancyMap::memory_bytes() const {
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
       hit_height_.capacity() * sizeof(float) + hit_rise_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
-  for (const auto& d : dirty_blocks_) bytes += d.capacity();
+  for (const auto& d : dirty_words_) bytes += d.capacity() * sizeof(std::uint64_t);
   for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
   return bytes;
 }
@@ -873,7 +876,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const RayStart start(w, origin_W);
   std::array<std::uint64_t, kRayTasks> task_visits{};
   std::array<MarkBox, kRayTasks> task_boxes{};
-  const bool flag_blocks = !dirty_blocks_.empty();
+  const bool flag_words = !dirty_words_.empty();
   runner.parallel_for(1 + kRayTasks, [&](std::size_t job) {
     if (job == 0) {
       hit_pass();
@@ -882,7 +885,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     const std::size_t task = job - 1;
     MarkBox& box = task_boxes[task];
     const FreeMarks marks{free_bits_[task].data(),
-                          flag_blocks ? dirty_blocks_[task].data() : nullptr};
+                          flag_words ? dirty_words_[task].data() : nullptr};
     const std::uint64_t visits = walk_task(
         w, start, TaskRays{points_W, clearing_dirs_W, origin_W, max_range, clear_range, task},
         marks, box);
@@ -997,17 +1000,20 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         if (n_pending == kPending) flush();
       }
     };
-    if (flag_blocks) {
+    if (flag_words) {
       const std::size_t b_begin = n_blocks * task / kApplyTasks;
       const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
       for (std::size_t b = b_begin; b < b_end; ++b) {
-        bool any_flag = false;
-        for (auto& d : dirty_blocks_) {
-          any_flag = any_flag || d[b] != 0;
+        std::uint64_t flags = 0;
+        for (auto& d : dirty_words_) {
+          flags |= d[b];
           d[b] = 0;
         }
-        if (!any_flag) continue;
-        gather(std::min(n_words, b << kBlockShift), std::min(n_words, (b + 1) << kBlockShift));
+        for (; flags != 0; flags &= flags - 1) {
+          const std::size_t wi =
+              (b << kBlockShift) + static_cast<std::size_t>(std::countr_zero(flags));
+          gather(wi, wi + 1);
+        }
       }
     } else if (!marked_box.empty()) {
       // This task's words, row by row (a row: the voxels of one ring z and ring y): the rows

@@ -199,9 +199,9 @@ class OccupancyMap {
   /// its bit (a clear bit says nothing).
   std::vector<std::uint64_t> floor_bits_;
   std::vector<std::vector<std::uint64_t>> free_bits_;
-  /// Large windows only: per ray task, one flag per block of 64 words (4096 voxels) its rays
-  /// passed through, so the apply pass skips the untouched part of the window.
-  std::vector<std::vector<std::uint8_t>> dirty_blocks_;
+  /// Large windows only: per ray task, one bit per mark word its rays marked (a word of these
+  /// covers 4096 voxels), so the apply pass reads only those words.
+  std::vector<std::vector<std::uint64_t>> dirty_words_;
   std::vector<std::uint32_t> hit_slots_;  ///< to clear hit_bits_ after the scan
   /// Per return of the scan being integrated: its slot (or none), window column, height along
   /// the up axis and rise above the scan's local ground.
