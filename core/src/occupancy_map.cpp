@@ -283,9 +283,9 @@ struct AxisWalk {
   }
 };
 
-inline std::uint64_t traverse(const WindowGeometry& w, const RayStart& start,
-                              const Eigen::Vector3d& end_W, bool include_end, FreeMarks marks,
-                              MarkBox& box) {
+template <bool kFlagWords>
+std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
+                       bool include_end, FreeMarks marks, MarkBox& box) {
   if (!start.inside) return 0;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - start.o;
@@ -294,7 +294,7 @@ inline std::uint64_t traverse(const WindowGeometry& w, const RayStart& start,
   std::int64_t remaining = 0;
   for (int a = 0; a < 3; ++a) {
     const int cur = start.cur[a];
-    remaining += std::abs(static_cast<int>(std::floor(e[a])) - cur);
+    remaining += std::abs(static_cast<int>(floor_to_int(e[a])) - cur);
     AxisWalk& k = ax[a];
     const int step = d[a] > 0 ? 1 : (d[a] < 0 ? -1 : 0);
     k.init(start.rel[a], start.ring[a], step, w.dims[a], strides[a]);
@@ -316,7 +316,7 @@ inline std::uint64_t traverse(const WindowGeometry& w, const RayStart& start,
   std::uint64_t* const dirty = marks.dirty;
   const auto mark = [bits, dirty](std::int64_t s) {
     bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-    if (dirty != nullptr) dirty[s >> (6 + kBlockShift)] |= std::uint64_t{1} << ((s >> 6) & 63);
+    if constexpr (kFlagWords) dirty[s >> (6 + kBlockShift)] |= std::uint64_t{1} << ((s >> 6) & 63);
   };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
@@ -356,19 +356,9 @@ struct TaskRays {
   std::size_t task;
 };
 
-/// Where x86-64 CPUs have AVX2, the walk runs in an AVX2 build of the same source (picked once at
-/// load time; the baseline SSE2 build stays for other CPUs): floor() inline, shifts and bit scans
-/// without flags. Integer and IEEE double operations give the same bits in both (no FMA: this
-/// file builds with -ffp-contract=off).
-#if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__)
-#define TARMAC_WALK_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define TARMAC_WALK_CLONES
-#endif
-
 /// Walks every ray of a task; returns the voxel visits.
-TARMAC_WALK_CLONES
-std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
+template <bool kFlagWords>
+std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
                         FreeMarks marks, MarkBox& box) {
   const std::size_t n_points = rays.points.size();
   const std::size_t n_rays = n_points + rays.dirs.size();
@@ -382,20 +372,27 @@ std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const Ta
       const Eigen::Vector3d pd = p.cast<double>();
       const double range = (pd - origin_W).norm();
       if (range <= rays.max_range) {
-        visits += traverse(w, start, pd, false, marks, box);
+        visits += traverse<kFlagWords>(w, start, pd, false, marks, box);
       } else if (rays.clear_range > 0.0) {
-        visits += traverse(w, start, origin_W + (pd - origin_W) * (rays.clear_range / range), true,
-                           marks, box);
+        visits += traverse<kFlagWords>(
+            w, start, origin_W + (pd - origin_W) * (rays.clear_range / range), true, marks, box);
       }
     } else {
       const Eigen::Vector3f& dir = rays.dirs[i - n_points];
       const double norm = dir.cast<double>().norm();
       if (!dir.allFinite() || norm == 0.0 || rays.clear_range <= 0.0) continue;
-      visits += traverse(w, start, origin_W + dir.cast<double>() * (rays.clear_range / norm), true,
-                         marks, box);
+      visits += traverse<kFlagWords>(
+          w, start, origin_W + dir.cast<double>() * (rays.clear_range / norm), true, marks, box);
     }
   }
   return visits;
+}
+
+/// The walks of one task, with per-word flags (large windows) or without.
+std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
+                        FreeMarks marks, MarkBox& box) {
+  return marks.dirty != nullptr ? walk_rays<true>(w, start, rays, marks, box)
+                                : walk_rays<false>(w, start, rays, marks, box);
 }
 
 /// Four lanes of 32 bits (GCC/Clang vector extensions, any target); comparisons give −1 or 0.
