@@ -25,6 +25,26 @@ ThreadPool::ThreadPool(std::size_t threads, const std::vector<int>& cpus,
   }
 }
 
+namespace {
+
+/// Polls `done` until it holds or `spin` has passed; true when it holds.
+template <typename Done>
+bool poll_for(std::chrono::microseconds spin, Done&& done) {
+  const auto until = std::chrono::steady_clock::now() + spin;
+  for (unsigned k = 1; !done(); ++k) {
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#endif
+    if ((k & 63) == 0) {
+      if (std::chrono::steady_clock::now() >= until) return false;
+      std::this_thread::yield();  // more threads than cores: let the one with work run
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
 ThreadPool::~ThreadPool() {
   {
     std::lock_guard lock(mutex_);
@@ -50,6 +70,14 @@ void ThreadPool::work_loop() {
   std::uint64_t seen = 0;
   std::unique_lock lock(mutex_);
   while (true) {
+    if (!stop_ && generation_ == seen) {
+      lock.unlock();
+      poll_for(kSpin, [&] {
+        return stop_.load(std::memory_order_relaxed) ||
+               generation_.load(std::memory_order_acquire) != seen;
+      });
+      lock.lock();
+    }
     wake_.wait(lock, [&] { return stop_ || generation_ != seen; });
     if (stop_) return;
     seen = generation_;
@@ -71,6 +99,11 @@ void ThreadPool::parallel_for(std::size_t count, core::TaskFn fn) {
   ++generation_;
   wake_.notify_all();
   drain(lock);
+  if (finished_ != count_) {
+    lock.unlock();
+    poll_for(kSpin, [&] { return finished_.load(std::memory_order_acquire) == count; });
+    lock.lock();
+  }
   done_.wait(lock, [&] { return finished_ == count_; });
   job_ = nullptr;
   count_ = 0;

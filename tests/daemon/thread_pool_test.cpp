@@ -1,0 +1,52 @@
+#include "tarmac/daemon/thread_pool.hpp"
+
+#include <atomic>
+#include <chrono>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace tarmac::daemon {
+namespace {
+
+/// Runs `calls` parallel_for calls of 1..9 tasks; every task index must run exactly once per
+/// call, and the call must not return before all have run.
+void expect_each_task_once(ThreadPool& pool, int calls, std::chrono::microseconds pause) {
+  std::vector<std::atomic<int>> runs(9);
+  for (int c = 0; c < calls; ++c) {
+    const std::size_t count = 1 + static_cast<std::size_t>(c % 9);
+    for (auto& r : runs) r.store(0);
+    pool.parallel_for(count, [&](std::size_t task) {
+      std::this_thread::sleep_for(std::chrono::microseconds(task % 3));
+      runs[task].fetch_add(1);
+    });
+    for (std::size_t t = 0; t < runs.size(); ++t) {
+      ASSERT_EQ(runs[t].load(), t < count ? 1 : 0) << "call " << c << " task " << t;
+    }
+    if (pause.count() > 0) std::this_thread::sleep_for(pause);
+  }
+}
+
+// Back-to-back calls find the workers still polling for work; calls apart by more than the
+// polling time find them asleep on the condition variable. Both must run every task once.
+TEST(ThreadPool, EveryTaskOnce_BackToBackAndAfterTheWorkersSlept) {
+  for (const std::size_t threads : {2u, 3u}) {
+    ThreadPool pool(threads);
+    expect_each_task_once(pool, 2000, std::chrono::microseconds(0));
+    expect_each_task_once(pool, 20, ThreadPool::kSpin * 5);
+  }
+}
+
+// Pools destroyed right after a call (workers polling) and right after construction (workers
+// asleep or not started) stop and join.
+TEST(ThreadPool, StopsWhetherWorkersPollOrSleep) {
+  for (int i = 0; i < 50; ++i) {
+    ThreadPool pool(2);
+    if (i % 2 == 0) pool.parallel_for(4, [](std::size_t) {});
+  }
+  SUCCEED();
+}
+
+}  // namespace
+}  // namespace tarmac::daemon
