@@ -141,12 +141,12 @@ int wrap(int i, int n) {
 /// Rays are split into a fixed number of tasks, each marking its own bit set, and the marks are
 /// applied in fixed ranges of the window, so the work splits the same way whatever the runner's
 /// thread count (determinism contract). Three, beside the hit pass's one task: on 2 threads
-/// the four jobs balance (BALM hall: hit pass ~0.9 ms, each ray task ~1.1 ms); 2 left one thread
-/// idle for a task's length, 4 or 5 only added mark sets to OR.
+/// the four jobs are of a size (BALM hall, 1 thread: hit pass ~0.8 ms, each ray task ~1.0 ms);
+/// 4 or 5 measured no faster and add mark sets to OR.
 constexpr std::size_t kRayTasks = 3;
 /// Rays are dealt to the tasks in chunks of this many, round robin: every task gets rays of every
-/// direction, so the tasks take about as long (contiguous ranges did not: a quarter of a scan
-/// that faces a far wall walks twice the voxels of one facing a near wall).
+/// direction, so a part of the scan facing a far wall does not land on one task (512 measured
+/// the same).
 constexpr std::size_t kRayChunk = 64;
 constexpr std::size_t kApplyTasks = 8;
 /// No slot: the return does not mark (beyond max range or outside the window).
@@ -322,8 +322,10 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   };
   std::int64_t slot = start.slot;
   const std::int64_t steps = remaining;
-  // Every axis moves one way, so the voxels marked span the start and end of the walk.
+  // Every axis moves one way, so the voxels marked span the start and end of the walk. (Large
+  // windows flag words instead: the apply pass does not read the box.)
   const auto add_box = [&] {
+    if constexpr (kFlagWords) return;
     box.add(0, start.rel[0], x.end_rel(start.rel[0]));
     box.add(1, start.rel[1], y.end_rel(start.rel[1]));
     box.add(2, start.rel[2], z.end_rel(start.rel[2]));
@@ -366,25 +368,26 @@ std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const Ta
   const std::size_t n_rays = n_points + rays.dirs.size();
   const Eigen::Vector3d& origin_W = rays.origin;
   std::uint64_t visits = 0;
-  for (std::size_t i = rays.task * kRayChunk; i < n_rays;
-       i += (i + 1) % kRayChunk == 0 ? (kRayTasks - 1) * kRayChunk + 1 : 1) {
-    if (i < n_points) {
-      const Eigen::Vector3f& p = rays.points[i];
-      if (!p.allFinite()) continue;
-      const Eigen::Vector3d pd = p.cast<double>();
-      const double range = (pd - origin_W).norm();
-      if (range <= rays.max_range) {
-        visits += traverse<kFlagWords>(w, start, pd, false, marks, box);
-      } else if (rays.clear_range > 0.0) {
+  for (std::size_t first = rays.task * kRayChunk; first < n_rays; first += kRayTasks * kRayChunk) {
+    for (std::size_t i = first; i < std::min(n_rays, first + kRayChunk); ++i) {
+      if (i < n_points) {
+        const Eigen::Vector3f& p = rays.points[i];
+        if (!p.allFinite()) continue;
+        const Eigen::Vector3d pd = p.cast<double>();
+        const double range = (pd - origin_W).norm();
+        if (range <= rays.max_range) {
+          visits += traverse<kFlagWords>(w, start, pd, false, marks, box);
+        } else if (rays.clear_range > 0.0) {
+          visits += traverse<kFlagWords>(
+              w, start, origin_W + (pd - origin_W) * (rays.clear_range / range), true, marks, box);
+        }
+      } else {
+        const Eigen::Vector3f& dir = rays.dirs[i - n_points];
+        const double norm = dir.cast<double>().norm();
+        if (!dir.allFinite() || norm == 0.0 || rays.clear_range <= 0.0) continue;
         visits += traverse<kFlagWords>(
-            w, start, origin_W + (pd - origin_W) * (rays.clear_range / range), true, marks, box);
+            w, start, origin_W + dir.cast<double>() * (rays.clear_range / norm), true, marks, box);
       }
-    } else {
-      const Eigen::Vector3f& dir = rays.dirs[i - n_points];
-      const double norm = dir.cast<double>().norm();
-      if (!dir.allFinite() || norm == 0.0 || rays.clear_range <= 0.0) continue;
-      visits += traverse<kFlagWords>(
-          w, start, origin_W + dir.cast<double>() * (rays.clear_range / norm), true, marks, box);
     }
   }
   return visits;
@@ -740,6 +743,127 @@ void OccupancyMap::import_static(std::span<const VoxelIndex> voxels) {
   if (placed_) restore_static(min_, min_ + dims_ - VoxelIndex::Ones());
 }
 
+std::array<int, 3> OccupancyMap::ring_origin() const {
+  return {wrap(min_.x(), dims_.x()), wrap(min_.y(), dims_.y()), wrap(min_.z(), dims_.z())};
+}
+
+void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
+                                  std::span<const Eigen::Vector3f> points_W,
+                                  const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats) {
+  const int nx = dims_.x(), ny = dims_.y();
+  const std::size_t n_points = points_W.size();
+  const double max_range = params_.max_range_m;
+  const std::array<int, 3> ring_min = ring_origin();
+  // a) Per return: its slot and window column, or none (beyond max range or outside the
+  //    window), and its height along up_W; and the scan's own ground: the lowest return
+  //    per window column (only the columns this scan touched are reset next time).
+  constexpr float kNone = std::numeric_limits<float>::infinity();
+  const Eigen::Vector3f up = up_W.normalized().cast<float>();
+  hit_slot_.resize(n_points);
+  hit_column_.resize(n_points);
+  hit_height_.resize(n_points);
+  hit_rise_.resize(n_points);
+  const double v_m = params_.voxel_size_m;
+  for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
+  scan_ground_cols_.clear();
+  for (std::size_t i = 0; i < n_points; ++i) {
+    const Eigen::Vector3f& p = points_W[i];
+    hit_slot_[i] = kNoSlot;
+    if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
+    std::int64_t slot = 0;
+    std::int64_t stride = 1;
+    bool inside = true;
+    int rel[3];
+    for (int a = 0; a < 3; ++a) {
+      rel[a] = static_cast<int>(floor_to_int(static_cast<double>(p[a]) / v_m)) - min_[a];
+      inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(dims_[a]);
+      int ring = ring_min[a] + rel[a];
+      if (ring >= dims_[a]) ring -= dims_[a];
+      slot += ring * stride;
+      stride *= dims_[a];
+    }
+    if (!inside) {
+      ++stats.outside_window;
+      continue;
+    }
+    const auto column = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
+    const float height = up.dot(p);
+    hit_slot_[i] = static_cast<std::uint32_t>(slot);
+    hit_column_[i] = column;
+    hit_height_[i] = height;
+    float& g = scan_ground_z_[column];
+    if (g == kNone) scan_ground_cols_.push_back(column);
+    g = std::min(g, height);
+  }
+  // b) Rise above the lowest return of this scan within ground_radius_m (an object cannot
+  //    hide the ground around it).
+  //    Once per column the scan touched (returns stack up in columns: walls, poles), then
+  //    per return; a return's own column is among them, so its ground is at most its height.
+  const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+  for (const std::uint32_t c : scan_ground_cols_) {
+    const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
+    const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
+    float ground_z = kNone;
+    for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
+      const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
+      for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
+        ground_z = std::min(ground_z, row[x]);
+      }
+    }
+    scan_ground_near_z_[c] = ground_z;
+  }
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (hit_slot_[i] == kNoSlot) continue;
+    const float h = hit_height_[i];
+    const float ground_z = scan_ground_near_z_[hit_column_[i]];
+    hit_rise_[i] =
+        static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
+  }
+  // c) One hit per voxel, in point order (promotions enter the static layer in that order).
+  const int promote = params_.static_promote_scans;
+  hit_slots_.clear();
+  // The voxels of a scan's returns are scattered over the window: their lines are requested a
+  // few returns ahead, so that the misses overlap instead of stalling this loop one by one.
+  constexpr std::size_t kAhead = 16;
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (i + kAhead < n_points && hit_slot_[i + kAhead] != kNoSlot) {
+      const std::uint32_t a = hit_slot_[i + kAhead];
+      __builtin_prefetch(&log_odds_[a], 1);
+      __builtin_prefetch(&state_[a], 1);
+      __builtin_prefetch(&rise_cm_[a], 1);
+      __builtin_prefetch(&hit_bits_[a >> 6], 1);
+    }
+    const std::uint32_t s = hit_slot_[i];
+    if (s == kNoSlot) continue;
+    const std::uint8_t rise = hit_rise_[i];
+    std::uint64_t& word = hit_bits_[s >> 6];
+    const std::uint64_t bit = std::uint64_t{1} << (s & 63);
+    if ((word & bit) == 0) {
+      word |= bit;
+      floor_bits_[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
+      hit_slots_.push_back(s);
+      float& l = log_odds_[s];
+      l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
+      std::uint8_t& st = state_[s];
+      if ((st & kStatic) != 0) {
+        st = kStatic;  // a return: the run of free observations restarts
+      } else if (l <= 0.0f || promote == 0) {
+        st = 0;  // not reading occupied yet: no run
+      } else if ((st & kCount) + 1 >= promote) {
+        st = kStatic;
+        static_->insert(voxel_of_slot(s));
+        ++stats.promotions;
+      } else {
+        ++st;
+      }
+      ++stats.hit_updates;
+      rise_cm_[s] = rise;  // the latest scan's returns replace older ones
+    } else {
+      rise_cm_[s] = std::max(rise_cm_[s], rise);
+    }
+  }
+}
+
 OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
                                              std::span<const Eigen::Vector3f> points_W,
                                              std::span<const Eigen::Vector3f> clearing_dirs_W,
@@ -749,125 +873,13 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const double max_range = params_.max_range_m;
   const double clear_range = params_.clearing_range_m;
 
-  // 1. Hits, in one task beside the ray walks of 2. (they touch disjoint data: the hit pass the
-  //    per-return arrays, the hit bits and the hit voxels' state; the walks their own mark bit
-  //    sets). Applied before any miss in 3., so that a voxel hit by any ray of this scan is
-  //    never also cleared by it.
+  // 1. Hits (integrate_hits), in one task beside the ray walks of 2.: they touch disjoint data
+  //    (the hit pass the per-return arrays, the hit bits and the hit voxels' state; the walks
+  //    their own mark bit sets). Applied before any miss in 3., so that a voxel hit by any ray
+  //    of this scan is never also cleared by it.
   const int nx = dims_.x(), ny = dims_.y();
   const std::size_t n_points = points_W.size();
-  std::array<int, 3> ring_min{};
-  for (int a = 0; a < 3; ++a) ring_min[a] = wrap(min_[a], dims_[a]);
-  const auto hit_pass = [&] {
-    //    a) Per return: its slot and window column, or none (beyond max range or outside the
-    //       window), and its height along up_W; and the scan's own ground: the lowest return
-    //       per window column (only the columns this scan touched are reset next time).
-    constexpr float kNone = std::numeric_limits<float>::infinity();
-    const Eigen::Vector3f up = up_W.normalized().cast<float>();
-    hit_slot_.resize(n_points);
-    hit_column_.resize(n_points);
-    hit_height_.resize(n_points);
-    hit_rise_.resize(n_points);
-    const double v_m = params_.voxel_size_m;
-    for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
-    scan_ground_cols_.clear();
-    for (std::size_t i = 0; i < n_points; ++i) {
-      const Eigen::Vector3f& p = points_W[i];
-      hit_slot_[i] = kNoSlot;
-      if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
-      std::int64_t slot = 0;
-      std::int64_t stride = 1;
-      bool inside = true;
-      int rel[3];
-      for (int a = 0; a < 3; ++a) {
-        rel[a] = static_cast<int>(floor_to_int(static_cast<double>(p[a]) / v_m)) - min_[a];
-        inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(dims_[a]);
-        int ring = ring_min[a] + rel[a];
-        if (ring >= dims_[a]) ring -= dims_[a];
-        slot += ring * stride;
-        stride *= dims_[a];
-      }
-      if (!inside) {
-        ++stats.outside_window;
-        continue;
-      }
-      const auto column = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
-      const float height = up.dot(p);
-      hit_slot_[i] = static_cast<std::uint32_t>(slot);
-      hit_column_[i] = column;
-      hit_height_[i] = height;
-      float& g = scan_ground_z_[column];
-      if (g == kNone) scan_ground_cols_.push_back(column);
-      g = std::min(g, height);
-    }
-    //    b) Rise above the lowest return of this scan within ground_radius_m (an object cannot
-    //       hide the ground around it).
-    //       Once per column the scan touched (returns stack up in columns: walls, poles), then
-    //       per return; a return's own column is among them, so its ground is at most its height.
-    const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
-    for (const std::uint32_t c : scan_ground_cols_) {
-      const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
-      const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
-      float ground_z = kNone;
-      for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
-        const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
-        for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
-          ground_z = std::min(ground_z, row[x]);
-        }
-      }
-      scan_ground_near_z_[c] = ground_z;
-    }
-    for (std::size_t i = 0; i < n_points; ++i) {
-      if (hit_slot_[i] == kNoSlot) continue;
-      const float h = hit_height_[i];
-      const float ground_z = scan_ground_near_z_[hit_column_[i]];
-      hit_rise_[i] =
-          static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
-    }
-    //    c) One hit per voxel, in point order (promotions enter the static layer in that order).
-    const int promote = params_.static_promote_scans;
-    hit_slots_.clear();
-    // The voxels of a scan's returns are scattered over the window: their lines are requested a
-    // few returns ahead, so that the misses overlap instead of stalling this loop one by one.
-    constexpr std::size_t kAhead = 16;
-    for (std::size_t i = 0; i < n_points; ++i) {
-      if (i + kAhead < n_points && hit_slot_[i + kAhead] != kNoSlot) {
-        const std::uint32_t a = hit_slot_[i + kAhead];
-        __builtin_prefetch(&log_odds_[a], 1);
-        __builtin_prefetch(&state_[a], 1);
-        __builtin_prefetch(&rise_cm_[a], 1);
-        __builtin_prefetch(&hit_bits_[a >> 6], 1);
-      }
-      const std::uint32_t s = hit_slot_[i];
-      if (s == kNoSlot) continue;
-      const std::uint8_t rise = hit_rise_[i];
-      std::uint64_t& word = hit_bits_[s >> 6];
-      const std::uint64_t bit = std::uint64_t{1} << (s & 63);
-      if ((word & bit) == 0) {
-        word |= bit;
-        floor_bits_[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
-        hit_slots_.push_back(s);
-        float& l = log_odds_[s];
-        l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
-        std::uint8_t& st = state_[s];
-        if ((st & kStatic) != 0) {
-          st = kStatic;  // a return: the run of free observations restarts
-        } else if (l <= 0.0f || promote == 0) {
-          st = 0;  // not reading occupied yet: no run
-        } else if ((st & kCount) + 1 >= promote) {
-          st = kStatic;
-          static_->insert(voxel_of_slot(s));
-          ++stats.promotions;
-        } else {
-          ++st;
-        }
-        ++stats.hit_updates;
-        rise_cm_[s] = rise;  // the latest scan's returns replace older ones
-      } else {
-        rise_cm_[s] = std::max(rise_cm_[s], rise);
-      }
-    }
-  };
-
+  const std::array<int, 3> ring_min = ring_origin();
   // 2. Free space: each ray task marks the voxels its rays pass through in its own bit set
   //    (fixed chunks of rays, so the split does not depend on the thread count).
   const std::size_t n_rays = n_points + clearing_dirs_W.size();
@@ -878,7 +890,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const bool flag_words = !dirty_words_.empty();
   runner.parallel_for(1 + kRayTasks, [&](std::size_t job) {
     if (job == 0) {
-      hit_pass();
+      integrate_hits(origin_W, points_W, up_W, stats);
       return;
     }
     const std::size_t task = job - 1;
@@ -1024,11 +1036,10 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       const std::size_t r_last =
           std::min((w_end << 6) / row_len + 1, static_cast<std::size_t>(ny) * dims_.z());
       const auto rel_of = [&](int ring, int axis) {
-        const int r = ring - ring_min[axis];
-        return r < 0 ? r + dims_[axis] : r;
+        return wrap(ring - ring_min[axis], dims_[axis]);
       };
       const int x_lo = marked_box.lo[0], x_hi = marked_box.hi[0];
-      const int x0 = ring_min[0] + x_lo >= nx ? ring_min[0] + x_lo - nx : ring_min[0] + x_lo;
+      const int x0 = wrap(ring_min[0] + x_lo, nx);
       const int x_count = x_hi - x_lo + 1;
       const auto run = [&](std::size_t first_slot, std::size_t last_slot) {
         const std::size_t a = std::max(w_begin, first_slot >> 6);

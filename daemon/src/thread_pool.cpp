@@ -27,20 +27,19 @@ ThreadPool::ThreadPool(std::size_t threads, const std::vector<int>& cpus,
 
 namespace {
 
-/// Polls `done` until it holds or `spin` has passed; true when it holds.
+/// Polls `done` until it holds or `spin` has passed (the caller then sleeps on its condition).
 template <typename Done>
-bool poll_for(std::chrono::microseconds spin, Done&& done) {
+void poll_for(std::chrono::microseconds spin, Done&& done) {
   const auto until = std::chrono::steady_clock::now() + spin;
   for (unsigned k = 1; !done(); ++k) {
 #if defined(__x86_64__) || defined(__i386__)
     __builtin_ia32_pause();
 #endif
     if ((k & 63) == 0) {
-      if (std::chrono::steady_clock::now() >= until) return false;
+      if (std::chrono::steady_clock::now() >= until) return;
       std::this_thread::yield();  // more threads than cores: let the one with work run
     }
   }
-  return true;
 }
 
 }  // namespace

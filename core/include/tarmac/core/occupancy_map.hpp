@@ -12,6 +12,7 @@
 /// The window's log-odds are the combined result (static voxels read occupied), so the costmap
 /// and the ESDF read one array. Unknown stays unknown: only rays change a voxel.
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -166,6 +167,12 @@ class OccupancyMap {
   /// window) read static.
   void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
   [[nodiscard]] VoxelIndex voxel_of_slot(std::size_t slot) const;
+  /// Ring index of the window's first voxel, per axis.
+  [[nodiscard]] std::array<int, 3> ring_origin() const;
+  /// integrate()'s hit pass: each return's slot, column, height and rise above the scan's ground,
+  /// then one hit per voxel in point order (the static layer's promotions too).
+  void integrate_hits(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vector3f> points_W,
+                      const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats);
   /// Clears the floor bits of slots [first, first + count) (their log-odds are being rewritten).
   void clear_floor_bits(std::size_t first, std::size_t count);
 
