@@ -157,6 +157,10 @@ std::int64_t floor_to_int(double v) {
   const auto i = static_cast<std::int64_t>(v);  // truncates toward zero
   return i - static_cast<std::int64_t>(static_cast<double>(i) > v);
 }
+/// Four lanes of 32 bits (GCC/Clang vector extensions, any target); comparisons give −1 or 0.
+using Float4 = float __attribute__((vector_size(16)));
+using Int4 = std::int32_t __attribute__((vector_size(16)));
+
 /// Free-space marks are tracked per block of 64 bit words (4096 voxels).
 constexpr int kBlockShift = 6;
 
@@ -168,26 +172,6 @@ struct WindowGeometry {
   Eigen::Vector3i dims;
   Eigen::Vector3i min;
   double voxel_size_m;
-};
-
-/// Where every ray of a scan starts: the origin's voxel (computed once per scan).
-struct RayStart {
-  Eigen::Vector3d o;  ///< origin in voxel units
-  std::array<int, 3> cur, rel, ring;
-  std::int64_t slot = 0;  ///< slot of the origin's voxel
-  bool inside = false;
-
-  RayStart(const WindowGeometry& w, const Eigen::Vector3d& origin_W)
-      : o(origin_W / w.voxel_size_m), cur{}, rel{}, ring{} {
-    inside = true;
-    for (int a = 0; a < 3; ++a) {
-      cur[a] = static_cast<int>(std::floor(o[a]));
-      rel[a] = cur[a] - w.min[a];
-      inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(w.dims[a]);
-      ring[a] = wrap(cur[a], w.dims[a]);
-    }
-    slot = (static_cast<std::int64_t>(ring[2]) * w.dims[1] + ring[1]) * w.dims[0] + ring[0];
-  }
 };
 
 /// One ray task's marks: a bit per voxel, and (large windows only) a bit per mark word that holds
@@ -285,35 +269,57 @@ struct AxisWalk {
   }
 };
 
+/// Where every ray of a scan starts: the origin's voxel, and for each axis and each direction
+/// of travel along it the walk's start state (computed once per scan: a ray only picks its three
+/// and sets the parameters that depend on its direction).
+struct RayStart {
+  Eigen::Vector3d o;  ///< origin in voxel units
+  std::array<int, 3> cur, rel, ring;
+  std::int64_t slot = 0;  ///< slot of the origin's voxel
+  bool inside = false;
+  /// axis_walk[a][k]: axis a stepping −1, 0, +1 for k = 0, 1, 2. Its t_max holds the distance
+  /// (in voxels) from the origin to the first boundary crossed, which the ray multiplies by its
+  /// t_delta; infinite t_delta times 1.0 for an axis that does not step.
+  std::array<std::array<AxisWalk, 3>, 3> axis_walk{};
+
+  RayStart(const WindowGeometry& w, const Eigen::Vector3d& origin_W)
+      : o(origin_W / w.voxel_size_m), cur{}, rel{}, ring{} {
+    inside = true;
+    const int strides[3] = {1, w.dims[0], w.dims[0] * w.dims[1]};
+    for (int a = 0; a < 3; ++a) {
+      cur[a] = static_cast<int>(std::floor(o[a]));
+      rel[a] = cur[a] - w.min[a];
+      inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(w.dims[a]);
+      ring[a] = wrap(cur[a], w.dims[a]);
+      for (int k = 0; k < 3; ++k) {
+        AxisWalk& walk = axis_walk[a][k];
+        walk.init(rel[a], ring[a], k - 1, w.dims[a], strides[a]);
+        walk.t_max = k == 2 ? cur[a] + 1 - o[a] : (k == 0 ? o[a] - cur[a] : 1.0);
+      }
+    }
+    slot = (static_cast<std::int64_t>(ring[2]) * w.dims[1] + ring[1]) * w.dims[0] + ring[0];
+  }
+};
+
 template <bool kFlagWords>
 std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
                        bool include_end, FreeMarks marks, MarkBox& box) {
   if (!start.inside) return 0;
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - start.o;
-  const int strides[3] = {1, w.dims[0], w.dims[0] * w.dims[1]};
-  AxisWalk ax[3];  // NOLINT(cppcoreguidelines-pro-type-member-init): every field set below
   std::int64_t remaining = 0;
-  for (int a = 0; a < 3; ++a) {
-    const int cur = start.cur[a];
-    remaining += std::abs(static_cast<int>(floor_to_int(e[a])) - cur);
-    AxisWalk& k = ax[a];
-    const int step = d[a] > 0 ? 1 : (d[a] < 0 ? -1 : 0);
-    k.init(start.rel[a], start.ring[a], step, w.dims[a], strides[a]);
-    if (step > 0) {
-      k.t_delta = 1.0 / d[a];
-      k.t_max = (cur + 1 - start.o[a]) * k.t_delta;
-    } else if (step < 0) {
-      k.t_delta = -1.0 / d[a];
-      k.t_max = (start.o[a] - cur) * k.t_delta;
-    } else {
-      k.t_delta = std::numeric_limits<double>::infinity();
-      k.t_max = std::numeric_limits<double>::infinity();
-    }
-  }
-  // Scalars the loop keeps in registers (the marks too: a byte store may alias anything, so
-  // they are not read through a reference); ties go to x, then y, before z.
-  AxisWalk x = ax[0], y = ax[1], z = ax[2];
+  // Each axis's start state for the ray's direction along it, picked by index, not by branch
+  // (the signs of a scan's rays are as good as random). The loop keeps them in registers.
+  const auto axis = [&](int a) {
+    remaining += std::abs(static_cast<int>(floor_to_int(e[a])) - start.cur[a]);
+    AxisWalk k = start.axis_walk[a][static_cast<int>(d[a] > 0) - static_cast<int>(d[a] < 0) + 1];
+    k.t_delta = 1.0 / std::abs(d[a]);  // the same value as ±1.0 / d; infinite when d is 0
+    k.t_max *= k.t_delta;
+    return k;
+  };
+  AxisWalk x = axis(0), y = axis(1), z = axis(2);
+  // Ties go to x, then y, before z (see the step below). The marks are not read through a
+  // reference either: a byte store may alias anything.
   std::uint64_t* const bits = marks.bits;
   std::uint64_t* const dirty = marks.dirty;
   const auto mark = [bits, dirty](std::int64_t s) {
@@ -349,12 +355,79 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
   return static_cast<std::uint64_t>(steps + 1);
 }
 
+/// Rays are walked in order of direction, not in the order the scan lists them. The walk's
+/// step is a branch on which axis crosses next, and a ray's run of steps resembles those of the
+/// rays beside it: walked one after another, the processor predicts most of them (BALM hall,
+/// whose scans interleave distant directions: the walks took 17 % less time). The marks are the
+/// same whatever the order, so this changes speed only. The order: cube-map face of the
+/// direction (dominant axis and sign), band of the second minor coordinate, bin of the first.
+constexpr int kDirBands = 16;   ///< bands per cube face
+constexpr int kDirBins = 128;   ///< bins per band
+constexpr std::size_t kDirBuckets = std::size_t{6} * kDirBands * kDirBins;
+
+/// The direction buckets of four rays (x, y, z: four lanes each), without a branch: a scan's
+/// directions are as good as random. Any input gives a bucket in range (NaN and infinities
+/// land in a valid one; such rays are not walked anyway).
+void direction_buckets(Float4 x, Float4 y, Float4 z, std::uint16_t* out) {
+  const Float4 zero = {0.0f, 0.0f, 0.0f, 0.0f};
+  const Float4 ax = x < zero ? -x : x, ay = y < zero ? -y : y, az = z < zero ? -z : z;
+  const Int4 x_dom = (ax >= ay) & (ax >= az);
+  const Int4 y_dom = ~x_dom & (ay >= az);
+  const Int4 z_dom = ~x_dom & ~y_dom;
+  const Float4 big = x_dom ? ax : (y_dom ? ay : az);
+  const Float4 u = x_dom ? y : x;
+  const Float4 v = z_dom ? y : z;
+  // A comparison gives −1 where true: face 2·axis, +1 when the dominant coordinate is positive.
+  const Int4 face = (x_dom & -(x > zero)) | (y_dom & (2 - (y > zero))) | (z_dom & (4 - (z > zero)));
+  const Float4 one = {1.0f, 1.0f, 1.0f, 1.0f};
+  // In [0, 2) on the face; anything else (a zero or non-finite direction) to 0.
+  Float4 fu = u / big + one, fv = v / big + one;
+  const Float4 two = one + one;
+  fu = (fu >= zero) & (fu < two) ? fu : zero;
+  fv = (fv >= zero) & (fv < two) ? fv : zero;
+  const Float4 half_bins = one * (0.5f * kDirBins), half_bands = one * (0.5f * kDirBands);
+  const Int4 bin = __builtin_convertvector(fu * half_bins, Int4);
+  const Int4 band = __builtin_convertvector(fv * half_bands, Int4);
+  const Int4 bucket = (face * kDirBands + band) * kDirBins + bin;
+  for (int k = 0; k < 4; ++k) {
+    out[k] = static_cast<std::uint16_t>(std::clamp(bucket[k], 0, static_cast<int>(kDirBuckets) - 1));
+  }
+}
+
+/// The scan's rays (returns, then beams without one) in order of direction bucket, stable (a
+/// counting sort): `order` receives the ray indices. `bucket` and `count` are scratch.
+void sort_rays_by_direction(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vector3f> points,
+                            std::span<const Eigen::Vector3f> dirs, std::vector<std::uint16_t>& bucket,
+                            std::vector<std::uint32_t>& count, std::vector<std::uint32_t>& order) {
+  const std::size_t n_points = points.size();
+  const std::size_t n_rays = n_points + dirs.size();
+  bucket.resize((n_rays + 3) & ~std::size_t{3});
+  order.resize(n_rays);
+  const Eigen::Vector3f o = origin_W.cast<float>();
+  for (std::size_t i = 0; i < n_rays; i += 4) {
+    Float4 x{}, y{}, z{};
+    for (std::size_t k = 0; k < 4 && i + k < n_rays; ++k) {
+      const std::size_t r = i + k;
+      const Eigen::Vector3f q = r < n_points ? Eigen::Vector3f(points[r] - o) : dirs[r - n_points];
+      x[k] = q.x();
+      y[k] = q.y();
+      z[k] = q.z();
+    }
+    direction_buckets(x, y, z, bucket.data() + i);
+  }
+  count.assign(kDirBuckets + 1, 0);
+  for (std::size_t r = 0; r < n_rays; ++r) ++count[bucket[r] + 1];
+  for (std::size_t b = 1; b <= kDirBuckets; ++b) count[b] += count[b - 1];
+  for (std::size_t r = 0; r < n_rays; ++r) order[count[bucket[r]]++] = static_cast<std::uint32_t>(r);
+}
+
 /// The rays of one ray task: returns (within max range: walked to their voxel, not marked;
 /// beyond: walked up to the clearing range, end voxel included) then beams without a return
 /// (clearing range, end included); ray i of the scan is this task's when its chunk of kRayChunk
 /// rays is dealt to it.
 struct TaskRays {
   std::span<const Eigen::Vector3f> points, dirs;
+  std::span<const std::uint32_t> order;  ///< the rays by direction (see sort_rays_by_direction)
   Eigen::Vector3d origin;
   double max_range, clear_range;
   std::size_t task;
@@ -369,7 +442,8 @@ std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const Ta
   const Eigen::Vector3d& origin_W = rays.origin;
   std::uint64_t visits = 0;
   for (std::size_t first = rays.task * kRayChunk; first < n_rays; first += kRayTasks * kRayChunk) {
-    for (std::size_t i = first; i < std::min(n_rays, first + kRayChunk); ++i) {
+    for (std::size_t j = first; j < std::min(n_rays, first + kRayChunk); ++j) {
+      const std::size_t i = rays.order[j];
       if (i < n_points) {
         const Eigen::Vector3f& p = rays.points[i];
         if (!p.allFinite()) continue;
@@ -400,9 +474,6 @@ std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const Ta
                                 : walk_rays<false>(w, start, rays, marks, box);
 }
 
-/// Four lanes of 32 bits (GCC/Clang vector extensions, any target); comparisons give −1 or 0.
-using Float4 = float __attribute__((vector_size(16)));
-using Int4 = std::int32_t __attribute__((vector_size(16)));
 
 /// Bit k set when lane k of a comparison mask is set (one instruction with SSE).
 unsigned lane_bits(Int4 mask) {
@@ -552,6 +623,9 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   warm(hit_column_, kReservedHitSlots);
   warm(hit_height_, kReservedHitSlots);
   warm(hit_rise_, kReservedHitSlots);
+  warm(ray_order_, kReservedHitSlots);
+  warm(ray_bucket_, kReservedHitSlots);
+  ray_bucket_count_.assign(kDirBuckets + 1, 0);
 }
 
 OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
@@ -567,7 +641,9 @@ std::size_t OccupancyMap::memory_bytes() const {
       (hit_bits_.capacity() + floor_bits_.capacity()) * sizeof(std::uint64_t) +
       hit_slots_.capacity() * sizeof(std::uint32_t) +
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
-      hit_height_.capacity() * sizeof(float) + hit_rise_.capacity();
+      hit_height_.capacity() * sizeof(float) + hit_rise_.capacity() +
+      (ray_order_.capacity() + ray_bucket_count_.capacity()) * sizeof(std::uint32_t) +
+      ray_bucket_.capacity() * sizeof(std::uint16_t);
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_words_) bytes += d.capacity() * sizeof(std::uint64_t);
   for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
@@ -888,6 +964,8 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   std::array<std::uint64_t, kRayTasks> task_visits{};
   std::array<MarkBox, kRayTasks> task_boxes{};
   const bool flag_words = !dirty_words_.empty();
+  sort_rays_by_direction(origin_W, points_W, clearing_dirs_W, ray_bucket_, ray_bucket_count_,
+                         ray_order_);
   runner.parallel_for(1 + kRayTasks, [&](std::size_t job) {
     if (job == 0) {
       integrate_hits(origin_W, points_W, up_W, stats);
@@ -898,7 +976,8 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     const FreeMarks marks{free_bits_[task].data(),
                           flag_words ? dirty_words_[task].data() : nullptr};
     const std::uint64_t visits = walk_task(
-        w, start, TaskRays{points_W, clearing_dirs_W, origin_W, max_range, clear_range, task},
+        w, start, TaskRays{points_W, clearing_dirs_W, ray_order_, origin_W, max_range, clear_range,
+                 task},
         marks, box);
     task_visits[task] = visits;
   });

@@ -1,5 +1,6 @@
 #include "tarmac/core/occupancy_map.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <set>
@@ -110,6 +111,71 @@ TEST(OccupancyMap, Raycast_MatchesReferenceTraversal) {
     ASSERT_EQ(free_count, expected.size()) << "trial " << trial;
     ASSERT_FLOAT_EQ(map.log_odds(e), map.hit_log_odds());
   }
+}
+
+// Many rays of one scan, in every direction (each face of the cube, along the axes, on the
+// diagonals) and listed in random order, plus entries that must be skipped: the free voxels are
+// exactly the union of their reference traversals, less the voxels any of them hit. The map
+// walks the rays in its own order (by direction); a ray lost or walked twice on the way shows
+// here.
+TEST(OccupancyMap, Raycast_ManyRaysInEveryDirection_MarkTheUnionOfTheirTraversals) {
+  const auto params = small_params();
+  OccupancyMap map(params);
+  map.recenter(Eigen::Vector3d::Zero());
+  const Eigen::Vector3d origin(0.031, 0.057, 0.013);
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::uniform_real_distribution<double> len(0.3, 4.0);
+  std::vector<Eigen::Vector3d> dirs;
+  for (int i = 0; i < 400; ++i) dirs.emplace_back(g(rng), g(rng), g(rng));
+  for (int a = 0; a < 3; ++a) {
+    for (const double sign : {-1.0, 1.0}) dirs.push_back(sign * Eigen::Vector3d::Unit(a));
+  }
+  for (const double sx : {-1.0, 1.0}) {
+    for (const double sy : {-1.0, 1.0}) dirs.emplace_back(sx, sy, 0.3 * sx * sy);
+  }
+  Scan scan{origin, {}, {}};
+  std::set<std::tuple<int, int, int>> expected_free, hits;
+  for (const Eigen::Vector3d& d : dirs) {
+    Eigen::Vector3d end = origin + d.normalized() * len(rng);
+    end.z() = std::clamp(end.z(), -1.5, 1.5);
+    const Eigen::Vector3f end_f = end.cast<float>();
+    scan.points.push_back(end_f);
+    auto crossed = sampled_voxels(origin, end_f.cast<double>(), params.voxel_size_m);
+    const VoxelIndex e = map.voxel_of(end_f.cast<double>());
+    crossed.erase({e.x(), e.y(), e.z()});
+    expected_free.insert(crossed.begin(), crossed.end());
+    hits.emplace(e.x(), e.y(), e.z());
+  }
+  for (const auto& h : hits) expected_free.erase(h);
+  std::shuffle(scan.points.begin(), scan.points.end(), rng);
+  // Skipped, wherever they sit in the list: not finite, and a return at the origin itself
+  // (its own voxel is hit, nothing is crossed).
+  scan.points.insert(scan.points.begin() + 17, Eigen::Vector3f(std::nanf(""), 1.0f, 0.0f));
+  scan.points.insert(scan.points.begin() + 101, Eigen::Vector3f(0.0f, -INFINITY, 0.0f));
+  scan.points.push_back(origin.cast<float>());
+  const VoxelIndex o = map.voxel_of(origin.cast<float>().cast<double>());
+  hits.emplace(o.x(), o.y(), o.z());
+  expected_free.erase({o.x(), o.y(), o.z()});
+  integrate(map, scan);
+  std::size_t free_count = 0, hit_count = 0;
+  for (int z = -10; z < 10; ++z)
+    for (int y = -50; y < 50; ++y)
+      for (int x = -50; x < 50; ++x) {
+        const float l = map.log_odds(VoxelIndex(x, y, z));
+        if (l == map.miss_log_odds()) {
+          ++free_count;
+          ASSERT_TRUE(expected_free.count({x, y, z}))
+              << "extra free voxel " << x << "," << y << "," << z;
+        } else if (l == map.hit_log_odds()) {
+          ++hit_count;
+          ASSERT_TRUE(hits.count({x, y, z})) << "extra hit voxel " << x << "," << y << "," << z;
+        } else {
+          ASSERT_EQ(l, OccupancyMap::kUnknown) << x << "," << y << "," << z;
+        }
+      }
+  EXPECT_EQ(free_count, expected_free.size());
+  EXPECT_EQ(hit_count, hits.size());
 }
 
 TEST(OccupancyMap, NoReturnAndBeyondMaxRange_ClearUpToClearingRange) {

@@ -210,6 +210,11 @@ class OccupancyMap {
   /// covers 4096 voxels), so the apply pass reads only those words.
   std::vector<std::vector<std::uint64_t>> dirty_words_;
   std::vector<std::uint32_t> hit_slots_;  ///< to clear hit_bits_ after the scan
+  /// Per scan: the rays in the order they are walked (by direction), their direction buckets
+  /// and the buckets' counts (scratch of the counting sort).
+  std::vector<std::uint32_t> ray_order_;
+  std::vector<std::uint16_t> ray_bucket_;
+  std::vector<std::uint32_t> ray_bucket_count_;
   /// Per return of the scan being integrated: its slot (or none), window column, height along
   /// the up axis and rise above the scan's local ground.
   std::vector<std::uint32_t> hit_slot_;
