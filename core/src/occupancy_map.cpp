@@ -1114,9 +1114,6 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
       const std::size_t r_first = (w_begin << 6) / row_len;
       const std::size_t r_last =
           std::min((w_end << 6) / row_len + 1, static_cast<std::size_t>(ny) * dims_.z());
-      const auto rel_of = [&](int ring, int axis) {
-        return wrap(ring - ring_min[axis], dims_[axis]);
-      };
       const int x_lo = marked_box.lo[0], x_hi = marked_box.hi[0];
       const int x0 = wrap(ring_min[0] + x_lo, nx);
       const int x_count = x_hi - x_lo + 1;
@@ -1125,18 +1122,28 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
         const std::size_t b = std::min(w_end, (last_slot >> 6) + 1);
         gather(a, b);
       };
+      // The row's ring y and z, and where they sit in the window, are stepped along with it:
+      // a division per row (tens of thousands of rows per task and scan) was most of this
+      // pass's time.
+      const int nz = dims_.z();
+      auto ring_y = static_cast<int>(r_first % static_cast<std::size_t>(ny));
+      int rel_y = wrap(ring_y - ring_min[1], ny);
+      int rel_z = wrap(static_cast<int>(r_first / static_cast<std::size_t>(ny)) - ring_min[2], nz);
       for (std::size_t r = r_first; r < r_last; ++r) {
-        const int ring_y = static_cast<int>(r % static_cast<std::size_t>(ny));
-        const int ring_z = static_cast<int>(r / static_cast<std::size_t>(ny));
-        if (!marked_box.holds(1, rel_of(ring_y, 1)) || !marked_box.holds(2, rel_of(ring_z, 2))) {
-          continue;
+        if (marked_box.holds(1, rel_y) && marked_box.holds(2, rel_z)) {
+          const std::size_t row = r * row_len;
+          if (x0 + x_count <= nx) {
+            run(row + static_cast<std::size_t>(x0),
+                row + static_cast<std::size_t>(x0 + x_count - 1));
+          } else {
+            run(row + static_cast<std::size_t>(x0), row + row_len - 1);
+            run(row, row + static_cast<std::size_t>(x0 + x_count - nx - 1));
+          }
         }
-        const std::size_t row = r * row_len;
-        if (x0 + x_count <= nx) {
-          run(row + static_cast<std::size_t>(x0), row + static_cast<std::size_t>(x0 + x_count - 1));
-        } else {
-          run(row + static_cast<std::size_t>(x0), row + row_len - 1);
-          run(row, row + static_cast<std::size_t>(x0 + x_count - nx - 1));
+        rel_y = rel_y + 1 == ny ? 0 : rel_y + 1;
+        if (++ring_y == ny) {
+          ring_y = 0;
+          rel_z = rel_z + 1 == nz ? 0 : rel_z + 1;
         }
       }
     }
