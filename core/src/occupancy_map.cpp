@@ -470,8 +470,15 @@ std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const Ta
 /// The walks of one task, with per-word flags (large windows) or without.
 std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
                         FreeMarks marks, MarkBox& box) {
-  return marks.dirty != nullptr ? walk_rays<true>(w, start, rays, marks, box)
-                                : walk_rays<false>(w, start, rays, marks, box);
+  // The box grows at the end of every ray: it lives on this task's own stack until the task
+  // is done. The tasks' boxes share a cache line, and updating them in place while another
+  // task did the same cost the walks about a quarter of their time on 2 threads.
+  MarkBox local;
+  const std::uint64_t visits = marks.dirty != nullptr
+                                   ? walk_rays<true>(w, start, rays, marks, local)
+                                   : walk_rays<false>(w, start, rays, marks, local);
+  box = local;
+  return visits;
 }
 
 
