@@ -81,7 +81,7 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   sensor_W_ = T_W_S.translation();
   T_W_B_ = T_W_B;
   // Filters in the sensor frame (none of them depends on the pose), so the survivors can be
-  // retained for a rebuild; then the same float transform filter_scan applies.
+  // retained for a rebuild and re-integrated with the same float transform (transform_points).
   // With a motion, the sweep is first deskewed into the sensor frame at the stamp.
   const PointCloud* input = &cloud;
   if (motion != nullptr && cloud.has_time() && cloud.consistent() && motion->t1_s > motion->t0_s) {
@@ -89,9 +89,10 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
     deskew_points(cloud, *motion, T_W_B, T_B_S, deskewed_.points_S);
     input = &deskewed_;
   }
-  const FilterCounts counts = filter_scan(*input, Eigen::Isometry3d::Identity(), T_B_S,
-                                          params_.filters, points_S_, filter_scratch_, runner);
-  transform_points(T_W_S, points_S_, points_W_);
+  // The survivors in the world frame, and in the sensor frame too when they are retained.
+  const FilterCounts counts =
+      filter_scan(*input, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_, runner,
+                  retained_.empty() ? nullptr : &points_S_);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&
         cursor_seq_ <= next_seq_ - retained_.size()) {

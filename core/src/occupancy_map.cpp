@@ -361,8 +361,8 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
 /// whose scans interleave distant directions: the walks took 17 % less time). The marks are the
 /// same whatever the order, so this changes speed only. The order: cube-map face of the
 /// direction (dominant axis and sign), band of the second minor coordinate, bin of the first.
-constexpr int kDirBands = 16;   ///< bands per cube face
-constexpr int kDirBins = 128;   ///< bins per band
+constexpr int kDirBands = 16;  ///< bands per cube face
+constexpr int kDirBins = 128;  ///< bins per band
 constexpr std::size_t kDirBuckets = std::size_t{6} * kDirBands * kDirBins;
 
 /// The direction buckets of four rays (x, y, z: four lanes each), without a branch: a scan's
@@ -390,15 +390,18 @@ void direction_buckets(Float4 x, Float4 y, Float4 z, std::uint16_t* out) {
   const Int4 band = __builtin_convertvector(fv * half_bands, Int4);
   const Int4 bucket = (face * kDirBands + band) * kDirBins + bin;
   for (int k = 0; k < 4; ++k) {
-    out[k] = static_cast<std::uint16_t>(std::clamp(bucket[k], 0, static_cast<int>(kDirBuckets) - 1));
+    out[k] =
+        static_cast<std::uint16_t>(std::clamp(bucket[k], 0, static_cast<int>(kDirBuckets) - 1));
   }
 }
 
 /// The scan's rays (returns, then beams without one) in order of direction bucket, stable (a
 /// counting sort): `order` receives the ray indices. `bucket` and `count` are scratch.
-void sort_rays_by_direction(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vector3f> points,
-                            std::span<const Eigen::Vector3f> dirs, std::vector<std::uint16_t>& bucket,
-                            std::vector<std::uint32_t>& count, std::vector<std::uint32_t>& order) {
+void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
+                            std::span<const Eigen::Vector3f> points,
+                            std::span<const Eigen::Vector3f> dirs,
+                            std::vector<std::uint16_t>& bucket, std::vector<std::uint32_t>& count,
+                            std::vector<std::uint32_t>& order) {
   const std::size_t n_points = points.size();
   const std::size_t n_rays = n_points + dirs.size();
   bucket.resize((n_rays + 3) & ~std::size_t{3});
@@ -418,7 +421,8 @@ void sort_rays_by_direction(const Eigen::Vector3d& origin_W, std::span<const Eig
   count.assign(kDirBuckets + 1, 0);
   for (std::size_t r = 0; r < n_rays; ++r) ++count[bucket[r] + 1];
   for (std::size_t b = 1; b <= kDirBuckets; ++b) count[b] += count[b - 1];
-  for (std::size_t r = 0; r < n_rays; ++r) order[count[bucket[r]]++] = static_cast<std::uint32_t>(r);
+  for (std::size_t r = 0; r < n_rays; ++r)
+    order[count[bucket[r]]++] = static_cast<std::uint32_t>(r);
 }
 
 /// The rays of one ray task: returns (within max range: walked to their voxel, not marked;
@@ -480,7 +484,6 @@ std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const Ta
   box = local;
   return visits;
 }
-
 
 /// Bit k set when lane k of a comparison mask is set (one instruction with SSE).
 unsigned lane_bits(Int4 mask) {
@@ -983,8 +986,8 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     const FreeMarks marks{free_bits_[task].data(),
                           flag_words ? dirty_words_[task].data() : nullptr};
     const std::uint64_t visits = walk_task(
-        w, start, TaskRays{points_W, clearing_dirs_W, ray_order_, origin_W, max_range, clear_range,
-                 task},
+        w, start,
+        TaskRays{points_W, clearing_dirs_W, ray_order_, origin_W, max_range, clear_range, task},
         marks, box);
     task_visits[task] = visits;
   });

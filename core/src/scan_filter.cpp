@@ -69,7 +69,10 @@ void FilterScratch::reserve(std::size_t points) {
   while (capacity < 2 * points) capacity *= 2;
   keys.assign(capacity, 0);
   counts.assign(capacity, 0);
+  cell_state.assign(capacity, 0);
   point_key.assign(points, 0);
+  point_slot.assign(points, 0);
+  point_near.assign(points, 0);
   candidates_S.assign(points, Eigen::Vector3f::Zero());
   keep.assign(points, 0);
 }
@@ -84,7 +87,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
 FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
                          std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch,
-                         TaskRunner& runner) {
+                         TaskRunner& runner, std::vector<Eigen::Vector3f>* points_S) {
   const std::size_t n = cloud.size();
   const double min_sq = params.min_range_m * params.min_range_m;
   const Eigen::Matrix3f R_W_S = T_W_S.linear().cast<float>();
@@ -102,6 +105,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   for (std::size_t t = 0; t <= kFilterTasks; ++t) first[t] = n * t / kFilterTasks;
   scratch.candidates_S.resize(n);
   scratch.point_key.resize(n);
+  scratch.point_near.resize(n);
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
     FilterCounts& c = task_counts[task];
     std::size_t out = first[task];
@@ -124,7 +128,10 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
         }
       }
       scratch.candidates_S[out] = p;
-      if (outliers) scratch.point_key[out] = cell_key(p, inv_cell);
+      if (outliers) {
+        scratch.point_key[out] = cell_key(p, inv_cell);
+        scratch.point_near[out] = p.squaredNorm() < near_sq ? 1 : 0;
+      }
       ++out;
     }
     last[task] = out;
@@ -138,28 +145,38 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     std::copy(scratch.point_key.begin() + static_cast<std::ptrdiff_t>(first[t]),
               scratch.point_key.begin() + static_cast<std::ptrdiff_t>(last[t]),
               scratch.point_key.begin() + static_cast<std::ptrdiff_t>(m));
+    std::copy(scratch.point_near.begin() + static_cast<std::ptrdiff_t>(first[t]),
+              scratch.point_near.begin() + static_cast<std::ptrdiff_t>(last[t]),
+              scratch.point_near.begin() + static_cast<std::ptrdiff_t>(m));
     m += last[t] - first[t];
   }
   scratch.candidates_S.resize(m);
   scratch.point_key.resize(m);
+  scratch.point_near.resize(m);
 
   // 2. Isolated outliers, counted in the sensor frame: a hash of occupied cells (built in one
-  //    pass), then each near point looks at its 27 cells. Membership only, so the result does
-  //    not depend on order.
+  //    pass, each candidate noting its cell's slot), then each cell that holds a near candidate
+  //    looks at its 27 cells once, for all the candidates it holds. Membership only, so the
+  //    result does not depend on order.
   const auto& cand = scratch.candidates_S;
   std::size_t mask = 0;
+  std::size_t capacity = 0;
   if (outliers) {
-    std::size_t capacity = 1024;
+    capacity = 1024;
     while (capacity < 2 * m) capacity *= 2;
     mask = capacity - 1;
     scratch.keys.assign(capacity, 0);
     scratch.counts.assign(capacity, 0);
+    scratch.cell_state.assign(capacity, 0);
+    scratch.point_slot.resize(m);
     for (std::size_t i = 0; i < m; ++i) {
       const std::uint64_t key = scratch.point_key[i];
       std::size_t s = slot_of(key, mask);
       while (scratch.keys[s] != 0 && scratch.keys[s] != key) s = (s + 1) & mask;
       scratch.keys[s] = key;
       ++scratch.counts[s];
+      scratch.cell_state[s] |= scratch.point_near[i];
+      scratch.point_slot[i] = static_cast<std::uint32_t>(s);
     }
   }
   const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
@@ -182,13 +199,24 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     }
     return false;
   };
+  if (outliers) {
+    // Each task owns a fixed range of slots: it writes only their bit 1.
+    runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+      for (std::size_t s = capacity * task / kFilterTasks; s < capacity * (task + 1) / kFilterTasks;
+           ++s) {
+        if (scratch.cell_state[s] != 0 && has_neighbours(scratch.keys[s])) {
+          scratch.cell_state[s] |= 2;
+        }
+      }
+    });
+  }
   scratch.keep.resize(m);
   std::array<std::size_t, kFilterTasks + 1> kept_before{};
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
     std::size_t kept = 0;
     for (std::size_t i = m * task / kFilterTasks; i < m * (task + 1) / kFilterTasks; ++i) {
-      const bool keep =
-          !outliers || cand[i].squaredNorm() >= near_sq || has_neighbours(scratch.point_key[i]);
+      const bool keep = !outliers || scratch.point_near[i] == 0 ||
+                        (scratch.cell_state[scratch.point_slot[i]] & 2) != 0;
       scratch.keep[i] = keep ? 1 : 0;
       kept += keep ? 1 : 0;
     }
@@ -198,10 +226,13 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
 
   // 3. Survivors into the world frame, each task writing its own range of the output.
   points_W.resize(kept_before[kFilterTasks]);
+  if (points_S != nullptr) points_S->resize(points_W.size());
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
     std::size_t out = kept_before[task];
     for (std::size_t i = m * task / kFilterTasks; i < m * (task + 1) / kFilterTasks; ++i) {
-      if (scratch.keep[i] != 0) points_W[out++] = R_W_S * cand[i] + t_W_S;
+      if (scratch.keep[i] == 0) continue;
+      if (points_S != nullptr) (*points_S)[out] = cand[i];
+      points_W[out++] = R_W_S * cand[i] + t_W_S;
     }
   });
 

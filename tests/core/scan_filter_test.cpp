@@ -1,7 +1,9 @@
 #include "tarmac/core/scan_filter.hpp"
 
 #include <cmath>
+#include <map>
 #include <random>
+#include <tuple>
 
 #include <gtest/gtest.h>
 
@@ -86,6 +88,62 @@ TEST(ScanFilter, OutlierDecisionDoesNotDependOnPointOrder) {
   std::sort(sa.begin(), sa.end(), less);
   std::sort(sb.begin(), sb.end(), less);
   EXPECT_EQ(sa, sb);
+}
+
+// The outlier decision against a brute-force count over the 27 cells around each point, on
+// clusters of every density near and beyond the tested range; and the sensor-frame output is
+// the same survivors, in the same order, that the world-frame output transforms.
+TEST(ScanFilter, OutlierDecisionMatchesBruteForceCountAndSensorFrameOutputMatches) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<float> centre(-35.0f, 35.0f), spread(-0.6f, 0.6f);
+  std::uniform_int_distribution<int> size(1, 6);
+  PointCloud cloud;
+  for (int c = 0; c < 1500; ++c) {
+    const Eigen::Vector3f m(centre(rng), centre(rng), centre(rng) / 10.0f);
+    for (int k = size(rng); k > 0; --k)
+      cloud.points_S.push_back(m + Eigen::Vector3f(spread(rng), spread(rng), spread(rng)));
+  }
+  Fixture f;
+  f.params.ego_box_enabled = false;
+  f.params.min_range_m = 0.0;
+  const float inv_cell = static_cast<float>(1.0 / f.params.outlier_cell_m);
+  const float near_sq =
+      static_cast<float>(f.params.outlier_max_range_m * f.params.outlier_max_range_m);
+  const auto cell = [&](const Eigen::Vector3f& p) {
+    return std::make_tuple(static_cast<int>(std::floor(p.x() * inv_cell)),
+                           static_cast<int>(std::floor(p.y() * inv_cell)),
+                           static_cast<int>(std::floor(p.z() * inv_cell)));
+  };
+  std::map<std::tuple<int, int, int>, int> counts;
+  for (const auto& p : cloud.points_S) ++counts[cell(p)];
+  std::vector<Eigen::Vector3f> expected;
+  for (const auto& p : cloud.points_S) {
+    int around = 0;
+    const auto [x, y, z] = cell(p);
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = counts.find({x + dx, y + dy, z + dz});
+          around += it == counts.end() ? 0 : it->second;
+        }
+    if (p.squaredNorm() >= near_sq || around >= f.params.outlier_min_neighbors + 1) {
+      expected.push_back(p);
+    }
+  }
+  Eigen::Isometry3d T_W_S = Eigen::Isometry3d::Identity();
+  T_W_S.translation() = Eigen::Vector3d(-4, 7, 0.5);
+  T_W_S.linear() = Eigen::AngleAxisd(-0.7, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  daemon::ThreadPool pool(2);
+  std::vector<Eigen::Vector3f> out_S;
+  const FilterCounts c = filter_scan(cloud, T_W_S, Eigen::Isometry3d::Identity(), f.params, f.out_W,
+                                     f.scratch, pool, &out_S);
+  EXPECT_GT(c.isolated, 100u);
+  EXPECT_GT(c.kept, 1000u);
+  EXPECT_EQ(out_S, expected);
+  ASSERT_EQ(f.out_W.size(), out_S.size());
+  const Eigen::Matrix3f R = T_W_S.linear().cast<float>();
+  const Eigen::Vector3f t = T_W_S.translation().cast<float>();
+  for (std::size_t i = 0; i < out_S.size(); ++i) ASSERT_EQ(f.out_W[i], R * out_S[i] + t) << i;
 }
 
 TEST(ScanFilter, SameResultForOneTwoAndFourThreads) {

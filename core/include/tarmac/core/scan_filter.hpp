@@ -42,9 +42,14 @@ struct FilterCounts {
 
 /// Buffers of the filter, reused across scans (no allocation after warm-up).
 struct FilterScratch {
-  std::vector<std::uint64_t> keys;       ///< open-addressing table of cell keys (0 = empty)
-  std::vector<std::uint32_t> counts;     ///< points per table slot
-  std::vector<std::uint64_t> point_key;  ///< cell key per candidate point
+  std::vector<std::uint64_t> keys;    ///< open-addressing table of cell keys (0 = empty)
+  std::vector<std::uint32_t> counts;  ///< points per table slot
+  /// Per table slot: bit 0, a candidate near enough to be tested lies in the cell; bit 1, the
+  /// cell and its 26 neighbours hold enough points (decided once per cell, not per point).
+  std::vector<std::uint8_t> cell_state;
+  std::vector<std::uint64_t> point_key;   ///< cell key per candidate point
+  std::vector<std::uint32_t> point_slot;  ///< table slot of the candidate's cell
+  std::vector<std::uint8_t> point_near;   ///< per candidate: near enough to be tested
   std::vector<Eigen::Vector3f> candidates_S;
   std::vector<std::uint8_t> keep;  ///< per candidate: survives the outlier test
 
@@ -57,10 +62,11 @@ struct FilterScratch {
 /// kept). T_W_S: sensor to world; T_B_S: sensor to vehicle base (extrinsic). RT-safe after warm-up.
 /// The work is split into a fixed number of point ranges run on `runner`; the result (points and
 /// their order, counts) is the same for any runner.
+/// With `points_S`, the survivors are also written there in the sensor frame (same order).
 FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
                          std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch,
-                         TaskRunner& runner);
+                         TaskRunner& runner, std::vector<Eigen::Vector3f>* points_S = nullptr);
 /// The same on the calling thread.
 FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S,
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
