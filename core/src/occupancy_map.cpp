@@ -9,6 +9,9 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 #include <limits>
 #include <tuple>
 #include <utility>
@@ -301,43 +304,61 @@ struct RayStart {
   }
 };
 
-template <bool kFlagWords>
-std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
-                       bool include_end, FreeMarks marks, MarkBox& box) {
-  if (!start.inside) return 0;
+/// The start of a ray's walk to `end_W` (world frame): each axis's state for the ray's direction
+/// along it, picked by index, not by branch (the signs of a scan's rays are as good as random),
+/// and the number of steps to the end point's voxel.
+[[gnu::always_inline]] inline void begin_walk(const WindowGeometry& w, const RayStart& start,
+                                              const Eigen::Vector3d& end_W, AxisWalk& x,
+                                              AxisWalk& y, AxisWalk& z, std::int64_t& steps) {
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - start.o;
-  std::int64_t remaining = 0;
-  // Each axis's start state for the ray's direction along it, picked by index, not by branch
-  // (the signs of a scan's rays are as good as random). The loop keeps them in registers.
+  steps = 0;
   const auto axis = [&](int a) {
-    remaining += std::abs(static_cast<int>(floor_to_int(e[a])) - start.cur[a]);
+    steps += std::abs(static_cast<int>(floor_to_int(e[a])) - start.cur[a]);
     AxisWalk k = start.axis_walk[a][static_cast<int>(d[a] > 0) - static_cast<int>(d[a] < 0) + 1];
     k.t_delta = 1.0 / std::abs(d[a]);  // the same value as ±1.0 / d; infinite when d is 0
     k.t_max *= k.t_delta;
     return k;
   };
-  AxisWalk x = axis(0), y = axis(1), z = axis(2);
-  // Ties go to x, then y, before z (see the step below). The marks are not read through a
-  // reference either: a byte store may alias anything.
+  x = axis(0);
+  y = axis(1);
+  z = axis(2);
+}
+
+/// Marks one voxel in a ray task's marks.
+template <bool kFlagWords>
+[[gnu::always_inline]] inline void mark_voxel(std::uint64_t* bits, std::uint64_t* dirty,
+                                              std::int64_t s) {
+  bits[s >> 6] |= std::uint64_t{1} << (s & 63);
+  if constexpr (kFlagWords) dirty[s >> (6 + kBlockShift)] |= std::uint64_t{1} << ((s >> 6) & 63);
+}
+
+/// Grows `box` by a walk that has ended (every axis moves one way, so the voxels marked span the
+/// start and end of the walk). Large windows flag words instead: the apply pass does not read
+/// the box.
+template <bool kFlagWords>
+void add_walk_box(const RayStart& start, const AxisWalk& x, const AxisWalk& y, const AxisWalk& z,
+                  MarkBox& box) {
+  if constexpr (kFlagWords) return;
+  box.add(0, start.rel[0], x.end_rel(start.rel[0]));
+  box.add(1, start.rel[1], y.end_rel(start.rel[1]));
+  box.add(2, start.rel[2], z.end_rel(start.rel[2]));
+}
+
+/// Runs a walk from any point of it (`remaining` of its `steps` steps left, at `slot`) to its
+/// end; returns its voxel visits in all.
+template <bool kFlagWords>
+[[gnu::always_inline]] inline std::uint64_t finish_walk(const RayStart& start, AxisWalk x,
+                                                        AxisWalk y, AxisWalk z, std::int64_t slot,
+                                                        std::int64_t remaining, std::int64_t steps,
+                                                        bool include_end, FreeMarks marks,
+                                                        MarkBox& box) {
+  // Scalars the loop keeps in registers (the marks too: a byte store may alias anything, so
+  // they are not read through a reference); ties go to the later axis (x, then y, then z).
   std::uint64_t* const bits = marks.bits;
   std::uint64_t* const dirty = marks.dirty;
-  const auto mark = [bits, dirty](std::int64_t s) {
-    bits[s >> 6] |= std::uint64_t{1} << (s & 63);
-    if constexpr (kFlagWords) dirty[s >> (6 + kBlockShift)] |= std::uint64_t{1} << ((s >> 6) & 63);
-  };
-  std::int64_t slot = start.slot;
-  const std::int64_t steps = remaining;
-  // Every axis moves one way, so the voxels marked span the start and end of the walk. (Large
-  // windows flag words instead: the apply pass does not read the box.)
-  const auto add_box = [&] {
-    if constexpr (kFlagWords) return;
-    box.add(0, start.rel[0], x.end_rel(start.rel[0]));
-    box.add(1, start.rel[1], y.end_rel(start.rel[1]));
-    box.add(2, start.rel[2], z.end_rel(start.rel[2]));
-  };
   for (; remaining > 0; --remaining) {
-    mark(slot);
+    mark_voxel<kFlagWords>(bits, dirty, slot);
     bool inside;  // NOLINT(cppcoreguidelines-init-variables): every branch sets it
     if (x.t_max < y.t_max) {
       inside = x.t_max < z.t_max ? x.advance(slot) : z.advance(slot);
@@ -345,14 +366,24 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
       inside = y.t_max < z.t_max ? y.advance(slot) : z.advance(slot);
     }
     if (!inside) {
-      add_box();
+      add_walk_box<kFlagWords>(start, x, y, z, box);
       return static_cast<std::uint64_t>(steps - remaining + 1);
     }
   }
-  if (steps > 0 || include_end) add_box();
+  if (steps > 0 || include_end) add_walk_box<kFlagWords>(start, x, y, z, box);
   if (!include_end) return static_cast<std::uint64_t>(steps);
-  mark(slot);
+  mark_voxel<kFlagWords>(bits, dirty, slot);
   return static_cast<std::uint64_t>(steps + 1);
+}
+
+template <bool kFlagWords>
+std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eigen::Vector3d& end_W,
+                       bool include_end, FreeMarks marks, MarkBox& box) {
+  if (!start.inside) return 0;
+  AxisWalk x, y, z;  // NOLINT(cppcoreguidelines-pro-type-member-init): begin_walk sets them
+  std::int64_t steps = 0;
+  begin_walk(w, start, end_W, x, y, z, steps);
+  return finish_walk<kFlagWords>(start, x, y, z, start.slot, steps, steps, include_end, marks, box);
 }
 
 /// Rays are walked in order of direction, not in the order the scan lists them. The walk's
@@ -437,50 +468,257 @@ struct TaskRays {
   std::size_t task;
 };
 
-/// Walks every ray of a task; returns the voxel visits.
-template <bool kFlagWords>
-std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
-                        FreeMarks marks, MarkBox& box) {
-  const std::size_t n_points = rays.points.size();
-  const std::size_t n_rays = n_points + rays.dirs.size();
-  const Eigen::Vector3d& origin_W = rays.origin;
-  std::uint64_t visits = 0;
-  for (std::size_t first = rays.task * kRayChunk; first < n_rays; first += kRayTasks * kRayChunk) {
-    for (std::size_t j = first; j < std::min(n_rays, first + kRayChunk); ++j) {
-      const std::size_t i = rays.order[j];
-      if (i < n_points) {
-        const Eigen::Vector3f& p = rays.points[i];
+/// The rays of one ray task, one at a time, as walks to make: where each ends and whether its
+/// end voxel is marked too (see TaskRays). Rays that mark nothing are passed over.
+class TaskRayCursor {
+ public:
+  explicit TaskRayCursor(const TaskRays& rays)
+      : rays_(rays),
+        n_points_(rays.points.size()),
+        n_rays_(rays.points.size() + rays.dirs.size()),
+        first_(rays.task * kRayChunk),
+        j_(first_) {}
+
+  /// The next walk of the task; false when none is left.
+  bool next(Eigen::Vector3d& end_W, bool& include_end) {
+    const Eigen::Vector3d& origin_W = rays_.origin;
+    while (true) {
+      if (j_ >= std::min(n_rays_, first_ + kRayChunk)) {
+        first_ += kRayTasks * kRayChunk;
+        j_ = first_;
+        if (first_ >= n_rays_) return false;
+      }
+      const std::size_t i = rays_.order[j_++];
+      if (i < n_points_) {
+        const Eigen::Vector3f& p = rays_.points[i];
         if (!p.allFinite()) continue;
         const Eigen::Vector3d pd = p.cast<double>();
         const double range = (pd - origin_W).norm();
-        if (range <= rays.max_range) {
-          visits += traverse<kFlagWords>(w, start, pd, false, marks, box);
-        } else if (rays.clear_range > 0.0) {
-          visits += traverse<kFlagWords>(
-              w, start, origin_W + (pd - origin_W) * (rays.clear_range / range), true, marks, box);
+        if (range <= rays_.max_range) {
+          end_W = pd;
+          include_end = false;
+          return true;
+        }
+        if (rays_.clear_range > 0.0) {
+          end_W = origin_W + (pd - origin_W) * (rays_.clear_range / range);
+          include_end = true;
+          return true;
         }
       } else {
-        const Eigen::Vector3f& dir = rays.dirs[i - n_points];
+        const Eigen::Vector3f& dir = rays_.dirs[i - n_points_];
         const double norm = dir.cast<double>().norm();
-        if (!dir.allFinite() || norm == 0.0 || rays.clear_range <= 0.0) continue;
-        visits += traverse<kFlagWords>(
-            w, start, origin_W + dir.cast<double>() * (rays.clear_range / norm), true, marks, box);
+        if (!dir.allFinite() || norm == 0.0 || rays_.clear_range <= 0.0) continue;
+        end_W = origin_W + dir.cast<double>() * (rays_.clear_range / norm);
+        include_end = true;
+        return true;
       }
     }
+  }
+
+ private:
+  const TaskRays& rays_;
+  std::size_t n_points_, n_rays_;
+  std::size_t first_, j_;  ///< the current chunk's first ray, the next ray (in `order`)
+};
+
+/// Walks every ray of a task one after the other; returns the voxel visits.
+template <bool kFlagWords>
+std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
+                        FreeMarks marks, MarkBox& box) {
+  TaskRayCursor cursor(rays);
+  Eigen::Vector3d end_W;
+  bool include_end = false;
+  std::uint64_t visits = 0;
+  while (cursor.next(end_W, include_end)) {
+    visits += traverse<kFlagWords>(w, start, end_W, include_end, marks, box);
   }
   return visits;
 }
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#define TARMAC_WIDE_WALK 1
+/// The same walks, eight at a time in the lanes of AVX-512 registers (x86-64 processors that
+/// have it; the caller checks). A lane takes the same steps as the one-at-a-time walk, decided
+/// by the same comparisons of the same sums, so the marks are the same bits. The step, which
+/// one at a time is an unpredictable branch per visit, becomes masked arithmetic; the lanes
+/// leave the vector loop only when one of them meets an event (ring wrap, window exit) or ends,
+/// handled one at a time with the scalar state, and a lane that ends takes the task's next ray.
+/// Measurements: docs/perf-occ5.md; `tarmac-bench --narrow-walk` runs the walks one at a time.
+template <bool kFlagWords>
+__attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const WindowGeometry& w,
+                                                                         const RayStart& start,
+                                                                         const TaskRays& rays,
+                                                                         FreeMarks marks,
+                                                                         MarkBox& box) {
+  constexpr int kLanes = 8;
+  TaskRayCursor cursor(rays);
+  if (!start.inside) return 0;
+  // Lane state, as the vector loop loads and stores it: parameters, parameter steps, slot steps
+  // and event counters per axis, the slot and the steps left; the scalar state besides.
+  alignas(64) double t[3][kLanes], dt[3][kLanes];
+  alignas(64) std::int64_t slot[kLanes], delta[3][kLanes], events[3][kLanes], left[kLanes];
+  AxisWalk axes[kLanes][3];
+  std::array<std::int64_t, kLanes> steps{};
+  std::array<bool, kLanes> include_end{};
+  std::uint64_t visits = 0;
+  std::uint64_t* const bits = marks.bits;
+  std::uint64_t* const dirty = marks.dirty;
+  // The task's next walk that takes a step into lane l (shorter ones are done on the spot);
+  // false when none is left.
+  const auto fill = [&](int l) {
+    Eigen::Vector3d end_W;
+    bool inc = false;
+    while (cursor.next(end_W, inc)) {
+      AxisWalk x, y, z;  // NOLINT(cppcoreguidelines-pro-type-member-init): begin_walk sets them
+      std::int64_t n = 0;
+      begin_walk(w, start, end_W, x, y, z, n);
+      if (n == 0) {
+        visits += finish_walk<kFlagWords>(start, x, y, z, start.slot, 0, 0, inc, marks, box);
+        continue;
+      }
+      axes[l][0] = x;
+      axes[l][1] = y;
+      axes[l][2] = z;
+      for (int a = 0; a < 3; ++a) {
+        t[a][l] = axes[l][a].t_max;
+        dt[a][l] = axes[l][a].t_delta;
+        delta[a][l] = axes[l][a].delta;
+        events[a][l] = axes[l][a].events;
+      }
+      slot[l] = start.slot;
+      left[l] = n;
+      steps[static_cast<std::size_t>(l)] = n;
+      include_end[static_cast<std::size_t>(l)] = inc;
+      return true;
+    }
+    return false;
+  };
+  // Lane l's vector state back into its scalar state.
+  const auto sync = [&](int l) {
+    for (int a = 0; a < 3; ++a) {
+      axes[l][a].t_max = t[a][l];
+      axes[l][a].events = static_cast<int>(events[a][l]);
+    }
+  };
+  const auto finish = [&](int l) {
+    sync(l);
+    return finish_walk<kFlagWords>(start, axes[l][0], axes[l][1], axes[l][2], slot[l], left[l],
+                                   steps[static_cast<std::size_t>(l)],
+                                   include_end[static_cast<std::size_t>(l)], marks, box);
+  };
+  int filled = 0;
+  while (filled < kLanes && fill(filled)) ++filled;
+  if (filled < kLanes) {  // fewer walks than lanes
+    for (int l = 0; l < filled; ++l) visits += finish(l);
+    return visits;
+  }
+  const __m512i one = _mm512_set1_epi64(1);
+  const __m512i zero = _mm512_setzero_si512();
+  while (true) {
+    __m512d tx = _mm512_load_pd(t[0]), ty = _mm512_load_pd(t[1]), tz = _mm512_load_pd(t[2]);
+    const __m512d dtx = _mm512_load_pd(dt[0]), dty = _mm512_load_pd(dt[1]);
+    const __m512d dtz = _mm512_load_pd(dt[2]);
+    __m512i s = _mm512_load_si512(slot);
+    const __m512i dx = _mm512_load_si512(delta[0]), dy = _mm512_load_si512(delta[1]);
+    const __m512i dz = _mm512_load_si512(delta[2]);
+    __m512i ex = _mm512_load_si512(events[0]), ey = _mm512_load_si512(events[1]);
+    __m512i ez = _mm512_load_si512(events[2]);
+    __m512i r = _mm512_load_si512(left);
+    __mmask8 event = 0, ended = 0;
+    while (event == 0 && ended == 0) {
+      _mm512_store_si512(slot, s);
+      for (int l = 0; l < kLanes; ++l) mark_voxel<kFlagWords>(bits, dirty, slot[l]);
+      // The scalar step's comparisons: x if x < y and x < z, else y if y < z, else z.
+      const __mmask8 x_lt_y = _mm512_cmp_pd_mask(tx, ty, _CMP_LT_OQ);
+      const __mmask8 x_lt_z = _mm512_cmp_pd_mask(tx, tz, _CMP_LT_OQ);
+      const __mmask8 y_lt_z = _mm512_cmp_pd_mask(ty, tz, _CMP_LT_OQ);
+      const auto kx = static_cast<__mmask8>(x_lt_y & x_lt_z);
+      const auto ky = static_cast<__mmask8>(~x_lt_y & y_lt_z);
+      const auto kz = static_cast<__mmask8>(~(kx | ky));
+      tx = _mm512_mask_add_pd(tx, kx, tx, dtx);
+      ty = _mm512_mask_add_pd(ty, ky, ty, dty);
+      tz = _mm512_mask_add_pd(tz, kz, tz, dtz);
+      s = _mm512_mask_add_epi64(s, kx, s, dx);
+      s = _mm512_mask_add_epi64(s, ky, s, dy);
+      s = _mm512_mask_add_epi64(s, kz, s, dz);
+      ex = _mm512_mask_sub_epi64(ex, kx, ex, one);
+      ey = _mm512_mask_sub_epi64(ey, ky, ey, one);
+      ez = _mm512_mask_sub_epi64(ez, kz, ez, one);
+      r = _mm512_sub_epi64(r, one);
+      event = static_cast<__mmask8>(_mm512_cmpeq_epi64_mask(ex, zero) |
+                                    _mm512_cmpeq_epi64_mask(ey, zero) |
+                                    _mm512_cmpeq_epi64_mask(ez, zero));
+      ended = _mm512_cmpeq_epi64_mask(r, zero);
+    }
+    _mm512_store_pd(t[0], tx);
+    _mm512_store_pd(t[1], ty);
+    _mm512_store_pd(t[2], tz);
+    _mm512_store_si512(slot, s);
+    _mm512_store_si512(events[0], ex);
+    _mm512_store_si512(events[1], ey);
+    _mm512_store_si512(events[2], ez);
+    _mm512_store_si512(left, r);
+    bool drained = false;
+    for (int l = 0; l < kLanes; ++l) {
+      bool done = false;
+      if (((event >> l) & 1) != 0) {
+        // The stepped axis's event, as AxisWalk::advance handles it (before the step count).
+        sync(l);
+        for (int a = 0; a < 3; ++a) {
+          if (events[a][l] != 0) continue;
+          if (!axes[l][a].on_event(slot[l])) {  // left the window
+            add_walk_box<kFlagWords>(start, axes[l][0], axes[l][1], axes[l][2], box);
+            visits += static_cast<std::uint64_t>(steps[static_cast<std::size_t>(l)] - left[l]);
+            done = true;
+          } else {
+            events[a][l] = axes[l][a].events;
+          }
+        }
+      }
+      if (!done && ((ended >> l) & 1) != 0) {
+        visits += finish(l);  // no step left: the end voxel, if marked, and the box
+        done = true;
+      }
+      if (done && !fill(l)) {
+        steps[static_cast<std::size_t>(l)] = -1;  // no walk left for the lane
+        drained = true;
+      }
+    }
+    if (drained) {  // the other lanes finish one at a time
+      for (int l = 0; l < kLanes; ++l) {
+        if (steps[static_cast<std::size_t>(l)] >= 0) visits += finish(l);
+      }
+      return visits;
+    }
+  }
+}
+
+/// Whether this processor runs walk_rays_wide (checked once).
+bool wide_walk_supported() {
+  static const bool supported =
+      __builtin_cpu_supports("avx512f") != 0 && __builtin_cpu_supports("avx512dq") != 0;
+  return supported;
+}
+#endif
+
 /// The walks of one task, with per-word flags (large windows) or without.
 std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
-                        FreeMarks marks, MarkBox& box) {
+                        FreeMarks marks, MarkBox& box, bool wide) {
   // The box grows at the end of every ray: it lives on this task's own stack until the task
   // is done. The tasks' boxes share a cache line, and updating them in place while another
   // task did the same cost the walks about a quarter of their time on 2 threads.
   MarkBox local;
-  const std::uint64_t visits = marks.dirty != nullptr
-                                   ? walk_rays<true>(w, start, rays, marks, local)
-                                   : walk_rays<false>(w, start, rays, marks, local);
+  std::uint64_t visits = 0;
+#if defined(TARMAC_WIDE_WALK)
+  if (wide && wide_walk_supported()) {
+    visits = marks.dirty != nullptr ? walk_rays_wide<true>(w, start, rays, marks, local)
+                                    : walk_rays_wide<false>(w, start, rays, marks, local);
+    box = local;
+    return visits;
+  }
+#endif
+  visits = marks.dirty != nullptr ? walk_rays<true>(w, start, rays, marks, local)
+                                  : walk_rays<false>(w, start, rays, marks, local);
   box = local;
   return visits;
 }
@@ -636,6 +874,14 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   warm(ray_order_, kReservedHitSlots);
   warm(ray_bucket_, kReservedHitSlots);
   ray_bucket_count_.assign(kDirBuckets + 1, 0);
+}
+
+bool OccupancyMap::wide_walk_active() const {
+#if defined(TARMAC_WIDE_WALK)
+  return wide_walk_ && wide_walk_supported();
+#else
+  return false;
+#endif
 }
 
 OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
@@ -988,7 +1234,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     const std::uint64_t visits = walk_task(
         w, start,
         TaskRays{points_W, clearing_dirs_W, ray_order_, origin_W, max_range, clear_range, task},
-        marks, box);
+        marks, box, wide_walk_);
     task_visits[task] = visits;
   });
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <set>
 
@@ -176,6 +177,85 @@ TEST(OccupancyMap, Raycast_ManyRaysInEveryDirection_MarkTheUnionOfTheirTraversal
       }
   EXPECT_EQ(free_count, expected_free.size());
   EXPECT_EQ(hit_count, hits.size());
+}
+
+// The AVX-512 walk (eight rays at a time) against the walk one ray at a time: the same log-odds
+// bit for bit and the same visit counts, over scans whose rays cross the ring's seams (the
+// window has scrolled), leave the window, end beyond max range or have no return, on both the
+// small-window path and the path that flags mark words.
+TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
+  for (const int window : {100, 700}) {  // 700 x 700 x 40 voxels: over the flagging threshold
+    auto params = small_params();
+    params.window_x_vox = window;
+    params.window_y_vox = window;
+    params.window_z_vox = 40;
+    params.max_range_m = 12.0;
+    params.clearing_range_m = 9.0;
+    OccupancyMap wide(params), narrow(params);
+    narrow.set_wide_walk(false);
+    if (!wide.wide_walk_active()) GTEST_SKIP() << "no AVX-512 on this processor";
+    ASSERT_FALSE(narrow.wide_walk_active());
+    std::mt19937_64 rng(13);
+    std::uniform_real_distribution<float> u(-16.0f, 16.0f);
+    for (int s = 0; s < 6; ++s) {
+      const Eigen::Vector3d origin(3.7 * s + 0.11, -2.3 * s + 0.05, 0.4 + 0.1 * s);
+      Scan scan{origin, {}, {}};
+      for (int i = 0; i < 3000; ++i) {
+        scan.points.push_back(origin.cast<float>() +
+                              Eigen::Vector3f(u(rng), u(rng), u(rng) / 5.0f));
+      }
+      for (int i = 0; i < 200; ++i) {
+        scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), u(rng) / 8.0f).normalized());
+      }
+      for (OccupancyMap* map : {&wide, &narrow}) map->recenter(origin);
+      daemon::ThreadPool pool(2);
+      const auto a = wide.integrate(scan.origin, scan.points, scan.clearing, pool);
+      const auto b = narrow.integrate(scan.origin, scan.points, scan.clearing, pool);
+      EXPECT_EQ(a.voxel_visits, b.voxel_visits) << "scan " << s;
+      EXPECT_EQ(a.miss_updates, b.miss_updates) << "scan " << s;
+      EXPECT_EQ(a.hit_updates, b.hit_updates) << "scan " << s;
+    }
+    std::vector<float> la, lb;
+    wide.export_log_odds(la);
+    narrow.export_log_odds(lb);
+    ASSERT_EQ(la.size(), lb.size());
+    EXPECT_EQ(0, std::memcmp(la.data(), lb.data(), la.size() * sizeof(float))) << window;
+  }
+}
+
+// Exact ties (the ray crosses two or three voxel faces at once, on every step): 0.25 m voxels
+// and an origin on the lattice's quarter points make every parameter exact, so each axis's
+// crossings coincide along the diagonals; the tie goes to the later axis both ways.
+TEST(OccupancyMap, WideWalk_BreaksTiesAsOneRayAtATime) {
+  auto params = small_params();
+  params.voxel_size_m = 0.25;
+  OccupancyMap wide(params), narrow(params);
+  narrow.set_wide_walk(false);
+  if (!wide.wide_walk_active()) GTEST_SKIP() << "no AVX-512 on this processor";
+  const Eigen::Vector3d origin(0.125, 0.125, 0.125);
+  Scan scan{origin, {}, {}};
+  for (const int sx : {-1, 0, 1}) {
+    for (const int sy : {-1, 0, 1}) {
+      for (const int sz : {-1, 0, 1}) {
+        if (sx == 0 && sy == 0 && sz == 0) continue;
+        for (const float length : {1.5f, 2.25f}) {
+          scan.points.push_back(origin.cast<float>() +
+                                length * Eigen::Vector3f(static_cast<float>(sx),
+                                                         static_cast<float>(sy),
+                                                         static_cast<float>(sz)));
+        }
+      }
+    }
+  }
+  for (OccupancyMap* map : {&wide, &narrow}) {
+    map->recenter(origin);
+    integrate(*map, scan);
+  }
+  std::vector<float> la, lb;
+  wide.export_log_odds(la);
+  narrow.export_log_odds(lb);
+  ASSERT_EQ(la.size(), lb.size());
+  EXPECT_EQ(0, std::memcmp(la.data(), lb.data(), la.size() * sizeof(float)));
 }
 
 TEST(OccupancyMap, NoReturnAndBeyondMaxRange_ClearUpToClearingRange) {

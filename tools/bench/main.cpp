@@ -33,6 +33,7 @@ struct Options {
   double resolution_m = 0.2;
   double max_range_m = 50.0;
   std::size_t threads = 2;
+  bool narrow_walk = false;  ///< walk rays one at a time even where AVX-512 lanes are available
   std::size_t max_scans = 0;
   double sensor_height_m = 1.9;
   bool esdf = true;
@@ -131,6 +132,8 @@ int main(int argc, char** argv) {
       opt.tsdf_reserve_blocks = static_cast<std::uint32_t>(std::atol(argv[++i]));
     else if (a == "--tsdf-only")
       opt.tsdf_only = true;
+    else if (a == "--narrow-walk")
+      opt.narrow_walk = true;
     else if (a == "--window" && v) {
       if (std::sscanf(argv[++i], "%d,%d,%d", &opt.window_x, &opt.window_y, &opt.window_z) != 3 ||
           opt.window_x <= 0 || opt.window_y <= 0 || opt.window_z <= 0) {
@@ -145,7 +148,8 @@ int main(int argc, char** argv) {
           "                    [--tsdf-voxel M] [--tsdf-truncation M] [--tsdf-only]\n"
           "                    [--window X,Y,Z]   (voxels; default: 2*ceil(range/res)+2 x same x "
           "8 m)\n"
-          "                    [--tsdf-reserve-blocks N]\n");
+          "                    [--tsdf-reserve-blocks N] [--narrow-walk]   (rays one at a time, "
+          "not in AVX-512 lanes)\n");
       return a == "--help" ? 0 : 64;
     }
   }
@@ -190,6 +194,7 @@ int main(int argc, char** argv) {
   }
   daemon::ThreadPool pool(opt.threads);
   core::Mapper mapper(params);
+  mapper.occupancy().set_wide_walk(!opt.narrow_walk);
   octomap::OcTree octree(opt.resolution_m);
   octree.setProbHit(params.occupancy.prob_hit);
   octree.setProbMiss(params.occupancy.prob_miss);
@@ -369,9 +374,10 @@ int main(int argc, char** argv) {
   const auto oct = summarize(t_octomap);
   std::printf(
       "\ntarmac-bench: %s, %zu scans, %.0f points/scan used, resolution %.2f m, max range %.0f m, "
-      "%zu threads\n",
+      "%zu threads, rays walked %s\n",
       opt.dataset.c_str(), n, static_cast<double>(points) / static_cast<double>(n),
-      opt.resolution_m, opt.max_range_m, opt.threads);
+      opt.resolution_m, opt.max_range_m, opt.threads,
+      mapper.occupancy().wide_walk_active() ? "8 at a time (AVX-512)" : "one at a time");
   std::printf("  %-26s %9s %9s %9s %9s   (ms per scan)\n", "", "mean", "p50", "p99", "max");
   print_row("OctoMap insertPointCloud", t_octomap);
   print_row("tarmac filter+occupancy", t_occ_only);

@@ -91,6 +91,13 @@ class OccupancyMap {
   OccupancyMap(const OccupancyMap&) = delete;
   OccupancyMap& operator=(const OccupancyMap&) = delete;
 
+  /// Whether the ray walks may run eight at a time in AVX-512 lanes where the processor has them
+  /// (the default). The marks, and so the map, are the same bits either way; off is for
+  /// measuring the difference and for testing one path against the other.
+  void set_wide_walk(bool enabled) { wide_walk_ = enabled; }
+  /// Whether integrate() walks rays in AVX-512 lanes: enabled and supported by this processor.
+  [[nodiscard]] bool wide_walk_active() const;
+
   /// Moves the window so that it is centred on `position_W` in x/y and spans
   /// [z − window_below_m, …) in z. Voxels that leave are forgotten (unknown when they re-enter);
   /// voxels that stay keep their content, without copying. RT-safe.
@@ -177,6 +184,7 @@ class OccupancyMap {
   void clear_floor_bits(std::size_t first, std::size_t count);
 
   OccupancyParams params_;
+  bool wide_walk_ = true;
   Eigen::Vector3i dims_;
   VoxelIndex min_;
   float l_hit_, l_miss_, l_min_, l_max_;
