@@ -659,7 +659,8 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
     _mm512_store_si512(events[2], ez);
     _mm512_store_si512(left, r);
     bool drained = false;
-    for (int l = 0; l < kLanes; ++l) {
+    for (unsigned lanes = static_cast<unsigned>(event | ended); lanes != 0; lanes &= lanes - 1) {
+      const int l = std::countr_zero(lanes);
       bool done = false;
       if (((event >> l) & 1) != 0) {
         // The stepped axis's event, as AxisWalk::advance handles it (before the step count).
