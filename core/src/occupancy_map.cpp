@@ -540,9 +540,11 @@ std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const Ta
 /// The same walks, eight at a time in the lanes of AVX-512 registers (x86-64 processors that
 /// have it; the caller checks). A lane takes the same steps as the one-at-a-time walk, decided
 /// by the same comparisons of the same sums, so the marks are the same bits. The step, which
-/// one at a time is an unpredictable branch per visit, becomes masked arithmetic; the lanes
-/// leave the vector loop only when one of them meets an event (ring wrap, window exit) or ends,
-/// handled one at a time with the scalar state, and a lane that ends takes the task's next ray.
+/// one at a time is an unpredictable branch per visit, becomes masked arithmetic. Walks are set
+/// up a batch at a time into a queue; a lane whose walk ends is booked (visits, box, end voxel)
+/// and takes the next walk from the queue without leaving the vector loop. The loop is left
+/// only for an event (ring wrap, window exit), which the scalar state handles one lane at a
+/// time, and to set up the next batch.
 /// Measurements: docs/perf-occ5.md; `tarmac-bench --narrow-walk` runs the walks one at a time.
 template <bool kFlagWords>
 __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const WindowGeometry& w,
@@ -551,24 +553,48 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
                                                                          FreeMarks marks,
                                                                          MarkBox& box) {
   constexpr int kLanes = 8;
-  TaskRayCursor cursor(rays);
+  constexpr int kQueue = 64;
   if (!start.inside) return 0;
-  // Lane state, as the vector loop loads and stores it: parameters, parameter steps, slot steps
-  // and event counters per axis, the slot and the steps left; the scalar state besides.
-  alignas(64) double t[3][kLanes], dt[3][kLanes];
-  alignas(64) std::int64_t slot[kLanes], delta[3][kLanes], events[3][kLanes], left[kLanes];
-  AxisWalk axes[kLanes][3];
-  std::array<std::int64_t, kLanes> steps{};
-  std::array<bool, kLanes> include_end{};
+  TaskRayCursor cursor(rays);
   std::uint64_t visits = 0;
   std::uint64_t* const bits = marks.bits;
   std::uint64_t* const dirty = marks.dirty;
-  // The task's next walk that takes a step into lane l (shorter ones are done on the spot);
-  // false when none is left.
-  const auto fill = [&](int l) {
+
+  // The queue: walks set up and not yet in a lane, as the lanes load them (parameters,
+  // parameter steps, slot steps, event counters per axis; steps; index), and their scalar state.
+  alignas(64) double q_t[3][kQueue], q_dt[3][kQueue];
+  alignas(64) std::int64_t q_delta[3][kQueue], q_events[3][kQueue], q_steps[kQueue], q_id[kQueue];
+  AxisWalk q_axes[kQueue][3];
+  std::array<bool, kQueue> q_inc{};
+  int q_len = 0, q_next = 0;
+  // The lanes, stored between vector loops; `source` is the queue index of the lane's walk, or
+  // −1 once its scalar state lives in lane_axes (after an event or a new batch), −2 when idle.
+  alignas(64) double t[3][kLanes], dt[3][kLanes];
+  alignas(64) std::int64_t delta[3][kLanes], events[3][kLanes], slot[kLanes], left[kLanes];
+  alignas(64) std::int64_t source[kLanes];
+  AxisWalk lane_axes[kLanes][3];
+  std::array<std::int64_t, kLanes> lane_steps{};
+  std::array<bool, kLanes> lane_inc{};
+
+  // The lane's walk's scalar state moves out of the queue (which is about to change, or whose
+  // entry the lane's events will modify).
+  const auto own = [&](int l) {
+    const auto k = static_cast<std::size_t>(source[l]);
+    if (source[l] < 0) return;
+    for (int a = 0; a < 3; ++a) lane_axes[l][a] = q_axes[k][a];
+    lane_steps[static_cast<std::size_t>(l)] = q_steps[k];
+    lane_inc[static_cast<std::size_t>(l)] = q_inc[k];
+    source[l] = -1;
+  };
+  // The next batch of walks into the queue (walks of no step are done on the spot); false
+  // when the task has none left.
+  const auto refill_queue = [&] {
+    for (int l = 0; l < kLanes; ++l) own(l);
+    q_len = 0;
+    q_next = 0;
     Eigen::Vector3d end_W;
     bool inc = false;
-    while (cursor.next(end_W, inc)) {
+    while (q_len < kQueue && cursor.next(end_W, inc)) {
       AxisWalk x, y, z;  // NOLINT(cppcoreguidelines-pro-type-member-init): begin_walk sets them
       std::int64_t n = 0;
       begin_walk(w, start, end_W, x, y, z, n);
@@ -576,56 +602,85 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
         visits += finish_walk<kFlagWords>(start, x, y, z, start.slot, 0, 0, inc, marks, box);
         continue;
       }
-      axes[l][0] = x;
-      axes[l][1] = y;
-      axes[l][2] = z;
+      const auto k = static_cast<std::size_t>(q_len++);
+      q_axes[k][0] = x;
+      q_axes[k][1] = y;
+      q_axes[k][2] = z;
       for (int a = 0; a < 3; ++a) {
-        t[a][l] = axes[l][a].t_max;
-        dt[a][l] = axes[l][a].t_delta;
-        delta[a][l] = axes[l][a].delta;
-        events[a][l] = axes[l][a].events;
+        q_t[a][k] = q_axes[k][a].t_max;
+        q_dt[a][k] = q_axes[k][a].t_delta;
+        q_delta[a][k] = q_axes[k][a].delta;
+        q_events[a][k] = q_axes[k][a].events;
       }
-      slot[l] = start.slot;
-      left[l] = n;
-      steps[static_cast<std::size_t>(l)] = n;
-      include_end[static_cast<std::size_t>(l)] = inc;
-      return true;
+      q_steps[k] = n;
+      q_id[k] = static_cast<std::int64_t>(k);
+      q_inc[k] = inc;
     }
-    return false;
+    return q_len > 0;
   };
-  // Lane l's vector state back into its scalar state.
-  const auto sync = [&](int l) {
+  // Lane l's scalar state with its vector state written in.
+  const auto scalar = [&](int l) {
+    own(l);
     for (int a = 0; a < 3; ++a) {
-      axes[l][a].t_max = t[a][l];
-      axes[l][a].events = static_cast<int>(events[a][l]);
+      lane_axes[l][a].t_max = t[a][l];
+      lane_axes[l][a].events = static_cast<int>(events[a][l]);
     }
   };
+  // The rest of lane l's walk one step at a time; its visits in all.
   const auto finish = [&](int l) {
-    sync(l);
-    return finish_walk<kFlagWords>(start, axes[l][0], axes[l][1], axes[l][2], slot[l], left[l],
-                                   steps[static_cast<std::size_t>(l)],
-                                   include_end[static_cast<std::size_t>(l)], marks, box);
+    scalar(l);
+    return finish_walk<kFlagWords>(start, lane_axes[l][0], lane_axes[l][1], lane_axes[l][2],
+                                   slot[l], left[l], lane_steps[static_cast<std::size_t>(l)],
+                                   lane_inc[static_cast<std::size_t>(l)], marks, box);
   };
-  int filled = 0;
-  while (filled < kLanes && fill(filled)) ++filled;
-  if (filled < kLanes) {  // fewer walks than lanes
-    for (int l = 0; l < filled; ++l) visits += finish(l);
-    return visits;
-  }
-  const __m512i one = _mm512_set1_epi64(1);
-  const __m512i zero = _mm512_setzero_si512();
+  // Lane l takes the queue's next walk (stored lanes; the vector loop takes them by itself).
+  const auto take = [&](int l) {
+    const auto k = static_cast<std::size_t>(q_next++);
+    for (int a = 0; a < 3; ++a) {
+      t[a][l] = q_t[a][k];
+      dt[a][l] = q_dt[a][k];
+      delta[a][l] = q_delta[a][k];
+      events[a][l] = q_events[a][k];
+    }
+    slot[l] = start.slot;
+    left[l] = q_steps[k];
+    source[l] = q_id[k];
+  };
+
+  for (int l = 0; l < kLanes; ++l) source[l] = -2;
   while (true) {
+    // Idle lanes take walks; when the task has fewer left than lanes, the lanes finish one at
+    // a time.
+    bool short_of_walks = false;
+    for (int l = 0; l < kLanes; ++l) {
+      if (source[l] != -2) continue;
+      if (q_next == q_len && !refill_queue()) {
+        short_of_walks = true;
+        break;
+      }
+      take(l);
+    }
+    if (short_of_walks) {
+      for (int l = 0; l < kLanes; ++l) {
+        if (source[l] != -2) visits += finish(l);
+      }
+      return visits;
+    }
     __m512d tx = _mm512_load_pd(t[0]), ty = _mm512_load_pd(t[1]), tz = _mm512_load_pd(t[2]);
-    const __m512d dtx = _mm512_load_pd(dt[0]), dty = _mm512_load_pd(dt[1]);
-    const __m512d dtz = _mm512_load_pd(dt[2]);
+    __m512d dtx = _mm512_load_pd(dt[0]), dty = _mm512_load_pd(dt[1]);
+    __m512d dtz = _mm512_load_pd(dt[2]);
     __m512i s = _mm512_load_si512(slot);
-    const __m512i dx = _mm512_load_si512(delta[0]), dy = _mm512_load_si512(delta[1]);
-    const __m512i dz = _mm512_load_si512(delta[2]);
+    __m512i dx = _mm512_load_si512(delta[0]), dy = _mm512_load_si512(delta[1]);
+    __m512i dz = _mm512_load_si512(delta[2]);
     __m512i ex = _mm512_load_si512(events[0]), ey = _mm512_load_si512(events[1]);
     __m512i ez = _mm512_load_si512(events[2]);
     __m512i r = _mm512_load_si512(left);
+    __m512i src = _mm512_load_si512(source);
+    const __m512i one = _mm512_set1_epi64(1);
+    const __m512i zero = _mm512_setzero_si512();
+    const __m512i start_slot = _mm512_set1_epi64(start.slot);
     __mmask8 event = 0, ended = 0;
-    while (event == 0 && ended == 0) {
+    while (true) {
       _mm512_store_si512(slot, s);
       for (int l = 0; l < kLanes; ++l) mark_voxel<kFlagWords>(bits, dirty, slot[l]);
       // The scalar step's comparisons: x if x < y and x < z, else y if y < z, else z.
@@ -649,30 +704,86 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
                                     _mm512_cmpeq_epi64_mask(ey, zero) |
                                     _mm512_cmpeq_epi64_mask(ez, zero));
       ended = _mm512_cmpeq_epi64_mask(r, zero);
+      if ((ended | event) == 0) continue;
+      const int n_ended = std::popcount(static_cast<unsigned>(ended));
+      if (event != 0 || q_len - q_next < n_ended) break;
+      // Walks that ended without an event: booked here, and their lanes take queued walks.
+      _mm512_store_si512(slot, s);
+      _mm512_store_si512(events[0], ex);
+      _mm512_store_si512(events[1], ey);
+      _mm512_store_si512(events[2], ez);
+      _mm512_store_si512(source, src);
+      for (unsigned lanes = ended; lanes != 0; lanes &= lanes - 1) {
+        const int l = std::countr_zero(lanes);
+        AxisWalk x, y, z;  // NOLINT(cppcoreguidelines-pro-type-member-init): copied whole
+        std::int64_t n = 0;
+        bool inc = false;
+        if (source[l] >= 0) {
+          const auto k = static_cast<std::size_t>(source[l]);
+          x = q_axes[k][0];
+          y = q_axes[k][1];
+          z = q_axes[k][2];
+          n = q_steps[k];
+          inc = q_inc[k];
+        } else {
+          x = lane_axes[l][0];
+          y = lane_axes[l][1];
+          z = lane_axes[l][2];
+          n = lane_steps[static_cast<std::size_t>(l)];
+          inc = lane_inc[static_cast<std::size_t>(l)];
+        }
+        x.events = static_cast<int>(events[0][l]);
+        y.events = static_cast<int>(events[1][l]);
+        z.events = static_cast<int>(events[2][l]);
+        visits += finish_walk<kFlagWords>(start, x, y, z, slot[l], 0, n, inc, marks, box);
+      }
+      const int k = q_next;
+      q_next += n_ended;
+      tx = _mm512_mask_expandloadu_pd(tx, ended, &q_t[0][k]);
+      ty = _mm512_mask_expandloadu_pd(ty, ended, &q_t[1][k]);
+      tz = _mm512_mask_expandloadu_pd(tz, ended, &q_t[2][k]);
+      dtx = _mm512_mask_expandloadu_pd(dtx, ended, &q_dt[0][k]);
+      dty = _mm512_mask_expandloadu_pd(dty, ended, &q_dt[1][k]);
+      dtz = _mm512_mask_expandloadu_pd(dtz, ended, &q_dt[2][k]);
+      dx = _mm512_mask_expandloadu_epi64(dx, ended, &q_delta[0][k]);
+      dy = _mm512_mask_expandloadu_epi64(dy, ended, &q_delta[1][k]);
+      dz = _mm512_mask_expandloadu_epi64(dz, ended, &q_delta[2][k]);
+      ex = _mm512_mask_expandloadu_epi64(ex, ended, &q_events[0][k]);
+      ey = _mm512_mask_expandloadu_epi64(ey, ended, &q_events[1][k]);
+      ez = _mm512_mask_expandloadu_epi64(ez, ended, &q_events[2][k]);
+      r = _mm512_mask_expandloadu_epi64(r, ended, &q_steps[k]);
+      src = _mm512_mask_expandloadu_epi64(src, ended, &q_id[k]);
+      s = _mm512_mask_mov_epi64(s, ended, start_slot);
     }
     _mm512_store_pd(t[0], tx);
     _mm512_store_pd(t[1], ty);
     _mm512_store_pd(t[2], tz);
+    _mm512_store_pd(dt[0], dtx);
+    _mm512_store_pd(dt[1], dty);
+    _mm512_store_pd(dt[2], dtz);
+    _mm512_store_si512(delta[0], dx);
+    _mm512_store_si512(delta[1], dy);
+    _mm512_store_si512(delta[2], dz);
     _mm512_store_si512(slot, s);
     _mm512_store_si512(events[0], ex);
     _mm512_store_si512(events[1], ey);
     _mm512_store_si512(events[2], ez);
     _mm512_store_si512(left, r);
-    bool drained = false;
+    _mm512_store_si512(source, src);
     for (unsigned lanes = static_cast<unsigned>(event | ended); lanes != 0; lanes &= lanes - 1) {
       const int l = std::countr_zero(lanes);
       bool done = false;
       if (((event >> l) & 1) != 0) {
         // The stepped axis's event, as AxisWalk::advance handles it (before the step count).
-        sync(l);
+        scalar(l);
         for (int a = 0; a < 3; ++a) {
           if (events[a][l] != 0) continue;
-          if (!axes[l][a].on_event(slot[l])) {  // left the window
-            add_walk_box<kFlagWords>(start, axes[l][0], axes[l][1], axes[l][2], box);
-            visits += static_cast<std::uint64_t>(steps[static_cast<std::size_t>(l)] - left[l]);
+          if (!lane_axes[l][a].on_event(slot[l])) {  // left the window
+            add_walk_box<kFlagWords>(start, lane_axes[l][0], lane_axes[l][1], lane_axes[l][2], box);
+            visits += static_cast<std::uint64_t>(lane_steps[static_cast<std::size_t>(l)] - left[l]);
             done = true;
           } else {
-            events[a][l] = axes[l][a].events;
+            events[a][l] = lane_axes[l][a].events;
           }
         }
       }
@@ -680,16 +791,7 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
         visits += finish(l);  // no step left: the end voxel, if marked, and the box
         done = true;
       }
-      if (done && !fill(l)) {
-        steps[static_cast<std::size_t>(l)] = -1;  // no walk left for the lane
-        drained = true;
-      }
-    }
-    if (drained) {  // the other lanes finish one at a time
-      for (int l = 0; l < kLanes; ++l) {
-        if (steps[static_cast<std::size_t>(l)] >= 0) visits += finish(l);
-      }
-      return visits;
+      if (done) source[l] = -2;
     }
   }
 }
