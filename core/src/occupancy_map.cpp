@@ -537,6 +537,111 @@ std::uint64_t walk_rays(const WindowGeometry& w, const RayStart& start, const Ta
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #define TARMAC_WIDE_WALK 1
+/// Walks set up for the wide walk and not yet in a lane, as the lanes load them: parameters,
+/// parameter steps, slot steps, event counters and direction per axis; steps; index.
+struct WideQueue {
+  static constexpr int kSize = 64;
+  alignas(64) double t[3][kSize], dt[3][kSize];
+  alignas(64) std::int64_t delta[3][kSize], events[3][kSize], sign[3][kSize];
+  alignas(64) std::int64_t steps[kSize], id[kSize];
+  std::array<bool, kSize> inc{};
+  int len = 0, next = 0;
+};
+
+/// Fills `q` (emptied by the caller) with the task's next walks, eight at a time: begin_walk's
+/// arithmetic in lanes (the same divisions, floors and products, so the same values); the walks
+/// that take a step are compressed into the queue, those that take none are done here.
+template <bool kFlagWords>
+__attribute__((target("avx512f,avx512dq"))) void set_up_walks(const WindowGeometry& w,
+                                                              const RayStart& start,
+                                                              TaskRayCursor& cursor, WideQueue& q,
+                                                              std::uint64_t& visits,
+                                                              FreeMarks marks, MarkBox& box) {
+  constexpr int kLanes = 8;
+  const __m512d voxel = _mm512_set1_pd(w.voxel_size_m);
+  const __m512d one_d = _mm512_set1_pd(1.0);
+  const __m512i one_i = _mm512_set1_epi64(1);
+  const __m512i abs_bits = _mm512_set1_epi64(0x7fffffffffffffffLL);
+  bool more = true;
+  while (more && q.len + kLanes <= WideQueue::kSize) {
+    alignas(64) double end[3][kLanes];
+    std::array<bool, kLanes> inc{};
+    int m = 0;
+    Eigen::Vector3d end_W;
+    while (m < kLanes && (more = cursor.next(end_W, inc[static_cast<std::size_t>(m)]))) {
+      for (int a = 0; a < 3; ++a) end[a][m] = end_W[a];
+      ++m;
+    }
+    if (m == 0) break;
+    for (int j = m; j < kLanes; ++j) {
+      for (int a = 0; a < 3; ++a) end[a][j] = start.o[a] * w.voxel_size_m;
+    }
+    __m512i steps = _mm512_setzero_si512();
+    __m512d t_v[3], dt_v[3];
+    __m512i delta_v[3], events_v[3], sign_v[3];
+    for (int a = 0; a < 3; ++a) {
+      const __m512d e = _mm512_div_pd(_mm512_load_pd(end[a]), voxel);
+      const __m512d d = _mm512_sub_pd(e, _mm512_set1_pd(start.o[a]));
+      const __m512i cell = _mm512_cvtpd_epi64(
+          _mm512_mask_roundscale_pd(e, 0xff, e, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC));
+      const __m512i moved = _mm512_sub_epi64(cell, _mm512_set1_epi64(start.cur[a]));
+      steps = _mm512_add_epi64(
+          steps, _mm512_mask_max_epi64(moved, 0xff, moved,
+                                       _mm512_sub_epi64(_mm512_setzero_si512(), moved)));
+      const __mmask8 pos = _mm512_cmp_pd_mask(d, _mm512_setzero_pd(), _CMP_GT_OQ);
+      const __mmask8 neg = _mm512_cmp_pd_mask(d, _mm512_setzero_pd(), _CMP_LT_OQ);
+      __m512i sign = _mm512_mask_add_epi64(one_i, pos, one_i, one_i);
+      sign = _mm512_mask_sub_epi64(sign, neg, sign, one_i);
+      const auto& walks = start.axis_walk[a];
+      const __m512d num =
+          _mm512_setr_pd(walks[0].t_max, walks[1].t_max, walks[2].t_max, 0.0, 0.0, 0.0, 0.0, 0.0);
+      dt_v[a] = _mm512_div_pd(
+          one_d, _mm512_castsi512_pd(_mm512_and_epi64(_mm512_castpd_si512(d),
+                                                      abs_bits)));  // ±1 / d; infinite when d is 0
+      t_v[a] = _mm512_mul_pd(_mm512_mask_permutexvar_pd(num, 0xff, sign, num), dt_v[a]);
+      const __m512i delta_table =
+          _mm512_setr_epi64(walks[0].delta, walks[1].delta, walks[2].delta, 0, 0, 0, 0, 0);
+      const __m512i events_table =
+          _mm512_setr_epi64(walks[0].events, walks[1].events, walks[2].events, 0, 0, 0, 0, 0);
+      delta_v[a] = _mm512_mask_permutexvar_epi64(delta_table, 0xff, sign, delta_table);
+      events_v[a] = _mm512_mask_permutexvar_epi64(events_table, 0xff, sign, events_table);
+      sign_v[a] = sign;
+    }
+    alignas(64) std::int64_t lane_n[kLanes], lane_sign[3][kLanes];
+    _mm512_store_si512(lane_n, steps);
+    const auto valid = static_cast<__mmask8>((1u << m) - 1u);
+    const auto walking =
+        static_cast<__mmask8>(valid & _mm512_cmpneq_epi64_mask(steps, _mm512_setzero_si512()));
+    // Walks of no step: only an included end voxel (the origin's) is marked.
+    for (unsigned idle = valid & ~walking & 0xffu; idle != 0; idle &= idle - 1) {
+      const int j = std::countr_zero(idle);
+      if (!inc[static_cast<std::size_t>(j)]) continue;
+      for (int a = 0; a < 3; ++a) _mm512_store_si512(lane_sign[a], sign_v[a]);
+      visits += finish_walk<kFlagWords>(
+          start, start.axis_walk[0][static_cast<std::size_t>(lane_sign[0][j])],
+          start.axis_walk[1][static_cast<std::size_t>(lane_sign[1][j])],
+          start.axis_walk[2][static_cast<std::size_t>(lane_sign[2][j])], start.slot, 0, 0, true,
+          marks, box);
+    }
+    const int k = q.len;
+    for (int a = 0; a < 3; ++a) {
+      _mm512_mask_compressstoreu_pd(&q.t[a][k], walking, t_v[a]);
+      _mm512_mask_compressstoreu_pd(&q.dt[a][k], walking, dt_v[a]);
+      _mm512_mask_compressstoreu_epi64(&q.delta[a][k], walking, delta_v[a]);
+      _mm512_mask_compressstoreu_epi64(&q.events[a][k], walking, events_v[a]);
+      _mm512_mask_compressstoreu_epi64(&q.sign[a][k], walking, sign_v[a]);
+    }
+    _mm512_mask_compressstoreu_epi64(&q.steps[k], walking, steps);
+    for (unsigned lanes = walking; lanes != 0; lanes &= lanes - 1) {
+      const int j = std::countr_zero(lanes);
+      q.id[q.len] = q.len;
+      q.inc[static_cast<std::size_t>(q.len)] = inc[static_cast<std::size_t>(j)];
+      ++q.len;
+    }
+    static_cast<void>(lane_n);
+  }
+}
+
 /// The same walks, eight at a time in the lanes of AVX-512 registers (x86-64 processors that
 /// have it; the caller checks). A lane takes the same steps as the one-at-a-time walk, decided
 /// by the same comparisons of the same sums, so the marks are the same bits. The step, which
@@ -553,7 +658,6 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
                                                                          FreeMarks marks,
                                                                          MarkBox& box) {
   constexpr int kLanes = 8;
-  constexpr int kQueue = 64;
   if (!start.inside) return 0;
   TaskRayCursor cursor(rays);
   std::uint64_t visits = 0;
@@ -562,11 +666,7 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
 
   // The queue: walks set up and not yet in a lane, as the lanes load them (parameters,
   // parameter steps, slot steps, event counters per axis; steps; index), and their scalar state.
-  alignas(64) double q_t[3][kQueue], q_dt[3][kQueue];
-  alignas(64) std::int64_t q_delta[3][kQueue], q_events[3][kQueue], q_steps[kQueue], q_id[kQueue];
-  AxisWalk q_axes[kQueue][3];
-  std::array<bool, kQueue> q_inc{};
-  int q_len = 0, q_next = 0;
+  WideQueue q;
   // The lanes, stored between vector loops; `source` is the queue index of the lane's walk, or
   // −1 once its scalar state lives in lane_axes (after an event or a new batch), −2 when idle.
   alignas(64) double t[3][kLanes], dt[3][kLanes];
@@ -581,42 +681,22 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   const auto own = [&](int l) {
     const auto k = static_cast<std::size_t>(source[l]);
     if (source[l] < 0) return;
-    for (int a = 0; a < 3; ++a) lane_axes[l][a] = q_axes[k][a];
-    lane_steps[static_cast<std::size_t>(l)] = q_steps[k];
-    lane_inc[static_cast<std::size_t>(l)] = q_inc[k];
+    for (int a = 0; a < 3; ++a) {
+      lane_axes[l][a] = start.axis_walk[a][static_cast<std::size_t>(q.sign[a][k])];
+      lane_axes[l][a].t_delta = q.dt[a][k];
+    }
+    lane_steps[static_cast<std::size_t>(l)] = q.steps[k];
+    lane_inc[static_cast<std::size_t>(l)] = q.inc[k];
     source[l] = -1;
   };
   // The next batch of walks into the queue (walks of no step are done on the spot); false
   // when the task has none left.
   const auto refill_queue = [&] {
     for (int l = 0; l < kLanes; ++l) own(l);
-    q_len = 0;
-    q_next = 0;
-    Eigen::Vector3d end_W;
-    bool inc = false;
-    while (q_len < kQueue && cursor.next(end_W, inc)) {
-      AxisWalk x, y, z;  // NOLINT(cppcoreguidelines-pro-type-member-init): begin_walk sets them
-      std::int64_t n = 0;
-      begin_walk(w, start, end_W, x, y, z, n);
-      if (n == 0) {
-        visits += finish_walk<kFlagWords>(start, x, y, z, start.slot, 0, 0, inc, marks, box);
-        continue;
-      }
-      const auto k = static_cast<std::size_t>(q_len++);
-      q_axes[k][0] = x;
-      q_axes[k][1] = y;
-      q_axes[k][2] = z;
-      for (int a = 0; a < 3; ++a) {
-        q_t[a][k] = q_axes[k][a].t_max;
-        q_dt[a][k] = q_axes[k][a].t_delta;
-        q_delta[a][k] = q_axes[k][a].delta;
-        q_events[a][k] = q_axes[k][a].events;
-      }
-      q_steps[k] = n;
-      q_id[k] = static_cast<std::int64_t>(k);
-      q_inc[k] = inc;
-    }
-    return q_len > 0;
+    q.len = 0;
+    q.next = 0;
+    set_up_walks<kFlagWords>(w, start, cursor, q, visits, marks, box);
+    return q.len > 0;
   };
   // Lane l's scalar state with its vector state written in.
   const auto scalar = [&](int l) {
@@ -635,16 +715,16 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   };
   // Lane l takes the queue's next walk (stored lanes; the vector loop takes them by itself).
   const auto take = [&](int l) {
-    const auto k = static_cast<std::size_t>(q_next++);
+    const auto k = static_cast<std::size_t>(q.next++);
     for (int a = 0; a < 3; ++a) {
-      t[a][l] = q_t[a][k];
-      dt[a][l] = q_dt[a][k];
-      delta[a][l] = q_delta[a][k];
-      events[a][l] = q_events[a][k];
+      t[a][l] = q.t[a][k];
+      dt[a][l] = q.dt[a][k];
+      delta[a][l] = q.delta[a][k];
+      events[a][l] = q.events[a][k];
     }
     slot[l] = start.slot;
-    left[l] = q_steps[k];
-    source[l] = q_id[k];
+    left[l] = q.steps[k];
+    source[l] = q.id[k];
   };
 
   for (int l = 0; l < kLanes; ++l) source[l] = -2;
@@ -654,7 +734,7 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
     bool short_of_walks = false;
     for (int l = 0; l < kLanes; ++l) {
       if (source[l] != -2) continue;
-      if (q_next == q_len && !refill_queue()) {
+      if (q.next == q.len && !refill_queue()) {
         short_of_walks = true;
         break;
       }
@@ -706,7 +786,7 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
       ended = _mm512_cmpeq_epi64_mask(r, zero);
       if ((ended | event) == 0) continue;
       const int n_ended = std::popcount(static_cast<unsigned>(ended));
-      if (event != 0 || q_len - q_next < n_ended) break;
+      if (event != 0 || q.len - q.next < n_ended) break;
       // Walks that ended without an event: booked here, and their lanes take queued walks.
       _mm512_store_si512(slot, s);
       _mm512_store_si512(events[0], ex);
@@ -720,11 +800,11 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
         bool inc = false;
         if (source[l] >= 0) {
           const auto k = static_cast<std::size_t>(source[l]);
-          x = q_axes[k][0];
-          y = q_axes[k][1];
-          z = q_axes[k][2];
-          n = q_steps[k];
-          inc = q_inc[k];
+          x = start.axis_walk[0][static_cast<std::size_t>(q.sign[0][k])];
+          y = start.axis_walk[1][static_cast<std::size_t>(q.sign[1][k])];
+          z = start.axis_walk[2][static_cast<std::size_t>(q.sign[2][k])];
+          n = q.steps[k];
+          inc = q.inc[k];
         } else {
           x = lane_axes[l][0];
           y = lane_axes[l][1];
@@ -737,22 +817,22 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
         z.events = static_cast<int>(events[2][l]);
         visits += finish_walk<kFlagWords>(start, x, y, z, slot[l], 0, n, inc, marks, box);
       }
-      const int k = q_next;
-      q_next += n_ended;
-      tx = _mm512_mask_expandloadu_pd(tx, ended, &q_t[0][k]);
-      ty = _mm512_mask_expandloadu_pd(ty, ended, &q_t[1][k]);
-      tz = _mm512_mask_expandloadu_pd(tz, ended, &q_t[2][k]);
-      dtx = _mm512_mask_expandloadu_pd(dtx, ended, &q_dt[0][k]);
-      dty = _mm512_mask_expandloadu_pd(dty, ended, &q_dt[1][k]);
-      dtz = _mm512_mask_expandloadu_pd(dtz, ended, &q_dt[2][k]);
-      dx = _mm512_mask_expandloadu_epi64(dx, ended, &q_delta[0][k]);
-      dy = _mm512_mask_expandloadu_epi64(dy, ended, &q_delta[1][k]);
-      dz = _mm512_mask_expandloadu_epi64(dz, ended, &q_delta[2][k]);
-      ex = _mm512_mask_expandloadu_epi64(ex, ended, &q_events[0][k]);
-      ey = _mm512_mask_expandloadu_epi64(ey, ended, &q_events[1][k]);
-      ez = _mm512_mask_expandloadu_epi64(ez, ended, &q_events[2][k]);
-      r = _mm512_mask_expandloadu_epi64(r, ended, &q_steps[k]);
-      src = _mm512_mask_expandloadu_epi64(src, ended, &q_id[k]);
+      const int k = q.next;
+      q.next += n_ended;
+      tx = _mm512_mask_expandloadu_pd(tx, ended, &q.t[0][k]);
+      ty = _mm512_mask_expandloadu_pd(ty, ended, &q.t[1][k]);
+      tz = _mm512_mask_expandloadu_pd(tz, ended, &q.t[2][k]);
+      dtx = _mm512_mask_expandloadu_pd(dtx, ended, &q.dt[0][k]);
+      dty = _mm512_mask_expandloadu_pd(dty, ended, &q.dt[1][k]);
+      dtz = _mm512_mask_expandloadu_pd(dtz, ended, &q.dt[2][k]);
+      dx = _mm512_mask_expandloadu_epi64(dx, ended, &q.delta[0][k]);
+      dy = _mm512_mask_expandloadu_epi64(dy, ended, &q.delta[1][k]);
+      dz = _mm512_mask_expandloadu_epi64(dz, ended, &q.delta[2][k]);
+      ex = _mm512_mask_expandloadu_epi64(ex, ended, &q.events[0][k]);
+      ey = _mm512_mask_expandloadu_epi64(ey, ended, &q.events[1][k]);
+      ez = _mm512_mask_expandloadu_epi64(ez, ended, &q.events[2][k]);
+      r = _mm512_mask_expandloadu_epi64(r, ended, &q.steps[k]);
+      src = _mm512_mask_expandloadu_epi64(src, ended, &q.id[k]);
       s = _mm512_mask_mov_epi64(s, ended, start_slot);
     }
     _mm512_store_pd(t[0], tx);
