@@ -5,6 +5,8 @@
 #include <cstring>
 #include <random>
 #include <set>
+#include <string>
+#include <tuple>
 
 #include <gtest/gtest.h>
 
@@ -46,6 +48,42 @@ std::set<std::tuple<int, int, int>> sampled_voxels(const Eigen::Vector3d& a,
     const Eigen::Vector3i q = (p / v).array().floor().cast<int>();
     out.emplace(q.x(), q.y(), q.z());
   }
+  return out;
+}
+
+using VoxelSet = std::set<std::tuple<int, int, int>>;
+
+/// What the small window (100 × 100 × 20 voxels around the origin) holds: the voxels reading
+/// free and those reading one hit, and the first that has no business there (free but not in
+/// `free`; with `hits`, hit but not in `hits`, or neither free, hit nor unknown).
+struct WindowScan {
+  std::size_t free = 0, hit = 0;
+  std::string wrong;
+};
+WindowScan scan_window(const OccupancyMap& map, const VoxelSet& free, const VoxelSet* hits) {
+  WindowScan out;
+  const auto flag = [&](const char* what, int x, int y, int z) {
+    if (out.wrong.empty()) {
+      out.wrong = std::string(what) + " " + std::to_string(x) + "," + std::to_string(y) + "," +
+                  std::to_string(z);
+    }
+  };
+  for (int z = -10; z < 10; ++z)
+    for (int y = -50; y < 50; ++y)
+      for (int x = -50; x < 50; ++x) {
+        const float l = map.log_odds(VoxelIndex(x, y, z));
+        if (l == map.miss_log_odds()) {
+          ++out.free;
+          if (free.count({x, y, z}) == 0) flag("extra free voxel", x, y, z);
+        } else if (hits == nullptr) {
+          continue;
+        } else if (l == map.hit_log_odds()) {
+          ++out.hit;
+          if (hits->count({x, y, z}) == 0) flag("extra hit voxel", x, y, z);
+        } else if (l != OccupancyMap::kUnknown) {
+          flag("voxel neither free, hit nor unknown", x, y, z);
+        }
+      }
   return out;
 }
 
@@ -98,18 +136,9 @@ TEST(OccupancyMap, Raycast_MatchesReferenceTraversal) {
     const VoxelIndex e = map.voxel_of(end.cast<double>());
     expected.erase({e.x(), e.y(), e.z()});
     // Every voxel the segment crosses is free; the end voxel is occupied; nothing else changed.
-    std::size_t free_count = 0;
-    for (int z = -10; z < 10; ++z)
-      for (int y = -50; y < 50; ++y)
-        for (int x = -50; x < 50; ++x) {
-          const float l = map.log_odds(VoxelIndex(x, y, z));
-          if (l == map.miss_log_odds()) {
-            ++free_count;
-            ASSERT_TRUE(expected.count({x, y, z}))
-                << "extra free voxel " << x << "," << y << "," << z;
-          }
-        }
-    ASSERT_EQ(free_count, expected.size()) << "trial " << trial;
+    const WindowScan window = scan_window(map, expected, nullptr);
+    ASSERT_EQ(window.wrong, "") << "trial " << trial;
+    ASSERT_EQ(window.free, expected.size()) << "trial " << trial;
     ASSERT_FLOAT_EQ(map.log_odds(e), map.hit_log_odds());
   }
 }
@@ -136,7 +165,7 @@ TEST(OccupancyMap, Raycast_ManyRaysInEveryDirection_MarkTheUnionOfTheirTraversal
     for (const double sy : {-1.0, 1.0}) dirs.emplace_back(sx, sy, 0.3 * sx * sy);
   }
   Scan scan{origin, {}, {}};
-  std::set<std::tuple<int, int, int>> expected_free, hits;
+  VoxelSet expected_free, hits;
   for (const Eigen::Vector3d& d : dirs) {
     Eigen::Vector3d end = origin + d.normalized() * len(rng);
     end.z() = std::clamp(end.z(), -1.5, 1.5);
@@ -159,24 +188,10 @@ TEST(OccupancyMap, Raycast_ManyRaysInEveryDirection_MarkTheUnionOfTheirTraversal
   hits.emplace(o.x(), o.y(), o.z());
   expected_free.erase({o.x(), o.y(), o.z()});
   integrate(map, scan);
-  std::size_t free_count = 0, hit_count = 0;
-  for (int z = -10; z < 10; ++z)
-    for (int y = -50; y < 50; ++y)
-      for (int x = -50; x < 50; ++x) {
-        const float l = map.log_odds(VoxelIndex(x, y, z));
-        if (l == map.miss_log_odds()) {
-          ++free_count;
-          ASSERT_TRUE(expected_free.count({x, y, z}))
-              << "extra free voxel " << x << "," << y << "," << z;
-        } else if (l == map.hit_log_odds()) {
-          ++hit_count;
-          ASSERT_TRUE(hits.count({x, y, z})) << "extra hit voxel " << x << "," << y << "," << z;
-        } else {
-          ASSERT_EQ(l, OccupancyMap::kUnknown) << x << "," << y << "," << z;
-        }
-      }
-  EXPECT_EQ(free_count, expected_free.size());
-  EXPECT_EQ(hit_count, hits.size());
+  const WindowScan window = scan_window(map, expected_free, &hits);
+  EXPECT_EQ(window.wrong, "");
+  EXPECT_EQ(window.free, expected_free.size());
+  EXPECT_EQ(window.hit, hits.size());
 }
 
 // The AVX-512 walk (eight rays at a time) against the walk one ray at a time: the same log-odds
