@@ -876,6 +876,77 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   }
 }
 
+/// integrate_hits' first pass in AVX-512 lanes, eight returns at a time: each return's slot
+/// (kNoSlot when not finite, beyond max range or outside the window) and window column, with the
+/// scalar pass's arithmetic (the same divisions and floors; the range's norm summed in the same
+/// order, and a return within 1e-9 of max range decided by the scalar expression itself).
+/// Returns how many returns fell outside the window.
+__attribute__((target("avx512f,avx512dq"))) std::uint64_t hit_voxels_wide(
+    std::span<const Eigen::Vector3f> points, const Eigen::Vector3d& origin_W, double max_range,
+    double voxel_size, const VoxelIndex& min, const Eigen::Vector3i& dims,
+    const std::array<int, 3>& ring_min, std::uint32_t* slot_out, std::uint32_t* column_out) {
+  constexpr int kLanes = 8;
+  const std::size_t n = points.size();
+  std::uint64_t outside = 0;
+  const __m512d voxel = _mm512_set1_pd(voxel_size);
+  const __m512d range = _mm512_set1_pd(max_range);
+  const __m512d near_edge = _mm512_set1_pd(1e-9 * std::max(1.0, max_range));
+  const __m512d abs_bits = _mm512_castsi512_pd(_mm512_set1_epi64(0x7fffffffffffffffLL));
+  for (std::size_t i = 0; i < n; i += kLanes) {
+    const int m = static_cast<int>(std::min<std::size_t>(kLanes, n - i));
+    alignas(64) double c[3][kLanes] = {};
+    for (int j = 0; j < m; ++j) {
+      for (int a = 0; a < 3; ++a) c[a][j] = static_cast<double>(points[i + j][a]);
+    }
+    auto keep = static_cast<__mmask8>((1u << m) - 1u);
+    __m512d sq = _mm512_setzero_pd();
+    __m512i slot = _mm512_setzero_si512(), stride = _mm512_set1_epi64(1);
+    __m512i rel[3];
+    __mmask8 inside = 0xff;
+    for (int a = 0; a < 3; ++a) {
+      const __m512d x = _mm512_load_pd(c[a]);
+      keep &= _mm512_cmp_pd_mask(_mm512_sub_pd(x, x), _mm512_setzero_pd(), _CMP_EQ_OQ);  // finite
+      const __m512d d = _mm512_sub_pd(x, _mm512_set1_pd(origin_W[a]));
+      sq = a == 0 ? _mm512_mul_pd(d, d) : _mm512_add_pd(sq, _mm512_mul_pd(d, d));
+      const __m512d q = _mm512_div_pd(x, voxel);
+      const __m512i cell = _mm512_cvtpd_epi64(
+          _mm512_mask_roundscale_pd(q, 0xff, q, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC));
+      const __m512i size = _mm512_set1_epi64(dims[a]);
+      rel[a] = _mm512_sub_epi64(cell, _mm512_set1_epi64(min[a]));
+      inside &= _mm512_cmplt_epu64_mask(rel[a], size);
+      __m512i ring = _mm512_add_epi64(rel[a], _mm512_set1_epi64(ring_min[a]));
+      ring = _mm512_mask_sub_epi64(ring, _mm512_cmpge_epi64_mask(ring, size), ring, size);
+      slot = _mm512_add_epi64(slot, _mm512_mullo_epi64(ring, stride));
+      stride = _mm512_mullo_epi64(stride, size);
+    }
+    const __m512d norm = _mm512_mask_sqrt_pd(sq, 0xff, sq);
+    keep &= _mm512_cmp_pd_mask(norm, range, _CMP_LE_OQ);
+    // Within a hair of max range: the scalar expression decides (its summation order is
+    // Eigen's; the lanes' is meant to be the same, this makes it so whatever it is).
+    const __mmask8 edge = _mm512_cmp_pd_mask(_mm512_and_pd(_mm512_sub_pd(norm, range), abs_bits),
+                                             near_edge, _CMP_LE_OQ);
+    for (unsigned lanes = edge & ((1u << m) - 1u); lanes != 0; lanes &= lanes - 1) {
+      const int j = std::countr_zero(lanes);
+      const Eigen::Vector3f& p = points[i + static_cast<std::size_t>(j)];
+      const bool in_range = p.allFinite() && !((p.cast<double>() - origin_W).norm() > max_range);
+      keep = static_cast<__mmask8>(in_range ? (keep | (1u << j)) : (keep & ~(1u << j)));
+    }
+    outside += static_cast<std::uint64_t>(std::popcount(static_cast<unsigned>(keep & ~inside)));
+    keep &= inside;
+    alignas(64) std::int64_t slots[kLanes], columns[kLanes];
+    _mm512_store_si512(slots, slot);
+    _mm512_store_si512(
+        columns, _mm512_add_epi64(_mm512_mullo_epi64(rel[1], _mm512_set1_epi64(dims[0])), rel[0]));
+    for (int j = 0; j < m; ++j) {
+      const bool k = ((keep >> j) & 1) != 0;
+      slot_out[i + static_cast<std::size_t>(j)] =
+          k ? static_cast<std::uint32_t>(slots[j]) : kNoSlot;
+      if (k) column_out[i + static_cast<std::size_t>(j)] = static_cast<std::uint32_t>(columns[j]);
+    }
+  }
+  return outside;
+}
+
 /// Whether this processor runs walk_rays_wide (checked once).
 bool wide_walk_supported() {
   static const bool supported =
@@ -1281,7 +1352,16 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   const double v_m = params_.voxel_size_m;
   for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
   scan_ground_cols_.clear();
-  for (std::size_t i = 0; i < n_points; ++i) {
+  // The slot and column of each return (none: not finite, beyond max range or outside).
+  bool wide = false;
+#if defined(TARMAC_WIDE_WALK)
+  wide = wide_walk_active();
+  if (wide) {
+    stats.outside_window += hit_voxels_wide(points_W, origin_W, max_range, v_m, min_, dims_,
+                                            ring_min, hit_slot_.data(), hit_column_.data());
+  }
+#endif
+  for (std::size_t i = 0; i < n_points && !wide; ++i) {
     const Eigen::Vector3f& p = points_W[i];
     hit_slot_[i] = kNoSlot;
     if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
@@ -1301,10 +1381,14 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
       ++stats.outside_window;
       continue;
     }
-    const auto column = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
-    const float height = up.dot(p);
     hit_slot_[i] = static_cast<std::uint32_t>(slot);
-    hit_column_[i] = column;
+    hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
+  }
+  // Heights, and the lowest return per column, in point order.
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (hit_slot_[i] == kNoSlot) continue;
+    const std::uint32_t column = hit_column_[i];
+    const float height = up.dot(points_W[i]);
     hit_height_[i] = height;
     float& g = scan_ground_z_[column];
     if (g == kNone) scan_ground_cols_.push_back(column);

@@ -213,7 +213,8 @@ TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
     std::mt19937_64 rng(13);
     std::uniform_real_distribution<float> u(-16.0f, 16.0f);
     for (int s = 0; s < 6; ++s) {
-      const Eigen::Vector3d origin(3.7 * s + 0.11, -2.3 * s + 0.05, 0.4 + 0.1 * s);
+      const Eigen::Vector3d origin(3.75 * s + 0.125, -2.25 * s + 0.0625,
+                                   0.375 + 0.125 * s);  // exact in float
       Scan scan{origin, {}, {}};
       for (int i = 0; i < 3000; ++i) {
         scan.points.push_back(origin.cast<float>() +
@@ -222,6 +223,16 @@ TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
       for (int i = 0; i < 200; ++i) {
         scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), u(rng) / 8.0f).normalized());
       }
+      // Returns exactly at max range (kept) and just beyond it (clearing), on every axis.
+      for (int a = 0; a < 3; ++a) {
+        for (const float sign : {-1.0f, 1.0f}) {
+          for (const float range : {12.0f, 12.001f}) {
+            Eigen::Vector3f p = origin.cast<float>();
+            p[a] += sign * range;
+            scan.points.push_back(p);
+          }
+        }
+      }
       for (OccupancyMap* map : {&wide, &narrow}) map->recenter(origin);
       daemon::ThreadPool pool(2);
       const auto a = wide.integrate(scan.origin, scan.points, scan.clearing, pool);
@@ -229,6 +240,7 @@ TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
       EXPECT_EQ(a.voxel_visits, b.voxel_visits) << "scan " << s;
       EXPECT_EQ(a.miss_updates, b.miss_updates) << "scan " << s;
       EXPECT_EQ(a.hit_updates, b.hit_updates) << "scan " << s;
+      EXPECT_EQ(a.outside_window, b.outside_window) << "scan " << s;
     }
     std::vector<float> la, lb;
     wide.export_log_odds(la);
