@@ -458,8 +458,9 @@ void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
 
 /// The rays of one ray task: returns (within max range: walked to their voxel, not marked;
 /// beyond: walked up to the clearing range, end voxel included) then beams without a return
-/// (clearing range, end included); ray i of the scan is this task's when its chunk of kRayChunk
-/// rays is dealt to it.
+/// (clearing range, end included). The scan's rays are taken in `order` (by direction) and
+/// dealt in chunks of kRayChunk, round robin; position j of `order` is this task's when its
+/// chunk is dealt to it.
 struct TaskRays {
   std::span<const Eigen::Vector3f> points, dirs;
   std::span<const std::uint32_t> order;  ///< the rays by direction (see sort_rays_by_direction)
