@@ -146,8 +146,8 @@ TEST(OccupancyMap, Raycast_MatchesReferenceTraversal) {
 // Many rays of one scan, in every direction (each face of the cube, along the axes, on the
 // diagonals) and listed in random order, plus entries that must be skipped: the free voxels are
 // exactly the union of their reference traversals, less the voxels any of them hit. The map
-// walks the rays in its own order (by direction); a ray lost or walked twice on the way shows
-// here.
+// walks the rays in its own order (by direction one at a time, in lanes of eight with AVX-512);
+// a ray lost or walked twice on the way shows here.
 TEST(OccupancyMap, Raycast_ManyRaysInEveryDirection_MarkTheUnionOfTheirTraversals) {
   const auto params = small_params();
   OccupancyMap map(params);
