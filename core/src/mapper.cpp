@@ -55,10 +55,8 @@ Mapper::Mapper(const MapperParams& params)
   // 64-beam scan and written once, and one costmap of the empty window (all unknown: it sizes
   // and writes every costmap and 2D ESDF buffer; the first update_costmap() replaces it).
   filter_scratch_.reserve(kWarmUpPoints);
-  for (auto* points : {&points_S_, &points_W_}) {
-    points->assign(kWarmUpPoints, Eigen::Vector3f::Zero());
-    points->clear();
-  }
+  points_W_.assign(kWarmUpPoints, Eigen::Vector3f::Zero());
+  points_W_.clear();
   SerialRunner serial;
   build_costmap(map_, params_.costmap, T_W_B_, {}, 0, layers_, serial);
   // The 3D band likewise (about 50 MB of states, scratch and field at the default window).
@@ -89,10 +87,11 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
     deskew_points(cloud, *motion, T_W_B, T_B_S, deskewed_.points_S);
     input = &deskewed_;
   }
-  // The survivors in the world frame, and in the sensor frame too when they are retained.
+  // The survivors in the world frame, and, when scans are retained, straight into the slot this
+  // scan takes in the sensor frame (nothing reads a slot's points between here and below).
   const FilterCounts counts =
       filter_scan(*input, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_, runner,
-                  retained_.empty() ? nullptr : &points_S_);
+                  retained_.empty() ? nullptr : &retained(next_seq_).points_S);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&
         cursor_seq_ <= next_seq_ - retained_.size()) {
@@ -104,7 +103,6 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
     slot.stamp_ns = cloud.stamp_ns;
     slot.T_W_B = T_W_B;
     slot.T_B_S = T_B_S;
-    slot.points_S.assign(points_S_.begin(), points_S_.end());  // keeps capacity
     slot.tsdf_wanted = false;
     slot.tsdf_done = false;
     slot.tsdf_blocks.clear();

@@ -390,7 +390,8 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
 /// them (the wide walk does not need it, see integrate). The walk's step is a branch on which
 /// axis crosses next, and a ray's run of steps resembles those of the
 /// rays beside it: walked one after another, the processor predicts most of them (BALM hall,
-/// whose scans interleave distant directions: the walks took 17 % less time). The marks are the
+/// whose scans interleave distant directions: in a harness walking its rays, sorted per scan,
+/// 0.83 of the time; docs/perf-occ5.md). The marks are the
 /// same whatever the order, so this changes speed only. The order: cube-map face of the
 /// direction (dominant axis and sign), band of the second minor coordinate, bin of the first.
 constexpr int kDirBands = 16;  ///< bands per cube face
@@ -611,8 +612,7 @@ __attribute__((target("avx512f,avx512dq"))) void set_up_walks(const WindowGeomet
       events_v[a] = _mm512_mask_permutexvar_epi64(events_table, 0xff, sign, events_table);
       sign_v[a] = sign;
     }
-    alignas(64) std::int64_t lane_n[kLanes], lane_sign[3][kLanes];
-    _mm512_store_si512(lane_n, steps);
+    alignas(64) std::int64_t lane_sign[3][kLanes];
     const auto valid = static_cast<__mmask8>((1u << m) - 1u);
     const auto walking =
         static_cast<__mmask8>(valid & _mm512_cmpneq_epi64_mask(steps, _mm512_setzero_si512()));
@@ -642,7 +642,6 @@ __attribute__((target("avx512f,avx512dq"))) void set_up_walks(const WindowGeomet
       q.inc[static_cast<std::size_t>(q.len)] = inc[static_cast<std::size_t>(j)];
       ++q.len;
     }
-    static_cast<void>(lane_n);
   }
 }
 
@@ -791,35 +790,19 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
       if ((ended | event) == 0) continue;
       const int n_ended = std::popcount(static_cast<unsigned>(ended));
       if (event != 0 || q.len - q.next < n_ended) break;
-      // Walks that ended without an event: booked here, and their lanes take queued walks.
+      // Walks that ended without an event: booked here (finish() with no step left), and their
+      // lanes take queued walks.
+      _mm512_store_pd(t[0], tx);
+      _mm512_store_pd(t[1], ty);
+      _mm512_store_pd(t[2], tz);
       _mm512_store_si512(slot, s);
       _mm512_store_si512(events[0], ex);
       _mm512_store_si512(events[1], ey);
       _mm512_store_si512(events[2], ez);
+      _mm512_store_si512(left, r);
       _mm512_store_si512(source, src);
       for (unsigned lanes = ended; lanes != 0; lanes &= lanes - 1) {
-        const int l = std::countr_zero(lanes);
-        AxisWalk x, y, z;  // NOLINT(cppcoreguidelines-pro-type-member-init): copied whole
-        std::int64_t n = 0;
-        bool inc = false;
-        if (source[l] >= 0) {
-          const auto k = static_cast<std::size_t>(source[l]);
-          x = start.axis_walk[0][static_cast<std::size_t>(q.sign[0][k])];
-          y = start.axis_walk[1][static_cast<std::size_t>(q.sign[1][k])];
-          z = start.axis_walk[2][static_cast<std::size_t>(q.sign[2][k])];
-          n = q.steps[k];
-          inc = q.inc[k];
-        } else {
-          x = lane_axes[l][0];
-          y = lane_axes[l][1];
-          z = lane_axes[l][2];
-          n = lane_steps[static_cast<std::size_t>(l)];
-          inc = lane_inc[static_cast<std::size_t>(l)];
-        }
-        x.events = static_cast<int>(events[0][l]);
-        y.events = static_cast<int>(events[1][l]);
-        z.events = static_cast<int>(events[2][l]);
-        visits += finish_walk<kFlagWords>(start, x, y, z, slot[l], 0, n, inc, marks, box);
+        visits += finish(std::countr_zero(lanes));
       }
       const int k = q.next;
       q.next += n_ended;
@@ -1365,28 +1348,30 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
                                             ring_min, hit_slot_.data(), hit_column_.data());
   }
 #endif
-  for (std::size_t i = 0; i < n_points && !wide; ++i) {
-    const Eigen::Vector3f& p = points_W[i];
-    hit_slot_[i] = kNoSlot;
-    if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
-    std::int64_t slot = 0;
-    std::int64_t stride = 1;
-    bool inside = true;
-    int rel[3];
-    for (int a = 0; a < 3; ++a) {
-      rel[a] = static_cast<int>(floor_to_int(static_cast<double>(p[a]) / v_m)) - min_[a];
-      inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(dims_[a]);
-      int ring = ring_min[a] + rel[a];
-      if (ring >= dims_[a]) ring -= dims_[a];
-      slot += ring * stride;
-      stride *= dims_[a];
+  if (!wide) {
+    for (std::size_t i = 0; i < n_points; ++i) {
+      const Eigen::Vector3f& p = points_W[i];
+      hit_slot_[i] = kNoSlot;
+      if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
+      std::int64_t slot = 0;
+      std::int64_t stride = 1;
+      bool inside = true;
+      int rel[3];
+      for (int a = 0; a < 3; ++a) {
+        rel[a] = static_cast<int>(floor_to_int(static_cast<double>(p[a]) / v_m)) - min_[a];
+        inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(dims_[a]);
+        int ring = ring_min[a] + rel[a];
+        if (ring >= dims_[a]) ring -= dims_[a];
+        slot += ring * stride;
+        stride *= dims_[a];
+      }
+      if (!inside) {
+        ++stats.outside_window;
+        continue;
+      }
+      hit_slot_[i] = static_cast<std::uint32_t>(slot);
+      hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
     }
-    if (!inside) {
-      ++stats.outside_window;
-      continue;
-    }
-    hit_slot_[i] = static_cast<std::uint32_t>(slot);
-    hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
   }
   // Heights, and the lowest return per column, in point order.
   for (std::size_t i = 0; i < n_points; ++i) {

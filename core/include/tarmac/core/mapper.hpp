@@ -158,7 +158,6 @@ class Mapper {
 
   MapperParams params_;
   OccupancyMap map_;
-  std::vector<Eigen::Vector3f> points_S_;  ///< the last ingested scan's survivors, sensor frame
   std::vector<RetainedScan> retained_;     ///< ring, corrections.retain_scans slots
   std::uint64_t next_seq_ = 0;             ///< scans retained so far; seq k is in slot k % size
   std::unique_ptr<OccupancyMap> spare_;    ///< the window being rebuilt
