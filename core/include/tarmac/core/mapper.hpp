@@ -158,9 +158,9 @@ class Mapper {
 
   MapperParams params_;
   OccupancyMap map_;
-  std::vector<RetainedScan> retained_;     ///< ring, corrections.retain_scans slots
-  std::uint64_t next_seq_ = 0;             ///< scans retained so far; seq k is in slot k % size
-  std::unique_ptr<OccupancyMap> spare_;    ///< the window being rebuilt
+  std::vector<RetainedScan> retained_;   ///< ring, corrections.retain_scans slots
+  std::uint64_t next_seq_ = 0;           ///< scans retained so far; seq k is in slot k % size
+  std::unique_ptr<OccupancyMap> spare_;  ///< the window being rebuilt
   bool rebuilding_ = false;
   bool pending_ = false;  ///< a rebuild is scheduled, from pending_from_stamp_ns_
   std::int64_t pending_from_stamp_ns_ = 0;
