@@ -654,6 +654,39 @@ __attribute__((target("avx512f,avx512dq"))) void set_up_walks(const WindowGeomet
 /// only for an event (ring wrap, window exit), which the scalar state handles one lane at a
 /// time, and to set up the next batch.
 /// Measurements: docs/perf-occ5.md; `tarmac-bench --narrow-walk` runs the walks one at a time.
+/// The wide walk's lanes between vector loops, per axis where it applies: parameters, parameter
+/// steps, slot steps, event counters; slot, steps left, and `source`: the queue index of the
+/// lane's walk, or −1 once its scalar state lives in lane_axes (after an event or a new batch),
+/// −2 when idle.
+struct WideLanes {
+  static constexpr int kLanes = 8;
+  alignas(64) double t[3][kLanes], dt[3][kLanes];
+  alignas(64) std::int64_t delta[3][kLanes], events[3][kLanes], slot[kLanes], left[kLanes];
+  alignas(64) std::int64_t source[kLanes];
+};
+
+/// The lanes' vector state back into `lanes` (for finish() and the event path).
+__attribute__((target("avx512f,avx512dq"), always_inline)) inline void store_lanes(
+    WideLanes& lanes, __m512d tx, __m512d ty, __m512d tz, __m512d dtx, __m512d dty, __m512d dtz,
+    __m512i dx, __m512i dy, __m512i dz, __m512i s, __m512i ex, __m512i ey, __m512i ez, __m512i r,
+    __m512i src) {
+  _mm512_store_pd(lanes.t[0], tx);
+  _mm512_store_pd(lanes.t[1], ty);
+  _mm512_store_pd(lanes.t[2], tz);
+  _mm512_store_pd(lanes.dt[0], dtx);
+  _mm512_store_pd(lanes.dt[1], dty);
+  _mm512_store_pd(lanes.dt[2], dtz);
+  _mm512_store_si512(lanes.delta[0], dx);
+  _mm512_store_si512(lanes.delta[1], dy);
+  _mm512_store_si512(lanes.delta[2], dz);
+  _mm512_store_si512(lanes.slot, s);
+  _mm512_store_si512(lanes.events[0], ex);
+  _mm512_store_si512(lanes.events[1], ey);
+  _mm512_store_si512(lanes.events[2], ez);
+  _mm512_store_si512(lanes.left, r);
+  _mm512_store_si512(lanes.source, src);
+}
+
 template <bool kFlagWords>
 __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const WindowGeometry& w,
                                                                          const RayStart& start,
@@ -670,11 +703,9 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   // The queue: walks set up and not yet in a lane, as the lanes load them (parameters,
   // parameter steps, slot steps, event counters per axis; steps; index), and their scalar state.
   WideQueue q;
-  // The lanes, stored between vector loops; `source` is the queue index of the lane's walk, or
-  // −1 once its scalar state lives in lane_axes (after an event or a new batch), −2 when idle.
-  alignas(64) double t[3][kLanes], dt[3][kLanes];
-  alignas(64) std::int64_t delta[3][kLanes], events[3][kLanes], slot[kLanes], left[kLanes];
-  alignas(64) std::int64_t source[kLanes];
+  // The lanes between vector loops (see WideLanes), and the scalar state of walks that left the
+  // queue.
+  WideLanes lanes;
   AxisWalk lane_axes[kLanes][3];
   std::array<std::int64_t, kLanes> lane_steps{};
   std::array<bool, kLanes> lane_inc{};
@@ -682,15 +713,15 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   // The lane's walk's scalar state moves out of the queue (which is about to change, or whose
   // entry the lane's events will modify).
   const auto own = [&](int l) {
-    const auto k = static_cast<std::size_t>(source[l]);
-    if (source[l] < 0) return;
+    const auto k = static_cast<std::size_t>(lanes.source[l]);
+    if (lanes.source[l] < 0) return;
     for (int a = 0; a < 3; ++a) {
       lane_axes[l][a] = start.axis_walk[a][static_cast<std::size_t>(q.sign[a][k])];
       lane_axes[l][a].t_delta = q.dt[a][k];
     }
     lane_steps[static_cast<std::size_t>(l)] = q.steps[k];
     lane_inc[static_cast<std::size_t>(l)] = q.inc[k];
-    source[l] = -1;
+    lanes.source[l] = -1;
   };
   // The next batch of walks into the queue (walks of no step are done on the spot); false
   // when the task has none left.
@@ -705,38 +736,38 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   const auto scalar = [&](int l) {
     own(l);
     for (int a = 0; a < 3; ++a) {
-      lane_axes[l][a].t_max = t[a][l];
-      lane_axes[l][a].events = static_cast<int>(events[a][l]);
+      lane_axes[l][a].t_max = lanes.t[a][l];
+      lane_axes[l][a].events = static_cast<int>(lanes.events[a][l]);
     }
   };
   // The rest of lane l's walk one step at a time; its visits in all.
   const auto finish = [&](int l) {
     scalar(l);
-    return finish_walk<kFlagWords>(start, lane_axes[l][0], lane_axes[l][1], lane_axes[l][2],
-                                   slot[l], left[l], lane_steps[static_cast<std::size_t>(l)],
-                                   lane_inc[static_cast<std::size_t>(l)], marks, box);
+    return finish_walk<kFlagWords>(
+        start, lane_axes[l][0], lane_axes[l][1], lane_axes[l][2], lanes.slot[l], lanes.left[l],
+        lane_steps[static_cast<std::size_t>(l)], lane_inc[static_cast<std::size_t>(l)], marks, box);
   };
   // Lane l takes the queue's next walk (stored lanes; the vector loop takes them by itself).
   const auto take = [&](int l) {
     const auto k = static_cast<std::size_t>(q.next++);
     for (int a = 0; a < 3; ++a) {
-      t[a][l] = q.t[a][k];
-      dt[a][l] = q.dt[a][k];
-      delta[a][l] = q.delta[a][k];
-      events[a][l] = q.events[a][k];
+      lanes.t[a][l] = q.t[a][k];
+      lanes.dt[a][l] = q.dt[a][k];
+      lanes.delta[a][l] = q.delta[a][k];
+      lanes.events[a][l] = q.events[a][k];
     }
-    slot[l] = start.slot;
-    left[l] = q.steps[k];
-    source[l] = q.id[k];
+    lanes.slot[l] = start.slot;
+    lanes.left[l] = q.steps[k];
+    lanes.source[l] = q.id[k];
   };
 
-  for (int l = 0; l < kLanes; ++l) source[l] = -2;
+  for (int l = 0; l < kLanes; ++l) lanes.source[l] = -2;
   while (true) {
     // Idle lanes take walks; when the task has fewer left than lanes, the lanes finish one at
     // a time.
     bool short_of_walks = false;
     for (int l = 0; l < kLanes; ++l) {
-      if (source[l] != -2) continue;
+      if (lanes.source[l] != -2) continue;
       if (q.next == q.len && !refill_queue()) {
         short_of_walks = true;
         break;
@@ -745,27 +776,28 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
     }
     if (short_of_walks) {
       for (int l = 0; l < kLanes; ++l) {
-        if (source[l] != -2) visits += finish(l);
+        if (lanes.source[l] != -2) visits += finish(l);
       }
       return visits;
     }
-    __m512d tx = _mm512_load_pd(t[0]), ty = _mm512_load_pd(t[1]), tz = _mm512_load_pd(t[2]);
-    __m512d dtx = _mm512_load_pd(dt[0]), dty = _mm512_load_pd(dt[1]);
-    __m512d dtz = _mm512_load_pd(dt[2]);
-    __m512i s = _mm512_load_si512(slot);
-    __m512i dx = _mm512_load_si512(delta[0]), dy = _mm512_load_si512(delta[1]);
-    __m512i dz = _mm512_load_si512(delta[2]);
-    __m512i ex = _mm512_load_si512(events[0]), ey = _mm512_load_si512(events[1]);
-    __m512i ez = _mm512_load_si512(events[2]);
-    __m512i r = _mm512_load_si512(left);
-    __m512i src = _mm512_load_si512(source);
+    __m512d tx = _mm512_load_pd(lanes.t[0]), ty = _mm512_load_pd(lanes.t[1]),
+            tz = _mm512_load_pd(lanes.t[2]);
+    __m512d dtx = _mm512_load_pd(lanes.dt[0]), dty = _mm512_load_pd(lanes.dt[1]);
+    __m512d dtz = _mm512_load_pd(lanes.dt[2]);
+    __m512i s = _mm512_load_si512(lanes.slot);
+    __m512i dx = _mm512_load_si512(lanes.delta[0]), dy = _mm512_load_si512(lanes.delta[1]);
+    __m512i dz = _mm512_load_si512(lanes.delta[2]);
+    __m512i ex = _mm512_load_si512(lanes.events[0]), ey = _mm512_load_si512(lanes.events[1]);
+    __m512i ez = _mm512_load_si512(lanes.events[2]);
+    __m512i r = _mm512_load_si512(lanes.left);
+    __m512i src = _mm512_load_si512(lanes.source);
     const __m512i one = _mm512_set1_epi64(1);
     const __m512i zero = _mm512_setzero_si512();
     const __m512i start_slot = _mm512_set1_epi64(start.slot);
     __mmask8 event = 0, ended = 0;
     while (true) {
-      _mm512_store_si512(slot, s);
-      for (int l = 0; l < kLanes; ++l) mark_voxel<kFlagWords>(bits, dirty, slot[l]);
+      _mm512_store_si512(lanes.slot, s);
+      for (int l = 0; l < kLanes; ++l) mark_voxel<kFlagWords>(bits, dirty, lanes.slot[l]);
       // The scalar step's comparisons: x if x < y and x < z, else y if y < z, else z.
       const __mmask8 x_lt_y = _mm512_cmp_pd_mask(tx, ty, _CMP_LT_OQ);
       const __mmask8 x_lt_z = _mm512_cmp_pd_mask(tx, tz, _CMP_LT_OQ);
@@ -790,19 +822,11 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
       if ((ended | event) == 0) continue;
       const int n_ended = std::popcount(static_cast<unsigned>(ended));
       if (event != 0 || q.len - q.next < n_ended) break;
-      // Walks that ended without an event: booked here (finish() with no step left), and their
-      // lanes take queued walks.
-      _mm512_store_pd(t[0], tx);
-      _mm512_store_pd(t[1], ty);
-      _mm512_store_pd(t[2], tz);
-      _mm512_store_si512(slot, s);
-      _mm512_store_si512(events[0], ex);
-      _mm512_store_si512(events[1], ey);
-      _mm512_store_si512(events[2], ez);
-      _mm512_store_si512(left, r);
-      _mm512_store_si512(source, src);
-      for (unsigned lanes = ended; lanes != 0; lanes &= lanes - 1) {
-        visits += finish(std::countr_zero(lanes));
+      // Walks that ended without an event: booked here (finish() with no step lanes.left), and
+      // their lanes take queued walks.
+      store_lanes(lanes, tx, ty, tz, dtx, dty, dtz, dx, dy, dz, s, ex, ey, ez, r, src);
+      for (unsigned m = ended; m != 0; m &= m - 1) {
+        visits += finish(std::countr_zero(m));
       }
       const int k = q.next;
       q.next += n_ended;
@@ -822,35 +846,22 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
       src = _mm512_mask_expandloadu_epi64(src, ended, &q.id[k]);
       s = _mm512_mask_mov_epi64(s, ended, start_slot);
     }
-    _mm512_store_pd(t[0], tx);
-    _mm512_store_pd(t[1], ty);
-    _mm512_store_pd(t[2], tz);
-    _mm512_store_pd(dt[0], dtx);
-    _mm512_store_pd(dt[1], dty);
-    _mm512_store_pd(dt[2], dtz);
-    _mm512_store_si512(delta[0], dx);
-    _mm512_store_si512(delta[1], dy);
-    _mm512_store_si512(delta[2], dz);
-    _mm512_store_si512(slot, s);
-    _mm512_store_si512(events[0], ex);
-    _mm512_store_si512(events[1], ey);
-    _mm512_store_si512(events[2], ez);
-    _mm512_store_si512(left, r);
-    _mm512_store_si512(source, src);
-    for (unsigned lanes = static_cast<unsigned>(event | ended); lanes != 0; lanes &= lanes - 1) {
-      const int l = std::countr_zero(lanes);
+    store_lanes(lanes, tx, ty, tz, dtx, dty, dtz, dx, dy, dz, s, ex, ey, ez, r, src);
+    for (unsigned m = static_cast<unsigned>(event | ended); m != 0; m &= m - 1) {
+      const int l = std::countr_zero(m);
       bool done = false;
       if (((event >> l) & 1) != 0) {
         // The stepped axis's event, as AxisWalk::advance handles it (before the step count).
         scalar(l);
         for (int a = 0; a < 3; ++a) {
-          if (events[a][l] != 0) continue;
-          if (!lane_axes[l][a].on_event(slot[l])) {  // left the window
+          if (lanes.events[a][l] != 0) continue;
+          if (!lane_axes[l][a].on_event(lanes.slot[l])) {  // left the window
             add_walk_box<kFlagWords>(start, lane_axes[l][0], lane_axes[l][1], lane_axes[l][2], box);
-            visits += static_cast<std::uint64_t>(lane_steps[static_cast<std::size_t>(l)] - left[l]);
+            visits +=
+                static_cast<std::uint64_t>(lane_steps[static_cast<std::size_t>(l)] - lanes.left[l]);
             done = true;
           } else {
-            events[a][l] = lane_axes[l][a].events;
+            lanes.events[a][l] = lane_axes[l][a].events;
           }
         }
       }
@@ -858,7 +869,7 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
         visits += finish(l);  // no step left: the end voxel, if marked, and the box
         done = true;
       }
-      if (done) source[l] = -2;
+      if (done) lanes.source[l] = -2;
     }
   }
 }
