@@ -1431,6 +1431,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
       __builtin_prefetch(&state_[a], 1);
       __builtin_prefetch(&rise_cm_[a], 1);
       __builtin_prefetch(&hit_bits_[a >> 6], 1);
+      __builtin_prefetch(&floor_bits_[a >> 6], 1);
     }
     const std::uint32_t s = hit_slot_[i];
     if (s == kNoSlot) continue;
