@@ -67,9 +67,7 @@ std::uint64_t key_offset(int dx, int dy, int dz) {
 void FilterScratch::reserve(std::size_t points) {
   std::size_t capacity = 1024;
   while (capacity < 2 * points) capacity *= 2;
-  keys.assign(capacity, 0);
-  counts.assign(capacity, 0);
-  cell_state.assign(capacity, 0);
+  cells.assign(capacity, Cell{});
   point_key.assign(points, 0);
   point_slot.assign(points, 0);
   point_near.assign(points, 0);
@@ -165,24 +163,23 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     capacity = 1024;
     while (capacity < 2 * m) capacity *= 2;
     mask = capacity - 1;
-    scratch.keys.assign(capacity, 0);
-    scratch.counts.assign(capacity, 0);
-    scratch.cell_state.assign(capacity, 0);
+    scratch.cells.assign(capacity, FilterScratch::Cell{});
     scratch.point_slot.resize(m);
     for (std::size_t i = 0; i < m; ++i) {
       const std::uint64_t key = scratch.point_key[i];
       std::size_t s = slot_of(key, mask);
-      while (scratch.keys[s] != 0 && scratch.keys[s] != key) s = (s + 1) & mask;
-      scratch.keys[s] = key;
-      ++scratch.counts[s];
-      scratch.cell_state[s] |= scratch.point_near[i];
+      while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
+      FilterScratch::Cell& cell = scratch.cells[s];
+      cell.key = key;
+      ++cell.count;
+      cell.state |= scratch.point_near[i];
       scratch.point_slot[i] = static_cast<std::uint32_t>(s);
     }
   }
   const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
     std::size_t s = slot_of(key, mask);
-    while (scratch.keys[s] != 0) {
-      if (scratch.keys[s] == key) return scratch.counts[s];
+    while (scratch.cells[s].key != 0) {
+      if (scratch.cells[s].key == key) return scratch.cells[s].count;
       s = (s + 1) & mask;
     }
     return 0;
@@ -204,9 +201,8 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     runner.parallel_for(kFilterTasks, [&](std::size_t task) {
       for (std::size_t s = capacity * task / kFilterTasks; s < capacity * (task + 1) / kFilterTasks;
            ++s) {
-        if (scratch.cell_state[s] != 0 && has_neighbours(scratch.keys[s])) {
-          scratch.cell_state[s] |= 2;
-        }
+        FilterScratch::Cell& cell = scratch.cells[s];
+        if (cell.state != 0 && has_neighbours(cell.key)) cell.state |= 2;
       }
     });
   }
@@ -216,7 +212,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     std::size_t kept = 0;
     for (std::size_t i = m * task / kFilterTasks; i < m * (task + 1) / kFilterTasks; ++i) {
       const bool keep = !outliers || scratch.point_near[i] == 0 ||
-                        (scratch.cell_state[scratch.point_slot[i]] & 2) != 0;
+                        (scratch.cells[scratch.point_slot[i]].state & 2) != 0;
       scratch.keep[i] = keep ? 1 : 0;
       kept += keep ? 1 : 0;
     }

@@ -42,11 +42,16 @@ struct FilterCounts {
 
 /// Buffers of the filter, reused across scans (no allocation after warm-up).
 struct FilterScratch {
-  std::vector<std::uint64_t> keys;    ///< open-addressing table of cell keys (0 = empty)
-  std::vector<std::uint32_t> counts;  ///< points per table slot
-  /// Per table slot: bit 0, a candidate near enough to be tested lies in the cell; bit 1, the
-  /// cell and its 26 neighbours hold enough points (decided once per cell, not per point).
-  std::vector<std::uint8_t> cell_state;
+  /// One slot of the open-addressing table of cells: the cell's key (0 = empty), its points, and
+  /// its state: bit 0, a candidate near enough to be tested lies in the cell; bit 1, the cell
+  /// and its 26 neighbours hold enough points (decided once per cell, not per point). In one
+  /// 16-byte slot, so an insert or a lookup touches one cache line, not three.
+  struct Cell {
+    std::uint64_t key;
+    std::uint32_t count;
+    std::uint8_t state;
+  };
+  std::vector<Cell> cells;
   std::vector<std::uint64_t> point_key;   ///< cell key per candidate point
   std::vector<std::uint32_t> point_slot;  ///< table slot of the candidate's cell
   std::vector<std::uint8_t> point_near;   ///< per candidate: near enough to be tested
