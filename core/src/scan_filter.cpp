@@ -62,12 +62,21 @@ std::uint64_t key_offset(int dx, int dy, int dz) {
          static_cast<std::uint64_t>(static_cast<std::int64_t>(dz));
 }
 
+/// Slots of the outlier table for `points` candidates: a power of two, at least twice as many
+/// (so linear probing stays short), at least 1024. reserve() sizes for it, filter_scan uses it.
+std::size_t table_capacity(std::size_t points) {
+  std::size_t capacity = 1024;
+  while (capacity < 2 * points) capacity *= 2;
+  return capacity;
+}
+
+// A slot is one aligned 16-byte unit: it never straddles two cache lines.
+static_assert(sizeof(FilterScratch::Cell) == 16 && alignof(FilterScratch::Cell) == 16);
+
 }  // namespace
 
 void FilterScratch::reserve(std::size_t points) {
-  std::size_t capacity = 1024;
-  while (capacity < 2 * points) capacity *= 2;
-  cells.assign(capacity, Cell{});
+  cells.assign(table_capacity(points), Cell{});
   point_key.assign(points, 0);
   point_slot.assign(points, 0);
   point_near.assign(points, 0);
@@ -160,8 +169,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   std::size_t mask = 0;
   std::size_t capacity = 0;
   if (outliers) {
-    capacity = 1024;
-    while (capacity < 2 * m) capacity *= 2;
+    capacity = table_capacity(m);
     mask = capacity - 1;
     scratch.cells.assign(capacity, FilterScratch::Cell{});
     scratch.point_slot.resize(m);
