@@ -20,6 +20,7 @@
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/kitti.hpp"
+#include "tarmac/tools/phase_runner.hpp"
 #include "vdbfusion_reference.hpp"
 
 namespace {
@@ -34,6 +35,7 @@ struct Options {
   double max_range_m = 50.0;
   std::size_t threads = 2;
   bool narrow_walk = false;  ///< walk rays one at a time even where AVX-512 lanes are available
+  bool phases = false;       ///< time each stage's parallel_for calls and serial stretches
   std::size_t max_scans = 0;
   double sensor_height_m = 1.9;
   bool esdf = true;
@@ -134,6 +136,8 @@ int main(int argc, char** argv) {
       opt.tsdf_only = true;
     else if (a == "--narrow-walk")
       opt.narrow_walk = true;
+    else if (a == "--phases")
+      opt.phases = true;
     else if (a == "--window" && v) {
       if (std::sscanf(argv[++i], "%d,%d,%d", &opt.window_x, &opt.window_y, &opt.window_z) != 3 ||
           opt.window_x <= 0 || opt.window_y <= 0 || opt.window_z <= 0) {
@@ -149,7 +153,9 @@ int main(int argc, char** argv) {
           "                    [--window X,Y,Z]   (voxels; default: 2*ceil(range/res)+2 x same x "
           "8 m)\n"
           "                    [--tsdf-reserve-blocks N] [--narrow-walk]   (rays one at a time, "
-          "not in AVX-512 lanes)\n");
+          "not in AVX-512 lanes)\n"
+          "                    [--phases]   (per stage: each parallel_for call and the serial "
+          "stretches between)\n");
       return a == "--help" ? 0 : 64;
     }
   }
@@ -193,6 +199,16 @@ int main(int argc, char** argv) {
     return 64;
   }
   daemon::ThreadPool pool(opt.threads);
+  // --phases: the filter, occupancy, costmap and band stages run on a PhaseRunner over the same
+  // pool (the same tasks on the same threads; a clock read around each task is added).
+  tools::PhaseRunner phased(pool);
+  core::TaskRunner& runner = opt.phases ? static_cast<core::TaskRunner&>(phased) : pool;
+  std::vector<tools::StagePhases> ph_filter, ph_occ, ph_cost, ph_band;
+  const auto staged = [&](std::vector<tools::StagePhases>& out, auto&& fn) {
+    if (opt.phases) phased.begin_stage();
+    fn();
+    if (opt.phases) out.push_back(phased.end_stage());
+  };
   core::Mapper mapper(params);
   mapper.occupancy().set_wide_walk(!opt.narrow_walk);
   octomap::OcTree octree(opt.resolution_m);
@@ -222,8 +238,11 @@ int main(int argc, char** argv) {
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
     // tarmac, stage by stage.
     core::FilterCounts counts;
-    const double f = timed_ms([&] { counts = mapper.ingest(clouds[k], T_W_B, T_B_S, pool); });
-    const double o = opt.tsdf_only ? 0.0 : timed_ms([&] { mapper.integrate(pool); });
+    const double f = timed_ms([&] {
+      staged(ph_filter, [&] { counts = mapper.ingest(clouds[k], T_W_B, T_B_S, runner); });
+    });
+    const double o =
+        opt.tsdf_only ? 0.0 : timed_ms([&] { staged(ph_occ, [&] { mapper.integrate(runner); }); });
     const double faults0 = process_minor_faults();
     const double cpu0 = process_cpu_ms();
     const double ts = timed_ms([&] {
@@ -238,10 +257,13 @@ int main(int argc, char** argv) {
     t_vdbfusion.push_back(timed_ms(
         [&] { vdbfusion.integrate(mapper.sensor_W(), mapper.points_W(), opt.max_range_m); }));
     t_vdbfusion_cpu.push_back(process_cpu_ms() - cpu1);
-    const double c = opt.tsdf_only ? 0.0 : timed_ms([&] { mapper.update_costmap({}, 0, pool); });
+    const double c = opt.tsdf_only ? 0.0 : timed_ms([&] {
+      staged(ph_cost, [&] { mapper.update_costmap({}, 0, runner); });
+    });
     // The band stage: its states from the window and this costmap's ground, then the transform.
     if (params.esdf_band.enabled) {
-      t_band.push_back(timed_ms([&] { mapper.update_esdf_band({}, 0, pool); }));
+      t_band.push_back(
+          timed_ms([&] { staged(ph_band, [&] { mapper.update_esdf_band({}, 0, runner); }); }));
     }
     t_filter.push_back(f);
     t_occ.push_back(o);
@@ -407,6 +429,15 @@ int main(int argc, char** argv) {
   if (!t_band.empty()) print_row("3D ESDF band stage", t_band);
   print_row("pipeline", t_pipeline);
   print_row("filter+occupancy+costmap", t_mapping);
+  if (opt.phases) {
+    std::printf(
+        "  phases of each stage (--phases; which call is which: see the stage's source):\n");
+    std::fputs(tools::summarize_phases("filter", ph_filter).c_str(), stdout);
+    std::fputs(tools::summarize_phases("occupancy", ph_occ).c_str(), stdout);
+    std::fputs(tools::summarize_phases("costmap + 2D ESDF", ph_cost).c_str(), stdout);
+    if (!ph_band.empty())
+      std::fputs(tools::summarize_phases("3D ESDF band", ph_band).c_str(), stdout);
+  }
 
   if (opt.esdf) {
     // 3D ESDF over the whole window on the final occupancy: tarmac's exact transform against
