@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -141,15 +142,12 @@ int wrap(int i, int n) {
   return r < 0 ? r + n : r;
 }
 
-/// Rays are split into a fixed number of tasks, each marking its own bit set, and the marks are
-/// applied in fixed ranges of the window, so the work splits the same way whatever the runner's
-/// thread count (determinism contract). Three, beside the hit pass's one task: on 2 threads
-/// the four jobs are of a size (BALM hall, 1 thread: hit pass ~0.8 ms, each ray task ~1.0 ms);
-/// 4 or 5 measured no faster and add mark sets to OR.
+/// Ray tasks, each marking its own bit set (the rays it walks: see TaskRays), beside the hit
+/// pass's one task; the marks are applied in fixed ranges of the window. Three: a task more is
+/// a mark set more for the apply pass to OR, and 4 or 5 measured no faster.
 constexpr std::size_t kRayTasks = 3;
-/// Rays are dealt to the tasks in chunks of this many, round robin: every task gets rays of every
-/// direction, so a part of the scan facing a far wall does not land on one task (512 measured
-/// the same).
+/// Rays are taken by the ray tasks in chunks of this many, in direction order, each chunk by the
+/// first task to ask for it (see TaskRays).
 constexpr std::size_t kRayChunk = 64;
 constexpr std::size_t kApplyTasks = 8;
 /// No slot: the return does not mark (beyond max range or outside the window).
@@ -460,16 +458,21 @@ void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
 
 /// The rays of one ray task: returns (within max range: walked to their voxel, not marked;
 /// beyond: walked up to the clearing range, end voxel included) then beams without a return
-/// (clearing range, end included). The scan's rays are taken in `order` (by direction) and
-/// dealt in chunks of kRayChunk, round robin; position j of `order` is this task's when its
-/// chunk is dealt to it.
+/// (clearing range, end included). The scan's rays are taken in `order` (by direction), in
+/// chunks of kRayChunk: a task takes the next chunk nobody has taken when it needs one
+/// (`next_chunk`, shared by the scan's ray tasks), so the tasks end together however the
+/// threads are shared with the hit pass. Which task walks which ray changes nothing: the
+/// apply pass reads the union of the tasks' marks (an OR), the box is the union of their
+/// boxes and the visits their sum, so the map is the same bit for bit (the digest tests).
+/// On 2 threads the thread that ran the hit pass had to take one of three fixed thirds as
+/// well, and the other two thirds waited for it (BALM hall: 1.4 ms hit pass, 1.9 ms a third).
 struct TaskRays {
   std::span<const Eigen::Vector3f> points, dirs;
   /// The rays by direction (see sort_rays_by_direction); empty: in the scan's order.
   std::span<const std::uint32_t> order;
   Eigen::Vector3d origin;
   double max_range, clear_range;
-  std::size_t task;
+  std::atomic<std::size_t>* next_chunk;
 };
 
 /// The rays of one ray task, one at a time, as walks to make: where each ends and whether its
@@ -480,17 +483,19 @@ class TaskRayCursor {
       : rays_(rays),
         n_points_(rays.points.size()),
         n_rays_(rays.points.size() + rays.dirs.size()),
-        first_(rays.task * kRayChunk),
-        j_(first_) {}
+        first_(0),
+        j_(0),
+        end_(0) {}
 
   /// The next walk of the task; false when none is left.
   bool next(Eigen::Vector3d& end_W, bool& include_end) {
     const Eigen::Vector3d& origin_W = rays_.origin;
     while (true) {
-      if (j_ >= std::min(n_rays_, first_ + kRayChunk)) {
-        first_ += kRayTasks * kRayChunk;
-        j_ = first_;
+      if (j_ >= end_) {
+        first_ = kRayChunk * rays_.next_chunk->fetch_add(1, std::memory_order_relaxed);
         if (first_ >= n_rays_) return false;
+        j_ = first_;
+        end_ = std::min(n_rays_, first_ + kRayChunk);
       }
       const std::size_t j = j_++;
       const std::size_t i = rays_.order.empty() ? j : rays_.order[j];
@@ -523,7 +528,7 @@ class TaskRayCursor {
  private:
   const TaskRays& rays_;
   std::size_t n_points_, n_rays_;
-  std::size_t first_, j_;  ///< the current chunk's first ray, the next ray (in `order`)
+  std::size_t first_, j_, end_;  ///< the current chunk [first_, end_), the next ray (in `order`)
 };
 
 /// Walks every ray of a task one after the other; returns the voxel visits.
@@ -1481,7 +1486,8 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const std::size_t n_points = points_W.size();
   const std::array<int, 3> ring_min = ring_origin();
   // 2. Free space: each ray task marks the voxels its rays pass through in its own bit set
-  //    (fixed chunks of rays, so the split does not depend on the thread count).
+  //    (chunks of rays as the tasks ask for them; their union does not depend on who took
+  //    which, see TaskRays).
   const std::size_t n_rays = n_points + clearing_dirs_W.size();
   const WindowGeometry w{dims_, min_, params_.voxel_size_m};
   const RayStart start(w, origin_W);
@@ -1491,6 +1497,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   // The order helps the one-at-a-time walk's branch prediction. The wide walk has no branch
   // per step to predict: BALM hall at 1 thread, its occupancy stage took 4.01–4.09 ms without
   // the sort against 4.21–4.25 ms with it (the sort itself 0.11 ms, serial).
+  std::atomic<std::size_t> next_chunk{0};
   const bool wide = wide_walk_active();
   if (!wide) {
     sort_rays_by_direction(origin_W, points_W, clearing_dirs_W, ray_bucket_, ray_bucket_count_,
@@ -1509,8 +1516,8 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
                           flag_words ? dirty_words_[task].data() : nullptr};
     const std::uint64_t visits = walk_task(
         w, start,
-        TaskRays{points_W, clearing_dirs_W, order, origin_W, max_range, clear_range, task}, marks,
-        box, wide_walk_);
+        TaskRays{points_W, clearing_dirs_W, order, origin_W, max_range, clear_range, &next_chunk},
+        marks, box, wide_walk_);
     task_visits[task] = visits;
   });
 
