@@ -146,6 +146,32 @@ TEST(ScanFilter, OutlierDecisionMatchesBruteForceCountAndSensorFrameOutputMatche
   for (std::size_t i = 0; i < out_S.size(); ++i) ASSERT_EQ(f.out_W[i], R * out_S[i] + t) << i;
 }
 
+TEST(ScanFilter, TableSizedFromASmallerScanGivesTheSameResult) {
+  // The outlier table is sized from the previous scan's distinct cells: after a scan of a few
+  // cells, a scan of thousands overflows that size and starts again with room for all its
+  // candidates; after a large scan, a small one uses a table sized for the large one. Either
+  // way every count, point and order equals a fresh scratch's.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> u(-25.0f, 25.0f);
+  PointCloud scattered = wall_plus({});
+  for (int i = 0; i < 6000; ++i) scattered.points_S.emplace_back(u(rng), u(rng), u(rng) / 5.0f);
+  const PointCloud small = wall_plus({{4.0f, 4.0f, 0.0f}});
+  Fixture fresh_small, fresh_scattered;
+  const FilterCounts want_small = fresh_small.run(small);
+  const FilterCounts want_scattered = fresh_scattered.run(scattered);
+  EXPECT_GT(want_scattered.isolated, 1000u);
+  Fixture f;
+  const PointCloud* const sequence[] = {&small, &scattered, &small, &scattered};
+  for (const PointCloud* cloud : sequence) {
+    const bool is_small = cloud == &small;
+    const FilterCounts c = f.run(*cloud);
+    const FilterCounts& want = is_small ? want_small : want_scattered;
+    EXPECT_EQ(c.kept, want.kept);
+    EXPECT_EQ(c.isolated, want.isolated);
+    EXPECT_EQ(f.out_W, is_small ? fresh_small.out_W : fresh_scattered.out_W);
+  }
+}
+
 TEST(ScanFilter, SameResultForOneTwoAndFourThreads) {
   // Every reason in one cloud: a dense wall, scattered isolated points near and far, points in
   // the ego box and too close, non-finite ones; the point ranges split it unevenly.

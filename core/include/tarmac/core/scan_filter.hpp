@@ -53,6 +53,8 @@ struct FilterScratch {
     std::uint8_t state;
   };
   std::vector<Cell> cells;
+  /// Distinct cells of the last scan: the next table is sized from it (see filter_scan).
+  std::size_t last_cells = 0;
   std::vector<std::uint64_t> point_key;   ///< cell key per candidate point
   std::vector<std::uint32_t> point_slot;  ///< table slot of the candidate's cell
   std::vector<std::uint8_t> point_near;   ///< per candidate: near enough to be tested
