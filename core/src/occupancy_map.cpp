@@ -426,29 +426,38 @@ void direction_buckets(Float4 x, Float4 y, Float4 z, std::uint16_t* out) {
   }
 }
 
+/// Fixed ranges of rays whose direction buckets are computed side by side (most of the sort's
+/// time: BALM hall, 0.15 of 0.23 ms).
+constexpr std::size_t kBucketTasks = 4;
+
 /// The scan's rays (returns, then beams without one) in order of direction bucket, stable (a
 /// counting sort): `order` receives the ray indices. `bucket` and `count` are scratch.
 void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
                             std::span<const Eigen::Vector3f> points,
                             std::span<const Eigen::Vector3f> dirs,
                             std::vector<std::uint16_t>& bucket, std::vector<std::uint32_t>& count,
-                            std::vector<std::uint32_t>& order) {
+                            std::vector<std::uint32_t>& order, TaskRunner& runner) {
   const std::size_t n_points = points.size();
   const std::size_t n_rays = n_points + dirs.size();
-  bucket.resize((n_rays + 3) & ~std::size_t{3});
+  const std::size_t n_quads = (n_rays + 3) / 4;
+  bucket.resize(4 * n_quads);
   order.resize(n_rays);
   const Eigen::Vector3f o = origin_W.cast<float>();
-  for (std::size_t i = 0; i < n_rays; i += 4) {
-    Float4 x{}, y{}, z{};
-    for (std::size_t k = 0; k < 4 && i + k < n_rays; ++k) {
-      const std::size_t r = i + k;
-      const Eigen::Vector3f q = r < n_points ? Eigen::Vector3f(points[r] - o) : dirs[r - n_points];
-      x[k] = q.x();
-      y[k] = q.y();
-      z[k] = q.z();
+  runner.parallel_for(kBucketTasks, [&](std::size_t task) {
+    const std::size_t q0 = n_quads * task / kBucketTasks, q1 = n_quads * (task + 1) / kBucketTasks;
+    for (std::size_t i = 4 * q0; i < 4 * q1; i += 4) {
+      Float4 x{}, y{}, z{};
+      for (std::size_t k = 0; k < 4 && i + k < n_rays; ++k) {
+        const std::size_t r = i + k;
+        const Eigen::Vector3f q =
+            r < n_points ? Eigen::Vector3f(points[r] - o) : dirs[r - n_points];
+        x[k] = q.x();
+        y[k] = q.y();
+        z[k] = q.z();
+      }
+      direction_buckets(x, y, z, bucket.data() + i);
     }
-    direction_buckets(x, y, z, bucket.data() + i);
-  }
+  });
   count.assign(kDirBuckets + 1, 0);
   for (std::size_t r = 0; r < n_rays; ++r) ++count[bucket[r] + 1];
   for (std::size_t b = 1; b <= kDirBuckets; ++b) count[b] += count[b - 1];
@@ -1501,7 +1510,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   const bool wide = wide_walk_active();
   if (!wide) {
     sort_rays_by_direction(origin_W, points_W, clearing_dirs_W, ray_bucket_, ray_bucket_count_,
-                           ray_order_);
+                           ray_order_, runner);
   }
   const std::span<const std::uint32_t> order =
       wide ? std::span<const std::uint32_t>{} : std::span<const std::uint32_t>(ray_order_);
