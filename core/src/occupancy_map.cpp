@@ -1191,24 +1191,38 @@ float OccupancyMap::log_odds(const VoxelIndex& v) const {
   return in_window(v) ? log_odds_[slot(v)] : kUnknown;
 }
 
-void OccupancyMap::clear_slab(int axis, int global_index) {
-  const int r = wrap(global_index, dims_[axis]);
+void OccupancyMap::clear_slabs(int axis, int first, int count) {
   const int nx = dims_.x(), ny = dims_.y(), nz = dims_.z();
-  for (int z = 0; z < nz; ++z) {
-    for (int y = 0; y < ny; ++y) {
-      if ((axis == 2 && z != r) || (axis == 1 && y != r)) continue;
-      const std::size_t row = (static_cast<std::size_t>(z) * ny + y) * nx;
-      if (axis == 0) {
-        log_odds_[row + r] = kUnknown;
-        rise_cm_[row + r] = 0;
-        state_[row + r] = 0;
-        clear_floor_bits(row + r, 1);
-      } else {
-        const auto first = static_cast<std::ptrdiff_t>(row);
-        std::fill_n(log_odds_.begin() + first, nx, kUnknown);
-        std::fill_n(rise_cm_.begin() + first, nx, std::uint8_t{0});
-        std::fill_n(state_.begin() + first, nx, std::uint8_t{0});
-        clear_floor_bits(row, static_cast<std::size_t>(nx));
+  const int n = dims_[axis];
+  // The slabs' ring indices: one run, or two where the ring wraps.
+  const int r0 = wrap(first, n);
+  const std::array<std::array<int, 2>, 2> runs{
+      {{r0, std::min(count, n - r0)}, {0, count - std::min(count, n - r0)}}};
+  const auto clear = [&](std::size_t s, std::size_t len) {
+    const auto at = static_cast<std::ptrdiff_t>(s);
+    std::fill_n(log_odds_.begin() + at, len, kUnknown);
+    std::fill_n(rise_cm_.begin() + at, len, std::uint8_t{0});
+    std::fill_n(state_.begin() + at, len, std::uint8_t{0});
+    clear_floor_bits(s, len);
+  };
+  const std::size_t row_len = static_cast<std::size_t>(nx);
+  const std::size_t layer_len = row_len * static_cast<std::size_t>(ny);
+  for (const auto& [r, len] : runs) {
+    if (len == 0) continue;
+    const auto ur = static_cast<std::size_t>(r), ulen = static_cast<std::size_t>(len);
+    if (axis == 2) {
+      clear(ur * layer_len, ulen * layer_len);  // whole layers
+      continue;
+    }
+    for (std::size_t z = 0; z < static_cast<std::size_t>(nz); ++z) {
+      if (axis == 1) {
+        clear(z * layer_len + ur * row_len, ulen * row_len);  // whole rows of the layer
+        continue;
+      }
+      // Along x the slabs cut every row: all of them in one pass, each row's run at once (a
+      // pass per slab touched each row's lines again: 2.8 ms per scan driving on MulRan).
+      for (std::size_t y = 0; y < static_cast<std::size_t>(ny); ++y) {
+        clear(z * layer_len + y * row_len + ur, ulen);
       }
     }
   }
@@ -1241,11 +1255,11 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W) {
       lo[a] = target[a];
       hi[a] = target[a] + dims_[a] - 1;
     } else if (shift > 0) {
-      for (int g = min_[a] + dims_[a]; g < target[a] + dims_[a]; ++g) clear_slab(a, g);
+      clear_slabs(a, min_[a] + dims_[a], shift);
       lo[a] = min_[a] + dims_[a];
       hi[a] = target[a] + dims_[a] - 1;
     } else {
-      for (int g = target[a]; g < min_[a]; ++g) clear_slab(a, g);
+      clear_slabs(a, target[a], -shift);
       lo[a] = target[a];
       hi[a] = min_[a] - 1;
     }

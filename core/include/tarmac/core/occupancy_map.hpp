@@ -169,7 +169,9 @@ class OccupancyMap {
 
  private:
   [[nodiscard]] std::size_t slot(const VoxelIndex& v) const;
-  void clear_slab(int axis, int global_index);
+  /// Forgets the voxels of `count` consecutive slabs along `axis`, from world index `first`
+  /// (count < the window's size along the axis).
+  void clear_slabs(int axis, int first, int count);
   /// Makes the voxels of the static layer inside [lo, hi] (world indices, inclusive, within the
   /// window) read static.
   void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
