@@ -149,7 +149,10 @@ constexpr std::size_t kRayTasks = 3;
 /// Rays are taken by the ray tasks in chunks of this many, in direction order, each chunk by the
 /// first task to ask for it (see TaskRays).
 constexpr std::size_t kRayChunk = 64;
-constexpr std::size_t kApplyTasks = 8;
+/// Fixed ranges of the window the apply pass splits into. The marks crowd into the layers near
+/// the sensor's height, so a few ranges hold most of them: with 8 on MulRan, the longest took
+/// 1.44 of the 6.1 ms of all 8, and the pass 3.56 ms on 2 threads; finer ranges even it out.
+constexpr std::size_t kApplyTasks = 32;
 /// No slot: the return does not mark (beyond max range or outside the window).
 constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};
 
