@@ -116,7 +116,7 @@ void Mapper::reserve_retained(std::size_t points_per_scan) {
 }
 
 OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
-  map_.recenter(T_W_B_.translation());
+  map_.recenter(T_W_B_.translation(), runner);
   return map_.integrate(sensor_W_, points_W_, {}, runner, T_W_B_.linear().col(2));
 }
 

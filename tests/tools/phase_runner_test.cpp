@@ -49,16 +49,16 @@ TEST(PhaseRunner, RunsEveryTaskOnceAndTimesCallsAndSerialStretches) {
   EXPECT_LT(s.serial_ms[0], 10.0);
 }
 
-TEST(PhaseRunner, SummaryListsEachCallAndLeavesOutScansOfAnotherShape) {
+TEST(PhaseRunner, SummaryListsEachCallOfTheCommonShapeAndLeavesOutOthers) {
   core::SerialRunner serial;
   PhaseRunner runner(serial);
   std::vector<StagePhases> scans;
   std::vector<std::atomic<int>> runs(8);
-  for (int k = 0; k < 3; ++k) scans.push_back(run_stage(runner, runs, 1ms, 1ms));
-  // A scan whose stage made one call only.
+  // First a scan whose stage made one call only, then three of the common shape.
   runner.begin_stage();
   runner.parallel_for(3, [](std::size_t) {});
   scans.push_back(runner.end_stage());
+  for (int k = 0; k < 3; ++k) scans.push_back(run_stage(runner, runs, 1ms, 1ms));
   const std::string text = summarize_phases("demo", scans, 4);
   EXPECT_NE(text.find("demo: 2 parallel_for calls, 3 of 4 scans alike"), std::string::npos) << text;
   EXPECT_NE(text.find("parallel_for #1,  3 tasks"), std::string::npos) << text;

@@ -62,14 +62,28 @@ std::string summarize_phases(const std::string& stage, const std::vector<StagePh
                              std::size_t max_tasks_listed) {
   std::string out;
   if (scans.empty()) return out;
-  const std::size_t calls = scans.front().calls.size();
+  // The scans whose stage made the most common sequence of calls (a stage may skip a call on
+  // some scans, e.g. the window's scroll when the vehicle did not move a voxel).
+  const auto shape = [](const StagePhases& s) {
+    std::vector<std::size_t> tasks;
+    for (const auto& c : s.calls) tasks.push_back(c.task_ms.size());
+    return tasks;
+  };
+  std::vector<std::size_t> common;
+  std::size_t best = 0;
+  for (const StagePhases& s : scans) {
+    const auto mine = shape(s);
+    std::size_t n = 0;
+    for (const StagePhases& o : scans) n += shape(o) == mine ? 1 : 0;
+    if (n > best) {
+      best = n;
+      common = mine;
+    }
+  }
+  const std::size_t calls = common.size();
   std::vector<const StagePhases*> same;
   for (const StagePhases& s : scans) {
-    bool match = s.calls.size() == calls;
-    for (std::size_t c = 0; match && c < calls; ++c) {
-      match = s.calls[c].task_ms.size() == scans.front().calls[c].task_ms.size();
-    }
-    if (match) same.push_back(&s);
+    if (shape(s) == common) same.push_back(&s);
   }
   char head[160];
   std::snprintf(head, sizeof head,
@@ -87,7 +101,7 @@ std::string summarize_phases(const std::string& stage, const std::vector<StagePh
     out += "    serial" + std::string(c == calls ? " (end)" : "      ") + "          " +
            format("%7.3f / %7.3f\n", mean(serial), median(serial));
     if (c == calls) break;
-    const std::size_t tasks = scans.front().calls[c].task_ms.size();
+    const std::size_t tasks = common[c];
     const auto wall = column([&](const StagePhases& s) { return s.calls[c].wall_ms; });
     char label[64];
     std::snprintf(label, sizeof label, "    parallel_for #%zu, %2zu tasks", c + 1, tasks);

@@ -100,7 +100,10 @@ class OccupancyMap {
 
   /// Moves the window so that it is centred on `position_W` in x/y and spans
   /// [z − window_below_m, …) in z. Voxels that leave are forgotten (unknown when they re-enter);
-  /// voxels that stay keep their content, without copying. RT-safe.
+  /// voxels that stay keep their content, without copying. RT-safe. The voxels that leave are
+  /// cleared in fixed ranges of layers on `runner` (same result for any runner).
+  void recenter(const Eigen::Vector3d& position_W, TaskRunner& runner);
+  /// The same on the calling thread.
   void recenter(const Eigen::Vector3d& position_W);
 
   /// Integrates one scan: `points_W` are returns in the world frame taken from `origin_W`.
@@ -171,7 +174,7 @@ class OccupancyMap {
   [[nodiscard]] std::size_t slot(const VoxelIndex& v) const;
   /// Forgets the voxels of `count` consecutive slabs along `axis`, from world index `first`
   /// (count < the window's size along the axis).
-  void clear_slabs(int axis, int first, int count);
+  void clear_slabs(int axis, int first, int count, TaskRunner& runner);
   /// Makes the voxels of the static layer inside [lo, hi] (world indices, inclusive, within the
   /// window) read static.
   void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
