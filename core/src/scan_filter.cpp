@@ -184,7 +184,13 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       std::fill_n(scratch.cells.begin(), capacity, FilterScratch::Cell{});
       std::size_t distinct = 0;
       std::size_t i = 0;
+      // The candidates' cells are scattered over the table (MulRan's 36 k points over 100 m):
+      // their slots' lines are requested a few candidates ahead, so that the misses overlap.
+      constexpr std::size_t kAhead = 8;
       for (; i < m && 2 * distinct <= capacity; ++i) {
+        if (i + kAhead < m) {
+          __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
+        }
         const std::uint64_t key = scratch.point_key[i];
         std::size_t s = slot_of(key, mask);
         while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
