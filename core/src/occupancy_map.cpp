@@ -153,7 +153,8 @@ constexpr std::size_t kRayChunk = 64;
 /// the sensor's height, so a few ranges hold most of them: with 8 on MulRan, the longest took
 /// 1.44 of the 6.1 ms of all 8, and the pass 3.56 ms on 2 threads; finer ranges even it out.
 constexpr std::size_t kApplyTasks = 32;
-/// Fixed ranges of layers the slabs leaving the window are cleared in.
+/// Fixed ranges of slots (cut at multiples of 64) in which the window's scroll clears the ring
+/// slabs that the entering voxels take over.
 constexpr std::size_t kSlabTasks = 8;
 /// No slot: the return does not mark (beyond max range or outside the window).
 constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};

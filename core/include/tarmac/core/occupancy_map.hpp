@@ -101,7 +101,7 @@ class OccupancyMap {
   /// Moves the window so that it is centred on `position_W` in x/y and spans
   /// [z − window_below_m, …) in z. Voxels that leave are forgotten (unknown when they re-enter);
   /// voxels that stay keep their content, without copying. RT-safe. The voxels that leave are
-  /// cleared in fixed ranges of layers on `runner` (same result for any runner).
+  /// cleared in fixed ranges of slots on `runner` (same result for any runner).
   void recenter(const Eigen::Vector3d& position_W, TaskRunner& runner);
   /// The same on the calling thread.
   void recenter(const Eigen::Vector3d& position_W);
