@@ -168,6 +168,12 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const auto& cand = scratch.candidates_S;
   std::size_t mask = 0;
   std::size_t capacity = 0;
+  // The slot holding `key`, or the empty slot where it would go (linear probing).
+  const auto find = [&](std::uint64_t key) {
+    std::size_t s = slot_of(key, mask);
+    while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
+    return s;
+  };
   if (outliers) {
     // Sized for twice the last scan's distinct cells, not for every candidate: points share
     // cells (BALM hall: 3 k cells for 18 k points), and the table is cold at each scan, so its
@@ -192,8 +198,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
           __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
         }
         const std::uint64_t key = scratch.point_key[i];
-        std::size_t s = slot_of(key, mask);
-        while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
+        const std::size_t s = find(key);
         FilterScratch::Cell& cell = scratch.cells[s];
         distinct += cell.key == 0 ? 1 : 0;
         cell.key = key;
@@ -209,12 +214,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     }
   }
   const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
-    std::size_t s = slot_of(key, mask);
-    while (scratch.cells[s].key != 0) {
-      if (scratch.cells[s].key == key) return scratch.cells[s].count;
-      s = (s + 1) & mask;
-    }
-    return 0;
+    return scratch.cells[find(key)].count;  // an empty slot's count is 0
   };
   // Itself and outlier_min_neighbors others.
   const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
