@@ -24,6 +24,7 @@
 #include "nav_msgsPubSubTypes.h"
 #include "tarmac/config/config.hpp"
 #include "tarmac/tools/array_io.hpp"
+#include "tarmac/tools/stats.hpp"
 #include "tarmac_msgsPubSubTypes.h"
 
 namespace {
@@ -63,12 +64,7 @@ std::int64_t realtime_ns() {
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size()))) - 1;
-  return v[std::min(i, v.size() - 1)];
-}
+using tools::percentile;
 
 struct Series {
   std::vector<double> ms;

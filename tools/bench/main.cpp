@@ -21,6 +21,7 @@
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/tools/phase_runner.hpp"
+#include "tarmac/tools/stats.hpp"
 #include "vdbfusion_reference.hpp"
 
 namespace {
@@ -87,15 +88,9 @@ void settle_allocator() {
 struct Summary {
   double mean, p50, p99, max;
 };
-Summary summarize(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  double s = 0.0;
-  for (const double x : v) s += x;
-  const auto at = [&](double q) {
-    return v[std::min(v.size() - 1,
-                      static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size()))) - 1)];
-  };
-  return {s / static_cast<double>(v.size()), at(0.5), at(0.99), v.back()};
+Summary summarize(const std::vector<double>& v) {
+  return {tools::mean(v), tools::percentile(v, 0.5), tools::percentile(v, 0.99),
+          tools::percentile(v, 1.0)};
 }
 
 void print_row(const char* name, const std::vector<double>& ms) {

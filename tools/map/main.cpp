@@ -23,6 +23,7 @@
 #include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/tools/mesh_io.hpp"
+#include "tarmac/tools/stats.hpp"
 
 namespace {
 
@@ -60,18 +61,8 @@ struct StageTimes {
   std::vector<double> ms;
 };
 
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size()))) - 1;
-  return v[std::min(i, v.size() - 1)];
-}
-
-double mean(const std::vector<double>& v) {
-  double s = 0.0;
-  for (const double x : v) s += x;
-  return v.empty() ? 0.0 : s / static_cast<double>(v.size());
-}
+using tools::mean;
+using tools::percentile;
 
 template <typename Fn>
 double timed_ms(Fn&& fn) {

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "tarmac/tools/stats.hpp"
+
 namespace tarmac::tools {
 
 namespace {
@@ -12,17 +14,9 @@ double ms_between(std::chrono::steady_clock::time_point a,
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-double mean(const std::vector<double>& v) {
-  double s = 0.0;
-  for (const double x : v) s += x;
-  return v.empty() ? 0.0 : s / static_cast<double>(v.size());
+/// p50 as every other table of the tools reads it.
+double median(const std::vector<double>& v) {
+  return percentile(v, 0.5);
 }
 
 std::string format(const char* fmt, double a, double b) {
@@ -64,26 +58,24 @@ std::string summarize_phases(const std::string& stage, const std::vector<StagePh
   if (scans.empty()) return out;
   // The scans whose stage made the most common sequence of calls (a stage may skip a call on
   // some scans, e.g. the window's scroll when the vehicle did not move a voxel).
-  const auto shape = [](const StagePhases& s) {
-    std::vector<std::size_t> tasks;
-    for (const auto& c : s.calls) tasks.push_back(c.task_ms.size());
-    return tasks;
-  };
-  std::vector<std::size_t> common;
-  std::size_t best = 0;
+  // (A shape: the task count of each call; ties go to the earliest scan's.)
+  std::vector<std::vector<std::size_t>> shapes;
   for (const StagePhases& s : scans) {
-    const auto mine = shape(s);
-    std::size_t n = 0;
-    for (const StagePhases& o : scans) n += shape(o) == mine ? 1 : 0;
-    if (n > best) {
-      best = n;
-      common = mine;
+    auto& tasks = shapes.emplace_back();
+    for (const auto& c : s.calls) tasks.push_back(c.task_ms.size());
+  }
+  std::size_t best = 0;
+  for (std::size_t k = 1; k < shapes.size(); ++k) {
+    if (std::count(shapes.begin(), shapes.end(), shapes[k]) >
+        std::count(shapes.begin(), shapes.end(), shapes[best])) {
+      best = k;
     }
   }
+  const std::vector<std::size_t>& common = shapes[best];
   const std::size_t calls = common.size();
   std::vector<const StagePhases*> same;
-  for (const StagePhases& s : scans) {
-    if (shape(s) == common) same.push_back(&s);
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    if (shapes[k] == common) same.push_back(&scans[k]);
   }
   char head[160];
   std::snprintf(head, sizeof head,

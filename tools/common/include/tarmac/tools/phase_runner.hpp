@@ -48,10 +48,10 @@ class PhaseRunner final : public core::TaskRunner {
 };
 
 /// Per-scan phases of one stage, summarised over the scans: for each position, the mean and
-/// p50 of the serial stretches and of the calls' wall time; per call, each task's p50 when it
-/// has at most `max_tasks_listed` tasks, else the p50 of its longest task and of their sum.
-/// Only the scans whose stage made the most common sequence of calls (their number of tasks) are
-/// summarised; the others are counted.
+/// p50 (nearest rank, tools::percentile) of the serial stretches and of the calls' wall time; per
+/// call, each task's p50 when it has at most `max_tasks_listed` tasks, else the p50 of its longest
+/// task and of their sum. Only the scans whose stage made the most common sequence of calls (their
+/// number of tasks) are summarised; the others are counted.
 std::string summarize_phases(const std::string& stage, const std::vector<StagePhases>& scans,
                              std::size_t max_tasks_listed = 4);
 

@@ -1,0 +1,16 @@
+#pragma once
+/// @file Summary statistics of per-scan or per-cycle timings, shared by the offline tools so that
+/// every table's p50 and p99 mean the same thing.
+
+#include <vector>
+
+namespace tarmac::tools {
+
+/// The q-quantile by nearest rank: the smallest value with at least q of the values at or below
+/// it (q = 0.99 of 21 values: the largest). 0 for no values.
+double percentile(std::vector<double> values, double q);
+
+/// Arithmetic mean; 0 for no values.
+double mean(const std::vector<double>& values);
+
+}  // namespace tarmac::tools
