@@ -894,6 +894,206 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   }
 }
 
+/// A walk set up for the four-lane walk (walk_rays_lanes4): what the lane's registers take.
+struct LaneWalk {
+  double t[3], dt[3];  ///< parameters and parameter steps per axis
+  /// Per axis: slot step; steps to the next event (ring wrap or window exit) − 1; slot
+  /// correction at a wrap; steps to the exit counted from the pending event.
+  std::int64_t delta[3], ev[3], wrap[3], to_exit[3];
+  std::int64_t left;  ///< voxels to mark − 1
+};
+
+/// Four lanes of 64 bits from one field of four walks (axis a).
+__attribute__((target("avx2"), always_inline)) inline __m256d lanes_of(const LaneWalk* const b[4],
+                                                                       double (LaneWalk::*f)[3],
+                                                                       int a) {
+  return _mm256_setr_pd((b[0]->*f)[a], (b[1]->*f)[a], (b[2]->*f)[a], (b[3]->*f)[a]);
+}
+__attribute__((target("avx2"), always_inline)) inline __m256i lanes_of(
+    const LaneWalk* const b[4], std::int64_t (LaneWalk::*f)[3], int a) {
+  return _mm256_setr_epi64x((b[0]->*f)[a], (b[1]->*f)[a], (b[2]->*f)[a], (b[3]->*f)[a]);
+}
+/// `m ? y : x` per 64-bit lane (m: all ones or all zeros).
+__attribute__((target("avx2"), always_inline)) inline __m256i select(__m256i m, __m256i y,
+                                                                     __m256i x) {
+  return _mm256_castpd_si256(
+      _mm256_blendv_pd(_mm256_castsi256_pd(x), _mm256_castsi256_pd(y), _mm256_castsi256_pd(m)));
+}
+
+/// One axis's events in the four-lane walk, for the lanes still walking (`walking`): a window
+/// exit ends the walk (its lane is set in `exited`); a ring wrap moves the slot back a ring,
+/// and the next event comes a ring later or at the exit, as AxisWalk::on_event.
+__attribute__((target("avx2"), always_inline)) inline void lanes4_events(
+    __m256i walking, __m256i& ev, __m256i& to_exit, __m256i wrap, __m256i n, __m256i& s,
+    __m256i& exited) {
+  const __m256i zero = _mm256_setzero_si256();
+  const __m256i m = _mm256_and_si256(_mm256_cmpgt_epi64(zero, ev), walking);
+  const __m256i out = _mm256_and_si256(m, _mm256_cmpeq_epi64(to_exit, zero));
+  const __m256i wrapped = _mm256_andnot_si256(out, m);
+  s = _mm256_add_epi64(s, _mm256_and_si256(wrapped, wrap));
+  const __m256i span = select(_mm256_cmpgt_epi64(to_exit, n), n, to_exit);
+  ev = select(wrapped, _mm256_sub_epi64(span, _mm256_set1_epi64x(1)), ev);
+  to_exit = select(wrapped, _mm256_sub_epi64(to_exit, span), to_exit);
+  exited = _mm256_or_si256(exited, out);
+}
+
+/// The same walks four at a time in AVX2 lanes (x86-64 processors that have AVX2 but not
+/// AVX-512; the caller checks). A lane takes the same steps as the one-at-a-time walk, decided
+/// by the same comparisons of the same sums, so the marks are the same bits; the step, one
+/// unpredictable branch per visit one at a time, becomes blends.
+/// The walks are taken a batch at a time in the task's (direction) order, and four neighbours
+/// run in lockstep until the longest has ended: a lane whose walk ended marks nothing (an OR
+/// of 0 into word 0) until then. Neighbours in direction mostly end near each other (BALM hall:
+/// 9 % of the lane steps idle); refilling a lane as its walk ends cost more than that without
+/// AVX-512's expand-loads, and sorting each batch by length more still. The only branch per step
+/// is to a rare path for ring wraps and window exits.
+/// The box: each walk adds its start and its end voxel one step further along each axis it
+/// moves on (the last steps may cross in another order than exact arithmetic would, by one
+/// voxel at most), clamped to the window. A superset of the voxels marked: the apply pass
+/// reads the marks inside it, so only its time changes.
+/// Measurements: docs/perf-occ8.md.
+template <bool kFlagWords>
+__attribute__((target("avx2"))) std::uint64_t walk_rays_lanes4(const WindowGeometry& w,
+                                                               const RayStart& start,
+                                                               const TaskRays& rays,
+                                                               FreeMarks marks, MarkBox& box) {
+  if (!start.inside) return 0;
+  TaskRayCursor cursor(rays);
+  std::uint64_t* const bits = marks.bits;
+  std::uint64_t* const dirty = marks.dirty;
+  std::uint64_t visits = 0;
+  constexpr int kBatch = 64;
+  constexpr std::int64_t kNever = std::int64_t{1} << 60;
+  // The batch, then three walks that mark nothing (to fill the last group).
+  std::array<LaneWalk, kBatch + 3> batch{};
+  for (int i = kBatch; i < kBatch + 3; ++i) {
+    batch[static_cast<std::size_t>(i)] =
+        LaneWalk{{0.0, 1.0, 1.0}, {0.0, 0.0, 0.0}, {0, 0, 0}, {kNever, kNever, kNever},
+                 {0, 0, 0},       {1, 1, 1},       -1};
+  }
+  const __m256i one = _mm256_set1_epi64x(1);
+  const __m256i low6 = _mm256_set1_epi64x(63);
+  const __m256i zero = _mm256_setzero_si256();
+  const __m256i sign = _mm256_set1_epi64x(std::numeric_limits<std::int64_t>::min());
+  const __m256i never = _mm256_set1_epi64x(kNever);
+  const __m256i nx = _mm256_set1_epi64x(w.dims[0]), ny = _mm256_set1_epi64x(w.dims[1]),
+                nz = _mm256_set1_epi64x(w.dims[2]);
+  bool more = true;
+  while (more) {
+    int n = 0;
+    Eigen::Vector3d end_W;
+    bool inc = false;
+    while (n < kBatch && (more = cursor.next(end_W, inc))) {
+      AxisWalk ax[3];  // NOLINT(cppcoreguidelines-pro-type-member-init): begin_walk sets them
+      std::int64_t steps = 0;
+      begin_walk(w, start, end_W, ax[0], ax[1], ax[2], steps);
+      if (steps == 0 && !inc) continue;  // marks nothing
+      LaneWalk& b = batch[static_cast<std::size_t>(n++)];
+      for (int a = 0; a < 3; ++a) {
+        b.t[a] = ax[a].t_max;
+        b.dt[a] = ax[a].t_delta;
+        b.delta[a] = ax[a].delta;
+        b.ev[a] = std::min<std::int64_t>(ax[a].events, kNever) - 1;
+        b.wrap[a] = ax[a].wrap;
+        b.to_exit[a] = ax[a].to_exit - ax[a].span;
+        const int moved = static_cast<int>(
+            std::abs(static_cast<int>(floor_to_int(end_W[a] / w.voxel_size_m)) - start.cur[a]));
+        box.add(a, start.rel[a],
+                std::clamp(start.rel[a] + ax[a].step * (moved + 1), 0, w.dims[a] - 1));
+      }
+      b.left = steps + (inc ? 1 : 0) - 1;
+      visits += static_cast<std::uint64_t>(b.left + 1);
+    }
+    for (int g = 0; g < n; g += 4) {
+      const LaneWalk* const b[4] = {
+          &batch[static_cast<std::size_t>(g)],
+          &batch[static_cast<std::size_t>(g < n - 1 ? g + 1 : kBatch)],
+          &batch[static_cast<std::size_t>(g < n - 2 ? g + 2 : kBatch + 1)],
+          &batch[static_cast<std::size_t>(g < n - 3 ? g + 3 : kBatch + 2)]};
+      __m256d tx = lanes_of(b, &LaneWalk::t, 0), ty = lanes_of(b, &LaneWalk::t, 1),
+              tz = lanes_of(b, &LaneWalk::t, 2);
+      const __m256d dtx = lanes_of(b, &LaneWalk::dt, 0), dty = lanes_of(b, &LaneWalk::dt, 1),
+                    dtz = lanes_of(b, &LaneWalk::dt, 2);
+      const __m256i dx = lanes_of(b, &LaneWalk::delta, 0), dy = lanes_of(b, &LaneWalk::delta, 1),
+                    dz = lanes_of(b, &LaneWalk::delta, 2);
+      __m256i ex = lanes_of(b, &LaneWalk::ev, 0), ey = lanes_of(b, &LaneWalk::ev, 1),
+              ez = lanes_of(b, &LaneWalk::ev, 2);
+      const __m256i wx = lanes_of(b, &LaneWalk::wrap, 0), wy = lanes_of(b, &LaneWalk::wrap, 1),
+                    wz = lanes_of(b, &LaneWalk::wrap, 2);
+      __m256i xx = lanes_of(b, &LaneWalk::to_exit, 0), xy = lanes_of(b, &LaneWalk::to_exit, 1),
+              xz = lanes_of(b, &LaneWalk::to_exit, 2);
+      __m256i r = _mm256_setr_epi64x(b[0]->left, b[1]->left, b[2]->left, b[3]->left);
+      __m256i s = _mm256_set1_epi64x(start.slot);
+      __m256i lost = zero;  // marks not made by walks that left the window
+      const std::int64_t longest =
+          std::max(std::max(b[0]->left, b[1]->left), std::max(b[2]->left, b[3]->left));
+      for (std::int64_t k = 0; k <= longest; ++k) {
+        const __m256i active = _mm256_cmpgt_epi64(r, _mm256_set1_epi64x(-1));
+        alignas(32) std::int64_t word[4];
+        alignas(32) std::uint64_t bit[4];
+        _mm256_store_si256(reinterpret_cast<__m256i*>(word),
+                           _mm256_and_si256(_mm256_srli_epi64(s, 6), active));
+        _mm256_store_si256(
+            reinterpret_cast<__m256i*>(bit),
+            _mm256_and_si256(_mm256_sllv_epi64(one, _mm256_and_si256(s, low6)), active));
+        for (int l = 0; l < 4; ++l) {
+          bits[word[l]] |= bit[l];
+          if constexpr (kFlagWords) {
+            dirty[word[l] >> kBlockShift] |= std::uint64_t{1} << (word[l] & 63);
+          }
+        }
+        // The scalar step's comparisons: x if x < y and x < z, else y if y < z, else z.
+        const __m256d x_lt_y = _mm256_cmp_pd(tx, ty, _CMP_LT_OQ);
+        const __m256d x_lt_z = _mm256_cmp_pd(tx, tz, _CMP_LT_OQ);
+        const __m256d y_lt_z = _mm256_cmp_pd(ty, tz, _CMP_LT_OQ);
+        const __m256d kx = _mm256_and_pd(x_lt_y, x_lt_z);
+        const __m256d ky = _mm256_andnot_pd(x_lt_y, y_lt_z);
+        const __m256d kxy = _mm256_or_pd(kx, ky);  // not z
+        tx = _mm256_blendv_pd(tx, _mm256_add_pd(tx, dtx), kx);
+        ty = _mm256_blendv_pd(ty, _mm256_add_pd(ty, dty), ky);
+        tz = _mm256_blendv_pd(_mm256_add_pd(tz, dtz), tz, kxy);
+        s = _mm256_add_epi64(
+            s, select(_mm256_castpd_si256(kx), dx, select(_mm256_castpd_si256(ky), dy, dz)));
+        // Event counters count down the stepped axis (a mask is −1); z's is stepped unless x's
+        // or y's was.
+        ex = _mm256_add_epi64(ex, _mm256_castpd_si256(kx));
+        ey = _mm256_add_epi64(ey, _mm256_castpd_si256(ky));
+        ez = _mm256_sub_epi64(_mm256_sub_epi64(ez, _mm256_castpd_si256(kxy)), one);
+        r = _mm256_sub_epi64(r, one);
+        if (_mm256_testz_si256(_mm256_or_si256(ex, _mm256_or_si256(ey, ez)), sign) != 0) continue;
+        const __m256i walking = _mm256_cmpgt_epi64(r, _mm256_set1_epi64x(-2));  // this step
+        __m256i exited = zero;
+        lanes4_events(walking, ex, xx, wx, nx, s, exited);
+        lanes4_events(walking, ey, xy, wy, ny, s, exited);
+        lanes4_events(walking, ez, xz, wz, nz, s, exited);
+        // A walk that left the window made r + 1 marks fewer than booked (none when this was
+        // its last step); it, and walks that had already ended, meet no further event.
+        lost = _mm256_add_epi64(lost, _mm256_and_si256(exited, _mm256_add_epi64(r, one)));
+        r = _mm256_or_si256(r, _mm256_and_si256(exited, _mm256_set1_epi64x(-kNever)));
+        const __m256i done = _mm256_cmpgt_epi64(_mm256_set1_epi64x(-1), r);
+        ex = select(done, never, ex);
+        ey = select(done, never, ey);
+        ez = select(done, never, ez);
+      }
+      alignas(32) std::int64_t lost_lanes[4];
+      _mm256_store_si256(reinterpret_cast<__m256i*>(lost_lanes), lost);
+      visits -=
+          static_cast<std::uint64_t>(lost_lanes[0] + lost_lanes[1] + lost_lanes[2] + lost_lanes[3]);
+    }
+    // The set-up calls code built without AVX, whose SSE instructions ran at half speed or
+    // worse while the registers' upper halves were in use (BALM hall, Zen 3: 5.7 ns per visit
+    // against 3.0 with this).
+    _mm256_zeroupper();
+  }
+  return visits;
+}
+
+/// Whether this processor runs walk_rays_lanes4 (checked once).
+bool lanes4_walk_supported() {
+  static const bool supported = __builtin_cpu_supports("avx2") != 0;
+  return supported;
+}
+
 /// integrate_hits' first pass in AVX-512 lanes, eight returns at a time: each return's slot
 /// (kNoSlot when not finite, beyond max range or outside the window) and window column, with the
 /// scalar pass's arithmetic (the same divisions and floors; the range's norm summed in the same
@@ -973,24 +1173,29 @@ bool wide_walk_supported() {
 }
 #endif
 
-/// The walks of one task, with per-word flags (large windows) or without.
+/// The walks of one task, `lanes` at a time (8, 4 or 1: see OccupancyMap::walk_lanes), with
+/// per-word flags (large windows) or without.
 std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const TaskRays& rays,
-                        FreeMarks marks, MarkBox& box, bool wide) {
+                        FreeMarks marks, MarkBox& box, int lanes) {
   // The box grows at the end of every ray: it lives on this task's own stack until the task
   // is done. The tasks' boxes share a cache line, and updating them in place while another
   // task did the same cost the walks about a quarter of their time on 2 threads.
   MarkBox local;
   std::uint64_t visits = 0;
+  const bool flags = marks.dirty != nullptr;
 #if defined(TARMAC_WIDE_WALK)
-  if (wide && wide_walk_supported()) {
-    visits = marks.dirty != nullptr ? walk_rays_wide<true>(w, start, rays, marks, local)
-                                    : walk_rays_wide<false>(w, start, rays, marks, local);
-    box = local;
-    return visits;
+  if (lanes == 8) {
+    visits = flags ? walk_rays_wide<true>(w, start, rays, marks, local)
+                   : walk_rays_wide<false>(w, start, rays, marks, local);
+  } else if (lanes == 4) {
+    visits = flags ? walk_rays_lanes4<true>(w, start, rays, marks, local)
+                   : walk_rays_lanes4<false>(w, start, rays, marks, local);
   }
 #endif
-  visits = marks.dirty != nullptr ? walk_rays<true>(w, start, rays, marks, local)
-                                  : walk_rays<false>(w, start, rays, marks, local);
+  if (lanes == 1) {
+    visits = flags ? walk_rays<true>(w, start, rays, marks, local)
+                   : walk_rays<false>(w, start, rays, marks, local);
+  }
   box = local;
   return visits;
 }
@@ -1148,12 +1353,12 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   ray_bucket_count_.assign(kDirBuckets + 1, 0);
 }
 
-bool OccupancyMap::wide_walk_active() const {
+int OccupancyMap::walk_lanes() const {
 #if defined(TARMAC_WIDE_WALK)
-  return wide_walk_ && wide_walk_supported();
-#else
-  return false;
+  if (walk_lanes_ >= 8 && wide_walk_supported()) return 8;
+  if (walk_lanes_ >= 4 && lanes4_walk_supported()) return 4;
 #endif
+  return 1;
 }
 
 OccupancyMap::OccupancyMap(OccupancyMap&&) noexcept = default;
@@ -1402,7 +1607,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   // The slot and column of each return (none: not finite, beyond max range or outside).
   bool wide = false;
 #if defined(TARMAC_WIDE_WALK)
-  wide = wide_walk_active();
+  wide = walk_lanes() == 8;
   if (wide) {
     stats.outside_window += hit_voxels_wide(points_W, origin_W, max_range, v_m, min_, dims_,
                                             ring_min, hit_slot_.data(), hit_column_.data());
@@ -1538,11 +1743,13 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   std::array<std::uint64_t, kRayTasks> task_visits{};
   std::array<MarkBox, kRayTasks> task_boxes{};
   const bool flag_words = !dirty_words_.empty();
-  // The order helps the one-at-a-time walk's branch prediction. The wide walk has no branch
-  // per step to predict: BALM hall at 1 thread, its occupancy stage took 4.01–4.09 ms without
-  // the sort against 4.21–4.25 ms with it (the sort itself 0.11 ms, serial).
+  // The order helps the one-at-a-time walk's branch prediction, and the four-lane walk's
+  // lockstep (neighbours in direction end near each other). The eight-lane walk needs neither:
+  // BALM hall at 1 thread, its occupancy stage took 4.01–4.09 ms without the sort against
+  // 4.21–4.25 ms with it (the sort itself 0.11 ms, serial).
   std::atomic<std::size_t> next_chunk{0};
-  const bool wide = wide_walk_active();
+  const int lanes = walk_lanes();
+  const bool wide = lanes == 8;
   if (!wide) {
     sort_rays_by_direction(origin_W, points_W, clearing_dirs_W, ray_bucket_, ray_bucket_count_,
                            ray_order_, runner);
@@ -1561,7 +1768,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     const std::uint64_t visits = walk_task(
         w, start,
         TaskRays{points_W, clearing_dirs_W, order, origin_W, max_range, clear_range, &next_chunk},
-        marks, box, wide_walk_);
+        marks, box, lanes);
     task_visits[task] = visits;
   });
 

@@ -194,11 +194,12 @@ TEST(OccupancyMap, Raycast_ManyRaysInEveryDirection_MarkTheUnionOfTheirTraversal
   EXPECT_EQ(window.hit, hits.size());
 }
 
-// The AVX-512 walk (eight rays at a time) against the walk one ray at a time: the same log-odds
-// bit for bit and the same visit counts, over scans whose rays cross the ring's seams (the
-// window has scrolled), leave the window, end beyond max range or have no return, on both the
-// small-window path and the path that flags mark words.
-TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
+// A walk in lanes (8 rays at a time: AVX-512, 4: AVX2) against the walk one ray at a time: the
+// same log-odds bit for bit and the same visit counts, over scans whose rays cross the ring's
+// seams (the window has scrolled), leave the window, end beyond max range or have no return, on
+// both the small-window path and the path that flags mark words. Skipped where the processor
+// lacks the lanes' instructions.
+void expect_lanes_walk_same_map(int lanes) {
   for (const int window : {100, 700}) {  // 700 x 700 x 40 voxels: over the flagging threshold
     auto params = small_params();
     params.window_x_vox = window;
@@ -207,9 +208,11 @@ TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
     params.max_range_m = 12.0;
     params.clearing_range_m = 9.0;
     OccupancyMap wide(params), narrow(params);
-    narrow.set_wide_walk(false);
-    if (!wide.wide_walk_active()) GTEST_SKIP() << "no AVX-512 on this processor";
-    ASSERT_FALSE(narrow.wide_walk_active());
+    wide.set_walk_lanes(lanes);
+    narrow.set_walk_lanes(1);
+    if (wide.walk_lanes() != lanes)
+      GTEST_SKIP() << "no " << lanes << "-lane walk on this processor";
+    ASSERT_EQ(narrow.walk_lanes(), 1);
     std::mt19937_64 rng(13);
     std::uniform_real_distribution<float> u(-16.0f, 16.0f);
     for (int s = 0; s < 6; ++s) {
@@ -253,12 +256,13 @@ TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
 // Exact ties (the ray crosses two or three voxel faces at once, on every step): 0.25 m voxels
 // and an origin on the lattice's quarter points make every parameter exact, so each axis's
 // crossings coincide along the diagonals; the tie goes to the later axis both ways.
-TEST(OccupancyMap, WideWalk_BreaksTiesAsOneRayAtATime) {
+void expect_lanes_walk_breaks_ties_the_same(int lanes) {
   auto params = small_params();
   params.voxel_size_m = 0.25;
   OccupancyMap wide(params), narrow(params);
-  narrow.set_wide_walk(false);
-  if (!wide.wide_walk_active()) GTEST_SKIP() << "no AVX-512 on this processor";
+  wide.set_walk_lanes(lanes);
+  narrow.set_walk_lanes(1);
+  if (wide.walk_lanes() != lanes) GTEST_SKIP() << "no " << lanes << "-lane walk on this processor";
   const Eigen::Vector3d origin(0.125, 0.125, 0.125);
   Scan scan{origin, {}, {}};
   for (const int sx : {-1, 0, 1}) {
@@ -283,6 +287,19 @@ TEST(OccupancyMap, WideWalk_BreaksTiesAsOneRayAtATime) {
   narrow.export_log_odds(lb);
   ASSERT_EQ(la.size(), lb.size());
   EXPECT_EQ(0, std::memcmp(la.data(), lb.data(), la.size() * sizeof(float)));
+}
+
+TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
+  expect_lanes_walk_same_map(8);
+}
+TEST(OccupancyMap, WideWalk_BreaksTiesAsOneRayAtATime) {
+  expect_lanes_walk_breaks_ties_the_same(8);
+}
+TEST(OccupancyMap, Lanes4Walk_SameMapAsOneRayAtATime) {
+  expect_lanes_walk_same_map(4);
+}
+TEST(OccupancyMap, Lanes4Walk_BreaksTiesAsOneRayAtATime) {
+  expect_lanes_walk_breaks_ties_the_same(4);
 }
 
 TEST(OccupancyMap, NoReturnAndBeyondMaxRange_ClearUpToClearingRange) {

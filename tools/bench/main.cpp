@@ -35,8 +35,8 @@ struct Options {
   double resolution_m = 0.2;
   double max_range_m = 50.0;
   std::size_t threads = 2;
-  bool narrow_walk = false;  ///< walk rays one at a time even where AVX-512 lanes are available
-  bool phases = false;       ///< time each stage's parallel_for calls and serial stretches
+  int walk_lanes = 8;   ///< most rays walked at a time (8: AVX-512, 4: AVX2, 1), as supported
+  bool phases = false;  ///< time each stage's parallel_for calls and serial stretches
   std::size_t max_scans = 0;
   double sensor_height_m = 1.9;
   bool esdf = true;
@@ -130,7 +130,9 @@ int main(int argc, char** argv) {
     else if (a == "--tsdf-only")
       opt.tsdf_only = true;
     else if (a == "--narrow-walk")
-      opt.narrow_walk = true;
+      opt.walk_lanes = 1;
+    else if (a == "--walk-lanes" && v)
+      opt.walk_lanes = std::atoi(argv[++i]);
     else if (a == "--phases")
       opt.phases = true;
     else if (a == "--window" && v) {
@@ -147,8 +149,8 @@ int main(int argc, char** argv) {
           "                    [--tsdf-voxel M] [--tsdf-truncation M] [--tsdf-only]\n"
           "                    [--window X,Y,Z]   (voxels; default: 2*ceil(range/res)+2 x same x "
           "8 m)\n"
-          "                    [--tsdf-reserve-blocks N] [--narrow-walk]   (rays one at a time, "
-          "not in AVX-512 lanes)\n"
+          "                    [--tsdf-reserve-blocks N] [--walk-lanes 8|4|1]   (most rays "
+          "walked at a time: AVX-512, AVX2, one; --narrow-walk is 1)\n"
           "                    [--phases]   (per stage: each parallel_for call and the serial "
           "stretches between)\n");
       return a == "--help" ? 0 : 64;
@@ -205,7 +207,7 @@ int main(int argc, char** argv) {
     if (opt.phases) out.push_back(phased.end_stage());
   };
   core::Mapper mapper(params);
-  mapper.occupancy().set_wide_walk(!opt.narrow_walk);
+  mapper.occupancy().set_walk_lanes(opt.walk_lanes);
   octomap::OcTree octree(opt.resolution_m);
   octree.setProbHit(params.occupancy.prob_hit);
   octree.setProbMiss(params.occupancy.prob_miss);
@@ -394,7 +396,9 @@ int main(int argc, char** argv) {
       "%zu threads, rays walked %s\n",
       opt.dataset.c_str(), n, static_cast<double>(points) / static_cast<double>(n),
       opt.resolution_m, opt.max_range_m, opt.threads,
-      mapper.occupancy().wide_walk_active() ? "8 at a time (AVX-512)" : "one at a time");
+      mapper.occupancy().walk_lanes() == 8   ? "8 at a time (AVX-512)"
+      : mapper.occupancy().walk_lanes() == 4 ? "4 at a time (AVX2)"
+                                             : "one at a time");
   std::printf("  %-26s %9s %9s %9s %9s   (ms per scan)\n", "", "mean", "p50", "p99", "max");
   print_row("OctoMap insertPointCloud", t_octomap);
   print_row("tarmac filter+occupancy", t_occ_only);

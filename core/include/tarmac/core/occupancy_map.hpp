@@ -91,12 +91,14 @@ class OccupancyMap {
   OccupancyMap(const OccupancyMap&) = delete;
   OccupancyMap& operator=(const OccupancyMap&) = delete;
 
-  /// Whether the ray walks may run eight at a time in AVX-512 lanes where the processor has them
-  /// (the default). The marks, and so the map, are the same bits either way; off is for
-  /// measuring the difference and for testing one path against the other.
-  void set_wide_walk(bool enabled) { wide_walk_ = enabled; }
-  /// Whether integrate() walks rays in AVX-512 lanes: enabled and supported by this processor.
-  [[nodiscard]] bool wide_walk_active() const;
+  /// The most rays the walks may take at a time: 8 (the default) runs them in AVX-512 lanes where
+  /// the processor has them, else in AVX2 lanes, four at a time; 4 stops at AVX2; 1 walks them
+  /// one at a time. The marks, and so the map, are the same bits on every path; the limit is for
+  /// measuring the difference and for testing one path against another.
+  void set_walk_lanes(int max_lanes) { walk_lanes_ = max_lanes; }
+  /// How many rays integrate() walks at a time: 8 (AVX-512), 4 (AVX2) or 1, the most that
+  /// set_walk_lanes() allows and this processor supports.
+  [[nodiscard]] int walk_lanes() const;
 
   /// Moves the window so that it is centred on `position_W` in x/y and spans
   /// [z − window_below_m, …) in z. Voxels that leave are forgotten (unknown when they re-enter);
@@ -189,7 +191,7 @@ class OccupancyMap {
   void clear_floor_bits(std::size_t first, std::size_t count);
 
   OccupancyParams params_;
-  bool wide_walk_ = true;
+  int walk_lanes_ = 8;
   Eigen::Vector3i dims_;
   VoxelIndex min_;
   float l_hit_, l_miss_, l_min_, l_max_;
