@@ -310,15 +310,18 @@ struct RayStart {
 
 /// The start of a ray's walk to `end_W` (world frame): each axis's state for the ray's direction
 /// along it, picked by index, not by branch (the signs of a scan's rays are as good as random),
-/// and the number of steps to the end point's voxel.
+/// and the number of steps to the end point's voxel (with `moved`: those along each axis).
 [[gnu::always_inline]] inline void begin_walk(const WindowGeometry& w, const RayStart& start,
                                               const Eigen::Vector3d& end_W, AxisWalk& x,
-                                              AxisWalk& y, AxisWalk& z, std::int64_t& steps) {
+                                              AxisWalk& y, AxisWalk& z, std::int64_t& steps,
+                                              int* moved = nullptr) {
   const Eigen::Vector3d e = end_W / w.voxel_size_m;
   const Eigen::Vector3d d = e - start.o;
   steps = 0;
   const auto axis = [&](int a) {
-    steps += std::abs(static_cast<int>(floor_to_int(e[a])) - start.cur[a]);
+    const int m = std::abs(static_cast<int>(floor_to_int(e[a])) - start.cur[a]);
+    if (moved != nullptr) moved[a] = m;
+    steps += m;
     AxisWalk k = start.axis_walk[a][static_cast<int>(d[a] > 0) - static_cast<int>(d[a] < 0) + 1];
     k.t_delta = 1.0 / std::abs(d[a]);  // the same value as ±1.0 / d; infinite when d is 0
     k.t_max *= k.t_delta;
@@ -894,25 +897,6 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_rays_wide(const W
   }
 }
 
-/// A walk set up for the four-lane walk (walk_rays_lanes4): what the lane's registers take.
-struct LaneWalk {
-  double t[3], dt[3];  ///< parameters and parameter steps per axis
-  /// Per axis: slot step; steps to the next event (ring wrap or window exit) − 1; slot
-  /// correction at a wrap; steps to the exit counted from the pending event.
-  std::int64_t delta[3], ev[3], wrap[3], to_exit[3];
-  std::int64_t left;  ///< voxels to mark − 1
-};
-
-/// Four lanes of 64 bits from one field of four walks (axis a).
-__attribute__((target("avx2"), always_inline)) inline __m256d lanes_of(const LaneWalk* const b[4],
-                                                                       double (LaneWalk::*f)[3],
-                                                                       int a) {
-  return _mm256_setr_pd((b[0]->*f)[a], (b[1]->*f)[a], (b[2]->*f)[a], (b[3]->*f)[a]);
-}
-__attribute__((target("avx2"), always_inline)) inline __m256i lanes_of(
-    const LaneWalk* const b[4], std::int64_t (LaneWalk::*f)[3], int a) {
-  return _mm256_setr_epi64x((b[0]->*f)[a], (b[1]->*f)[a], (b[2]->*f)[a], (b[3]->*f)[a]);
-}
 /// `m ? y : x` per 64-bit lane (m: all ones or all zeros).
 __attribute__((target("avx2"), always_inline)) inline __m256i select(__m256i m, __m256i y,
                                                                      __m256i x) {
@@ -935,6 +919,106 @@ __attribute__((target("avx2"), always_inline)) inline void lanes4_events(
   ev = select(wrapped, _mm256_sub_epi64(span, _mm256_set1_epi64x(1)), ev);
   to_exit = select(wrapped, _mm256_sub_epi64(to_exit, span), to_exit);
   exited = _mm256_or_si256(exited, out);
+}
+
+/// Walks set up for the four-lane walk (walk_rays_lanes4), a batch at a time, each field in its
+/// own array so that four walks load into lanes at once.
+struct LaneBatch {
+  static constexpr int kSize = 64;
+  /// Per axis: parameters and parameter steps; slot steps; steps to the next event (ring wrap
+  /// or window exit) − 1; slot correction at a wrap; steps to the exit counted from the
+  /// pending event.
+  alignas(32) double t[3][kSize], dt[3][kSize];
+  alignas(32) std::int64_t delta[3][kSize], ev[3][kSize], wrap[3][kSize], to_exit[3][kSize];
+  alignas(32) std::int64_t left[kSize];  ///< voxels to mark − 1 (−1: marks nothing)
+  /// The end points of the walks to set up, and whether their end voxel is marked.
+  alignas(32) double end[3][kSize];
+  alignas(32) std::int64_t inc[kSize];
+};
+
+/// Walks [g, g + 4) of one field of a LaneBatch (axis a), in lanes.
+__attribute__((target("avx2"), always_inline)) inline __m256d lanes_at(
+    int g, const double (*field)[LaneBatch::kSize], int a) {
+  return _mm256_load_pd(&field[a][g]);
+}
+__attribute__((target("avx2"), always_inline)) inline __m256i lanes_at(
+    int g, const std::int64_t (*field)[LaneBatch::kSize], int a) {
+  return _mm256_load_si256(reinterpret_cast<const __m256i*>(&field[a][g]));
+}
+
+/// `neg ? v[0] : pos ? v[2] : v[1]` per lane: a per-scan value of the axis by direction sign.
+__attribute__((target("avx2"), always_inline)) inline __m256d by_sign(__m256d neg, __m256d pos,
+                                                                      double v0, double v1,
+                                                                      double v2) {
+  return _mm256_blendv_pd(_mm256_blendv_pd(_mm256_set1_pd(v1), _mm256_set1_pd(v0), neg),
+                          _mm256_set1_pd(v2), pos);
+}
+__attribute__((target("avx2"), always_inline)) inline __m256i by_sign(__m256d neg, __m256d pos,
+                                                                      std::int64_t v0,
+                                                                      std::int64_t v1,
+                                                                      std::int64_t v2) {
+  return _mm256_castpd_si256(by_sign(neg, pos, std::bit_cast<double>(v0), std::bit_cast<double>(v1),
+                                     std::bit_cast<double>(v2)));
+}
+
+/// by_sign's lanes stored at `out` (32-byte aligned).
+__attribute__((target("avx2"), always_inline)) inline void store_by_sign(std::int64_t* out,
+                                                                         __m256d neg, __m256d pos,
+                                                                         std::int64_t v0,
+                                                                         std::int64_t v1,
+                                                                         std::int64_t v2) {
+  _mm256_store_si256(reinterpret_cast<__m256i*>(out), by_sign(neg, pos, v0, v1, v2));
+}
+
+/// Walks [k, k + 4) of `b` from their end points: begin_walk's arithmetic in lanes (the same
+/// divisions, floors and products, so the same values). Lanes from `valid` on mark nothing.
+/// Books the walks' visits and grows `box` by each walk's start and its end voxel one step
+/// further along each axis it moves on, clamped to the window (see walk_rays_lanes4).
+__attribute__((target("avx2"))) void set_up_lanes4(const WindowGeometry& w, const RayStart& start,
+                                                   LaneBatch& b, int k, int valid,
+                                                   std::uint64_t& visits, MarkBox& box) {
+  const __m256d voxel = _mm256_set1_pd(w.voxel_size_m);
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256d abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffffLL));
+  __m256i steps = _mm256_setzero_si256();
+  alignas(16) std::int32_t last[3][4];
+  for (int a = 0; a < 3; ++a) {
+    const __m256d e = _mm256_div_pd(_mm256_load_pd(&b.end[a][k]), voxel);
+    const __m256d d = _mm256_sub_pd(e, _mm256_set1_pd(start.o[a]));
+    const __m128i cell = _mm256_cvttpd_epi32(_mm256_round_pd(e, _MM_FROUND_TO_NEG_INF));
+    steps = _mm256_add_epi64(
+        steps,
+        _mm256_cvtepi32_epi64(_mm_abs_epi32(_mm_sub_epi32(cell, _mm_set1_epi32(start.cur[a])))));
+    const __m256d neg = _mm256_cmp_pd(d, zero, _CMP_LT_OQ);
+    const __m256d pos = _mm256_cmp_pd(d, zero, _CMP_GT_OQ);
+    const __m256d dt = _mm256_div_pd(_mm256_set1_pd(1.0), _mm256_and_pd(d, abs_mask));
+    const auto& k3 = start.axis_walk[a];
+    _mm256_store_pd(&b.dt[a][k], dt);
+    _mm256_store_pd(&b.t[a][k],
+                    _mm256_mul_pd(by_sign(neg, pos, k3[0].t_max, k3[1].t_max, k3[2].t_max), dt));
+    store_by_sign(&b.delta[a][k], neg, pos, k3[0].delta, k3[1].delta, k3[2].delta);
+    store_by_sign(&b.ev[a][k], neg, pos, k3[0].events - 1, k3[1].events - 1, k3[2].events - 1);
+    store_by_sign(&b.wrap[a][k], neg, pos, k3[0].wrap, k3[1].wrap, k3[2].wrap);
+    store_by_sign(&b.to_exit[a][k], neg, pos, k3[0].to_exit - k3[0].span,
+                  k3[1].to_exit - k3[1].span, k3[2].to_exit - k3[2].span);
+    // The end voxel and one step further, window-relative, clamped.
+    const __m128i step = _mm256_cvttpd_epi32(by_sign(neg, pos, -1.0, 0.0, 1.0));
+    const __m128i far = _mm_add_epi32(_mm_sub_epi32(cell, _mm_set1_epi32(w.min[a])), step);
+    _mm_store_si128(
+        reinterpret_cast<__m128i*>(last[a]),
+        _mm_min_epi32(_mm_max_epi32(far, _mm_setzero_si128()), _mm_set1_epi32(w.dims[a] - 1)));
+  }
+  const __m256i left = _mm256_sub_epi64(
+      _mm256_add_epi64(steps, _mm256_load_si256(reinterpret_cast<const __m256i*>(&b.inc[k]))),
+      _mm256_set1_epi64x(1));
+  _mm256_store_si256(reinterpret_cast<__m256i*>(&b.left[k]), left);
+  for (int l = 0; l < 4; ++l) {
+    std::int64_t& lane_left = b.left[k + l];
+    if (l >= valid) lane_left = -1;
+    if (lane_left < 0) continue;
+    visits += static_cast<std::uint64_t>(lane_left + 1);
+    for (int a = 0; a < 3; ++a) box.add(a, start.rel[a], last[a][l]);
+  }
 }
 
 /// The same walks four at a time in AVX2 lanes (x86-64 processors that have AVX2 but not
@@ -962,15 +1046,8 @@ __attribute__((target("avx2"))) std::uint64_t walk_rays_lanes4(const WindowGeome
   std::uint64_t* const bits = marks.bits;
   std::uint64_t* const dirty = marks.dirty;
   std::uint64_t visits = 0;
-  constexpr int kBatch = 64;
   constexpr std::int64_t kNever = std::int64_t{1} << 60;
-  // The batch, then three walks that mark nothing (to fill the last group).
-  std::array<LaneWalk, kBatch + 3> batch{};
-  for (int i = kBatch; i < kBatch + 3; ++i) {
-    batch[static_cast<std::size_t>(i)] =
-        LaneWalk{{0.0, 1.0, 1.0}, {0.0, 0.0, 0.0}, {0, 0, 0}, {kNever, kNever, kNever},
-                 {0, 0, 0},       {1, 1, 1},       -1};
-  }
+  LaneBatch batch;
   const __m256i one = _mm256_set1_epi64x(1);
   const __m256i low6 = _mm256_set1_epi64x(63);
   const __m256i zero = _mm256_setzero_si256();
@@ -980,53 +1057,37 @@ __attribute__((target("avx2"))) std::uint64_t walk_rays_lanes4(const WindowGeome
                 nz = _mm256_set1_epi64x(w.dims[2]);
   bool more = true;
   while (more) {
+    // The batch's end points (the cursor is built without AVX: see the end of the loop).
     int n = 0;
     Eigen::Vector3d end_W;
     bool inc = false;
-    while (n < kBatch && (more = cursor.next(end_W, inc))) {
-      AxisWalk ax[3];  // NOLINT(cppcoreguidelines-pro-type-member-init): begin_walk sets them
-      std::int64_t steps = 0;
-      begin_walk(w, start, end_W, ax[0], ax[1], ax[2], steps);
-      if (steps == 0 && !inc) continue;  // marks nothing
-      LaneWalk& b = batch[static_cast<std::size_t>(n++)];
-      for (int a = 0; a < 3; ++a) {
-        b.t[a] = ax[a].t_max;
-        b.dt[a] = ax[a].t_delta;
-        b.delta[a] = ax[a].delta;
-        b.ev[a] = std::min<std::int64_t>(ax[a].events, kNever) - 1;
-        b.wrap[a] = ax[a].wrap;
-        b.to_exit[a] = ax[a].to_exit - ax[a].span;
-        const int moved = static_cast<int>(
-            std::abs(static_cast<int>(floor_to_int(end_W[a] / w.voxel_size_m)) - start.cur[a]));
-        box.add(a, start.rel[a],
-                std::clamp(start.rel[a] + ax[a].step * (moved + 1), 0, w.dims[a] - 1));
-      }
-      b.left = steps + (inc ? 1 : 0) - 1;
-      visits += static_cast<std::uint64_t>(b.left + 1);
+    while (n < LaneBatch::kSize && (more = cursor.next(end_W, inc))) {
+      for (int a = 0; a < 3; ++a) batch.end[a][n] = end_W[a];
+      batch.inc[n++] = inc ? 1 : 0;
     }
+    for (int k = n; k % 4 != 0; ++k) {  // lanes that mark nothing
+      for (int a = 0; a < 3; ++a) batch.end[a][k] = start.o[a] * w.voxel_size_m;
+      batch.inc[k] = 0;
+    }
+    for (int k = 0; k < n; k += 4) set_up_lanes4(w, start, batch, k, n - k, visits, box);
     for (int g = 0; g < n; g += 4) {
-      const LaneWalk* const b[4] = {
-          &batch[static_cast<std::size_t>(g)],
-          &batch[static_cast<std::size_t>(g < n - 1 ? g + 1 : kBatch)],
-          &batch[static_cast<std::size_t>(g < n - 2 ? g + 2 : kBatch + 1)],
-          &batch[static_cast<std::size_t>(g < n - 3 ? g + 3 : kBatch + 2)]};
-      __m256d tx = lanes_of(b, &LaneWalk::t, 0), ty = lanes_of(b, &LaneWalk::t, 1),
-              tz = lanes_of(b, &LaneWalk::t, 2);
-      const __m256d dtx = lanes_of(b, &LaneWalk::dt, 0), dty = lanes_of(b, &LaneWalk::dt, 1),
-                    dtz = lanes_of(b, &LaneWalk::dt, 2);
-      const __m256i dx = lanes_of(b, &LaneWalk::delta, 0), dy = lanes_of(b, &LaneWalk::delta, 1),
-                    dz = lanes_of(b, &LaneWalk::delta, 2);
-      __m256i ex = lanes_of(b, &LaneWalk::ev, 0), ey = lanes_of(b, &LaneWalk::ev, 1),
-              ez = lanes_of(b, &LaneWalk::ev, 2);
-      const __m256i wx = lanes_of(b, &LaneWalk::wrap, 0), wy = lanes_of(b, &LaneWalk::wrap, 1),
-                    wz = lanes_of(b, &LaneWalk::wrap, 2);
-      __m256i xx = lanes_of(b, &LaneWalk::to_exit, 0), xy = lanes_of(b, &LaneWalk::to_exit, 1),
-              xz = lanes_of(b, &LaneWalk::to_exit, 2);
-      __m256i r = _mm256_setr_epi64x(b[0]->left, b[1]->left, b[2]->left, b[3]->left);
+      __m256d tx = lanes_at(g, batch.t, 0), ty = lanes_at(g, batch.t, 1),
+              tz = lanes_at(g, batch.t, 2);
+      const __m256d dtx = lanes_at(g, batch.dt, 0), dty = lanes_at(g, batch.dt, 1),
+                    dtz = lanes_at(g, batch.dt, 2);
+      const __m256i dx = lanes_at(g, batch.delta, 0), dy = lanes_at(g, batch.delta, 1),
+                    dz = lanes_at(g, batch.delta, 2);
+      __m256i ex = lanes_at(g, batch.ev, 0), ey = lanes_at(g, batch.ev, 1),
+              ez = lanes_at(g, batch.ev, 2);
+      const __m256i wx = lanes_at(g, batch.wrap, 0), wy = lanes_at(g, batch.wrap, 1),
+                    wz = lanes_at(g, batch.wrap, 2);
+      __m256i xx = lanes_at(g, batch.to_exit, 0), xy = lanes_at(g, batch.to_exit, 1),
+              xz = lanes_at(g, batch.to_exit, 2);
+      __m256i r = _mm256_load_si256(reinterpret_cast<const __m256i*>(&batch.left[g]));
+      const std::int64_t* const left = &batch.left[g];
       __m256i s = _mm256_set1_epi64x(start.slot);
       __m256i lost = zero;  // marks not made by walks that left the window
-      const std::int64_t longest =
-          std::max(std::max(b[0]->left, b[1]->left), std::max(b[2]->left, b[3]->left));
+      const std::int64_t longest = std::max(std::max(left[0], left[1]), std::max(left[2], left[3]));
       for (std::int64_t k = 0; k <= longest; ++k) {
         const __m256i active = _mm256_cmpgt_epi64(r, _mm256_set1_epi64x(-1));
         alignas(32) std::int64_t word[4];
