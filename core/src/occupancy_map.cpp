@@ -1226,6 +1226,77 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t hit_voxels_wide(
   return outside;
 }
 
+/// integrate_hits' first pass in AVX2 lanes, four returns at a time, as hit_voxels_wide (the
+/// same divisions, floors and norm; a return within 1e-9 of max range decided by the scalar
+/// expression). The window's indices in 32 bits: a window has fewer than 2^31 voxels
+/// (OccupancyParams::validate) and every coordinate it holds is within ±2^31 voxels.
+/// Returns how many returns fell outside the window.
+__attribute__((target("avx2"))) std::uint64_t hit_voxels_lanes4(
+    std::span<const Eigen::Vector3f> points, const Eigen::Vector3d& origin_W, double max_range,
+    double voxel_size, const VoxelIndex& min, const Eigen::Vector3i& dims,
+    const std::array<int, 3>& ring_min, std::uint32_t* slot_out, std::uint32_t* column_out) {
+  constexpr int kLanes = 4;
+  const std::size_t n = points.size();
+  std::uint64_t outside = 0;
+  const __m256d voxel = _mm256_set1_pd(voxel_size);
+  const __m256d range = _mm256_set1_pd(max_range);
+  const __m256d near_edge = _mm256_set1_pd(1e-9 * std::max(1.0, max_range));
+  const __m256d abs_bits = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffffLL));
+  for (std::size_t i = 0; i < n; i += kLanes) {
+    const int m = static_cast<int>(std::min<std::size_t>(kLanes, n - i));
+    alignas(32) double c[3][kLanes] = {};
+    for (int j = 0; j < m; ++j) {
+      for (int a = 0; a < 3; ++a) c[a][j] = static_cast<double>(points[i + j][a]);
+    }
+    __m256d keep = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+    __m256d sq = _mm256_setzero_pd();
+    __m128i slot = _mm_setzero_si128(), stride = _mm_set1_epi32(1), inside = _mm_set1_epi32(-1);
+    __m128i rel[3];
+    for (int a = 0; a < 3; ++a) {
+      const __m256d x = _mm256_load_pd(c[a]);
+      keep = _mm256_and_pd(keep, _mm256_cmp_pd(_mm256_sub_pd(x, x), _mm256_setzero_pd(),
+                                               _CMP_EQ_OQ));  // finite
+      const __m256d d = _mm256_sub_pd(x, _mm256_set1_pd(origin_W[a]));
+      sq = a == 0 ? _mm256_mul_pd(d, d) : _mm256_add_pd(sq, _mm256_mul_pd(d, d));
+      const __m128i cell = _mm256_cvttpd_epi32(
+          _mm256_round_pd(_mm256_div_pd(x, voxel), _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC));
+      const __m128i size = _mm_set1_epi32(dims[a]);
+      rel[a] = _mm_sub_epi32(cell, _mm_set1_epi32(min[a]));
+      inside = _mm_and_si128(inside, _mm_andnot_si128(_mm_cmpgt_epi32(_mm_setzero_si128(), rel[a]),
+                                                      _mm_cmpgt_epi32(size, rel[a])));
+      __m128i ring = _mm_add_epi32(rel[a], _mm_set1_epi32(ring_min[a]));
+      ring = _mm_sub_epi32(ring, _mm_andnot_si128(_mm_cmpgt_epi32(size, ring), size));
+      slot = _mm_add_epi32(slot, _mm_mullo_epi32(ring, stride));
+      stride = _mm_mullo_epi32(stride, size);
+    }
+    const __m256d norm = _mm256_sqrt_pd(sq);
+    keep = _mm256_and_pd(keep, _mm256_cmp_pd(norm, range, _CMP_LE_OQ));
+    const int edge = _mm256_movemask_pd(
+        _mm256_cmp_pd(_mm256_and_pd(_mm256_sub_pd(norm, range), abs_bits), near_edge, _CMP_LE_OQ));
+    alignas(16) std::int32_t slots[kLanes], columns[kLanes], in[kLanes];
+    _mm_store_si128(reinterpret_cast<__m128i*>(slots), slot);
+    _mm_store_si128(reinterpret_cast<__m128i*>(columns),
+                    _mm_add_epi32(_mm_mullo_epi32(rel[1], _mm_set1_epi32(dims[0])), rel[0]));
+    _mm_store_si128(reinterpret_cast<__m128i*>(in), inside);
+    const int kept = _mm256_movemask_pd(keep);
+    for (int j = 0; j < m; ++j) {
+      bool k = ((kept >> j) & 1) != 0;
+      if (((edge >> j) & 1) != 0) {
+        // Within a hair of max range: the scalar expression decides (its summation order is
+        // Eigen's; the lanes' is meant to be the same, this makes it so whatever it is).
+        const Eigen::Vector3f& p = points[i + static_cast<std::size_t>(j)];
+        k = p.allFinite() && !((p.cast<double>() - origin_W).norm() > max_range);
+      }
+      if (k && in[j] == 0) ++outside;
+      k = k && in[j] != 0;
+      slot_out[i + static_cast<std::size_t>(j)] =
+          k ? static_cast<std::uint32_t>(slots[j]) : kNoSlot;
+      if (k) column_out[i + static_cast<std::size_t>(j)] = static_cast<std::uint32_t>(columns[j]);
+    }
+  }
+  return outside;
+}
+
 /// Whether this processor runs walk_rays_wide (checked once).
 bool wide_walk_supported() {
   static const bool supported =
@@ -1668,10 +1739,14 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   // The slot and column of each return (none: not finite, beyond max range or outside).
   bool wide = false;
 #if defined(TARMAC_WIDE_WALK)
-  wide = walk_lanes() == 8;
-  if (wide) {
+  const int lanes = walk_lanes();
+  wide = lanes > 1;
+  if (lanes == 8) {
     stats.outside_window += hit_voxels_wide(points_W, origin_W, max_range, v_m, min_, dims_,
                                             ring_min, hit_slot_.data(), hit_column_.data());
+  } else if (lanes == 4) {
+    stats.outside_window += hit_voxels_lanes4(points_W, origin_W, max_range, v_m, min_, dims_,
+                                              ring_min, hit_slot_.data(), hit_column_.data());
   }
 #endif
   if (!wide) {
