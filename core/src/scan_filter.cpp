@@ -81,6 +81,7 @@ void FilterScratch::reserve(std::size_t points) {
   point_slot.assign(points, 0);
   point_near.assign(points, 0);
   candidates_S.assign(points, Eigen::Vector3f::Zero());
+  candidates_W.assign(points, Eigen::Vector3f::Zero());
   keep.assign(points, 0);
 }
 
@@ -143,23 +144,13 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     }
     last[task] = out;
   });
-  // Candidates back to back, in input order.
-  std::size_t m = last[0];
-  for (std::size_t t = 1; t < kFilterTasks; ++t) {
-    std::copy(scratch.candidates_S.begin() + static_cast<std::ptrdiff_t>(first[t]),
-              scratch.candidates_S.begin() + static_cast<std::ptrdiff_t>(last[t]),
-              scratch.candidates_S.begin() + static_cast<std::ptrdiff_t>(m));
-    std::copy(scratch.point_key.begin() + static_cast<std::ptrdiff_t>(first[t]),
-              scratch.point_key.begin() + static_cast<std::ptrdiff_t>(last[t]),
-              scratch.point_key.begin() + static_cast<std::ptrdiff_t>(m));
-    std::copy(scratch.point_near.begin() + static_cast<std::ptrdiff_t>(first[t]),
-              scratch.point_near.begin() + static_cast<std::ptrdiff_t>(last[t]),
-              scratch.point_near.begin() + static_cast<std::ptrdiff_t>(m));
-    m += last[t] - first[t];
-  }
-  scratch.candidates_S.resize(m);
-  scratch.point_key.resize(m);
-  scratch.point_near.resize(m);
+  // Task t's candidates are [first[t], last[t]): the passes below take the tasks' ranges in
+  // order (no copy to close the gaps), so the survivors keep the input order.
+  std::size_t m = 0;
+  for (std::size_t t = 0; t < kFilterTasks; ++t) m += last[t] - first[t];
+  const auto each_candidate = [&](std::size_t t, auto&& f) {
+    for (std::size_t i = first[t]; i < last[t]; ++i) f(i);
+  };
 
   // 2. Isolated outliers, counted in the sensor frame: a hash of occupied cells (built in one
   //    pass, each candidate noting its cell's slot), then each cell that holds a near candidate
@@ -174,45 +165,58 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
     return s;
   };
-  if (outliers) {
-    // Sized for twice the last scan's distinct cells, not for every candidate: points share
-    // cells (BALM hall: 3 k cells for 18 k points), and the table is cold at each scan, so its
-    // emptying and its inserts cost by the line (64 k slots, 1 MB, took 0.16 ms to empty and
-    // 0.17 ms to fill). A scan with more cells than half the table starts again with a table
-    // for all its candidates, which always fits. The counts per cell, hence the result, do not
-    // depend on the table's size.
+  // Sized for twice the last scan's distinct cells, not for every candidate: points share
+  // cells (BALM hall: 3 k cells for 18 k points), and the table is cold at each scan, so its
+  // emptying and its inserts cost by the line (64 k slots, 1 MB, took 0.16 ms to empty and
+  // 0.17 ms to fill). A scan with more cells than half the table starts again with a table
+  // for all its candidates, which always fits. The counts per cell, hence the result, do not
+  // depend on the table's size.
+  const auto build_table = [&] {
     const std::size_t full = table_capacity(m);
     capacity = std::min(full, table_capacity(2 * scratch.last_cells));
-    scratch.point_slot.resize(m);
     while (true) {
       mask = capacity - 1;
       scratch.cells.resize(std::max(scratch.cells.size(), capacity));
       std::fill_n(scratch.cells.begin(), capacity, FilterScratch::Cell{});
       std::size_t distinct = 0;
-      std::size_t i = 0;
       // The candidates' cells are scattered over the table (MulRan's 36 k points over 100 m):
       // their slots' lines are requested a few candidates ahead, so that the misses overlap.
       constexpr std::size_t kAhead = 8;
-      for (; i < m && 2 * distinct <= capacity; ++i) {
-        if (i + kAhead < m) {
-          __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
+      for (std::size_t t = 0; t < kFilterTasks && 2 * distinct <= capacity; ++t) {
+        for (std::size_t i = first[t]; i < last[t] && 2 * distinct <= capacity; ++i) {
+          if (i + kAhead < last[t]) {
+            __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
+          }
+          const std::uint64_t key = scratch.point_key[i];
+          const std::size_t s = find(key);
+          FilterScratch::Cell& cell = scratch.cells[s];
+          distinct += cell.key == 0 ? 1 : 0;
+          cell.key = key;
+          ++cell.count;
+          cell.state |= scratch.point_near[i];
+          scratch.point_slot[i] = static_cast<std::uint32_t>(s);
         }
-        const std::uint64_t key = scratch.point_key[i];
-        const std::size_t s = find(key);
-        FilterScratch::Cell& cell = scratch.cells[s];
-        distinct += cell.key == 0 ? 1 : 0;
-        cell.key = key;
-        ++cell.count;
-        cell.state |= scratch.point_near[i];
-        scratch.point_slot[i] = static_cast<std::uint32_t>(s);
       }
-      if (i == m && 2 * distinct <= capacity) {
+      if (2 * distinct <= capacity) {
         scratch.last_cells = distinct;
-        break;
+        return;
       }
       capacity = full;  // more than half full: again, with room for every candidate
     }
-  }
+  };
+  // The table is built on one thread (two tables side by side were no faster, the cells being
+  // scattered: docs/perf-occ7.md); the candidates go into the world frame meanwhile, in ranges,
+  // the survivors picked from them at the end.
+  scratch.point_slot.resize(n);
+  scratch.candidates_W.resize(n);
+  runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
+    if (job == 0) {
+      if (outliers) build_table();
+      return;
+    }
+    each_candidate(job - 1,
+                   [&](std::size_t i) { scratch.candidates_W[i] = R_W_S * cand[i] + t_W_S; });
+  });
   const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
     return scratch.cells[find(key)].count;  // an empty slot's count is 0
   };
@@ -238,30 +242,30 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       }
     });
   }
-  scratch.keep.resize(m);
+  scratch.keep.resize(n);
   std::array<std::size_t, kFilterTasks + 1> kept_before{};
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
     std::size_t kept = 0;
-    for (std::size_t i = m * task / kFilterTasks; i < m * (task + 1) / kFilterTasks; ++i) {
+    each_candidate(task, [&](std::size_t i) {
       const bool keep = !outliers || scratch.point_near[i] == 0 ||
                         (scratch.cells[scratch.point_slot[i]].state & 2) != 0;
       scratch.keep[i] = keep ? 1 : 0;
       kept += keep ? 1 : 0;
-    }
+    });
     kept_before[task + 1] = kept;
   });
   for (std::size_t t = 0; t < kFilterTasks; ++t) kept_before[t + 1] += kept_before[t];
 
-  // 3. Survivors into the world frame, each task writing its own range of the output.
+  // 3. The survivors, in input order, each task writing its own range of the output.
   points_W.resize(kept_before[kFilterTasks]);
   if (points_S != nullptr) points_S->resize(points_W.size());
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
     std::size_t out = kept_before[task];
-    for (std::size_t i = m * task / kFilterTasks; i < m * (task + 1) / kFilterTasks; ++i) {
-      if (scratch.keep[i] == 0) continue;
+    each_candidate(task, [&](std::size_t i) {
+      if (scratch.keep[i] == 0) return;
       if (points_S != nullptr) (*points_S)[out] = cand[i];
-      points_W[out++] = R_W_S * cand[i] + t_W_S;
-    }
+      points_W[out++] = scratch.candidates_W[i];
+    });
   });
 
   FilterCounts counts;

@@ -58,7 +58,10 @@ struct FilterScratch {
   std::vector<std::uint64_t> point_key;   ///< cell key per candidate point
   std::vector<std::uint32_t> point_slot;  ///< table slot of the candidate's cell
   std::vector<std::uint8_t> point_near;   ///< per candidate: near enough to be tested
-  std::vector<Eigen::Vector3f> candidates_S;
+  /// Candidates (points that passed the per-point tests) in the sensor and world frames. Both
+  /// are indexed by input position: each of the filter's fixed point ranges keeps its
+  /// candidates at the front of its own range.
+  std::vector<Eigen::Vector3f> candidates_S, candidates_W;
   std::vector<std::uint8_t> keep;  ///< per candidate: survives the outlier test
 
   /// Sizes (and writes once, so the first scan does not pay their page faults) every buffer for
