@@ -451,6 +451,7 @@ void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
   const std::size_t n_quads = (n_rays + 3) / 4;
   bucket.resize(4 * n_quads);
   order.resize(n_rays);
+  count.resize(kBucketTasks * kDirBuckets);
   const Eigen::Vector3f o = origin_W.cast<float>();
   runner.parallel_for(kBucketTasks, [&](std::size_t task) {
     const std::size_t q0 = n_quads * task / kBucketTasks, q1 = n_quads * (task + 1) / kBucketTasks;
@@ -466,12 +467,29 @@ void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
       }
       direction_buckets(x, y, z, bucket.data() + i);
     }
+    // The range's own histogram (a counting sort split by range: the order is the serial one).
+    std::uint32_t* const c = count.data() + task * kDirBuckets;
+    std::fill_n(c, kDirBuckets, 0u);
+    for (std::size_t r = 4 * q0; r < std::min(4 * q1, n_rays); ++r) ++c[bucket[r]];
   });
-  count.assign(kDirBuckets + 1, 0);
-  for (std::size_t r = 0; r < n_rays; ++r) ++count[bucket[r] + 1];
-  for (std::size_t b = 1; b <= kDirBuckets; ++b) count[b] += count[b - 1];
-  for (std::size_t r = 0; r < n_rays; ++r)
-    order[count[bucket[r]]++] = static_cast<std::uint32_t>(r);
+  // Each range's first place per bucket: buckets in order, within a bucket the ranges in order,
+  // so rays keep their scan order within a bucket (stable), as one serial pass would.
+  std::uint32_t next = 0;
+  for (std::size_t b = 0; b < kDirBuckets; ++b) {
+    for (std::size_t t = 0; t < kBucketTasks; ++t) {
+      std::uint32_t& c = count[t * kDirBuckets + b];
+      const std::uint32_t n = c;
+      c = next;
+      next += n;
+    }
+  }
+  runner.parallel_for(kBucketTasks, [&](std::size_t task) {
+    const std::size_t q0 = n_quads * task / kBucketTasks, q1 = n_quads * (task + 1) / kBucketTasks;
+    std::uint32_t* const c = count.data() + task * kDirBuckets;
+    for (std::size_t r = 4 * q0; r < std::min(4 * q1, n_rays); ++r) {
+      order[c[bucket[r]]++] = static_cast<std::uint32_t>(r);
+    }
+  });
 }
 
 /// The rays of one ray task: returns (within max range: walked to their voxel, not marked;
@@ -1482,7 +1500,7 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   warm(hit_rise_, kReservedHitSlots);
   warm(ray_order_, kReservedHitSlots);
   warm(ray_bucket_, kReservedHitSlots);
-  ray_bucket_count_.assign(kDirBuckets + 1, 0);
+  ray_bucket_count_.assign(kBucketTasks * kDirBuckets, 0);
 }
 
 int OccupancyMap::walk_lanes() const {
