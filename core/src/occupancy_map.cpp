@@ -1173,28 +1173,49 @@ bool lanes4_walk_supported() {
   return supported;
 }
 
+/// What integrate_hits' first pass in lanes reads and writes: the returns, the origin, max
+/// range, the window; each return's slot and window column out.
+struct HitPass {
+  std::span<const Eigen::Vector3f> points;
+  const Eigen::Vector3d& origin_W;
+  double max_range, voxel_size;
+  const VoxelIndex& min;
+  const Eigen::Vector3i& dims;
+  const std::array<int, 3>& ring_min;
+  std::uint32_t *slot_out, *column_out;
+  /// Within this of max range, the scalar expression decides whether a return is in range.
+  [[nodiscard]] double near_edge() const { return 1e-9 * std::max(1.0, max_range); }
+};
+
+/// Points [i, i + m) of `points` as three columns of doubles, for the hit pass's lanes (lanes
+/// from m on stay 0).
+template <int kLanes>
+[[gnu::always_inline]] inline void point_columns(std::span<const Eigen::Vector3f> points,
+                                                 std::size_t i, int m, double (&c)[3][kLanes]) {
+  for (int j = 0; j < m; ++j) {
+    for (int a = 0; a < 3; ++a) c[a][j] = static_cast<double>(points[i + j][a]);
+  }
+}
+
 /// integrate_hits' first pass in AVX-512 lanes, eight returns at a time: each return's slot
 /// (kNoSlot when not finite, beyond max range or outside the window) and window column, with the
 /// scalar pass's arithmetic (the same divisions and floors; the range's norm summed in the same
 /// order, and a return within 1e-9 of max range decided by the scalar expression itself).
 /// Returns how many returns fell outside the window.
-__attribute__((target("avx512f,avx512dq"))) std::uint64_t hit_voxels_wide(
-    std::span<const Eigen::Vector3f> points, const Eigen::Vector3d& origin_W, double max_range,
-    double voxel_size, const VoxelIndex& min, const Eigen::Vector3i& dims,
-    const std::array<int, 3>& ring_min, std::uint32_t* slot_out, std::uint32_t* column_out) {
+__attribute__((target("avx512f,avx512dq"))) std::uint64_t hit_voxels_wide(const HitPass& h) {
+  const auto& [points, origin_W, max_range, voxel_size, min, dims, ring_min, slot_out, column_out] =
+      h;
   constexpr int kLanes = 8;
   const std::size_t n = points.size();
   std::uint64_t outside = 0;
   const __m512d voxel = _mm512_set1_pd(voxel_size);
   const __m512d range = _mm512_set1_pd(max_range);
-  const __m512d near_edge = _mm512_set1_pd(1e-9 * std::max(1.0, max_range));
+  const __m512d near_edge = _mm512_set1_pd(h.near_edge());
   const __m512d abs_bits = _mm512_castsi512_pd(_mm512_set1_epi64(0x7fffffffffffffffLL));
   for (std::size_t i = 0; i < n; i += kLanes) {
     const int m = static_cast<int>(std::min<std::size_t>(kLanes, n - i));
     alignas(64) double c[3][kLanes] = {};
-    for (int j = 0; j < m; ++j) {
-      for (int a = 0; a < 3; ++a) c[a][j] = static_cast<double>(points[i + j][a]);
-    }
+    point_columns<kLanes>(points, i, m, c);
     auto keep = static_cast<__mmask8>((1u << m) - 1u);
     __m512d sq = _mm512_setzero_pd();
     __m512i slot = _mm512_setzero_si512(), stride = _mm512_set1_epi64(1);
@@ -1249,23 +1270,20 @@ __attribute__((target("avx512f,avx512dq"))) std::uint64_t hit_voxels_wide(
 /// expression). The window's indices in 32 bits: a window has fewer than 2^31 voxels
 /// (OccupancyParams::validate) and every coordinate it holds is within ±2^31 voxels.
 /// Returns how many returns fell outside the window.
-__attribute__((target("avx2"))) std::uint64_t hit_voxels_lanes4(
-    std::span<const Eigen::Vector3f> points, const Eigen::Vector3d& origin_W, double max_range,
-    double voxel_size, const VoxelIndex& min, const Eigen::Vector3i& dims,
-    const std::array<int, 3>& ring_min, std::uint32_t* slot_out, std::uint32_t* column_out) {
+__attribute__((target("avx2"))) std::uint64_t hit_voxels_lanes4(const HitPass& h) {
+  const auto& [points, origin_W, max_range, voxel_size, min, dims, ring_min, slot_out, column_out] =
+      h;
   constexpr int kLanes = 4;
   const std::size_t n = points.size();
   std::uint64_t outside = 0;
   const __m256d voxel = _mm256_set1_pd(voxel_size);
   const __m256d range = _mm256_set1_pd(max_range);
-  const __m256d near_edge = _mm256_set1_pd(1e-9 * std::max(1.0, max_range));
+  const __m256d near_edge = _mm256_set1_pd(h.near_edge());
   const __m256d abs_bits = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffffLL));
   for (std::size_t i = 0; i < n; i += kLanes) {
     const int m = static_cast<int>(std::min<std::size_t>(kLanes, n - i));
     alignas(32) double c[3][kLanes] = {};
-    for (int j = 0; j < m; ++j) {
-      for (int a = 0; a < 3; ++a) c[a][j] = static_cast<double>(points[i + j][a]);
-    }
+    point_columns<kLanes>(points, i, m, c);
     __m256d keep = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
     __m256d sq = _mm256_setzero_pd();
     __m128i slot = _mm_setzero_si128(), stride = _mm_set1_epi32(1), inside = _mm_set1_epi32(-1);
@@ -1759,12 +1777,12 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
 #if defined(TARMAC_WIDE_WALK)
   const int lanes = walk_lanes();
   wide = lanes > 1;
+  const HitPass pass{points_W, origin_W,         max_range,         v_m, min_, dims_,
+                     ring_min, hit_slot_.data(), hit_column_.data()};
   if (lanes == 8) {
-    stats.outside_window += hit_voxels_wide(points_W, origin_W, max_range, v_m, min_, dims_,
-                                            ring_min, hit_slot_.data(), hit_column_.data());
+    stats.outside_window += hit_voxels_wide(pass);
   } else if (lanes == 4) {
-    stats.outside_window += hit_voxels_lanes4(points_W, origin_W, max_range, v_m, min_, dims_,
-                                              ring_min, hit_slot_.data(), hit_column_.data());
+    stats.outside_window += hit_voxels_lanes4(pass);
   }
 #endif
   if (!wide) {
