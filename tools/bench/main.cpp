@@ -131,9 +131,14 @@ int main(int argc, char** argv) {
       opt.tsdf_only = true;
     else if (a == "--narrow-walk")
       opt.walk_lanes = 1;
-    else if (a == "--walk-lanes" && v)
-      opt.walk_lanes = std::atoi(argv[++i]);
-    else if (a == "--phases")
+    else if (a == "--walk-lanes" && v) {
+      const std::string lanes = argv[++i];
+      if (lanes != "8" && lanes != "4" && lanes != "1") {
+        std::fprintf(stderr, "tarmac-bench: --walk-lanes takes 8, 4 or 1\n");
+        return 64;
+      }
+      opt.walk_lanes = std::stoi(lanes);
+    } else if (a == "--phases")
       opt.phases = true;
     else if (a == "--window" && v) {
       if (std::sscanf(argv[++i], "%d,%d,%d", &opt.window_x, &opt.window_y, &opt.window_z) != 3 ||
