@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <set>
 #include <string>
@@ -289,6 +290,104 @@ void expect_lanes_walk_breaks_ties_the_same(int lanes) {
   EXPECT_EQ(0, std::memcmp(la.data(), lb.data(), la.size() * sizeof(float)));
 }
 
+// Random small scenes against the walk one ray at a time: windows a few voxels wide (walks wrap
+// and leave on every axis), origins on the lattice, off-centre or outside the window, returns in
+// the origin's voxel or on the lattice, non-finite returns, zero and NaN clearing directions,
+// scans of fewer rays than lanes, on one thread and two. Counts and log-odds must be the same.
+void expect_lanes_walk_same_on_random_scenes(int lanes) {
+  std::mt19937_64 rng(42);
+  const auto u = [&](double a, double b) {
+    return std::uniform_real_distribution<double>(a, b)(rng);
+  };
+  const auto pick = [&](int a, int b) { return std::uniform_int_distribution<int>(a, b)(rng); };
+  daemon::ThreadPool pool(2);
+  SerialRunner serial;
+  int scans = 0;
+  for (int it = 0; it < 60; ++it) {
+    OccupancyParams p;
+    const double sizes[] = {0.05, 0.1, 0.2, 0.25, 0.5, 1.0};
+    p.voxel_size_m = sizes[pick(0, 5)];
+    p.window_x_vox = pick(4, 40);
+    p.window_y_vox = pick(4, 40);
+    p.window_z_vox = pick(4, 24);
+    p.window_below_m = u(0.0, p.window_z_vox * p.voxel_size_m);
+    p.max_range_m = u(0.01, 30.0);
+    p.clearing_range_m = it % 5 == 0 ? 0.0 : u(0.0, 40.0);
+    ASSERT_TRUE(p.validate().ok());
+    OccupancyMap wide(p), narrow(p);
+    wide.set_walk_lanes(lanes);
+    narrow.set_walk_lanes(1);
+    if (wide.walk_lanes() != lanes) {
+      GTEST_SKIP() << "no " << lanes << "-lane walk on this processor";
+    }
+    Eigen::Vector3d origin(u(-5.0, 5.0), u(-5.0, 5.0), u(-2.0, 2.0));
+    for (int s = 0; s < 4; ++s) {
+      if (pick(0, 2) == 0) {  // on the lattice's quarter points: exact ties
+        for (int a = 0; a < 3; ++a) {
+          origin[a] = std::round(origin[a] / p.voxel_size_m * 4.0) * p.voxel_size_m / 4.0;
+        }
+      }
+      const Eigen::Vector3f o = origin.cast<float>();
+      const auto v = static_cast<float>(p.voxel_size_m);
+      std::vector<Eigen::Vector3f> points, dirs;
+      const int n = pick(0, 3) == 0 ? pick(0, 9) : pick(10, 400);
+      for (int i = 0; i < n; ++i) {
+        const int kind = pick(0, 8);
+        if (kind == 0) {
+          points.push_back(o);  // the origin's voxel
+        } else if (kind == 1) {
+          Eigen::Vector3f q = o;
+          q[pick(0, 2)] += static_cast<float>(pick(-8, 8)) * v;  // along an axis
+          points.push_back(q);
+        } else if (kind == 2) {
+          points.push_back(o + v * Eigen::Vector3f(static_cast<float>(pick(-5, 5)),
+                                                   static_cast<float>(pick(-5, 5)),
+                                                   static_cast<float>(pick(-5, 5))));
+        } else if (kind == 3) {
+          points.emplace_back(std::nanf(""), 0.0f, 0.0f);
+        } else {
+          const Eigen::Vector3d d = Eigen::Vector3d(u(-1, 1), u(-1, 1), u(-1, 1)).normalized();
+          points.push_back((origin + d * u(0.0, 40.0)).cast<float>());
+        }
+      }
+      for (int i = pick(0, 40); i > 0; --i) {
+        const int kind = pick(0, 5);
+        if (kind == 0) {
+          dirs.push_back(Eigen::Vector3f::Zero());
+        } else if (kind == 1) {
+          dirs.emplace_back(std::nanf(""), 0.0f, 1.0f);
+        } else if (kind == 2) {
+          Eigen::Vector3f d = Eigen::Vector3f::Zero();
+          d[pick(0, 2)] = pick(0, 1) == 0 ? 1.0f : -1.0f;
+          dirs.push_back(d);
+        } else {
+          dirs.push_back(Eigen::Vector3d(u(-1, 1), u(-1, 1), u(-1, 1)).cast<float>());
+        }
+      }
+      TaskRunner& runner = s % 2 == 0 ? static_cast<TaskRunner&>(serial) : pool;
+      if (s > 0 && pick(0, 1) == 0) origin += Eigen::Vector3d(u(-10, 10), u(-10, 10), u(-2, 2));
+      wide.recenter(origin, runner);
+      narrow.recenter(origin, runner);
+      Eigen::Vector3d sensor = origin;  // sometimes off-centre, or outside the window
+      if (pick(0, 4) == 0) sensor += Eigen::Vector3d(u(-8, 8), u(-8, 8), u(-3, 3));
+      const auto a = wide.integrate(sensor, points, dirs, runner);
+      const auto b = narrow.integrate(sensor, points, dirs, runner);
+      ASSERT_EQ(a.voxel_visits, b.voxel_visits) << "scene " << it << " scan " << s;
+      ASSERT_EQ(a.miss_updates, b.miss_updates) << "scene " << it << " scan " << s;
+      ASSERT_EQ(a.hit_updates, b.hit_updates) << "scene " << it << " scan " << s;
+      ASSERT_EQ(a.outside_window, b.outside_window) << "scene " << it << " scan " << s;
+      std::vector<float> la, lb;
+      wide.export_log_odds(la);
+      narrow.export_log_odds(lb);
+      ASSERT_EQ(la.size(), lb.size());
+      ASSERT_EQ(0, std::memcmp(la.data(), lb.data(), la.size() * sizeof(float)))
+          << "scene " << it << " scan " << s;
+      ++scans;
+    }
+  }
+  EXPECT_EQ(scans, 240);
+}
+
 TEST(OccupancyMap, WideWalk_SameMapAsOneRayAtATime) {
   expect_lanes_walk_same_map(8);
 }
@@ -300,6 +399,12 @@ TEST(OccupancyMap, Lanes4Walk_SameMapAsOneRayAtATime) {
 }
 TEST(OccupancyMap, Lanes4Walk_BreaksTiesAsOneRayAtATime) {
   expect_lanes_walk_breaks_ties_the_same(4);
+}
+TEST(OccupancyMap, WideWalk_RandomScenesSameAsOneRayAtATime) {
+  expect_lanes_walk_same_on_random_scenes(8);
+}
+TEST(OccupancyMap, Lanes4Walk_RandomScenesSameAsOneRayAtATime) {
+  expect_lanes_walk_same_on_random_scenes(4);
 }
 
 TEST(OccupancyMap, NoReturnAndBeyondMaxRange_ClearUpToClearingRange) {
@@ -592,6 +697,22 @@ TEST(OccupancyMap, StaticLayer_ZeroPromotionDisablesIt) {
   EXPECT_FALSE(p.validate().ok());
   p.static_promote_scans = 20;
   p.static_demote_scans = 0;
+  EXPECT_FALSE(p.validate().ok());
+}
+
+// Ranges are bounded: a walk's voxel indices are 32-bit. Beyond 2^31 voxels of range the walks
+// would wrap (the lanes' conversions saturate instead), so such a config is refused.
+TEST(OccupancyMap, Params_RangesAreBounded) {
+  OccupancyParams p = small_params();
+  p.max_range_m = 1000.0;
+  p.clearing_range_m = 1000.0;
+  EXPECT_TRUE(p.validate().ok());
+  p.max_range_m = 1e8;
+  EXPECT_FALSE(p.validate().ok());
+  p.max_range_m = 50.0;
+  p.clearing_range_m = 1e8;
+  EXPECT_FALSE(p.validate().ok());
+  p.clearing_range_m = std::numeric_limits<double>::infinity();
   EXPECT_FALSE(p.validate().ok());
 }
 
