@@ -1788,10 +1788,10 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
   scan_ground_cols_.clear();
   // The slot and column of each return (none: not finite, beyond max range or outside).
-  bool wide = false;
+  bool in_lanes = false;
 #if defined(TARMAC_WIDE_WALK)
   const int lanes = walk_lanes();
-  wide = lanes > 1;
+  in_lanes = lanes > 1;
   const HitPass pass{points_W, origin_W,         max_range,         v_m, min_, dims_,
                      ring_min, hit_slot_.data(), hit_column_.data()};
   if (lanes == 8) {
@@ -1800,7 +1800,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
     stats.outside_window += hit_voxels_lanes4(pass);
   }
 #endif
-  if (!wide) {
+  if (!in_lanes) {
     for (std::size_t i = 0; i < n_points; ++i) {
       const Eigen::Vector3f& p = points_W[i];
       hit_slot_[i] = kNoSlot;
