@@ -2,7 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <cstring>
+#include <limits>
+
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
 
 namespace tarmac::core {
 
@@ -73,6 +80,136 @@ std::size_t table_capacity(std::size_t points) {
 // A slot is one aligned 16-byte unit: it never straddles two cache lines.
 static_assert(sizeof(FilterScratch::Cell) == 16 && alignof(FilterScratch::Cell) == 16);
 
+/// Lanes set in a four-lane mask (std::popcount is a library call without the POPCNT
+/// instruction, which the baseline x86-64 target does not assume).
+std::uint64_t lanes_set(unsigned mask) {
+  constexpr std::uint8_t kSet[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+  return kSet[mask & 15u];
+}
+
+/// Four lanes of 32 bits (GCC/Clang vector extensions: SSE on any x86-64); comparisons give −1
+/// or 0.
+using Float4 = float __attribute__((vector_size(16)));
+using Int4 = std::int32_t __attribute__((vector_size(16)));
+
+/// filter_scan's per-point tests four points at a time, with the same float arithmetic as the
+/// one-point reference (test_point in filter_scan), so the same decisions: the squared norm
+/// summed in Eigen's order (x² + (y² + z²)), its comparison with min range² in double done in
+/// float against the smallest float not below it, the cell key's floors in 32-bit lanes (a
+/// lane whose cell coordinate is out of their range takes the reference's 64-bit one).
+/// The ego box test, in double, is left to the reference for the few points that a float test
+/// with a wide margin does not put surely outside the box (within ~1e-5 of the box's size and
+/// of the point's distance: those near or in the vehicle).
+class PointLanes {
+ public:
+  /// What test() finds for four points: lane masks (bit l: point l) and, for the lanes whose
+  /// keys are in `keyed`, the three 21-bit fields of the cell key.
+  struct Found {
+    unsigned finite = 0, close = 0, maybe_ego = 0, keyed = 0, near = 0;
+    alignas(16) std::uint32_t field[3][4];
+  };
+
+  PointLanes(const FilterParams& params, const Eigen::Isometry3d& T_B_S, float inv_cell,
+             float near_sq)
+      : ego_(params.ego_box_enabled), inv_cell_(inv_cell), near_sq_(near_sq) {
+    const double min_sq = params.min_range_m * params.min_range_m;
+    float f = static_cast<float>(min_sq);
+    if (static_cast<double>(f) < min_sq)
+      f = std::nextafter(f, std::numeric_limits<float>::infinity());
+    min_sq_ = f;
+    double row_sum = 0.0, bound = 1.0;
+    for (int a = 0; a < 3; ++a) {
+      double sum = 0.0;
+      for (int b = 0; b < 3; ++b) {
+        R_[a][b] = static_cast<float>(T_B_S.linear()(a, b));
+        sum += std::abs(T_B_S.linear()(a, b));
+      }
+      row_sum = std::max(row_sum, sum);
+      t_[a] = static_cast<float>(T_B_S.translation()[a]);
+      lo_[a] = static_cast<float>(params.ego_box_min_B[a]);
+      hi_[a] = static_cast<float>(params.ego_box_max_B[a]);
+      bound += std::abs(T_B_S.translation()[a]) + std::abs(params.ego_box_min_B[a]) +
+               std::abs(params.ego_box_max_B[a]);
+    }
+    // The float test's error is a few float roundings of sums bounded by these: a margin a
+    // hundred times that.
+    margin_ = static_cast<float>(1e-5 * bound);
+    margin_per_m_ = static_cast<float>(1e-5 * row_sum);
+    // Extrinsics or a box beyond float's range: every lane takes the reference's test.
+    all_maybe_ego_ = ego_ && !(std::isfinite(margin_) && std::isfinite(margin_per_m_));
+  }
+
+  [[nodiscard]] Found test(const Eigen::Vector3f* p) const {
+    static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float));
+    const auto* raw = reinterpret_cast<const unsigned char*>(p);
+    Float4 a, b, c;  // x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3
+    std::memcpy(&a, raw, sizeof a);
+    std::memcpy(&b, raw + sizeof a, sizeof b);
+    std::memcpy(&c, raw + 2 * sizeof a, sizeof c);
+    const Float4 x =
+        __builtin_shufflevector(__builtin_shufflevector(a, b, 0, 3, 6, 7), c, 0, 1, 2, 5);
+    const Float4 y =
+        __builtin_shufflevector(__builtin_shufflevector(a, b, 1, 4, 7, 7), c, 0, 1, 2, 6);
+    const Float4 z =
+        __builtin_shufflevector(__builtin_shufflevector(a, b, 2, 5, 5, 5), c, 0, 1, 4, 7);
+    const Float4 zero = {};
+    const Int4 finite = (x - x == zero) & (y - y == zero) & (z - z == zero);
+    const Float4 sq = x * x + (y * y + z * z);
+    const Int4 close = finite & (sq < min_sq_);
+    Found f;
+    f.finite = mask(finite);
+    f.close = mask(close);
+    f.near = mask(sq < near_sq_);
+    if (all_maybe_ego_) {
+      f.maybe_ego = 0xf;
+    } else if (ego_) {
+      const Float4 ax = x < zero ? -x : x, ay = y < zero ? -y : y, az = z < zero ? -z : z;
+      const Float4 m = margin_ + margin_per_m_ * (ax + ay + az);
+      Int4 outside = {};
+      for (int r = 0; r < 3; ++r) {
+        const Float4 v = R_[r][0] * x + R_[r][1] * y + R_[r][2] * z + t_[r];
+        outside |= (v < lo_[r] - m) | (v > hi_[r] + m);
+      }
+      f.maybe_ego = mask(~outside);
+    }
+    // Cell fields: floor as the reference's floor_to_int, in 32 bits while that is exact.
+    const Float4 limit = zero + 2147483520.0f;  // the largest float below 2^31
+    Int4 keyed = finite;
+    const Float4 q[3] = {x * inv_cell_, y * inv_cell_, z * inv_cell_};
+    for (int k = 0; k < 3; ++k) {
+      const Float4 abs_q = q[k] < zero ? -q[k] : q[k];
+      keyed &= abs_q <= limit;
+      const Float4 safe = abs_q <= limit ? q[k] : zero;
+      const Int4 i = __builtin_convertvector(safe, Int4);           // truncates toward zero
+      const Int4 down = __builtin_convertvector(i, Float4) > safe;  // −1 where it rounded up
+      using UInt4 = std::uint32_t __attribute__((vector_size(16)));
+      const UInt4 field =
+          (reinterpret_cast<const UInt4&>(i) + reinterpret_cast<const UInt4&>(down) + (1u << 20)) &
+          static_cast<std::uint32_t>(kField);
+      std::memcpy(f.field[k], &field, sizeof field);
+    }
+    f.keyed = mask(keyed);
+    return f;
+  }
+
+ private:
+  /// Bit l set where lane l is true.
+  static unsigned mask(Int4 m) {
+#if defined(__SSE2__)
+    return static_cast<unsigned>(_mm_movemask_ps(_mm_castsi128_ps(reinterpret_cast<__m128i&>(m))));
+#else
+    unsigned bits = 0;
+    for (int l = 0; l < 4; ++l) bits |= (m[l] != 0 ? 1u : 0u) << l;
+    return bits;
+#endif
+  }
+
+  bool ego_, all_maybe_ego_ = false;
+  float inv_cell_, near_sq_, min_sq_ = 0.0f;
+  float R_[3][3] = {}, t_[3] = {}, lo_[3] = {}, hi_[3] = {};
+  float margin_ = 0.0f, margin_per_m_ = 0.0f;
+};
+
 }  // namespace
 
 void FilterScratch::reserve(std::size_t points) {
@@ -114,34 +251,60 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   scratch.candidates_S.resize(n);
   scratch.point_key.resize(n);
   scratch.point_near.resize(n);
+  const auto in_ego_box = [&](const Eigen::Vector3f& p) {
+    const Eigen::Vector3d p_B = R_B_S * p.cast<double>() + t_B_S;
+    return (p_B.array() >= params.ego_box_min_B.array()).all() &&
+           (p_B.array() <= params.ego_box_max_B.array()).all();
+  };
+  const auto add_candidate = [&](const Eigen::Vector3f& p, std::size_t& out) {
+    scratch.candidates_S[out] = p;
+    if (outliers) {
+      scratch.point_key[out] = cell_key(p, inv_cell);
+      scratch.point_near[out] = p.squaredNorm() < near_sq ? 1 : 0;
+    }
+    ++out;
+  };
+  // The tests one point at a time: the reference (and the lanes' fallback).
+  const auto test_point = [&](const Eigen::Vector3f& p, FilterCounts& c, std::size_t& out) {
+    if (!p.allFinite()) {
+      ++c.non_finite;
+    } else if (static_cast<double>(p.squaredNorm()) < min_sq) {
+      ++c.too_close;
+    } else if (params.ego_box_enabled && in_ego_box(p)) {
+      ++c.ego_vehicle;
+    } else {
+      add_candidate(p, out);
+    }
+  };
+  const PointLanes lanes(params, T_B_S, inv_cell, near_sq);
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
     FilterCounts& c = task_counts[task];
     std::size_t out = first[task];
-    for (std::size_t i = first[task]; i < first[task + 1]; ++i) {
-      const Eigen::Vector3f& p = cloud.points_S[i];
-      if (!p.allFinite()) {
-        ++c.non_finite;
-        continue;
-      }
-      if (static_cast<double>(p.squaredNorm()) < min_sq) {
-        ++c.too_close;
-        continue;
-      }
-      if (params.ego_box_enabled) {
-        const Eigen::Vector3d p_B = R_B_S * p.cast<double>() + t_B_S;
-        if ((p_B.array() >= params.ego_box_min_B.array()).all() &&
-            (p_B.array() <= params.ego_box_max_B.array()).all()) {
+    std::size_t i = first[task];
+    for (; i + 4 <= first[task + 1]; i += 4) {
+      const PointLanes::Found f = lanes.test(&cloud.points_S[i]);
+      c.non_finite += 4 - lanes_set(f.finite);
+      c.too_close += lanes_set(f.close);
+      for (unsigned pass = f.finite & ~f.close; pass != 0; pass &= pass - 1) {
+        const int l = std::countr_zero(pass);
+        const Eigen::Vector3f& p = cloud.points_S[i + static_cast<std::size_t>(l)];
+        if (((f.maybe_ego >> l) & 1u) != 0 && in_ego_box(p)) {
           ++c.ego_vehicle;
           continue;
         }
+        scratch.candidates_S[out] = p;
+        if (outliers) {
+          scratch.point_key[out] = ((f.keyed >> l) & 1u) != 0
+                                       ? (std::uint64_t{f.field[0][l]} << 42) |
+                                             (std::uint64_t{f.field[1][l]} << 21) | f.field[2][l] |
+                                             (1ull << 63)
+                                       : cell_key(p, inv_cell);
+          scratch.point_near[out] = static_cast<std::uint8_t>((f.near >> l) & 1u);
+        }
+        ++out;
       }
-      scratch.candidates_S[out] = p;
-      if (outliers) {
-        scratch.point_key[out] = cell_key(p, inv_cell);
-        scratch.point_near[out] = p.squaredNorm() < near_sq ? 1 : 0;
-      }
-      ++out;
     }
+    for (; i < first[task + 1]; ++i) test_point(cloud.points_S[i], c, out);
     last[task] = out;
   });
   // Task t's candidates are [first[t], last[t]): the passes below take the tasks' ranges in
@@ -238,7 +401,10 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       for (std::size_t s = capacity * task / kFilterTasks; s < capacity * (task + 1) / kFilterTasks;
            ++s) {
         FilterScratch::Cell& cell = scratch.cells[s];
-        if (cell.state != 0 && has_neighbours(cell.key)) cell.state |= 2;
+        // A cell holding enough points on its own needs no lookup (most of them: walls).
+        if (cell.state != 0 && (cell.count >= needed || has_neighbours(cell.key))) {
+          cell.state |= 2;
+        }
       }
     });
   }

@@ -1,6 +1,8 @@
 #include "tarmac/core/scan_filter.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <random>
 #include <tuple>
@@ -170,6 +172,86 @@ TEST(ScanFilter, TableSizedFromASmallerScanGivesTheSameResult) {
     EXPECT_EQ(c.isolated, want.isolated);
     EXPECT_EQ(f.out_W, is_small ? fresh_small.out_W : fresh_scattered.out_W);
   }
+}
+
+TEST(ScanFilter, PerPointTestsDecideAsTheDoublePrecisionRuleOnEdgeCases) {
+  // The per-point tests run four points at a time in float lanes; each decision must be the
+  // rule's own: |p|² (float) below min range² in double, and the ego box tested in double in
+  // the base frame. Points on both sides of each edge by a few float steps, non-finite and huge
+  // ones, shuffled so that every kind lands in every lane.
+  FilterParams params;
+  params.outlier_min_neighbors = 0;
+  params.min_range_m = 1.9;  // 3.61 is not a float, and the nearest float lies below it
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.linear() = (Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()) *
+                    Eigen::AngleAxisd(0.05, Eigen::Vector3d::UnitX()))
+                       .toRotationMatrix();
+  T_B_S.translation() = Eigen::Vector3d(1.2, -0.1, 1.9);
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::uniform_int_distribution<int> nudge(-3, 3);
+  const auto step = [&](float v) {  // v moved by a few float steps
+    const int k = nudge(rng);
+    for (int i = 0; i < std::abs(k); ++i)
+      v = std::nextafter(v, k > 0 ? std::numeric_limits<float>::infinity() : -1e30f);
+    return v;
+  };
+  PointCloud cloud;
+  for (int i = 0; i < 3000; ++i) {  // on the min-range sphere
+    const Eigen::Vector3d d = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+    const Eigen::Vector3f p = (d * params.min_range_m).cast<float>();
+    cloud.points_S.emplace_back(step(p.x()), step(p.y()), step(p.z()));
+  }
+  for (int i = 0; i < 6000; ++i) {  // on a face of the ego box, in the base frame
+    const int axis = i % 3;
+    Eigen::Vector3d p_B;
+    for (int a = 0; a < 3; ++a) {
+      p_B[a] = params.ego_box_min_B[a] +
+               (0.5 + 0.6 * u(rng)) * (params.ego_box_max_B[a] - params.ego_box_min_B[a]);
+    }
+    p_B[axis] = (i / 3) % 2 == 0 ? params.ego_box_min_B[axis] : params.ego_box_max_B[axis];
+    const Eigen::Vector3f p = (T_B_S.inverse() * p_B).cast<float>();
+    cloud.points_S.emplace_back(step(p.x()), step(p.y()), step(p.z()));
+  }
+  const float inf = std::numeric_limits<float>::infinity();
+  for (const Eigen::Vector3f& p : {Eigen::Vector3f(std::nanf(""), 1, 1), Eigen::Vector3f(1, inf, 1),
+                                   Eigen::Vector3f(1, 1, -inf), Eigen::Vector3f(0, 0, 1.1f),
+                                   Eigen::Vector3f(1e30f, -1e30f, 1e30f),
+                                   Eigen::Vector3f(3e9f, 5, 1), Eigen::Vector3f(0, 0, 0)}) {
+    for (int k = 0; k < 5; ++k) cloud.points_S.push_back(p);
+  }
+  std::shuffle(cloud.points_S.begin(), cloud.points_S.end(), rng);
+  FilterCounts want;
+  want.input = cloud.size();
+  std::vector<Eigen::Vector3f> want_S;
+  for (const Eigen::Vector3f& p : cloud.points_S) {
+    if (!p.allFinite()) {
+      ++want.non_finite;
+    } else if (static_cast<double>(p.squaredNorm()) < params.min_range_m * params.min_range_m) {
+      ++want.too_close;
+    } else {
+      const Eigen::Vector3d p_B = T_B_S * p.cast<double>();
+      if ((p_B.array() >= params.ego_box_min_B.array()).all() &&
+          (p_B.array() <= params.ego_box_max_B.array()).all()) {
+        ++want.ego_vehicle;
+      } else {
+        want_S.push_back(p);
+      }
+    }
+  }
+  EXPECT_GT(want.too_close, 1000u);
+  EXPECT_GT(want.ego_vehicle, 1500u);
+  EXPECT_GT(want_S.size(), 4000u);
+  FilterScratch scratch;
+  std::vector<Eigen::Vector3f> out_W, out_S;
+  daemon::ThreadPool pool(2);
+  const FilterCounts c = filter_scan(cloud, Eigen::Isometry3d::Identity(), T_B_S, params, out_W,
+                                     scratch, pool, &out_S);
+  EXPECT_EQ(c.non_finite, want.non_finite);
+  EXPECT_EQ(c.too_close, want.too_close);
+  EXPECT_EQ(c.ego_vehicle, want.ego_vehicle);
+  EXPECT_EQ(c.kept, want_S.size());
+  EXPECT_EQ(out_S, want_S);
 }
 
 TEST(ScanFilter, SameResultForOneTwoAndFourThreads) {
