@@ -54,7 +54,7 @@ Mapper::Mapper(const MapperParams& params)
   // Warm-up, so the first cycle costs what the others do: the per-point buffers sized for a
   // 64-beam scan and written once, and one costmap of the empty window (all unknown: it sizes
   // and writes every costmap and 2D ESDF buffer; the first update_costmap() replaces it).
-  filter_scratch_.reserve(kWarmUpPoints);
+  filter_scratch_.reserve(kWarmUpPoints, params.filters);
   points_W_.assign(kWarmUpPoints, Eigen::Vector3f::Zero());
   points_W_.clear();
   SerialRunner serial;

@@ -24,6 +24,9 @@ Status FilterParams::validate() const {
   if (!(outlier_cell_m >= 0.05 && outlier_cell_m <= 5.0)) {
     return Error{"config.range", "filters.outlier_cell_m: must be in [0.05, 5]"};
   }
+  if (!(outlier_max_range_m >= 0.0 && outlier_max_range_m <= 1000.0)) {
+    return Error{"config.range", "filters.outlier_max_range_m: must be in [0, 1000]"};
+  }
   return Ok{};
 }
 
@@ -41,12 +44,18 @@ std::int64_t floor_to_int(float v) {
 
 constexpr std::uint64_t kField = 0x1fffff;
 
+/// The cell of a point: floor(coordinate / cell) per axis.
+std::array<std::int64_t, 3> cell_of(const Eigen::Vector3f& p, float inv_cell) {
+  return {floor_to_int(p.x() * inv_cell), floor_to_int(p.y() * inv_cell),
+          floor_to_int(p.z() * inv_cell)};
+}
+
 /// Packs a cell coordinate (each within ±2^20 cells) into a non-zero key.
-std::uint64_t cell_key(const Eigen::Vector3f& p, float inv_cell) {
-  const auto c = [&](float v) {
-    return static_cast<std::uint64_t>(floor_to_int(v * inv_cell) + (1 << 20)) & kField;
+std::uint64_t cell_key(const std::array<std::int64_t, 3>& c) {
+  const auto field = [](std::int64_t v) {
+    return static_cast<std::uint64_t>(v + (1 << 20)) & kField;
   };
-  return (c(p.x()) << 42) | (c(p.y()) << 21) | c(p.z()) | (1ull << 63);
+  return (field(c[0]) << 42) | (field(c[1]) << 21) | field(c[2]) | (1ull << 63);
 }
 
 /// Home slot of a key: linear in the cell coordinates with the z coordinate unscaled, so the
@@ -77,6 +86,36 @@ std::size_t table_capacity(std::size_t points) {
   return capacity;
 }
 
+/// Bits of FilterScratch::point_near: the candidate is near enough to be tested; its cell lies
+/// in the region the test reads (OutlierRegion).
+constexpr std::uint8_t kNear = 1, kInRegion = 4;
+
+/// The cells the outlier test can read: a near candidate's cell and the 26 around it lie within
+/// `reach` cells of the sensor's on every axis (each coordinate of a near point is below the
+/// outlier range; 3 cells more for the floors' float rounding). Candidates outside it are not
+/// counted: no near candidate can be their neighbour. When the region has few enough cells
+/// (side³ ≤ FilterScratch::grid_cell_limit: 2 MB at the defaults) they are counted in a grid
+/// of bytes, an index instead of a hash lookup per count and per neighbour.
+struct OutlierRegion {
+  OutlierRegion(const FilterParams& params, std::size_t limit)
+      : reach(static_cast<int>(
+                  std::min(std::ceil(params.outlier_max_range_m / params.outlier_cell_m), 1e5)) +
+              3),
+        side(2 * static_cast<std::size_t>(reach) + 1),
+        grid(side * side * side <= limit) {}
+
+  /// The grid index (x fastest) of the cell of a key in the region.
+  [[nodiscard]] std::size_t index(std::uint64_t key) const {
+    const std::uint64_t lo = (1u << 20) - static_cast<std::uint64_t>(reach);
+    return (((key & kField) - lo) * side + (((key >> 21) & kField) - lo)) * side +
+           (((key >> 42) & kField) - lo);
+  }
+
+  int reach;
+  std::size_t side;
+  bool grid;
+};
+
 // A slot is one aligned 16-byte unit: it never straddles two cache lines.
 static_assert(sizeof(FilterScratch::Cell) == 16 && alignof(FilterScratch::Cell) == 16);
 
@@ -105,13 +144,13 @@ class PointLanes {
   /// What test() finds for four points: lane masks (bit l: point l) and, for the lanes whose
   /// keys are in `keyed`, the three 21-bit fields of the cell key.
   struct Found {
-    unsigned finite = 0, close = 0, maybe_ego = 0, keyed = 0, near = 0;
+    unsigned finite = 0, close = 0, maybe_ego = 0, keyed = 0, near = 0, region = 0;
     alignas(16) std::uint32_t field[3][4];
   };
 
   PointLanes(const FilterParams& params, const Eigen::Isometry3d& T_B_S, float inv_cell,
-             float near_sq)
-      : ego_(params.ego_box_enabled), inv_cell_(inv_cell), near_sq_(near_sq) {
+             float near_sq, int reach)
+      : ego_(params.ego_box_enabled), inv_cell_(inv_cell), near_sq_(near_sq), reach_(reach) {
     const double min_sq = params.min_range_m * params.min_range_m;
     float f = static_cast<float>(min_sq);
     if (static_cast<double>(f) < min_sq)
@@ -175,6 +214,7 @@ class PointLanes {
     // Cell fields: floor as the reference's floor_to_int, in 32 bits while that is exact.
     const Float4 limit = zero + 2147483520.0f;  // the largest float below 2^31
     Int4 keyed = finite;
+    Int4 region = finite;
     const Float4 q[3] = {x * inv_cell_, y * inv_cell_, z * inv_cell_};
     for (int k = 0; k < 3; ++k) {
       const Float4 abs_q = q[k] < zero ? -q[k] : q[k];
@@ -182,6 +222,8 @@ class PointLanes {
       const Float4 safe = abs_q <= limit ? q[k] : zero;
       const Int4 i = __builtin_convertvector(safe, Int4);           // truncates toward zero
       const Int4 down = __builtin_convertvector(i, Float4) > safe;  // −1 where it rounded up
+      const Int4 cell = i + down;  // no overflow: |safe| < 2^31, so i > −2^31 where down is −1
+      region &= (cell >= -reach_) & (cell <= reach_);
       using UInt4 = std::uint32_t __attribute__((vector_size(16)));
       const UInt4 field =
           (reinterpret_cast<const UInt4&>(i) + reinterpret_cast<const UInt4&>(down) + (1u << 20)) &
@@ -189,6 +231,7 @@ class PointLanes {
       std::memcpy(f.field[k], &field, sizeof field);
     }
     f.keyed = mask(keyed);
+    f.region = mask(region & keyed);
     return f;
   }
 
@@ -206,13 +249,20 @@ class PointLanes {
 
   bool ego_, all_maybe_ego_ = false;
   float inv_cell_, near_sq_, min_sq_ = 0.0f;
+  int reach_;
   float R_[3][3] = {}, t_[3] = {}, lo_[3] = {}, hi_[3] = {};
   float margin_ = 0.0f, margin_per_m_ = 0.0f;
 };
 
 }  // namespace
 
-void FilterScratch::reserve(std::size_t points) {
+void FilterScratch::reserve(std::size_t points, const FilterParams& params) {
+  const OutlierRegion region(params, grid_cell_limit);
+  if (params.outlier_min_neighbors > 0 && region.grid) {
+    grid.assign(region.side * region.side * region.side, 0);
+  }
+  grid_touched.assign(points, 0);
+  grid_touched.clear();
   cells.assign(table_capacity(points), Cell{});
   point_key.assign(points, 0);
   point_slot.assign(points, 0);
@@ -243,6 +293,8 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const float inv_cell = static_cast<float>(1.0 / params.outlier_cell_m);
   const float near_sq = static_cast<float>(params.outlier_max_range_m * params.outlier_max_range_m);
 
+  const OutlierRegion region(params, scratch.grid_cell_limit);
+
   // 1. Per-point tests, each task compacting its candidates to the front of its own range.
   std::array<FilterCounts, kFilterTasks> task_counts{};
   std::array<std::size_t, kFilterTasks + 1> first{};  // candidates of task t: [first[t], …)
@@ -259,8 +311,12 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const auto add_candidate = [&](const Eigen::Vector3f& p, std::size_t& out) {
     scratch.candidates_S[out] = p;
     if (outliers) {
-      scratch.point_key[out] = cell_key(p, inv_cell);
-      scratch.point_near[out] = p.squaredNorm() < near_sq ? 1 : 0;
+      const std::array<std::int64_t, 3> c = cell_of(p, inv_cell);
+      const bool in_region = std::abs(c[0]) <= region.reach && std::abs(c[1]) <= region.reach &&
+                             std::abs(c[2]) <= region.reach;
+      scratch.point_key[out] = cell_key(c);
+      scratch.point_near[out] = static_cast<std::uint8_t>((p.squaredNorm() < near_sq ? kNear : 0) |
+                                                          (in_region ? kInRegion : 0));
     }
     ++out;
   };
@@ -276,35 +332,44 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       add_candidate(p, out);
     }
   };
-  const PointLanes lanes(params, T_B_S, inv_cell, near_sq);
+  const PointLanes lanes(params, T_B_S, inv_cell, near_sq, region.reach);
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-    FilterCounts& c = task_counts[task];
+    // Locals rather than scratch's members and the task's counts: a byte store may alias
+    // anything, and the compiler would reload them after each.
+    FilterCounts c;
+    const Eigen::Vector3f* const points = cloud.points_S.data();
+    Eigen::Vector3f* const cand_S = scratch.candidates_S.data();
+    std::uint64_t* const keys = scratch.point_key.data();
+    std::uint8_t* const flags = scratch.point_near.data();
+    const std::size_t end = first[task + 1];
     std::size_t out = first[task];
     std::size_t i = first[task];
-    for (; i + 4 <= first[task + 1]; i += 4) {
-      const PointLanes::Found f = lanes.test(&cloud.points_S[i]);
+    for (; i + 4 <= end; i += 4) {
+      const PointLanes::Found f = lanes.test(points + i);
       c.non_finite += 4 - lanes_set(f.finite);
       c.too_close += lanes_set(f.close);
       for (unsigned pass = f.finite & ~f.close; pass != 0; pass &= pass - 1) {
         const int l = std::countr_zero(pass);
-        const Eigen::Vector3f& p = cloud.points_S[i + static_cast<std::size_t>(l)];
+        const Eigen::Vector3f& p = points[i + static_cast<std::size_t>(l)];
         if (((f.maybe_ego >> l) & 1u) != 0 && in_ego_box(p)) {
           ++c.ego_vehicle;
           continue;
         }
-        scratch.candidates_S[out] = p;
+        cand_S[out] = p;
         if (outliers) {
-          scratch.point_key[out] = ((f.keyed >> l) & 1u) != 0
-                                       ? (std::uint64_t{f.field[0][l]} << 42) |
-                                             (std::uint64_t{f.field[1][l]} << 21) | f.field[2][l] |
-                                             (1ull << 63)
-                                       : cell_key(p, inv_cell);
-          scratch.point_near[out] = static_cast<std::uint8_t>((f.near >> l) & 1u);
+          keys[out] = ((f.keyed >> l) & 1u) != 0
+                          ? (std::uint64_t{f.field[0][l]} << 42) |
+                                (std::uint64_t{f.field[1][l]} << 21) | f.field[2][l] | (1ull << 63)
+                          : cell_key(cell_of(p, inv_cell));
+          // Out of the lanes' range (not keyed) is out of the region too.
+          flags[out] = static_cast<std::uint8_t>((((f.near >> l) & 1u) != 0 ? kNear : 0) |
+                                                 (((f.region >> l) & 1u) != 0 ? kInRegion : 0));
         }
         ++out;
       }
     }
-    for (; i < first[task + 1]; ++i) test_point(cloud.points_S[i], c, out);
+    for (; i < end; ++i) test_point(points[i], c, out);
+    task_counts[task] = c;
     last[task] = out;
   });
   // Task t's candidates are [first[t], last[t]): the passes below take the tasks' ranges in
@@ -315,111 +380,190 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     for (std::size_t i = first[t]; i < last[t]; ++i) f(i);
   };
 
-  // 2. Isolated outliers, counted in the sensor frame: a hash of occupied cells (built in one
-  //    pass, each candidate noting its cell's slot), then each cell that holds a near candidate
-  //    looks at its 27 cells once, for all the candidates it holds. Membership only, so the
-  //    result does not depend on order.
+  // 2. Isolated outliers, counted in the sensor frame: the candidates per cell of the region
+  //    (OutlierRegion), in a grid or a hash table, then each near candidate's 27 cells.
+  //    Membership only, so the result does not depend on order.
   const auto& cand = scratch.candidates_S;
-  std::size_t mask = 0;
-  std::size_t capacity = 0;
-  // The slot holding `key`, or the empty slot where it would go (linear probing).
-  const auto find = [&](std::uint64_t key) {
-    std::size_t s = slot_of(key, mask);
-    while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
-    return s;
-  };
-  // Sized for twice the last scan's distinct cells, not for every candidate: points share
-  // cells (BALM hall: 3 k cells for 18 k points), and the table is cold at each scan, so its
-  // emptying and its inserts cost by the line (64 k slots, 1 MB, took 0.16 ms to empty and
-  // 0.17 ms to fill). A scan with more cells than half the table starts again with a table
-  // for all its candidates, which always fits. The counts per cell, hence the result, do not
-  // depend on the table's size.
-  const auto build_table = [&] {
-    const std::size_t full = table_capacity(m);
-    capacity = std::min(full, table_capacity(2 * scratch.last_cells));
-    while (true) {
-      mask = capacity - 1;
-      scratch.cells.resize(std::max(scratch.cells.size(), capacity));
-      std::fill_n(scratch.cells.begin(), capacity, FilterScratch::Cell{});
-      std::size_t distinct = 0;
-      // The candidates' cells are scattered over the table (MulRan's 36 k points over 100 m):
-      // their slots' lines are requested a few candidates ahead, so that the misses overlap.
-      constexpr std::size_t kAhead = 8;
-      for (std::size_t t = 0; t < kFilterTasks && 2 * distinct <= capacity; ++t) {
-        for (std::size_t i = first[t]; i < last[t] && 2 * distinct <= capacity; ++i) {
-          if (i + kAhead < last[t]) {
-            __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
-          }
-          const std::uint64_t key = scratch.point_key[i];
-          const std::size_t s = find(key);
-          FilterScratch::Cell& cell = scratch.cells[s];
-          distinct += cell.key == 0 ? 1 : 0;
-          cell.key = key;
-          ++cell.count;
-          cell.state |= scratch.point_near[i];
-          scratch.point_slot[i] = static_cast<std::uint32_t>(s);
-        }
-      }
-      if (2 * distinct <= capacity) {
-        scratch.last_cells = distinct;
-        return;
-      }
-      capacity = full;  // more than half full: again, with room for every candidate
-    }
-  };
-  // The table is built on one thread (two tables side by side were no faster, the cells being
-  // scattered: docs/perf-occ7.md); the candidates go into the world frame meanwhile, in ranges,
-  // the survivors picked from them at the end.
-  scratch.point_slot.resize(n);
-  scratch.candidates_W.resize(n);
-  runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
-    if (job == 0) {
-      if (outliers) build_table();
-      return;
-    }
-    each_candidate(job - 1,
-                   [&](std::size_t i) { scratch.candidates_W[i] = R_W_S * cand[i] + t_W_S; });
-  });
-  const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
-    return scratch.cells[find(key)].count;  // an empty slot's count is 0
-  };
   // Itself and outlier_min_neighbors others.
   const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
-  const auto has_neighbours = [&](std::uint64_t key) {
-    std::uint32_t points = 0;
-    for (const auto& [dx, dy] : kColumns) {
-      for (int dz = -1; dz <= 1; ++dz) {
-        points += count_in(key + key_offset(dx, dy, dz));
-        if (points >= needed) return true;
-      }
-    }
-    return false;
-  };
-  if (outliers) {
-    // Each task owns a fixed range of slots: it writes only their bit 1.
-    runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-      for (std::size_t s = capacity * task / kFilterTasks; s < capacity * (task + 1) / kFilterTasks;
-           ++s) {
-        FilterScratch::Cell& cell = scratch.cells[s];
-        // A cell holding enough points on its own needs no lookup (most of them: walls).
-        if (cell.state != 0 && (cell.count >= needed || has_neighbours(cell.key))) {
-          cell.state |= 2;
-        }
-      }
-    });
-  }
+  scratch.point_slot.resize(n);
+  scratch.candidates_W.resize(n);
   scratch.keep.resize(n);
   std::array<std::size_t, kFilterTasks + 1> kept_before{};
-  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+  // The candidates go into the world frame beside the counting, in ranges, the survivors
+  // picked from them at the end.
+  const auto to_world = [&](std::size_t task) {
+    each_candidate(task, [&](std::size_t i) { scratch.candidates_W[i] = R_W_S * cand[i] + t_W_S; });
+  };
+  // Whether candidate i survives, `passes` deciding for a near one; booked per task.
+  // (Locals rather than scratch's members: a byte store may alias anything, and the compiler
+  // would reload them after each.)
+  const auto decide = [&](std::size_t task, auto&& passes) {
+    const std::uint8_t* const flags = scratch.point_near.data();
+    std::uint8_t* const keep = scratch.keep.data();
+    const std::size_t begin = first[task], end = last[task];
     std::size_t kept = 0;
-    each_candidate(task, [&](std::size_t i) {
-      const bool keep = !outliers || scratch.point_near[i] == 0 ||
-                        (scratch.cells[scratch.point_slot[i]].state & 2) != 0;
-      scratch.keep[i] = keep ? 1 : 0;
-      kept += keep ? 1 : 0;
-    });
+    for (std::size_t i = begin; i < end; ++i) {
+      const bool k = !outliers || (flags[i] & kNear) == 0 || passes(i);
+      keep[i] = k ? 1 : 0;
+      kept += k ? 1 : 0;
+    }
     kept_before[task + 1] = kept;
-  });
+  };
+  if (outliers && region.grid) {
+    if (scratch.grid.size() != region.side * region.side * region.side) {
+      scratch.grid.assign(region.side * region.side * region.side, 0);  // config changed
+      scratch.grid_touched.clear();
+    }
+    std::uint8_t* const grid = scratch.grid.data();
+    // One byte per cell, saturating (the test needs at most 27).
+    const auto count = [&] {
+      for (const std::uint32_t c : scratch.grid_touched) grid[c] = 0;  // the last scan's cells
+      scratch.grid_touched.resize(m);
+      // Locals: a byte store may alias anything, and the compiler would reload each of these
+      // after every count otherwise.
+      std::uint32_t* const touched = scratch.grid_touched.data();
+      const std::uint64_t* const keys = scratch.point_key.data();
+      const std::uint8_t* const flags = scratch.point_near.data();
+      const OutlierRegion r = region;
+      std::size_t n_touched = 0;
+      // The cells are scattered over the grid: requested a few candidates ahead, and no branch
+      // depends on a count (a cell's first candidate books it without one).
+      constexpr std::size_t kAhead = 16;
+      for (std::size_t t = 0; t < kFilterTasks; ++t) {
+        const std::size_t begin = first[t], end = last[t];
+        for (std::size_t i = begin; i < end; ++i) {
+          if (i + kAhead < end) {
+            const std::size_t j = i + kAhead;
+            __builtin_prefetch(grid + ((flags[j] & kInRegion) != 0 ? r.index(keys[j]) : 0), 1);
+          }
+          if ((flags[i] & kInRegion) == 0) continue;
+          const std::size_t c = r.index(keys[i]);
+          const std::uint8_t g = grid[c];
+          touched[n_touched] = static_cast<std::uint32_t>(c);
+          n_touched += g == 0 ? 1 : 0;
+          grid[c] = static_cast<std::uint8_t>(g + (g != 255 ? 1 : 0));
+        }
+      }
+      scratch.grid_touched.resize(n_touched);
+    };
+    runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
+      if (job == 0) {
+        count();
+      } else {
+        to_world(job - 1);
+      }
+    });
+    // A near candidate's cell and its neighbours are in the region (see OutlierRegion).
+    const std::ptrdiff_t row = static_cast<std::ptrdiff_t>(region.side);
+    const std::ptrdiff_t layer = row * row;
+    runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+      const std::uint64_t* const keys = scratch.point_key.data();
+      const OutlierRegion r = region;
+      decide(task, [&](std::size_t i) {
+        const std::uint8_t* const c = grid + r.index(keys[i]);
+        if (*c >= needed) return true;  // enough in its own cell: most of them (walls)
+        std::uint32_t points = 0;
+        for (const std::ptrdiff_t dz : {std::ptrdiff_t{0}, -layer, layer}) {
+          for (const std::ptrdiff_t dy : {std::ptrdiff_t{0}, -row, row}) {
+            const std::uint8_t* const r = c + dz + dy;
+            points += std::uint32_t{r[-1]} + r[0] + r[1];
+            if (points >= needed) return true;
+          }
+        }
+        return false;
+      });
+    });
+  } else {
+    std::size_t mask = 0;
+    std::size_t capacity = 0;
+    // The slot holding `key`, or the empty slot where it would go (linear probing).
+    const auto find = [&](std::uint64_t key) {
+      std::size_t s = slot_of(key, mask);
+      while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
+      return s;
+    };
+    // Sized for twice the last scan's distinct cells, not for every candidate: points share
+    // cells (BALM hall: 3 k cells for 18 k points), and the table is cold at each scan, so its
+    // emptying and its inserts cost by the line (64 k slots, 1 MB, took 0.16 ms to empty and
+    // 0.17 ms to fill). A scan with more cells than half the table starts again with a table
+    // for all its candidates, which always fits. The counts per cell, hence the result, do not
+    // depend on the table's size.
+    const auto build_table = [&] {
+      const std::size_t full = table_capacity(m);
+      capacity = std::min(full, table_capacity(2 * scratch.last_cells));
+      while (true) {
+        mask = capacity - 1;
+        scratch.cells.resize(std::max(scratch.cells.size(), capacity));
+        std::fill_n(scratch.cells.begin(), capacity, FilterScratch::Cell{});
+        std::size_t distinct = 0;
+        // The candidates' cells are scattered over the table (MulRan's 36 k points over 100
+        // m): their slots' lines are requested a few candidates ahead, so that the misses
+        // overlap.
+        constexpr std::size_t kAhead = 8;
+        for (std::size_t t = 0; t < kFilterTasks && 2 * distinct <= capacity; ++t) {
+          for (std::size_t i = first[t]; i < last[t] && 2 * distinct <= capacity; ++i) {
+            if (i + kAhead < last[t]) {
+              __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
+            }
+            if ((scratch.point_near[i] & kInRegion) == 0) continue;
+            const std::uint64_t key = scratch.point_key[i];
+            const std::size_t s = find(key);
+            FilterScratch::Cell& cell = scratch.cells[s];
+            distinct += cell.key == 0 ? 1 : 0;
+            cell.key = key;
+            ++cell.count;
+            cell.state |= scratch.point_near[i] & kNear;
+            scratch.point_slot[i] = static_cast<std::uint32_t>(s);
+          }
+        }
+        if (2 * distinct <= capacity) {
+          scratch.last_cells = distinct;
+          return;
+        }
+        capacity = full;  // more than half full: again, with room for every candidate
+      }
+    };
+    // The table is built on one thread (two tables side by side were no faster, the cells
+    // being scattered: docs/perf-occ7.md).
+    runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
+      if (job == 0) {
+        if (outliers) build_table();
+      } else {
+        to_world(job - 1);
+      }
+    });
+    const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
+      return scratch.cells[find(key)].count;  // an empty slot's count is 0
+    };
+    const auto has_neighbours = [&](std::uint64_t key) {
+      std::uint32_t points = 0;
+      for (const auto& [dx, dy] : kColumns) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          points += count_in(key + key_offset(dx, dy, dz));
+          if (points >= needed) return true;
+        }
+      }
+      return false;
+    };
+    if (outliers) {
+      // Each task owns a fixed range of slots: it writes only their bit 1.
+      runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+        for (std::size_t s = capacity * task / kFilterTasks;
+             s < capacity * (task + 1) / kFilterTasks; ++s) {
+          FilterScratch::Cell& cell = scratch.cells[s];
+          // A cell holding enough points on its own needs no lookup (most of them: walls).
+          if (cell.state != 0 && (cell.count >= needed || has_neighbours(cell.key))) {
+            cell.state |= 2;
+          }
+        }
+      });
+    }
+    runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+      decide(task,
+             [&](std::size_t i) { return (scratch.cells[scratch.point_slot[i]].state & 2) != 0; });
+    });
+  }
   for (std::size_t t = 0; t < kFilterTasks; ++t) kept_before[t + 1] += kept_before[t];
 
   // 3. The survivors, in input order, each task writing its own range of the output.

@@ -136,16 +136,62 @@ TEST(ScanFilter, OutlierDecisionMatchesBruteForceCountAndSensorFrameOutputMatche
   T_W_S.translation() = Eigen::Vector3d(-4, 7, 0.5);
   T_W_S.linear() = Eigen::AngleAxisd(-0.7, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   daemon::ThreadPool pool(2);
-  std::vector<Eigen::Vector3f> out_S;
-  const FilterCounts c = filter_scan(cloud, T_W_S, Eigen::Isometry3d::Identity(), f.params, f.out_W,
-                                     f.scratch, pool, &out_S);
-  EXPECT_GT(c.isolated, 100u);
-  EXPECT_GT(c.kept, 1000u);
-  EXPECT_EQ(out_S, expected);
-  ASSERT_EQ(f.out_W.size(), out_S.size());
-  const Eigen::Matrix3f R = T_W_S.linear().cast<float>();
-  const Eigen::Vector3f t = T_W_S.translation().cast<float>();
-  for (std::size_t i = 0; i < out_S.size(); ++i) ASSERT_EQ(f.out_W[i], R * out_S[i] + t) << i;
+  // Counted in the grid (the defaults' region is small enough) and in the hash table.
+  for (const std::size_t grid_limit : {f.scratch.grid_cell_limit, std::size_t{0}}) {
+    SCOPED_TRACE(grid_limit);
+    FilterScratch scratch;
+    scratch.grid_cell_limit = grid_limit;
+    std::vector<Eigen::Vector3f> out_S;
+    const FilterCounts c = filter_scan(cloud, T_W_S, Eigen::Isometry3d::Identity(), f.params,
+                                       f.out_W, scratch, pool, &out_S);
+    EXPECT_EQ(scratch.grid.empty(), grid_limit == 0);
+    EXPECT_GT(c.isolated, 100u);
+    EXPECT_GT(c.kept, 1000u);
+    EXPECT_EQ(out_S, expected);
+    ASSERT_EQ(f.out_W.size(), out_S.size());
+    const Eigen::Matrix3f R = T_W_S.linear().cast<float>();
+    const Eigen::Vector3f t = T_W_S.translation().cast<float>();
+    for (std::size_t i = 0; i < out_S.size(); ++i) ASSERT_EQ(f.out_W[i], R * out_S[i] + t) << i;
+  }
+}
+
+TEST(ScanFilter, GridAndHashTableAgreeWithPointsFarOutsideTheTestedRegion) {
+  // Points beyond the outlier range are never tested but may be neighbours of near ones; points
+  // far beyond (where 32-bit cell coordinates end, or where the hash key's 21-bit fields would
+  // wrap onto a near cell) must not count for any near cell. Scans in a row, so that the grid
+  // is emptied between them.
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<float> near(-31.0f, 31.0f), unit(0.0f, 1.0f);
+  FilterParams params;
+  params.ego_box_enabled = false;
+  params.min_range_m = 0.0;
+  FilterScratch grid, table;
+  table.grid_cell_limit = 0;
+  for (int scan = 0; scan < 3; ++scan) {
+    PointCloud cloud;
+    for (int i = 0; i < 4000; ++i) {
+      const Eigen::Vector3f p(near(rng), near(rng), near(rng));
+      cloud.points_S.push_back(p);
+      const float u = unit(rng);
+      if (u < 0.2f) {
+        cloud.points_S.push_back(p + Eigen::Vector3f(0.3f, 0, 0));  // one neighbour
+      } else if (u < 0.3f) {  // the same cell 2^21 cells away (a wrapped key's twin)
+        cloud.points_S.push_back(p + Eigen::Vector3f(1048576.0f, 0, 0));
+        cloud.points_S.push_back(p - Eigen::Vector3f(0, 0, 1048576.0f));
+      } else if (u < 0.35f) {
+        cloud.points_S.push_back(p * 1e8f);
+      }
+    }
+    std::vector<Eigen::Vector3f> out_grid, out_table;
+    const FilterCounts a = filter_scan(cloud, Eigen::Isometry3d::Identity(),
+                                       Eigen::Isometry3d::Identity(), params, out_grid, grid);
+    const FilterCounts b = filter_scan(cloud, Eigen::Isometry3d::Identity(),
+                                       Eigen::Isometry3d::Identity(), params, out_table, table);
+    EXPECT_FALSE(grid.grid.empty());
+    EXPECT_GT(a.isolated, 1000u);
+    EXPECT_EQ(a.isolated, b.isolated);
+    EXPECT_EQ(out_grid, out_table);
+  }
 }
 
 TEST(ScanFilter, TableSizedFromASmallerScanGivesTheSameResult) {

@@ -63,10 +63,18 @@ struct FilterScratch {
   /// candidates at the front of its own range.
   std::vector<Eigen::Vector3f> candidates_S, candidates_W;
   std::vector<std::uint8_t> keep;  ///< per candidate: survives the outlier test
+  /// Candidates per cell of the outlier test's region, when it is counted in a grid (see
+  /// filter_scan): a byte per cell, zero between scans but for the cells in grid_touched (the
+  /// last scan's, emptied by the next).
+  std::vector<std::uint8_t> grid;
+  std::vector<std::uint32_t> grid_touched;
+  /// Regions of more cells than this are counted in the hash table `cells` instead (small cells
+  /// with a long outlier range). Both give the same result; tests lower it to compare them.
+  std::size_t grid_cell_limit = std::size_t{1} << 23;
 
   /// Sizes (and writes once, so the first scan does not pay their page faults) every buffer for
-  /// scans of up to `points` points.
-  void reserve(std::size_t points);
+  /// scans of up to `points` points, and the outlier grid for `params`.
+  void reserve(std::size_t points, const FilterParams& params = {});
 };
 
 /// Filters `cloud` (sensor frame) and writes survivors into `points_W` (cleared first, capacity
