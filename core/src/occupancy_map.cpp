@@ -1852,40 +1852,57 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
     }
     scan_ground_near_z_[c] = ground_z;
   }
-  for (std::size_t i = 0; i < n_points; ++i) {
-    if (hit_slot_[i] == kNoSlot) continue;
-    const float h = hit_height_[i];
-    const float ground_z = scan_ground_near_z_[hit_column_[i]];
-    hit_rise_[i] =
-        static_cast<std::uint8_t>(std::clamp(static_cast<int>((h - ground_z) * 100.0f), 0, 255));
+  // The loops that store bytes read through locals: a byte store may alias anything, and the
+  // compiler would reload every member after each (BALM hall: 0.1 ms of the 0.8 ms pass).
+  const std::uint32_t* const slot_of_hit = hit_slot_.data();
+  std::uint8_t* const rise_of_hit = hit_rise_.data();
+  {
+    const float* const height = hit_height_.data();
+    const std::uint32_t* const column = hit_column_.data();
+    const float* const ground_near = scan_ground_near_z_.data();
+    for (std::size_t i = 0; i < n_points; ++i) {
+      if (slot_of_hit[i] == kNoSlot) continue;
+      const float ground_z = ground_near[column[i]];
+      rise_of_hit[i] = static_cast<std::uint8_t>(
+          std::clamp(static_cast<int>((height[i] - ground_z) * 100.0f), 0, 255));
+    }
   }
   // c) One hit per voxel, in point order (promotions enter the static layer in that order).
   const int promote = params_.static_promote_scans;
-  hit_slots_.clear();
+  hit_slots_.resize(n_points);
+  std::uint32_t* const first_hits = hit_slots_.data();
+  std::size_t n_first = 0;
+  float* const log_odds = log_odds_.data();
+  std::uint8_t* const state = state_.data();
+  std::uint8_t* const rise_cm = rise_cm_.data();
+  std::uint64_t* const hit_bits = hit_bits_.data();
+  std::uint64_t* const floor_bits = floor_bits_.data();
+  const float l_hit = l_hit_, l_min = l_min_, l_max = l_max_;
+  std::uint64_t promotions = 0;
   // The voxels of a scan's returns are scattered over the window: their lines are requested a
   // few returns ahead, so that the misses overlap instead of stalling this loop one by one.
   constexpr std::size_t kAhead = 16;
   for (std::size_t i = 0; i < n_points; ++i) {
-    if (i + kAhead < n_points && hit_slot_[i + kAhead] != kNoSlot) {
-      const std::uint32_t a = hit_slot_[i + kAhead];
-      __builtin_prefetch(&log_odds_[a], 1);
-      __builtin_prefetch(&state_[a], 1);
-      __builtin_prefetch(&rise_cm_[a], 1);
-      __builtin_prefetch(&hit_bits_[a >> 6], 1);
-      __builtin_prefetch(&floor_bits_[a >> 6], 1);
+    if (i + kAhead < n_points && slot_of_hit[i + kAhead] != kNoSlot) {
+      const std::uint32_t a = slot_of_hit[i + kAhead];
+      __builtin_prefetch(log_odds + a, 1);
+      __builtin_prefetch(state + a, 1);
+      __builtin_prefetch(rise_cm + a, 1);
+      __builtin_prefetch(hit_bits + (a >> 6), 1);
+      __builtin_prefetch(floor_bits + (a >> 6), 1);
     }
-    const std::uint32_t s = hit_slot_[i];
+    const std::uint32_t s = slot_of_hit[i];
     if (s == kNoSlot) continue;
-    const std::uint8_t rise = hit_rise_[i];
-    std::uint64_t& word = hit_bits_[s >> 6];
+    const std::uint8_t rise = rise_of_hit[i];
+    std::uint64_t& word = hit_bits[s >> 6];
     const std::uint64_t bit = std::uint64_t{1} << (s & 63);
     if ((word & bit) == 0) {
       word |= bit;
-      floor_bits_[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
-      hit_slots_.push_back(s);
-      float& l = log_odds_[s];
-      l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit_, l_min_, l_max_);
-      std::uint8_t& st = state_[s];
+      floor_bits[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
+      first_hits[n_first++] = s;
+      float& l = log_odds[s];
+      l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit, l_min, l_max);
+      std::uint8_t& st = state[s];
       if ((st & kStatic) != 0) {
         st = kStatic;  // a return: the run of free observations restarts
       } else if (l <= 0.0f || promote == 0) {
@@ -1893,16 +1910,18 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
       } else if ((st & kCount) + 1 >= promote) {
         st = kStatic;
         static_->insert(voxel_of_slot(s));
-        ++stats.promotions;
+        ++promotions;
       } else {
         ++st;
       }
-      ++stats.hit_updates;
-      rise_cm_[s] = rise;  // the latest scan's returns replace older ones
+      rise_cm[s] = rise;  // the latest scan's returns replace older ones
     } else {
-      rise_cm_[s] = std::max(rise_cm_[s], rise);
+      rise_cm[s] = std::max(rise_cm[s], rise);
     }
   }
+  hit_slots_.resize(n_first);
+  stats.hit_updates += n_first;
+  stats.promotions += promotions;
 }
 
 OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
