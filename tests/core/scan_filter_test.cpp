@@ -34,6 +34,22 @@ PointCloud wall_plus(std::vector<Eigen::Vector3f> extra) {
   return cloud;
 }
 
+TEST(ScanFilter, ParamsOutOfRangeAreRejected) {
+  EXPECT_TRUE(FilterParams{}.validate().ok());
+  const auto rejected = [](auto&& set) {
+    FilterParams p;
+    set(p);
+    return !p.validate().ok();
+  };
+  EXPECT_TRUE(rejected([](FilterParams& p) { p.min_range_m = -1.0; }));
+  EXPECT_TRUE(rejected([](FilterParams& p) { p.outlier_min_neighbors = 27; }));
+  EXPECT_TRUE(rejected([](FilterParams& p) { p.outlier_cell_m = 0.01; }));
+  // The outlier test's region is sized from the range: bounded, as in the YAML config.
+  EXPECT_TRUE(rejected([](FilterParams& p) { p.outlier_max_range_m = 1e9; }));
+  EXPECT_TRUE(rejected([](FilterParams& p) { p.outlier_max_range_m = std::nan(""); }));
+  EXPECT_FALSE(rejected([](FilterParams& p) { p.outlier_max_range_m = 1000.0; }));
+}
+
 TEST(ScanFilter, CountsEachReasonAndTransformsSurvivors) {
   Fixture f;
   f.params.outlier_min_neighbors = 0;
