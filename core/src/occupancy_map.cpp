@@ -457,6 +457,24 @@ void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
     const std::size_t q0 = n_quads * task / kBucketTasks, q1 = n_quads * (task + 1) / kBucketTasks;
     for (std::size_t i = 4 * q0; i < 4 * q1; i += 4) {
       Float4 x{}, y{}, z{};
+      if (i + 4 <= n_points) {
+        // Four returns, contiguous: x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3 into lanes.
+        static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float));
+        const auto* const raw = reinterpret_cast<const unsigned char*>(points.data() + i);
+        Float4 a, b, c;
+        std::memcpy(&a, raw, sizeof a);
+        std::memcpy(&b, raw + sizeof a, sizeof b);
+        std::memcpy(&c, raw + 2 * sizeof a, sizeof c);
+        const Float4 zero{};
+        x = __builtin_shufflevector(__builtin_shufflevector(a, b, 0, 3, 6, 7), c, 0, 1, 2, 5) -
+            (zero + o.x());
+        y = __builtin_shufflevector(__builtin_shufflevector(a, b, 1, 4, 7, 7), c, 0, 1, 2, 6) -
+            (zero + o.y());
+        z = __builtin_shufflevector(__builtin_shufflevector(a, b, 2, 5, 5, 5), c, 0, 1, 4, 7) -
+            (zero + o.z());
+        direction_buckets(x, y, z, bucket.data() + i);
+        continue;
+      }
       for (std::size_t k = 0; k < 4 && i + k < n_rays; ++k) {
         const std::size_t r = i + k;
         const Eigen::Vector3f q =
