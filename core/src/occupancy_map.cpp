@@ -1797,7 +1797,12 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   //    window), and its height along up_W; and the scan's own ground: the lowest return
   //    per window column (only the columns this scan touched are reset next time).
   constexpr float kNone = std::numeric_limits<float>::infinity();
-  const Eigen::Vector3f up = up_W.normalized().cast<float>();
+  // A zero or non-finite up axis is taken as +z: the heights must be numbers (a column's first
+  // return is booked by its ground leaving +inf, below).
+  const double up_norm = up_W.norm();
+  const Eigen::Vector3f up = std::isfinite(up_norm) && up_norm > 0.0
+                                 ? Eigen::Vector3f((up_W / up_norm).cast<float>())
+                                 : Eigen::Vector3f::UnitZ();
   hit_slot_.resize(n_points);
   hit_column_.resize(n_points);
   hit_height_.resize(n_points);

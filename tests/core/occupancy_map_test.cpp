@@ -431,6 +431,39 @@ TEST(OccupancyMap, NonFinitePointsAreSkipped) {
   EXPECT_EQ(stats.hit_updates + stats.miss_updates, 0u);
 }
 
+TEST(OccupancyMap, ZeroOrNonFiniteUpAxisIsTakenAsZ) {
+  // Thousands of returns in the 16 columns of a tiny window, with an up axis that is NaN,
+  // infinite or zero: the map must equal one integrated with +z (a NaN height once made every
+  // return book its column again, past the list's end).
+  OccupancyParams p;
+  p.window_x_vox = p.window_y_vox = p.window_z_vox = 4;
+  p.window_below_m = 0.4;
+  ASSERT_TRUE(p.validate().ok());
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> u(-0.35f, 0.35f);
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 5000; ++i) points.emplace_back(u(rng), u(rng), u(rng));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  SerialRunner serial;
+  OccupancyMap reference(p);
+  for (int k = 0; k < 3; ++k) reference.integrate(Eigen::Vector3d::Zero(), points, {}, serial);
+  std::vector<float> want, got;
+  reference.export_log_odds(want);
+  for (const Eigen::Vector3d& up :
+       {Eigen::Vector3d(0, 0, nan), Eigen::Vector3d(inf, 0, 1), Eigen::Vector3d(0, 0, 0)}) {
+    OccupancyMap map(p);
+    for (int k = 0; k < 3; ++k) map.integrate(Eigen::Vector3d::Zero(), points, {}, serial, up);
+    map.export_log_odds(got);
+    EXPECT_EQ(std::memcmp(got.data(), want.data(), want.size() * sizeof(float)), 0);
+    for (int z = 0; z < 4; ++z) {
+      const std::uint8_t* a = map.ring_layer_rise_cm(z);
+      const std::uint8_t* b = reference.ring_layer_rise_cm(z);
+      EXPECT_TRUE(std::equal(a, a + 16, b)) << z;
+    }
+  }
+}
+
 TEST(OccupancyMap, Scrolling_KeepsContentAndForgetsWhatLeft) {
   const auto params = small_params();
   OccupancyMap map(params);

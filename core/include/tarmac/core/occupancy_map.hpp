@@ -116,7 +116,7 @@ class OccupancyMap {
   /// clearing_range_m. Deterministic for any runner.
   /// `up_W` is the vehicle's up axis (its base frame's z in the world frame): heights of returns
   /// above the scan's ground (ring_layer_rise_cm) are measured along it, so a world frame that
-  /// is not gravity-aligned does not tilt them.
+  /// is not gravity-aligned does not tilt them. A zero or non-finite `up_W` is taken as +z.
   OccupancyUpdateStats integrate(const Eigen::Vector3d& origin_W,
                                  std::span<const Eigen::Vector3f> points_W,
                                  std::span<const Eigen::Vector3f> clearing_dirs_W,
