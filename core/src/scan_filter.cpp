@@ -44,10 +44,19 @@ std::int64_t floor_to_int(float v) {
 
 constexpr std::uint64_t kField = 0x1fffff;
 
-/// The cell of a point: floor(coordinate / cell) per axis.
-std::array<std::int64_t, 3> cell_of(const Eigen::Vector3f& p, float inv_cell) {
-  return {floor_to_int(p.x() * inv_cell), floor_to_int(p.y() * inv_cell),
-          floor_to_int(p.z() * inv_cell)};
+/// Cell coordinates are taken for |coordinate / cell| up to this (the largest float below 2^31);
+/// a point beyond is outside any region the outlier test reads (OutlierRegion).
+constexpr float kCellLimit = 2147483520.0f;
+
+/// The cell of a point, floor(coordinate / cell) per axis; false (and `c` unset) when a
+/// coordinate is beyond kCellLimit cells.
+bool cell_of(const Eigen::Vector3f& p, float inv_cell, std::array<std::int64_t, 3>& c) {
+  for (int a = 0; a < 3; ++a) {
+    const float q = p[a] * inv_cell;
+    if (!(std::abs(q) <= kCellLimit)) return false;
+    c[static_cast<std::size_t>(a)] = floor_to_int(q);
+  }
+  return true;
 }
 
 /// Packs a cell coordinate (each within ±2^20 cells) into a non-zero key.
@@ -97,12 +106,23 @@ constexpr std::uint8_t kNear = 1, kInRegion = 4;
 /// (side³ ≤ FilterScratch::grid_cell_limit: 2 MB at the defaults) they are counted in a grid
 /// of bytes, an index instead of a hash lookup per count and per neighbour.
 struct OutlierRegion {
+  /// Cells of outlier range at most (validated parameters give at most 20 000).
+  static constexpr double kMaxCells = 1e5;
+
   OutlierRegion(const FilterParams& params, std::size_t limit)
-      : reach(static_cast<int>(
-                  std::min(std::ceil(params.outlier_max_range_m / params.outlier_cell_m), 1e5)) +
-              3),
+      : reach(static_cast<int>(cells_in_range(params)) + 3),
         side(2 * static_cast<std::size_t>(reach) + 1),
-        grid(side * side * side <= limit) {}
+        // Cell indices are 32-bit (the touched lists).
+        grid(side * side * side <= std::min(limit, std::size_t{1} << 31)),
+        capped(!(params.outlier_max_range_m / params.outlier_cell_m >= 0.0 &&
+                 params.outlier_max_range_m / params.outlier_cell_m <= kMaxCells)) {}
+
+  /// The outlier range, or for unvalidated parameters (beyond kMaxCells cells, negative, not a
+  /// number) the range the region covers: near points must have their cells and neighbours in
+  /// it.
+  [[nodiscard]] double near_range_m(const FilterParams& params) const {
+    return capped ? (reach - 3) * params.outlier_cell_m : params.outlier_max_range_m;
+  }
 
   /// The grid index (x fastest) of the cell of a key in the region.
   [[nodiscard]] std::size_t index(std::uint64_t key) const {
@@ -114,6 +134,13 @@ struct OutlierRegion {
   int reach;
   std::size_t side;
   bool grid;
+  bool capped;
+
+ private:
+  static double cells_in_range(const FilterParams& params) {
+    const double cells = std::ceil(params.outlier_max_range_m / params.outlier_cell_m);
+    return cells >= 0.0 ? std::min(cells, kMaxCells) : 0.0;  // NaN and negatives: 0
+  }
 };
 
 // A slot is one aligned 16-byte unit: it never straddles two cache lines.
@@ -175,7 +202,12 @@ class PointLanes {
     margin_ = static_cast<float>(1e-5 * bound);
     margin_per_m_ = static_cast<float>(1e-5 * row_sum);
     // Extrinsics or a box beyond float's range: every lane takes the reference's test.
-    all_maybe_ego_ = ego_ && !(std::isfinite(margin_) && std::isfinite(margin_per_m_));
+    bool finite = std::isfinite(margin_) && std::isfinite(margin_per_m_);
+    for (int a = 0; a < 3; ++a) {
+      finite = finite && std::isfinite(t_[a]) && std::isfinite(lo_[a]) && std::isfinite(hi_[a]);
+      for (int b = 0; b < 3; ++b) finite = finite && std::isfinite(R_[a][b]);
+    }
+    all_maybe_ego_ = ego_ && !finite;
   }
 
   [[nodiscard]] Found test(const Eigen::Vector3f* p) const {
@@ -207,12 +239,13 @@ class PointLanes {
       Int4 outside = {};
       for (int r = 0; r < 3; ++r) {
         const Float4 v = R_[r][0] * x + R_[r][1] * y + R_[r][2] * z + t_[r];
-        outside |= (v < lo_[r] - m) | (v > hi_[r] + m);
+        // A sum that overflowed (not finite) says nothing: the reference decides.
+        outside |= (v - v == zero) & ((v < lo_[r] - m) | (v > hi_[r] + m));
       }
       f.maybe_ego = mask(~outside);
     }
     // Cell fields: floor as the reference's floor_to_int, in 32 bits while that is exact.
-    const Float4 limit = zero + 2147483520.0f;  // the largest float below 2^31
+    const Float4 limit = zero + kCellLimit;
     Int4 keyed = finite;
     Int4 region = finite;
     const Float4 q[3] = {x * inv_cell_, y * inv_cell_, z * inv_cell_};
@@ -260,6 +293,8 @@ void FilterScratch::reserve(std::size_t points, const FilterParams& params) {
   const OutlierRegion region(params, grid_cell_limit);
   if (params.outlier_min_neighbors > 0 && region.grid) {
     grid.assign(region.side * region.side * region.side, 0);
+  } else {
+    grid.clear();  // a later grid-path scan allocates it anew, all zero
   }
   grid_touched.assign(points, 0);
   grid_touched.clear();
@@ -291,9 +326,11 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const Eigen::Vector3d t_B_S = T_B_S.translation();
   const bool outliers = params.outlier_min_neighbors > 0;
   const float inv_cell = static_cast<float>(1.0 / params.outlier_cell_m);
-  const float near_sq = static_cast<float>(params.outlier_max_range_m * params.outlier_max_range_m);
-
   const OutlierRegion region(params, scratch.grid_cell_limit);
+  // Within the region's reach (the same range for valid parameters; a larger, unvalidated one
+  // would put near points outside the region the test reads).
+  const double near_m = region.near_range_m(params);
+  const float near_sq = static_cast<float>(near_m * near_m);
 
   // 1. Per-point tests, each task compacting its candidates to the front of its own range.
   std::array<FilterCounts, kFilterTasks> task_counts{};
@@ -311,10 +348,11 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const auto add_candidate = [&](const Eigen::Vector3f& p, std::size_t& out) {
     scratch.candidates_S[out] = p;
     if (outliers) {
-      const std::array<std::int64_t, 3> c = cell_of(p, inv_cell);
-      const bool in_region = std::abs(c[0]) <= region.reach && std::abs(c[1]) <= region.reach &&
-                             std::abs(c[2]) <= region.reach;
-      scratch.point_key[out] = cell_key(c);
+      std::array<std::int64_t, 3> c{};
+      const bool in_range = cell_of(p, inv_cell, c);
+      const bool in_region = in_range && std::abs(c[0]) <= region.reach &&
+                             std::abs(c[1]) <= region.reach && std::abs(c[2]) <= region.reach;
+      scratch.point_key[out] = in_range ? cell_key(c) : 0;  // not read out of the region
       scratch.point_near[out] = static_cast<std::uint8_t>((p.squaredNorm() < near_sq ? kNear : 0) |
                                                           (in_region ? kInRegion : 0));
     }
@@ -360,8 +398,8 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
           keys[out] = ((f.keyed >> l) & 1u) != 0
                           ? (std::uint64_t{f.field[0][l]} << 42) |
                                 (std::uint64_t{f.field[1][l]} << 21) | f.field[2][l] | (1ull << 63)
-                          : cell_key(cell_of(p, inv_cell));
-          // Out of the lanes' range (not keyed) is out of the region too.
+                          : 0;
+          // Beyond kCellLimit cells (not keyed): out of the region, the key is not read.
           flags[out] = static_cast<std::uint8_t>((((f.near >> l) & 1u) != 0 ? kNear : 0) |
                                                  (((f.region >> l) & 1u) != 0 ? kInRegion : 0));
         }

@@ -316,6 +316,79 @@ TEST(ScanFilter, PerPointTestsDecideAsTheDoublePrecisionRuleOnEdgeCases) {
   EXPECT_EQ(out_S, want_S);
 }
 
+TEST(ScanFilter, HugeCoordinatesAndUnvalidatedParamsDecideAsTheRule) {
+  FilterParams params;
+  params.ego_box_enabled = false;
+  params.min_range_m = 0.0;
+  // Two near points one cell apart, each with one neighbour (2 needed): both isolated. A point
+  // at 1e30 m (beyond any cell coordinate) must not count as anyone's neighbour, whether it is
+  // tested in the lanes or one at a time (a cloud of 3 takes the latter, of 7 the former).
+  const Eigen::Vector3f a(0.2f, 0.0f, 1.2f), b(0.3f, 0.0f, 1.2f), g(1e30f, 0.0f, 1.2f);
+  for (const std::vector<Eigen::Vector3f>& points :
+       {std::vector<Eigen::Vector3f>{a, b, g},
+        std::vector<Eigen::Vector3f>{a, b, g, g, g, g, Eigen::Vector3f(0, 0, 2e9f)}}) {
+    for (const std::size_t grid_limit : {std::size_t{1} << 23, std::size_t{0}}) {
+      PointCloud cloud;
+      cloud.points_S = points;
+      FilterScratch scratch;
+      scratch.grid_cell_limit = grid_limit;
+      std::vector<Eigen::Vector3f> out;
+      const FilterCounts c = filter_scan(cloud, Eigen::Isometry3d::Identity(),
+                                         Eigen::Isometry3d::Identity(), params, out, scratch);
+      EXPECT_EQ(c.isolated, 2u) << points.size() << " points, grid limit " << grid_limit;
+    }
+  }
+  // A scratch reserved for parameters without a grid, then used with one, starts from an
+  // empty grid.
+  {
+    PointCloud dense = wall_plus({});
+    PointCloud pair;
+    pair.points_S = {a, b};
+    FilterScratch scratch;
+    std::vector<Eigen::Vector3f> out;
+    filter_scan(dense, Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity(), params, out,
+                scratch);
+    FilterParams no_outliers = params;
+    no_outliers.outlier_min_neighbors = 0;
+    scratch.reserve(64, no_outliers);
+    PointCloud near_wall;
+    near_wall.points_S = {Eigen::Vector3f(10.0f, 0.0f, 0.0f), Eigen::Vector3f(10.1f, 0.0f, 0.0f)};
+    const FilterCounts c = filter_scan(near_wall, Eigen::Isometry3d::Identity(),
+                                       Eigen::Isometry3d::Identity(), params, out, scratch);
+    EXPECT_EQ(c.isolated, 2u);  // the wall's counts are gone
+  }
+  // Unvalidated: an outlier range of 1e6 m. Forty points in one cell at 60 km have 39
+  // neighbours each: none is isolated (the region covers 50 km; farther points are not tested).
+  {
+    FilterParams far = params;
+    far.outlier_max_range_m = 1e6;
+    PointCloud cloud;
+    for (int i = 0; i < 40; ++i) cloud.points_S.emplace_back(60000.0f + 0.01f * i, 0.0f, 0.0f);
+    FilterScratch scratch;
+    std::vector<Eigen::Vector3f> out;
+    const FilterCounts c = filter_scan(cloud, Eigen::Isometry3d::Identity(),
+                                       Eigen::Isometry3d::Identity(), far, out, scratch);
+    EXPECT_EQ(c.isolated, 0u);
+  }
+}
+
+TEST(ScanFilter, EgoBoxDecidedByTheRuleWhenExtrinsicsOverflowFloats) {
+  // A (degenerate) extrinsic beyond float's range: p_B = (1, 1, 0), inside the box, for every
+  // point. The lanes' float pre-test cannot say "surely outside" for any of them.
+  FilterParams params;
+  params.outlier_min_neighbors = 0;
+  params.min_range_m = 0.0;
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.linear() = Eigen::Vector3d(1e39, 0.1, 0.1).asDiagonal();
+  PointCloud cloud;
+  for (int i = 0; i < 32; ++i) cloud.points_S.emplace_back(1e-39f, 10.0f, 0.0f);
+  FilterScratch scratch;
+  std::vector<Eigen::Vector3f> out;
+  const FilterCounts c =
+      filter_scan(cloud, Eigen::Isometry3d::Identity(), T_B_S, params, out, scratch);
+  EXPECT_EQ(c.ego_vehicle, 32u);
+}
+
 TEST(ScanFilter, SameResultForOneTwoAndFourThreads) {
   // Every reason in one cloud: a dense wall, scattered isolated points near and far, points in
   // the ego box and too close, non-finite ones; the point ranges split it unevenly.
