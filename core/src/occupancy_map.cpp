@@ -1543,8 +1543,10 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
     v.resize(n);
     v.clear();
   };
-  warm(scan_ground_cols_, static_cast<std::size_t>(dims_.x()) * dims_.y() + 1);
-  warm(hit_slots_, kReservedHitSlots);
+  // These two keep their size (their counts are n_ground_cols_, n_hit_slots_): growing them from
+  // empty each scan zero-filled ~150 KB per scan.
+  scan_ground_cols_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y() + 1, 0);
+  hit_slots_.assign(kReservedHitSlots, 0);
   warm(hit_slot_, kReservedHitSlots);
   warm(hit_column_, kReservedHitSlots);
   warm(hit_height_, kReservedHitSlots);
@@ -1808,8 +1810,8 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   hit_height_.resize(n_points);
   hit_rise_.resize(n_points);
   const double v_m = params_.voxel_size_m;
-  for (const std::uint32_t c : scan_ground_cols_) scan_ground_z_[c] = kNone;
-  scan_ground_cols_.clear();
+  for (std::size_t k = 0; k < n_ground_cols_; ++k) scan_ground_z_[scan_ground_cols_[k]] = kNone;
+  n_ground_cols_ = 0;
   // The slot and column of each return (none: not finite, beyond max range or outside).
   bool in_lanes = false;
 #if defined(TARMAC_WIDE_WALK)
@@ -1853,7 +1855,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   // was a fifth of this pass's time); the list has room for one more than it can hold.
   {
     const std::size_t columns = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
-    scan_ground_cols_.resize(std::min(n_points, columns) + 1);
+    scan_ground_cols_.resize(std::max(scan_ground_cols_.size(), std::min(n_points, columns) + 1));
     std::uint32_t* const touched = scan_ground_cols_.data();
     std::size_t n_touched = 0;
     float* const ground = scan_ground_z_.data();
@@ -1869,14 +1871,15 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
       n_touched += g == kNone ? 1 : 0;
       ground[column] = std::min(g, height);
     }
-    scan_ground_cols_.resize(n_touched);
+    n_ground_cols_ = n_touched;
   }
   // b) Rise above the lowest return of this scan within ground_radius_m (an object cannot
   //    hide the ground around it).
   //    Once per column the scan touched (returns stack up in columns: walls, poles), then
   //    per return; a return's own column is among them, so its ground is at most its height.
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
-  for (const std::uint32_t c : scan_ground_cols_) {
+  for (std::size_t k = 0; k < n_ground_cols_; ++k) {
+    const std::uint32_t c = scan_ground_cols_[k];
     const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
     const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
     float ground_z = kNone;
@@ -1905,7 +1908,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   }
   // c) One hit per voxel, in point order (promotions enter the static layer in that order).
   const int promote = params_.static_promote_scans;
-  hit_slots_.resize(n_points);
+  hit_slots_.resize(std::max(hit_slots_.size(), n_points));
   std::uint32_t* const first_hits = hit_slots_.data();
   std::size_t n_first = 0;
   float* const log_odds = log_odds_.data();
@@ -1955,7 +1958,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
       rise_cm[s] = std::max(rise_cm[s], rise);
     }
   }
-  hit_slots_.resize(n_first);
+  n_hit_slots_ = n_first;
   stats.hit_updates += n_first;
   stats.promotions += promotions;
 }
@@ -2182,7 +2185,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     flush();
     task_updates[task] = updates;
   });
-  for (const std::uint32_t s : hit_slots_) hit_bits_[s >> 6] = 0;
+  for (std::size_t k = 0; k < n_hit_slots_; ++k) hit_bits_[hit_slots_[k] >> 6] = 0;
   for (const auto& demoted : demoted_) {
     for (const std::uint32_t s : demoted) static_->erase(voxel_of_slot(s));
     stats.demotions += demoted.size();

@@ -297,7 +297,7 @@ void FilterScratch::reserve(std::size_t points, const FilterParams& params) {
     grid.clear();  // a later grid-path scan allocates it anew, all zero
   }
   grid_touched.assign(points, 0);
-  grid_touched.clear();
+  n_grid_touched = 0;
   cells.assign(table_capacity(points), Cell{});
   point_key.assign(points, 0);
   point_slot.assign(points, 0);
@@ -451,13 +451,15 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   if (outliers && region.grid) {
     if (scratch.grid.size() != region.side * region.side * region.side) {
       scratch.grid.assign(region.side * region.side * region.side, 0);  // config changed
-      scratch.grid_touched.clear();
+      scratch.n_grid_touched = 0;
     }
     std::uint8_t* const grid = scratch.grid.data();
     // One byte per cell, saturating (the test needs at most 27).
     const auto count = [&] {
-      for (const std::uint32_t c : scratch.grid_touched) grid[c] = 0;  // the last scan's cells
-      scratch.grid_touched.resize(m);
+      for (std::size_t k = 0; k < scratch.n_grid_touched; ++k) {
+        grid[scratch.grid_touched[k]] = 0;  // the last scan's cells
+      }
+      scratch.grid_touched.resize(std::max(scratch.grid_touched.size(), m));
       // Locals: a byte store may alias anything, and the compiler would reload each of these
       // after every count otherwise.
       std::uint32_t* const touched = scratch.grid_touched.data();
@@ -483,7 +485,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
           grid[c] = static_cast<std::uint8_t>(g + (g != 255 ? 1 : 0));
         }
       }
-      scratch.grid_touched.resize(n_touched);
+      scratch.n_grid_touched = n_touched;
     };
     runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
       if (job == 0) {

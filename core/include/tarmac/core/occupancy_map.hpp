@@ -208,7 +208,8 @@ class OccupancyMap {
   std::vector<float> scan_ground_z_;
   /// Per scan, for the columns that hold a return: the lowest return within ground_radius_m.
   std::vector<float> scan_ground_near_z_;
-  std::vector<std::uint32_t> scan_ground_cols_;
+  std::vector<std::uint32_t> scan_ground_cols_;  ///< the first n_ground_cols_ (no per-scan fill)
+  std::size_t n_ground_cols_ = 0;
   /// Per-scan marks, one bit per window voxel in slot order: the voxels this scan's returns hit,
   /// and, per ray task, the voxels its rays passed through. A bit set costs far less memory
   /// traffic than a list of visits (a 400×400×40 window is 0.8 MB of bits, cache-resident), and
@@ -224,7 +225,8 @@ class OccupancyMap {
   /// Large windows only: per ray task, one bit per mark word its rays marked (a word of these
   /// covers 4096 voxels), so the apply pass reads only those words.
   std::vector<std::vector<std::uint64_t>> dirty_words_;
-  std::vector<std::uint32_t> hit_slots_;  ///< to clear hit_bits_ after the scan
+  std::vector<std::uint32_t> hit_slots_;  ///< the first n_hit_slots_: to clear hit_bits_ after
+  std::size_t n_hit_slots_ = 0;           ///< the scan
   /// Per scan: the rays in the order they are walked (by direction), their direction buckets
   /// and the buckets' counts (scratch of the counting sort).
   std::vector<std::uint32_t> ray_order_;

@@ -67,7 +67,8 @@ struct FilterScratch {
   /// filter_scan): a byte per cell, zero between scans but for the cells in grid_touched (the
   /// last scan's, emptied by the next).
   std::vector<std::uint8_t> grid;
-  std::vector<std::uint32_t> grid_touched;
+  std::vector<std::uint32_t> grid_touched;  ///< its first n_grid_touched (no per-scan fill)
+  std::size_t n_grid_touched = 0;
   /// Regions of more cells than this are counted in the hash table `cells` instead (small cells
   /// with a long outlier range). Both give the same result; tests lower it to compare them.
   std::size_t grid_cell_limit = std::size_t{1} << 23;
