@@ -7,6 +7,8 @@
 #include <cstring>
 #include <limits>
 
+#include "lanes4.hpp"
+
 namespace tarmac::core {
 
 namespace {
@@ -45,10 +47,6 @@ void mark_envelope(std::uint8_t* __restrict known, std::uint8_t* __restrict obst
   }
 }
 
-/// Four lanes of 32 bits (GCC/Clang vector extensions, any target): what one SSE/NEON register
-/// holds. Comparisons yield −1 (all bits) or 0 per lane.
-using Float4 = float __attribute__((vector_size(16)));
-using Int4 = std::int32_t __attribute__((vector_size(16)));
 /// Layers per group of the layer-bits pass: a group's layers are read side by side (a few
 /// sequential streams, which the prefetchers follow; all 40 at once were twice as slow).
 constexpr int kLayerGroup = 4;

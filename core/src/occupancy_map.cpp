@@ -17,6 +17,8 @@
 #include <tuple>
 #include <utility>
 
+#include "lanes4.hpp"
+
 namespace tarmac::core {
 
 /// The site-wide static layer: one 512-bit mask per 8×8×8 block of voxels that holds any.
@@ -164,10 +166,6 @@ std::int64_t floor_to_int(double v) {
   const auto i = static_cast<std::int64_t>(v);  // truncates toward zero
   return i - static_cast<std::int64_t>(static_cast<double>(i) > v);
 }
-/// Four lanes of 32 bits (GCC/Clang vector extensions, any target); comparisons give −1 or 0.
-using Float4 = float __attribute__((vector_size(16)));
-using Int4 = std::int32_t __attribute__((vector_size(16)));
-
 /// Free-space marks are tracked per block of 64 bit words (4096 voxels).
 constexpr int kBlockShift = 6;
 
@@ -457,22 +455,11 @@ void sort_rays_by_direction(const Eigen::Vector3d& origin_W,
     const std::size_t q0 = n_quads * task / kBucketTasks, q1 = n_quads * (task + 1) / kBucketTasks;
     for (std::size_t i = 4 * q0; i < 4 * q1; i += 4) {
       Float4 x{}, y{}, z{};
-      if (i + 4 <= n_points) {
-        // Four returns, contiguous: x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3 into lanes.
-        static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float));
-        const auto* const raw = reinterpret_cast<const unsigned char*>(points.data() + i);
-        Float4 a, b, c;
-        std::memcpy(&a, raw, sizeof a);
-        std::memcpy(&b, raw + sizeof a, sizeof b);
-        std::memcpy(&c, raw + 2 * sizeof a, sizeof c);
+      if (i + 4 <= n_points) {  // four returns, contiguous
+        load_xyz4(points.data() + i, x, y, z);
         const Float4 zero{};
-        x = __builtin_shufflevector(__builtin_shufflevector(a, b, 0, 3, 6, 7), c, 0, 1, 2, 5) -
-            (zero + o.x());
-        y = __builtin_shufflevector(__builtin_shufflevector(a, b, 1, 4, 7, 7), c, 0, 1, 2, 6) -
-            (zero + o.y());
-        z = __builtin_shufflevector(__builtin_shufflevector(a, b, 2, 5, 5, 5), c, 0, 1, 4, 7) -
-            (zero + o.z());
-        direction_buckets(x, y, z, bucket.data() + i);
+        direction_buckets(x - (zero + o.x()), y - (zero + o.y()), z - (zero + o.z()),
+                          bucket.data() + i);
         continue;
       }
       for (std::size_t k = 0; k < 4 && i + k < n_rays; ++k) {
@@ -1394,23 +1381,6 @@ std::uint64_t walk_task(const WindowGeometry& w, const RayStart& start, const Ta
   return visits;
 }
 
-/// Bit k set when lane k of a comparison mask is set (one instruction with SSE).
-unsigned lane_bits(Int4 mask) {
-#if defined(__SSE2__)
-  return static_cast<unsigned>(_mm_movemask_ps(reinterpret_cast<__m128>(mask)));
-#else
-  return static_cast<unsigned>((mask[0] & 1) | (mask[1] & 2) | (mask[2] & 4) | (mask[3] & 8));
-#endif
-}
-
-/// Set bits of a word. (std::popcount is a library call on x86-64 builds without POPCNT.)
-int bit_count(std::uint64_t x) {
-  x -= (x >> 1) & 0x5555555555555555ull;
-  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
-  x = (x + (x >> 4)) & 0x0f0f0f0f0f0f0f0full;
-  return static_cast<int>((x * 0x0101010101010101ull) >> 56);
-}
-
 /// Words with at least this many voxels to miss take the four-lanes path.
 constexpr int kDenseWord = 8;
 
@@ -1852,7 +1822,10 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   }
   // Heights, and the lowest return per column, in point order. A column's first return books
   // it without a branch (whether a column was touched before is as good as random: the branch
-  // was a fifth of this pass's time); the list has room for one more than it can hold.
+  // was a fifth of integrate_hits' own time): every return writes its column at the list's
+  // end, which moves on only for a first return, so the list has room for one entry more than
+  // there can be columns.
+  const std::uint32_t* const slot_of_hit = hit_slot_.data();
   {
     const std::size_t columns = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
     scan_ground_cols_.resize(std::max(scan_ground_cols_.size(), std::min(n_points, columns) + 1));
@@ -1862,7 +1835,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
     float* const height_of_hit = hit_height_.data();
     const std::uint32_t* const column_of_hit = hit_column_.data();
     for (std::size_t i = 0; i < n_points; ++i) {
-      if (hit_slot_[i] == kNoSlot) continue;
+      if (slot_of_hit[i] == kNoSlot) continue;
       const std::uint32_t column = column_of_hit[i];
       const float height = up.dot(points_W[i]);
       height_of_hit[i] = height;
@@ -1893,7 +1866,6 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   }
   // The loops that store bytes read through locals: a byte store may alias anything, and the
   // compiler would reload every member after each (BALM hall: 0.1 ms of the 0.8 ms pass).
-  const std::uint32_t* const slot_of_hit = hit_slot_.data();
   std::uint8_t* const rise_of_hit = hit_rise_.data();
   {
     const float* const height = hit_height_.data();

@@ -7,9 +7,7 @@
 #include <cstring>
 #include <limits>
 
-#if defined(__SSE2__)
-#include <immintrin.h>
-#endif
+#include "lanes4.hpp"
 
 namespace tarmac::core {
 
@@ -59,12 +57,17 @@ bool cell_of(const Eigen::Vector3f& p, float inv_cell, std::array<std::int64_t, 
   return true;
 }
 
+/// A non-zero key from a cell's three 21-bit fields (coordinate + 2^20, wrapped).
+std::uint64_t pack_key(std::uint64_t fx, std::uint64_t fy, std::uint64_t fz) {
+  return (fx << 42) | (fy << 21) | fz | (1ull << 63);
+}
+
 /// Packs a cell coordinate (each within ±2^20 cells) into a non-zero key.
 std::uint64_t cell_key(const std::array<std::int64_t, 3>& c) {
   const auto field = [](std::int64_t v) {
     return static_cast<std::uint64_t>(v + (1 << 20)) & kField;
   };
-  return (field(c[0]) << 42) | (field(c[1]) << 21) | field(c[2]) | (1ull << 63);
+  return pack_key(field(c[0]), field(c[1]), field(c[2]));
 }
 
 /// Home slot of a key: linear in the cell coordinates with the z coordinate unscaled, so the
@@ -110,18 +113,18 @@ struct OutlierRegion {
   static constexpr double kMaxCells = 1e5;
 
   OutlierRegion(const FilterParams& params, std::size_t limit)
-      : reach(static_cast<int>(cells_in_range(params)) + 3),
-        side(2 * static_cast<std::size_t>(reach) + 1),
-        // Cell indices are 32-bit (the touched lists).
-        grid(side * side * side <= std::min(limit, std::size_t{1} << 31)),
-        capped(!(params.outlier_max_range_m / params.outlier_cell_m >= 0.0 &&
-                 params.outlier_max_range_m / params.outlier_cell_m <= kMaxCells)) {}
+      : OutlierRegion(params.outlier_max_range_m / params.outlier_cell_m, limit) {}
 
   /// The outlier range, or for unvalidated parameters (beyond kMaxCells cells, negative, not a
   /// number) the range the region covers: near points must have their cells and neighbours in
   /// it.
   [[nodiscard]] double near_range_m(const FilterParams& params) const {
     return capped ? (reach - 3) * params.outlier_cell_m : params.outlier_max_range_m;
+  }
+
+  /// Whether a cell lies in the region.
+  [[nodiscard]] bool holds(const std::array<std::int64_t, 3>& c) const {
+    return std::abs(c[0]) <= reach && std::abs(c[1]) <= reach && std::abs(c[2]) <= reach;
   }
 
   /// The grid index (x fastest) of the cell of a key in the region.
@@ -137,26 +140,17 @@ struct OutlierRegion {
   bool capped;
 
  private:
-  static double cells_in_range(const FilterParams& params) {
-    const double cells = std::ceil(params.outlier_max_range_m / params.outlier_cell_m);
-    return cells >= 0.0 ? std::min(cells, kMaxCells) : 0.0;  // NaN and negatives: 0
-  }
+  /// `cells`: outlier range over cell size.
+  OutlierRegion(double cells, std::size_t limit)
+      : reach(static_cast<int>(cells >= 0.0 ? std::min(std::ceil(cells), kMaxCells) : 0.0) + 3),
+        side(2 * static_cast<std::size_t>(reach) + 1),
+        // Cell indices are 32-bit (the touched lists).
+        grid(side * side * side <= std::min(limit, std::size_t{1} << 31)),
+        capped(!(cells >= 0.0 && cells <= kMaxCells)) {}  // NaN: capped, reach 3
 };
 
 // A slot is one aligned 16-byte unit: it never straddles two cache lines.
 static_assert(sizeof(FilterScratch::Cell) == 16 && alignof(FilterScratch::Cell) == 16);
-
-/// Lanes set in a four-lane mask (std::popcount is a library call without the POPCNT
-/// instruction, which the baseline x86-64 target does not assume).
-std::uint64_t lanes_set(unsigned mask) {
-  constexpr std::uint8_t kSet[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
-  return kSet[mask & 15u];
-}
-
-/// Four lanes of 32 bits (GCC/Clang vector extensions: SSE on any x86-64); comparisons give −1
-/// or 0.
-using Float4 = float __attribute__((vector_size(16)));
-using Int4 = std::int32_t __attribute__((vector_size(16)));
 
 /// filter_scan's per-point tests four points at a time, with the same float arithmetic as the
 /// one-point reference (test_point in filter_scan), so the same decisions: the squared norm
@@ -211,26 +205,16 @@ class PointLanes {
   }
 
   [[nodiscard]] Found test(const Eigen::Vector3f* p) const {
-    static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float));
-    const auto* raw = reinterpret_cast<const unsigned char*>(p);
-    Float4 a, b, c;  // x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3
-    std::memcpy(&a, raw, sizeof a);
-    std::memcpy(&b, raw + sizeof a, sizeof b);
-    std::memcpy(&c, raw + 2 * sizeof a, sizeof c);
-    const Float4 x =
-        __builtin_shufflevector(__builtin_shufflevector(a, b, 0, 3, 6, 7), c, 0, 1, 2, 5);
-    const Float4 y =
-        __builtin_shufflevector(__builtin_shufflevector(a, b, 1, 4, 7, 7), c, 0, 1, 2, 6);
-    const Float4 z =
-        __builtin_shufflevector(__builtin_shufflevector(a, b, 2, 5, 5, 5), c, 0, 1, 4, 7);
+    Float4 x, y, z;
+    load_xyz4(p, x, y, z);
     const Float4 zero = {};
     const Int4 finite = (x - x == zero) & (y - y == zero) & (z - z == zero);
     const Float4 sq = x * x + (y * y + z * z);
     const Int4 close = finite & (sq < min_sq_);
     Found f;
-    f.finite = mask(finite);
-    f.close = mask(close);
-    f.near = mask(sq < near_sq_);
+    f.finite = lane_bits(finite);
+    f.close = lane_bits(close);
+    f.near = lane_bits(sq < near_sq_);
     if (all_maybe_ego_) {
       f.maybe_ego = 0xf;
     } else if (ego_) {
@@ -242,7 +226,7 @@ class PointLanes {
         // A sum that overflowed (not finite) says nothing: the reference decides.
         outside |= (v - v == zero) & ((v < lo_[r] - m) | (v > hi_[r] + m));
       }
-      f.maybe_ego = mask(~outside);
+      f.maybe_ego = lane_bits(~outside);
     }
     // Cell fields: floor as the reference's floor_to_int, in 32 bits while that is exact.
     const Float4 limit = zero + kCellLimit;
@@ -263,23 +247,12 @@ class PointLanes {
           static_cast<std::uint32_t>(kField);
       std::memcpy(f.field[k], &field, sizeof field);
     }
-    f.keyed = mask(keyed);
-    f.region = mask(region & keyed);
+    f.keyed = lane_bits(keyed);
+    f.region = lane_bits(region & keyed);
     return f;
   }
 
  private:
-  /// Bit l set where lane l is true.
-  static unsigned mask(Int4 m) {
-#if defined(__SSE2__)
-    return static_cast<unsigned>(_mm_movemask_ps(_mm_castsi128_ps(reinterpret_cast<__m128i&>(m))));
-#else
-    unsigned bits = 0;
-    for (int l = 0; l < 4; ++l) bits |= (m[l] != 0 ? 1u : 0u) << l;
-    return bits;
-#endif
-  }
-
   bool ego_, all_maybe_ego_ = false;
   float inv_cell_, near_sq_, min_sq_ = 0.0f;
   int reach_;
@@ -350,8 +323,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     if (outliers) {
       std::array<std::int64_t, 3> c{};
       const bool in_range = cell_of(p, inv_cell, c);
-      const bool in_region = in_range && std::abs(c[0]) <= region.reach &&
-                             std::abs(c[1]) <= region.reach && std::abs(c[2]) <= region.reach;
+      const bool in_region = in_range && region.holds(c);
       scratch.point_key[out] = in_range ? cell_key(c) : 0;  // not read out of the region
       scratch.point_near[out] = static_cast<std::uint8_t>((p.squaredNorm() < near_sq ? kNear : 0) |
                                                           (in_region ? kInRegion : 0));
@@ -384,8 +356,8 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     std::size_t i = first[task];
     for (; i + 4 <= end; i += 4) {
       const PointLanes::Found f = lanes.test(points + i);
-      c.non_finite += 4 - lanes_set(f.finite);
-      c.too_close += lanes_set(f.close);
+      c.non_finite += static_cast<std::uint64_t>(4 - bit_count(f.finite));
+      c.too_close += static_cast<std::uint64_t>(bit_count(f.close));
       for (unsigned pass = f.finite & ~f.close; pass != 0; pass &= pass - 1) {
         const int l = std::countr_zero(pass);
         const Eigen::Vector3f& p = points[i + static_cast<std::size_t>(l)];
@@ -396,8 +368,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
         cand_S[out] = p;
         if (outliers) {
           keys[out] = ((f.keyed >> l) & 1u) != 0
-                          ? (std::uint64_t{f.field[0][l]} << 42) |
-                                (std::uint64_t{f.field[1][l]} << 21) | f.field[2][l] | (1ull << 63)
+                          ? pack_key(f.field[0][l], f.field[1][l], f.field[2][l])
                           : 0;
           // Beyond kCellLimit cells (not keyed): out of the region, the key is not read.
           flags[out] = static_cast<std::uint8_t>((((f.near >> l) & 1u) != 0 ? kNear : 0) |
@@ -506,8 +477,8 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
         std::uint32_t points = 0;
         for (const std::ptrdiff_t dz : {std::ptrdiff_t{0}, -layer, layer}) {
           for (const std::ptrdiff_t dy : {std::ptrdiff_t{0}, -row, row}) {
-            const std::uint8_t* const r = c + dz + dy;
-            points += std::uint32_t{r[-1]} + r[0] + r[1];
+            const std::uint8_t* const x_row = c + dz + dy;  // x − 1, x, x + 1
+            points += std::uint32_t{x_row[-1]} + x_row[0] + x_row[1];
             if (points >= needed) return true;
           }
         }
