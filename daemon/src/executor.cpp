@@ -733,7 +733,14 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
   spdlog::info("executor: {} Hz, {} workers, input delay {} ms, pose wait {} ms",
                d.config.executor.rate_hz, d.config.executor.workers,
                d.config.executor.input_delay_ms, d.config.executor.pose_wait_ms);
+  const std::int64_t wake_lead_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(ThreadPool::kWakeLead).count();
   while (!stop_requested()) {
+    // The workers slept since the last tick: they are woken a little before this one, so the
+    // first stage's first parallel_for does not run on this thread alone while they wake up
+    // (tens of µs on the project's VMs).
+    sleep_until_monotonic(deadline - wake_lead_ns);
+    d.pool->wake();
     sleep_until_monotonic(deadline);
     std::int64_t late = monotonic_ns() - deadline;
     std::uint32_t skipped = 0;

@@ -84,6 +84,17 @@ void ThreadPool::work_loop() {
   }
 }
 
+void ThreadPool::wake() {
+  if (workers_.empty()) return;
+  {
+    // A new generation with no tasks (count_ is 0 between calls): each worker wakes, finds
+    // nothing to run, and polls for kSpin before sleeping again.
+    std::lock_guard lock(mutex_);
+    ++generation_;
+  }
+  wake_.notify_all();
+}
+
 void ThreadPool::parallel_for(std::size_t count, core::TaskFn fn) {
   if (count == 0) return;
   if (workers_.empty() || count == 1) {

@@ -38,6 +38,27 @@ TEST(ThreadPool, EveryTaskOnce_BackToBackAndAfterTheWorkersSlept) {
   }
 }
 
+// wake() between calls (once, twice, then a call at once, within the polling time or after the
+// workers slept again) hands out no task of its own and loses none of the next call's; a pool
+// destroyed right after a wake stops and joins.
+TEST(ThreadPool, WakeBetweenCallsLosesNoTask) {
+  for (const std::size_t threads : {1u, 2u, 3u}) {
+    ThreadPool pool(threads);
+    for (int c = 0; c < 300; ++c) {
+      if (c % 2 == 0) pool.wake();
+      if (c % 3 == 0) pool.wake();
+      if (c % 50 == 0) std::this_thread::sleep_for(ThreadPool::kSpin * 3);
+      if (c % 7 == 0) std::this_thread::sleep_for(ThreadPool::kWakeLead);
+      expect_each_task_once(pool, 1 + c % 4, std::chrono::microseconds(0));
+    }
+    pool.wake();
+  }
+  for (int i = 0; i < 50; ++i) {
+    ThreadPool pool(2);
+    pool.wake();
+  }
+}
+
 // Pools destroyed right after a call (workers polling) and right after construction (workers
 // asleep or not started) stop and join.
 TEST(ThreadPool, StopsWhetherWorkersPollOrSleep) {

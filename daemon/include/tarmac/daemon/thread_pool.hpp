@@ -8,7 +8,8 @@
 /// short tasks runs serially, and a stage calls parallel_for several times in a row. So a worker
 /// that has finished its tasks, and the caller waiting for the last task, first poll for up to
 /// kSpin before sleeping on the condition variable: back-to-back calls within a stage never
-/// sleep; between cycles each thread sleeps after kSpin.
+/// sleep; between cycles each thread sleeps after kSpin. wake() lets a caller that knows when
+/// its next cycle starts (the executor's tick) have the workers up and polling by then.
 
 #include <atomic>
 #include <chrono>
@@ -35,6 +36,12 @@ class ThreadPool final : public core::TaskRunner {
   ThreadPool& operator=(const ThreadPool&) = delete;
 
   void parallel_for(std::size_t count, core::TaskFn fn) override;
+
+  /// Wakes sleeping workers without giving them work: they poll for kSpin, so a parallel_for
+  /// within that time starts on every thread at once instead of waiting for the wake-up (the
+  /// first call of a cycle otherwise ran on the calling thread alone for tens of µs). Returns at
+  /// once. Call it from the thread that calls parallel_for, not during a call.
+  void wake();
   [[nodiscard]] std::size_t concurrency() const override { return workers_.size() + 1; }
 
   /// Number of workers whose CPU pinning failed (0 when none requested).
@@ -43,6 +50,9 @@ class ThreadPool final : public core::TaskRunner {
   /// How long a thread polls for new work (worker) or for the last task (caller) before it
   /// sleeps.
   static constexpr std::chrono::microseconds kSpin{200};
+  /// How long before a cycle its caller wakes the workers: past the 20–40 µs a wake-up takes,
+  /// well within kSpin.
+  static constexpr std::chrono::microseconds kWakeLead{100};
 
  private:
   void work_loop();
