@@ -127,11 +127,11 @@ struct OutlierRegion {
     return std::abs(c[0]) <= reach && std::abs(c[1]) <= reach && std::abs(c[2]) <= reach;
   }
 
-  /// The grid index (x fastest) of the cell of a key in the region.
-  [[nodiscard]] std::size_t index(std::uint64_t key) const {
+  /// The grid index (x fastest) of a cell in the region, from its key's three 21-bit fields
+  /// (x, y, z). Computed once per candidate, when the candidate is tested.
+  [[nodiscard]] std::uint32_t index(std::uint64_t fx, std::uint64_t fy, std::uint64_t fz) const {
     const std::uint64_t lo = (1u << 20) - static_cast<std::uint64_t>(reach);
-    return (((key & kField) - lo) * side + (((key >> 21) & kField) - lo)) * side +
-           (((key >> 42) & kField) - lo);
+    return static_cast<std::uint32_t>(((fz - lo) * side + (fy - lo)) * side + (fx - lo));
   }
 
   int reach;
@@ -167,11 +167,18 @@ class PointLanes {
   struct Found {
     unsigned finite = 0, close = 0, maybe_ego = 0, keyed = 0, near = 0, region = 0;
     alignas(16) std::uint32_t field[3][4];
+    /// The cell's grid index (OutlierRegion::index) for the lanes in `region`.
+    alignas(16) std::uint32_t index[4];
   };
 
   PointLanes(const FilterParams& params, const Eigen::Isometry3d& T_B_S, float inv_cell,
-             float near_sq, int reach)
-      : ego_(params.ego_box_enabled), inv_cell_(inv_cell), near_sq_(near_sq), reach_(reach) {
+             float near_sq, const OutlierRegion& region)
+      : ego_(params.ego_box_enabled),
+        inv_cell_(inv_cell),
+        near_sq_(near_sq),
+        reach_(region.reach),
+        side_(static_cast<std::uint32_t>(region.side)),
+        lo_field_((1u << 20) - static_cast<std::uint32_t>(region.reach)) {
     const double min_sq = params.min_range_m * params.min_range_m;
     float f = static_cast<float>(min_sq);
     if (static_cast<double>(f) < min_sq)
@@ -233,6 +240,8 @@ class PointLanes {
     Int4 keyed = finite;
     Int4 region = finite;
     const Float4 q[3] = {x * inv_cell_, y * inv_cell_, z * inv_cell_};
+    using UInt4 = std::uint32_t __attribute__((vector_size(16)));
+    UInt4 fields[3];
     for (int k = 0; k < 3; ++k) {
       const Float4 abs_q = q[k] < zero ? -q[k] : q[k];
       keyed &= abs_q <= limit;
@@ -241,12 +250,16 @@ class PointLanes {
       const Int4 down = __builtin_convertvector(i, Float4) > safe;  // −1 where it rounded up
       const Int4 cell = i + down;  // no overflow: |safe| < 2^31, so i > −2^31 where down is −1
       region &= (cell >= -reach_) & (cell <= reach_);
-      using UInt4 = std::uint32_t __attribute__((vector_size(16)));
       const UInt4 field =
           (reinterpret_cast<const UInt4&>(i) + reinterpret_cast<const UInt4&>(down) + (1u << 20)) &
           static_cast<std::uint32_t>(kField);
       std::memcpy(f.field[k], &field, sizeof field);
+      fields[k] = field - lo_field_;
     }
+    // The grid index in 32 bits (the region has at most 2^31 cells); lanes out of the region
+    // wrap around and are not read.
+    const UInt4 index = (fields[2] * side_ + fields[1]) * side_ + fields[0];
+    std::memcpy(f.index, &index, sizeof index);
     f.keyed = lane_bits(keyed);
     f.region = lane_bits(region & keyed);
     return f;
@@ -256,6 +269,7 @@ class PointLanes {
   bool ego_, all_maybe_ego_ = false;
   float inv_cell_, near_sq_, min_sq_ = 0.0f;
   int reach_;
+  std::uint32_t side_, lo_field_;
   float R_[3][3] = {}, t_[3] = {}, lo_[3] = {}, hi_[3] = {};
   float margin_ = 0.0f, margin_per_m_ = 0.0f;
 };
@@ -312,6 +326,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   for (std::size_t t = 0; t <= kFilterTasks; ++t) first[t] = n * t / kFilterTasks;
   scratch.candidates_S.resize(n);
   scratch.point_key.resize(n);
+  scratch.point_slot.resize(n);
   scratch.point_near.resize(n);
   const auto in_ego_box = [&](const Eigen::Vector3f& p) {
     const Eigen::Vector3d p_B = R_B_S * p.cast<double>() + t_B_S;
@@ -324,7 +339,13 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       std::array<std::int64_t, 3> c{};
       const bool in_range = cell_of(p, inv_cell, c);
       const bool in_region = in_range && region.holds(c);
-      scratch.point_key[out] = in_range ? cell_key(c) : 0;  // not read out of the region
+      const std::uint64_t key = in_range ? cell_key(c) : 0;  // not read out of the region
+      scratch.point_key[out] = key;
+      // The grid path reads the cell's index instead (set for cells in the region only).
+      if (region.grid && in_region) {
+        scratch.point_slot[out] =
+            region.index((key >> 42) & kField, (key >> 21) & kField, key & kField);
+      }
       scratch.point_near[out] = static_cast<std::uint8_t>((p.squaredNorm() < near_sq ? kNear : 0) |
                                                           (in_region ? kInRegion : 0));
     }
@@ -342,7 +363,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       add_candidate(p, out);
     }
   };
-  const PointLanes lanes(params, T_B_S, inv_cell, near_sq, region.reach);
+  const PointLanes lanes(params, T_B_S, inv_cell, near_sq, region);
   runner.parallel_for(kFilterTasks, [&](std::size_t task) {
     // Locals rather than scratch's members and the task's counts: a byte store may alias
     // anything, and the compiler would reload them after each.
@@ -350,7 +371,9 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     const Eigen::Vector3f* const points = cloud.points_S.data();
     Eigen::Vector3f* const cand_S = scratch.candidates_S.data();
     std::uint64_t* const keys = scratch.point_key.data();
+    std::uint32_t* const cells = scratch.point_slot.data();
     std::uint8_t* const flags = scratch.point_near.data();
+    const bool grid = region.grid;
     const std::size_t end = first[task + 1];
     std::size_t out = first[task];
     std::size_t i = first[task];
@@ -370,6 +393,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
           keys[out] = ((f.keyed >> l) & 1u) != 0
                           ? pack_key(f.field[0][l], f.field[1][l], f.field[2][l])
                           : 0;
+          if (grid) cells[out] = f.index[l];  // read for candidates in the region only
           // Beyond kCellLimit cells (not keyed): out of the region, the key is not read.
           flags[out] = static_cast<std::uint8_t>((((f.near >> l) & 1u) != 0 ? kNear : 0) |
                                                  (((f.region >> l) & 1u) != 0 ? kInRegion : 0));
@@ -395,7 +419,6 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const auto& cand = scratch.candidates_S;
   // Itself and outlier_min_neighbors others.
   const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
-  scratch.point_slot.resize(n);
   scratch.candidates_W.resize(n);
   scratch.keep.resize(n);
   std::array<std::size_t, kFilterTasks + 1> kept_before{};
@@ -434,9 +457,8 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       // Locals: a byte store may alias anything, and the compiler would reload each of these
       // after every count otherwise.
       std::uint32_t* const touched = scratch.grid_touched.data();
-      const std::uint64_t* const keys = scratch.point_key.data();
+      const std::uint32_t* const cells = scratch.point_slot.data();
       const std::uint8_t* const flags = scratch.point_near.data();
-      const OutlierRegion r = region;
       std::size_t n_touched = 0;
       // The cells are scattered over the grid: requested a few candidates ahead, and no branch
       // depends on a count (a cell's first candidate books it without one).
@@ -446,10 +468,10 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
         for (std::size_t i = begin; i < end; ++i) {
           if (i + kAhead < end) {
             const std::size_t j = i + kAhead;
-            __builtin_prefetch(grid + ((flags[j] & kInRegion) != 0 ? r.index(keys[j]) : 0), 1);
+            __builtin_prefetch(grid + ((flags[j] & kInRegion) != 0 ? cells[j] : 0), 1);
           }
           if ((flags[i] & kInRegion) == 0) continue;
-          const std::size_t c = r.index(keys[i]);
+          const std::size_t c = cells[i];
           const std::uint8_t g = grid[c];
           touched[n_touched] = static_cast<std::uint32_t>(c);
           n_touched += g == 0 ? 1 : 0;
@@ -469,10 +491,9 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     const std::ptrdiff_t row = static_cast<std::ptrdiff_t>(region.side);
     const std::ptrdiff_t layer = row * row;
     runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-      const std::uint64_t* const keys = scratch.point_key.data();
-      const OutlierRegion r = region;
+      const std::uint32_t* const cells = scratch.point_slot.data();
       decide(task, [&](std::size_t i) {
-        const std::uint8_t* const c = grid + r.index(keys[i]);
+        const std::uint8_t* const c = grid + cells[i];
         if (*c >= needed) return true;  // enough in its own cell: most of them (walls)
         std::uint32_t points = 0;
         for (const std::ptrdiff_t dz : {std::ptrdiff_t{0}, -layer, layer}) {

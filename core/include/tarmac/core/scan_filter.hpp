@@ -55,9 +55,11 @@ struct FilterScratch {
   std::vector<Cell> cells;
   /// Distinct cells of the last scan: the next table is sized from it (see filter_scan).
   std::size_t last_cells = 0;
-  std::vector<std::uint64_t> point_key;   ///< cell key per candidate point
-  std::vector<std::uint32_t> point_slot;  ///< table slot of the candidate's cell
-  std::vector<std::uint8_t> point_near;   ///< per candidate: near enough to be tested
+  std::vector<std::uint64_t> point_key;  ///< cell key per candidate point
+  /// Per candidate: its cell's slot in the outlier table (hash path) or index in the grid (grid
+  /// path, set for candidates in the region only).
+  std::vector<std::uint32_t> point_slot;
+  std::vector<std::uint8_t> point_near;  ///< per candidate: near enough to be tested
   /// Candidates (points that passed the per-point tests) in the sensor and world frames. Both
   /// are indexed by input position: each of the filter's fixed point ranges keeps its
   /// candidates at the front of its own range.
