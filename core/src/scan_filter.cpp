@@ -274,6 +274,190 @@ class PointLanes {
   float margin_ = 0.0f, margin_per_m_ = 0.0f;
 };
 
+/// A scan's candidates between the filter's passes: task t's are [first[t], last[t]) of the
+/// scratch arrays (the passes take the tasks' ranges in order, and no copy closes the gaps, so
+/// the survivors keep the input order); kept_before[t + 1] counts task t's survivors.
+struct CandidateRanges {
+  std::array<std::size_t, kFilterTasks + 1> first{};
+  std::array<std::size_t, kFilterTasks> last{};
+  std::array<std::size_t, kFilterTasks + 1> kept_before{};
+
+  [[nodiscard]] std::size_t count() const {
+    std::size_t m = 0;
+    for (std::size_t t = 0; t < kFilterTasks; ++t) m += last[t] - first[t];
+    return m;
+  }
+};
+
+/// The isolated-outlier test in the grid of bytes around the sensor (OutlierRegion::grid): the
+/// candidates counted per cell on one thread while the tasks run `to_world(task)`, then
+/// `decide(task, passes)` per task with the grid's answer for near candidates. `needed`: the
+/// candidate itself and outlier_min_neighbors others.
+template <typename ToWorld, typename Decide>
+void isolate_in_grid(const OutlierRegion& region, std::uint32_t needed,
+                     const CandidateRanges& ranges, FilterScratch& scratch, TaskRunner& runner,
+                     ToWorld&& to_world, Decide&& decide) {
+  if (scratch.grid.size() != region.side * region.side * region.side) {
+    scratch.grid.assign(region.side * region.side * region.side, 0);  // config changed
+    scratch.n_grid_touched = 0;
+  }
+  std::uint8_t* const grid = scratch.grid.data();
+  // One byte per cell, saturating (the test needs at most 27).
+  const auto count = [&] {
+    for (std::size_t k = 0; k < scratch.n_grid_touched; ++k) {
+      grid[scratch.grid_touched[k]] = 0;  // the last scan's cells
+    }
+    scratch.grid_touched.resize(std::max(scratch.grid_touched.size(), ranges.count()));
+    // Locals: a byte store may alias anything, and the compiler would reload each of these
+    // after every count otherwise.
+    std::uint32_t* const touched = scratch.grid_touched.data();
+    const std::uint32_t* const cells = scratch.point_slot.data();
+    const std::uint8_t* const flags = scratch.point_near.data();
+    std::size_t n_touched = 0;
+    // The cells are scattered over the grid: requested a few candidates ahead, and no branch
+    // depends on a count (a cell's first candidate books it without one).
+    constexpr std::size_t kAhead = 16;
+    for (std::size_t t = 0; t < kFilterTasks; ++t) {
+      const std::size_t begin = ranges.first[t], end = ranges.last[t];
+      for (std::size_t i = begin; i < end; ++i) {
+        if (i + kAhead < end) {
+          const std::size_t j = i + kAhead;
+          __builtin_prefetch(grid + ((flags[j] & kInRegion) != 0 ? cells[j] : 0), 1);
+        }
+        if ((flags[i] & kInRegion) == 0) continue;
+        const std::size_t c = cells[i];
+        const std::uint8_t g = grid[c];
+        touched[n_touched] = static_cast<std::uint32_t>(c);
+        n_touched += g == 0 ? 1 : 0;
+        grid[c] = static_cast<std::uint8_t>(g + (g != 255 ? 1 : 0));
+      }
+    }
+    scratch.n_grid_touched = n_touched;
+  };
+  runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
+    if (job == 0) {
+      count();
+    } else {
+      to_world(job - 1);
+    }
+  });
+  // A near candidate's cell and its neighbours are in the region (see OutlierRegion).
+  const std::ptrdiff_t row = static_cast<std::ptrdiff_t>(region.side);
+  const std::ptrdiff_t layer = row * row;
+  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+    const std::uint32_t* const cells = scratch.point_slot.data();
+    decide(task, [&](std::size_t i) {
+      const std::uint8_t* const c = grid + cells[i];
+      if (*c >= needed) return true;  // enough in its own cell: most of them (walls)
+      std::uint32_t points = 0;
+      for (const std::ptrdiff_t dz : {std::ptrdiff_t{0}, -layer, layer}) {
+        for (const std::ptrdiff_t dy : {std::ptrdiff_t{0}, -row, row}) {
+          const std::uint8_t* const x_row = c + dz + dy;  // x − 1, x, x + 1
+          points += std::uint32_t{x_row[-1]} + x_row[0] + x_row[1];
+          if (points >= needed) return true;
+        }
+      }
+      return false;
+    });
+  });
+}
+
+/// The same test with the cells in a hash table (regions over FilterScratch::grid_cell_limit
+/// cells), or, without the test (`outliers` false), the world frame and every candidate kept.
+template <typename ToWorld, typename Decide>
+void isolate_in_table(bool outliers, std::uint32_t needed, const CandidateRanges& ranges,
+                      FilterScratch& scratch, TaskRunner& runner, ToWorld&& to_world,
+                      Decide&& decide) {
+  std::size_t mask = 0;
+  std::size_t capacity = 0;
+  // The slot holding `key`, or the empty slot where it would go (linear probing).
+  const auto find = [&](std::uint64_t key) {
+    std::size_t s = slot_of(key, mask);
+    while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
+    return s;
+  };
+  // Sized for twice the last scan's distinct cells, not for every candidate: points share
+  // cells (BALM hall: 3 k cells for 18 k points), and the table is cold at each scan, so its
+  // emptying and its inserts cost by the line (64 k slots, 1 MB, took 0.16 ms to empty and
+  // 0.17 ms to fill). A scan with more cells than half the table starts again with a table
+  // for all its candidates, which always fits. The counts per cell, hence the result, do not
+  // depend on the table's size.
+  const auto build_table = [&] {
+    const std::size_t full = table_capacity(ranges.count());
+    capacity = std::min(full, table_capacity(2 * scratch.last_cells));
+    while (true) {
+      mask = capacity - 1;
+      scratch.cells.resize(std::max(scratch.cells.size(), capacity));
+      std::fill_n(scratch.cells.begin(), capacity, FilterScratch::Cell{});
+      std::size_t distinct = 0;
+      // The candidates' cells are scattered over the table (MulRan's 36 k points over 100
+      // m): their slots' lines are requested a few candidates ahead, so that the misses
+      // overlap.
+      constexpr std::size_t kAhead = 8;
+      for (std::size_t t = 0; t < kFilterTasks && 2 * distinct <= capacity; ++t) {
+        for (std::size_t i = ranges.first[t]; i < ranges.last[t] && 2 * distinct <= capacity; ++i) {
+          if (i + kAhead < ranges.last[t]) {
+            __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
+          }
+          if ((scratch.point_near[i] & kInRegion) == 0) continue;
+          const std::uint64_t key = scratch.point_key[i];
+          const std::size_t s = find(key);
+          FilterScratch::Cell& cell = scratch.cells[s];
+          distinct += cell.key == 0 ? 1 : 0;
+          cell.key = key;
+          ++cell.count;
+          cell.state |= scratch.point_near[i] & kNear;
+          scratch.point_slot[i] = static_cast<std::uint32_t>(s);
+        }
+      }
+      if (2 * distinct <= capacity) {
+        scratch.last_cells = distinct;
+        return;
+      }
+      capacity = full;  // more than half full: again, with room for every candidate
+    }
+  };
+  // The table is built on one thread (two tables side by side were no faster, the cells
+  // being scattered: docs/perf-occ7.md).
+  runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
+    if (job == 0) {
+      if (outliers) build_table();
+    } else {
+      to_world(job - 1);
+    }
+  });
+  const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
+    return scratch.cells[find(key)].count;  // an empty slot's count is 0
+  };
+  const auto has_neighbours = [&](std::uint64_t key) {
+    std::uint32_t points = 0;
+    for (const auto& [dx, dy] : kColumns) {
+      for (int dz = -1; dz <= 1; ++dz) {
+        points += count_in(key + key_offset(dx, dy, dz));
+        if (points >= needed) return true;
+      }
+    }
+    return false;
+  };
+  if (outliers) {
+    // Each task owns a fixed range of slots: it writes only their bit 1.
+    runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+      for (std::size_t s = capacity * task / kFilterTasks; s < capacity * (task + 1) / kFilterTasks;
+           ++s) {
+        FilterScratch::Cell& cell = scratch.cells[s];
+        // A cell holding enough points on its own needs no lookup (most of them: walls).
+        if (cell.state != 0 && (cell.count >= needed || has_neighbours(cell.key))) {
+          cell.state |= 2;
+        }
+      }
+    });
+  }
+  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+    decide(task,
+           [&](std::size_t i) { return (scratch.cells[scratch.point_slot[i]].state & 2) != 0; });
+  });
+}
+
 }  // namespace
 
 void FilterScratch::reserve(std::size_t points, const FilterParams& params) {
@@ -321,8 +505,9 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
 
   // 1. Per-point tests, each task compacting its candidates to the front of its own range.
   std::array<FilterCounts, kFilterTasks> task_counts{};
-  std::array<std::size_t, kFilterTasks + 1> first{};  // candidates of task t: [first[t], …)
-  std::array<std::size_t, kFilterTasks> last{};
+  CandidateRanges ranges;
+  auto& first = ranges.first;
+  auto& last = ranges.last;
   for (std::size_t t = 0; t <= kFilterTasks; ++t) first[t] = n * t / kFilterTasks;
   scratch.candidates_S.resize(n);
   scratch.point_key.resize(n);
@@ -405,10 +590,8 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     task_counts[task] = c;
     last[task] = out;
   });
-  // Task t's candidates are [first[t], last[t]): the passes below take the tasks' ranges in
-  // order (no copy to close the gaps), so the survivors keep the input order.
-  std::size_t m = 0;
-  for (std::size_t t = 0; t < kFilterTasks; ++t) m += last[t] - first[t];
+  // Task t's candidates are [first[t], last[t]) (CandidateRanges).
+  const std::size_t m = ranges.count();
   const auto each_candidate = [&](std::size_t t, auto&& f) {
     for (std::size_t i = first[t]; i < last[t]; ++i) f(i);
   };
@@ -421,7 +604,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
   scratch.candidates_W.resize(n);
   scratch.keep.resize(n);
-  std::array<std::size_t, kFilterTasks + 1> kept_before{};
+  auto& kept_before = ranges.kept_before;
   // The candidates go into the world frame beside the counting, in ranges, the survivors
   // picked from them at the end.
   const auto to_world = [&](std::size_t task) {
@@ -443,158 +626,9 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
     kept_before[task + 1] = kept;
   };
   if (outliers && region.grid) {
-    if (scratch.grid.size() != region.side * region.side * region.side) {
-      scratch.grid.assign(region.side * region.side * region.side, 0);  // config changed
-      scratch.n_grid_touched = 0;
-    }
-    std::uint8_t* const grid = scratch.grid.data();
-    // One byte per cell, saturating (the test needs at most 27).
-    const auto count = [&] {
-      for (std::size_t k = 0; k < scratch.n_grid_touched; ++k) {
-        grid[scratch.grid_touched[k]] = 0;  // the last scan's cells
-      }
-      scratch.grid_touched.resize(std::max(scratch.grid_touched.size(), m));
-      // Locals: a byte store may alias anything, and the compiler would reload each of these
-      // after every count otherwise.
-      std::uint32_t* const touched = scratch.grid_touched.data();
-      const std::uint32_t* const cells = scratch.point_slot.data();
-      const std::uint8_t* const flags = scratch.point_near.data();
-      std::size_t n_touched = 0;
-      // The cells are scattered over the grid: requested a few candidates ahead, and no branch
-      // depends on a count (a cell's first candidate books it without one).
-      constexpr std::size_t kAhead = 16;
-      for (std::size_t t = 0; t < kFilterTasks; ++t) {
-        const std::size_t begin = first[t], end = last[t];
-        for (std::size_t i = begin; i < end; ++i) {
-          if (i + kAhead < end) {
-            const std::size_t j = i + kAhead;
-            __builtin_prefetch(grid + ((flags[j] & kInRegion) != 0 ? cells[j] : 0), 1);
-          }
-          if ((flags[i] & kInRegion) == 0) continue;
-          const std::size_t c = cells[i];
-          const std::uint8_t g = grid[c];
-          touched[n_touched] = static_cast<std::uint32_t>(c);
-          n_touched += g == 0 ? 1 : 0;
-          grid[c] = static_cast<std::uint8_t>(g + (g != 255 ? 1 : 0));
-        }
-      }
-      scratch.n_grid_touched = n_touched;
-    };
-    runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
-      if (job == 0) {
-        count();
-      } else {
-        to_world(job - 1);
-      }
-    });
-    // A near candidate's cell and its neighbours are in the region (see OutlierRegion).
-    const std::ptrdiff_t row = static_cast<std::ptrdiff_t>(region.side);
-    const std::ptrdiff_t layer = row * row;
-    runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-      const std::uint32_t* const cells = scratch.point_slot.data();
-      decide(task, [&](std::size_t i) {
-        const std::uint8_t* const c = grid + cells[i];
-        if (*c >= needed) return true;  // enough in its own cell: most of them (walls)
-        std::uint32_t points = 0;
-        for (const std::ptrdiff_t dz : {std::ptrdiff_t{0}, -layer, layer}) {
-          for (const std::ptrdiff_t dy : {std::ptrdiff_t{0}, -row, row}) {
-            const std::uint8_t* const x_row = c + dz + dy;  // x − 1, x, x + 1
-            points += std::uint32_t{x_row[-1]} + x_row[0] + x_row[1];
-            if (points >= needed) return true;
-          }
-        }
-        return false;
-      });
-    });
+    isolate_in_grid(region, needed, ranges, scratch, runner, to_world, decide);
   } else {
-    std::size_t mask = 0;
-    std::size_t capacity = 0;
-    // The slot holding `key`, or the empty slot where it would go (linear probing).
-    const auto find = [&](std::uint64_t key) {
-      std::size_t s = slot_of(key, mask);
-      while (scratch.cells[s].key != 0 && scratch.cells[s].key != key) s = (s + 1) & mask;
-      return s;
-    };
-    // Sized for twice the last scan's distinct cells, not for every candidate: points share
-    // cells (BALM hall: 3 k cells for 18 k points), and the table is cold at each scan, so its
-    // emptying and its inserts cost by the line (64 k slots, 1 MB, took 0.16 ms to empty and
-    // 0.17 ms to fill). A scan with more cells than half the table starts again with a table
-    // for all its candidates, which always fits. The counts per cell, hence the result, do not
-    // depend on the table's size.
-    const auto build_table = [&] {
-      const std::size_t full = table_capacity(m);
-      capacity = std::min(full, table_capacity(2 * scratch.last_cells));
-      while (true) {
-        mask = capacity - 1;
-        scratch.cells.resize(std::max(scratch.cells.size(), capacity));
-        std::fill_n(scratch.cells.begin(), capacity, FilterScratch::Cell{});
-        std::size_t distinct = 0;
-        // The candidates' cells are scattered over the table (MulRan's 36 k points over 100
-        // m): their slots' lines are requested a few candidates ahead, so that the misses
-        // overlap.
-        constexpr std::size_t kAhead = 8;
-        for (std::size_t t = 0; t < kFilterTasks && 2 * distinct <= capacity; ++t) {
-          for (std::size_t i = first[t]; i < last[t] && 2 * distinct <= capacity; ++i) {
-            if (i + kAhead < last[t]) {
-              __builtin_prefetch(&scratch.cells[slot_of(scratch.point_key[i + kAhead], mask)], 1);
-            }
-            if ((scratch.point_near[i] & kInRegion) == 0) continue;
-            const std::uint64_t key = scratch.point_key[i];
-            const std::size_t s = find(key);
-            FilterScratch::Cell& cell = scratch.cells[s];
-            distinct += cell.key == 0 ? 1 : 0;
-            cell.key = key;
-            ++cell.count;
-            cell.state |= scratch.point_near[i] & kNear;
-            scratch.point_slot[i] = static_cast<std::uint32_t>(s);
-          }
-        }
-        if (2 * distinct <= capacity) {
-          scratch.last_cells = distinct;
-          return;
-        }
-        capacity = full;  // more than half full: again, with room for every candidate
-      }
-    };
-    // The table is built on one thread (two tables side by side were no faster, the cells
-    // being scattered: docs/perf-occ7.md).
-    runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
-      if (job == 0) {
-        if (outliers) build_table();
-      } else {
-        to_world(job - 1);
-      }
-    });
-    const auto count_in = [&](std::uint64_t key) -> std::uint32_t {
-      return scratch.cells[find(key)].count;  // an empty slot's count is 0
-    };
-    const auto has_neighbours = [&](std::uint64_t key) {
-      std::uint32_t points = 0;
-      for (const auto& [dx, dy] : kColumns) {
-        for (int dz = -1; dz <= 1; ++dz) {
-          points += count_in(key + key_offset(dx, dy, dz));
-          if (points >= needed) return true;
-        }
-      }
-      return false;
-    };
-    if (outliers) {
-      // Each task owns a fixed range of slots: it writes only their bit 1.
-      runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-        for (std::size_t s = capacity * task / kFilterTasks;
-             s < capacity * (task + 1) / kFilterTasks; ++s) {
-          FilterScratch::Cell& cell = scratch.cells[s];
-          // A cell holding enough points on its own needs no lookup (most of them: walls).
-          if (cell.state != 0 && (cell.count >= needed || has_neighbours(cell.key))) {
-            cell.state |= 2;
-          }
-        }
-      });
-    }
-    runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-      decide(task,
-             [&](std::size_t i) { return (scratch.cells[scratch.point_slot[i]].state & 2) != 0; });
-    });
+    isolate_in_table(outliers, needed, ranges, scratch, runner, to_world, decide);
   }
   for (std::size_t t = 0; t < kFilterTasks; ++t) kept_before[t + 1] += kept_before[t];
 
