@@ -276,11 +276,10 @@ class PointLanes {
 
 /// A scan's candidates between the filter's passes: task t's are [first[t], last[t]) of the
 /// scratch arrays (the passes take the tasks' ranges in order, and no copy closes the gaps, so
-/// the survivors keep the input order); kept_before[t + 1] counts task t's survivors.
+/// the survivors keep the input order).
 struct CandidateRanges {
   std::array<std::size_t, kFilterTasks + 1> first{};
   std::array<std::size_t, kFilterTasks> last{};
-  std::array<std::size_t, kFilterTasks + 1> kept_before{};
 
   [[nodiscard]] std::size_t count() const {
     std::size_t m = 0;
@@ -525,9 +524,9 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
       const bool in_range = cell_of(p, inv_cell, c);
       const bool in_region = in_range && region.holds(c);
       const std::uint64_t key = in_range ? cell_key(c) : 0;  // not read out of the region
-      scratch.point_key[out] = key;
-      // The grid path reads the cell's index instead (set for cells in the region only).
-      if (region.grid && in_region) {
+      if (!region.grid) {
+        scratch.point_key[out] = key;
+      } else if (in_region) {  // the grid path reads the cell's index instead
         scratch.point_slot[out] =
             region.index((key >> 42) & kField, (key >> 21) & kField, key & kField);
       }
@@ -575,11 +574,14 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
         }
         cand_S[out] = p;
         if (outliers) {
-          keys[out] = ((f.keyed >> l) & 1u) != 0
-                          ? pack_key(f.field[0][l], f.field[1][l], f.field[2][l])
-                          : 0;
-          if (grid) cells[out] = f.index[l];  // read for candidates in the region only
-          // Beyond kCellLimit cells (not keyed): out of the region, the key is not read.
+          if (grid) {
+            cells[out] = f.index[l];  // read for candidates in the region only
+          } else {
+            // Beyond kCellLimit cells (not keyed): out of the region, the key is not read.
+            keys[out] = ((f.keyed >> l) & 1u) != 0
+                            ? pack_key(f.field[0][l], f.field[1][l], f.field[2][l])
+                            : 0;
+          }
           flags[out] = static_cast<std::uint8_t>((((f.near >> l) & 1u) != 0 ? kNear : 0) |
                                                  (((f.region >> l) & 1u) != 0 ? kInRegion : 0));
         }
@@ -604,7 +606,7 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
   const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
   scratch.candidates_W.resize(n);
   scratch.keep.resize(n);
-  auto& kept_before = ranges.kept_before;
+  std::array<std::size_t, kFilterTasks + 1> kept_before{};  // task t's survivors at t + 1
   // The candidates go into the world frame beside the counting, in ranges, the survivors
   // picked from them at the end.
   const auto to_world = [&](std::size_t task) {

@@ -55,7 +55,7 @@ struct FilterScratch {
   std::vector<Cell> cells;
   /// Distinct cells of the last scan: the next table is sized from it (see filter_scan).
   std::size_t last_cells = 0;
-  std::vector<std::uint64_t> point_key;  ///< cell key per candidate point
+  std::vector<std::uint64_t> point_key;  ///< cell key per candidate (hash path only)
   /// Per candidate: its cell's slot in the outlier table (hash path) or index in the grid (grid
   /// path, set for candidates in the region only).
   std::vector<std::uint32_t> point_slot;
