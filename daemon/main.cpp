@@ -96,6 +96,10 @@ int main(int argc, char** argv) {
                tarmac::transport::to_string(config.value().dds.participant.transport),
                security.enabled ? "on, identity " + security.identity_certificate : "off",
                config.value().sensors.size(), config.value().pose.topic);
+  for (const auto& shortfall :
+       tarmac::transport::udp_buffer_shortfalls(config.value().dds.participant)) {
+    spdlog::warn("DDS: {}", shortfall);
+  }
   executor.value()->load_tsdf();  // logs what it found; never fails the start
   executor.value()->prepare();    // memory locked, workers up: the first tick follows READY
   sd_notify(0, "READY=1");

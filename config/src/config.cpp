@@ -1,6 +1,8 @@
 #include "tarmac/config/config.hpp"
 
+#include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -22,6 +24,28 @@ struct ConfigError {
 
 [[noreturn]] void fail(const std::string& reason, const std::string& path, const std::string& why) {
   throw ConfigError{reason, path + ": " + why};
+}
+
+/// Why a DDS topic name is not the wire form of a ROS 2 topic (`rt/` + a fully qualified ROS
+/// name: tokens of [A-Za-z0-9_] not starting with a digit, separated by single '/'), or "".
+std::string ros_topic_problem(const std::string& name) {
+  if (name.rfind("rt/", 0) != 0) return "is not a ROS 2 topic: ROS 2 nodes could not see it";
+  const std::string ros = name.substr(2);  // "/ns/name"
+  if (ros.size() < 2) return "has no name after the namespace";
+  if (ros.back() == '/') return "ends with '/'";
+  bool token_start = false;
+  for (const char c : ros) {
+    if (c == '/') {
+      if (token_start) return "has an empty token ('//')";
+      token_start = true;
+      continue;
+    }
+    const bool alnum = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9');
+    if (!alnum && c != '_') return std::string("has a character ROS 2 names refuse: '") + c + "'";
+    if (token_start && c >= '0' && c <= '9') return "has a token starting with a digit";
+    token_start = false;
+  }
+  return {};
 }
 
 /// Reads the keys of one YAML map and, at the end, rejects any key nobody asked for.
@@ -52,6 +76,22 @@ class MapReader {
     if (!child) return;
     if (!child.IsScalar()) fail("type", join(key), "expected a string");
     value = child.as<std::string>();
+  }
+
+  /// A DDS topic name that ROS 2 nodes can see: its wire form `rt/ns/name` as is, a ROS 2 name
+  /// `/ns/name` mapped to `rt/ns/name`; anything else is refused (ROS could not see it). Empty
+  /// stays empty (an output switched off, where the key allows it).
+  void topic(const std::string& key, std::string& value) {
+    string(key, value);
+    if (value.empty()) return;
+    const std::string given = value;
+    if (value.front() == '/') value = "rt" + value;
+    const auto why = ros_topic_problem(value);
+    if (!why.empty()) {
+      fail("value", join(key),
+           "'" + given + "' " + why + " (give a ROS 2 name such as /tarmac/costmap, or its DDS " +
+               "form rt/tarmac/costmap)");
+    }
   }
 
   /// A string that must be one of `choices`; returns the index chosen, or -1 if absent.
@@ -193,6 +233,21 @@ void read_security(MapReader& r, transport::SecurityConfig& s, const std::string
   path("permissions", s.permissions);
 }
 
+/// ROS 2's convention: the domain comes from ROS_DOMAIN_ID when the config names none.
+void domain_from_environment(std::uint32_t& domain_id) {
+  const char* env = std::getenv("ROS_DOMAIN_ID");
+  if (env == nullptr || *env == '\0') return;
+  char* end = nullptr;
+  errno = 0;
+  const long value = std::strtol(env, &end, 10);
+  if (errno != 0 || *end != '\0' || value < 0 || value > 232) {
+    fail("value", "dds.domain_id",
+         std::string("not set in the file, and ROS_DOMAIN_ID='") + env +
+             "' in the environment is not a domain 0..232");
+  }
+  domain_id = static_cast<std::uint32_t>(value);
+}
+
 void read_dds(MapReader& r, DdsConfig& dds, const std::string& base_dir) {
   auto& p = dds.participant;
   r.scalar<std::uint32_t>("domain_id", p.domain_id, 0, 232);
@@ -204,6 +259,9 @@ void read_dds(MapReader& r, DdsConfig& dds, const std::string& base_dir) {
   r.string_list("initial_peers", p.initial_peers);
   r.scalar<std::uint32_t>("shm_segment_bytes", p.shm_segment_bytes, 1u << 16, 1u << 30);
   r.scalar<std::uint32_t>("shm_max_message_bytes", p.shm_max_message_bytes, 1u << 16, 1u << 30);
+  r.scalar<std::uint32_t>("udp_receive_buffer_bytes", p.udp_receive_buffer_bytes, 1u << 16,
+                          1u << 30);
+  r.scalar<std::uint32_t>("udp_send_buffer_bytes", p.udp_send_buffer_bytes, 1u << 16, 1u << 30);
   r.map("security", [&](MapReader& m) { read_security(m, p.security, base_dir); });
   r.map("qos", [&](MapReader& q) {
     q.map("lidar", [&](MapReader& m) { read_qos(m, dds.qos.lidar); });
@@ -359,7 +417,7 @@ void read_sensors(MapReader& root, std::vector<SensorConfig>& sensors) {
     if (s.id.empty()) fail("value", r.path() + ".id", "is required and must not be empty");
     s.topic = "rt/tarmac/lidar/" + s.id + "/points";
     s.frame_id = "lidar_" + s.id;
-    r.string("topic", s.topic);
+    r.topic("topic", s.topic);
     r.string("frame_id", s.frame_id);
     r.map("extrinsic", [&](MapReader& m) { read_extrinsic(m, s.T_base_sensor); });
     r.scalar<double>("max_age_ms", s.max_age_ms, 1.0, 60000.0);
@@ -380,7 +438,7 @@ void read_sensors(MapReader& root, std::vector<SensorConfig>& sensors) {
 void read_daemon(MapReader& root, Config& c) {
   read_sensors(root, c.sensors);
   root.map("pose", [&](MapReader& r) {
-    r.string("topic", c.pose.topic);
+    r.topic("topic", c.pose.topic);
     if (const int i = r.choice("type", kPoseTypes); i >= 0) {
       c.pose.type = static_cast<PoseType>(i);
     }
@@ -388,7 +446,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.scalar<std::uint32_t>("buffer_size", c.pose.buffer_size, 2, 100000);
     r.scalar<double>("max_gap_ms", c.pose.max_gap_ms, 1.0, 10000.0);
     r.scalar<double>("max_age_ms", c.pose.max_age_ms, 1.0, 60000.0);
-    r.string("correction_topic", c.pose.correction_topic);
+    r.topic("correction_topic", c.pose.correction_topic);
   });
   root.map("executor", [&](MapReader& r) {
     auto& e = c.executor;
@@ -426,12 +484,13 @@ void read_daemon(MapReader& root, Config& c) {
   root.map("outputs", [&](MapReader& r) {
     auto& o = c.outputs;
     r.string("frame_id", o.frame_id);
-    r.string("costmap_topic", o.costmap_topic);
-    r.string("esdf_slice_topic", o.esdf_slice_topic);
-    r.string("esdf_band_topic", o.esdf_band_topic);
-    r.string("cycle_report_topic", o.cycle_report_topic);
-    r.string("diagnostic_array_topic", o.diagnostic_array_topic);
-    r.string("virtual_obstacles_topic", o.virtual_obstacles_topic);
+    r.topic("costmap_topic", o.costmap_topic);
+    r.topic("esdf_slice_topic", o.esdf_slice_topic);
+    r.topic("esdf_band_topic", o.esdf_band_topic);
+    r.topic("cycle_report_topic", o.cycle_report_topic);
+    r.topic("diagnostic_array_topic", o.diagnostic_array_topic);
+    r.topic("virtual_obstacles_topic", o.virtual_obstacles_topic);
+    r.topic("obstacle_grid_topic", o.obstacle_grid_topic);
     r.scalar<std::uint32_t>("diagnostic_array_every", o.diagnostic_array_every, 1, 100000);
   });
   root.map("state", [&](MapReader& r) {
@@ -456,6 +515,17 @@ core::Status validate_daemon(const Config& c) {
     if (s.topic == c.pose.topic) return err("pose.topic", "same topic as sensor " + s.id);
   }
   if (c.outputs.frame_id.empty()) return err("outputs.frame_id", "must not be empty");
+  for (const auto& [key, topic] :
+       {std::pair{"outputs.costmap_topic", &c.outputs.costmap_topic},
+        std::pair{"outputs.esdf_slice_topic", &c.outputs.esdf_slice_topic},
+        std::pair{"outputs.cycle_report_topic", &c.outputs.cycle_report_topic},
+        std::pair{"outputs.diagnostic_array_topic", &c.outputs.diagnostic_array_topic},
+        std::pair{"outputs.virtual_obstacles_topic", &c.outputs.virtual_obstacles_topic}}) {
+    if (topic->empty()) return err(key, "must not be empty");
+  }
+  if (c.outputs.obstacle_grid_topic == c.outputs.costmap_topic) {
+    return err("outputs.obstacle_grid_topic", "must differ from outputs.costmap_topic");
+  }
   if (c.mapping.esdf_band.enabled && c.outputs.esdf_band_topic.empty()) {
     return err("outputs.esdf_band_topic", "must not be empty when esdf_band.enabled is true");
   }
@@ -508,7 +578,12 @@ core::Result<Config> load_config(const std::string& yaml_text, const std::string
                              ", the file says " +
                              (root["version"] ? root["version"].as<std::string>() : "nothing")};
     }
-    r.map("dds", [&](MapReader& m) { read_dds(m, config.dds, base_dir); });
+    bool domain_given = false;
+    r.map("dds", [&](MapReader& m) {
+      domain_given = m.has("domain_id");
+      read_dds(m, config.dds, base_dir);
+    });
+    if (!domain_given) domain_from_environment(config.dds.participant.domain_id);
     read_daemon(r, config);
     read_mapping(r, config.mapping);
     r.finish();
@@ -553,6 +628,8 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "initial_peers" << YAML::Value << YAML::Flow << p.initial_peers;
   out << YAML::Key << "shm_segment_bytes" << YAML::Value << p.shm_segment_bytes;
   out << YAML::Key << "shm_max_message_bytes" << YAML::Value << p.shm_max_message_bytes;
+  out << YAML::Key << "udp_receive_buffer_bytes" << YAML::Value << p.udp_receive_buffer_bytes;
+  out << YAML::Key << "udp_send_buffer_bytes" << YAML::Value << p.udp_send_buffer_bytes;
   const auto& sec = p.security;
   out << YAML::Key << "security" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "enabled" << YAML::Value << sec.enabled;
@@ -640,6 +717,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "outputs" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "frame_id" << YAML::Value << ou.frame_id;
   out << YAML::Key << "costmap_topic" << YAML::Value << ou.costmap_topic;
+  out << YAML::Key << "obstacle_grid_topic" << YAML::Value << ou.obstacle_grid_topic;
   out << YAML::Key << "esdf_slice_topic" << YAML::Value << ou.esdf_slice_topic;
   out << YAML::Key << "esdf_band_topic" << YAML::Value << ou.esdf_band_topic;
   out << YAML::Key << "cycle_report_topic" << YAML::Value << ou.cycle_report_topic;

@@ -173,6 +173,15 @@ std::int8_t to_occupancy_value(std::uint8_t cost) {
   return static_cast<std::int8_t>(1 + (97 * (cost - 1)) / 251);
 }
 
+void to_obstacle_grid(const Costmap& costmap, Costmap& out) {
+  out.reset(costmap.geometry(), kCostFree);  // keeps the storage while the size holds
+  const auto& in = costmap.cells();
+  auto& cells = out.cells();
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    cells[i] = in[i] == kCostLethal || in[i] == kCostUnknown ? in[i] : kCostFree;
+  }
+}
+
 bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vector2d& p) {
   bool inside = false;
   for (std::size_t i = 0, j = polygon.size() - 1; i < polygon.size(); j = i++) {

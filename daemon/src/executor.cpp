@@ -228,7 +228,15 @@ class Executor::Impl {
                           "correction.unsorted"}) {
       rejections.declare(r);
     }
-    report.drops.reserve(32);
+    drops.declare("transport.pose_lost");
+    transport_seen.resize(config.sensors.size());
+    for (std::size_t i = 0; i < config.sensors.size(); ++i) {
+      transport_seen[i].lost_reason = "transport.scan_lost." + config.sensors[i].id;
+      transport_seen[i].rejected_reason = "transport.scan_rejected." + config.sensors[i].id;
+      drops.declare(transport_seen[i].lost_reason);
+      drops.declare(transport_seen[i].rejected_reason);
+    }
+    report.drops.reserve(32 + 2 * config.sensors.size());
     report.rejections.reserve(32);
     selected.reserve(config.quotas.max_pending_scans + 1);
     overflow_seen.assign(config.sensors.size(), 0);
@@ -238,6 +246,10 @@ class Executor::Impl {
   }
 
   void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped);
+  /// Adds sensor `sensor`'s scans lost or rejected in DDS transport since the last tick to the
+  /// drops (`transport.scan_lost.<id>`, `transport.scan_rejected.<id>`) and logs them,
+  /// rate-limited.
+  void count_transport_losses(std::size_t sensor);
   /// A jump in the pose stream (DESIGN.md §4, pose corrections): the pose samples before it and
   /// the mapper's retained scans are re-expressed in the corrected frame (T ← Δ · T), and the
   /// mapper starts rebuilding its window from the retained scans (rebuild stage, per tick).
@@ -308,11 +320,20 @@ class Executor::Impl {
   std::unique_ptr<ThreadPool> pool;
   std::vector<core::VirtualZone> zones;
   std::string zone_rejection;
+  core::Costmap obstacle_grid;  // outputs.obstacle_grid_topic: the costmap without inflation
 
   ReasonCounters drops, rejections;
   std::vector<ScanScheduler::Selected> selected;
   std::vector<std::uint64_t> overflow_seen;
   std::uint64_t pose_overflow_seen = 0;
+  struct TransportLosses {
+    std::string lost_reason, rejected_reason;
+    std::uint64_t lost = 0, rejected = 0;
+    std::uint64_t logged_tick = 0;  // cycle index of the last log line (0: never)
+  };
+  static constexpr std::uint64_t kLossLogTicks = 100;
+  std::vector<TransportLosses> transport_seen;  // per sensor
+  std::uint64_t pose_lost_seen = 0;
   transport::CycleReport report;
   transport::DiagnosticReport diag;
   std::int64_t tick_ns = 0;  // the current tick's time on the stamp clock
@@ -435,6 +456,24 @@ void Executor::Impl::real_time_setup(const RunHooks& hooks) {
   }
 }
 
+void Executor::Impl::count_transport_losses(std::size_t sensor) {
+  TransportLosses& seen = transport_seen[sensor];
+  const std::uint64_t lost = scans[sensor]->transport_lost();
+  const std::uint64_t rejected = scans[sensor]->transport_rejected();
+  if (lost == seen.lost && rejected == seen.rejected) return;
+  drops.add(seen.lost_reason, lost - seen.lost);
+  drops.add(seen.rejected_reason, rejected - seen.rejected);
+  seen.lost = lost;
+  seen.rejected = rejected;
+  // At most one line per sensor per kLossLogTicks ticks: a lossy link must not flood the log.
+  if (seen.logged_tick != 0 && cycle_index < seen.logged_tick + kLossLogTicks) return;
+  seen.logged_tick = std::max<std::uint64_t>(cycle_index, 1);
+  spdlog::warn(
+      "input {}: {} scan(s) lost and {} rejected in DDS transport so far (UDP receive buffer "
+      "too small? see dds.udp_receive_buffer_bytes and net.core.rmem_max)",
+      config.sensors[sensor].id, lost, rejected);
+}
+
 void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped) {
   const auto t_start = Clock::now();
   tick_ns = tick_time_ns;
@@ -449,11 +488,15 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     const std::uint64_t overflow = scans[i]->overflow_drops();
     drops.add("queue.scan_overflow", overflow - overflow_seen[i]);
     overflow_seen[i] = overflow;
+    count_transport_losses(i);
   }
   pose_input->drain(pose_sink);
   const std::uint64_t pose_overflow = pose_input->overflow_drops();
   drops.add("queue.pose_overflow", pose_overflow - pose_overflow_seen);
   pose_overflow_seen = pose_overflow;
+  const std::uint64_t pose_lost = pose_input->transport_lost();
+  drops.add("transport.pose_lost", pose_lost - pose_lost_seen);
+  pose_lost_seen = pose_lost;
   // After the poses: a correction applies to the samples already in the buffer.
   if (trajectory_input) trajectory_input->drain(trajectory_sink);
   zone_rejection.clear();
@@ -557,6 +600,10 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   if (update) {
     const auto& layers = mapper.costmap();
     outputs->publish_costmap(layers.costmap, newest_stamp_ns, config.outputs.frame_id);
+    if (!config.outputs.obstacle_grid_topic.empty()) {
+      core::to_obstacle_grid(layers.costmap, obstacle_grid);
+      outputs->publish_obstacle_grid(obstacle_grid, newest_stamp_ns, config.outputs.frame_id);
+    }
     outputs->publish_slice(layers.obstacle_distance, layers.costmap.geometry(), newest_stamp_ns,
                            config.outputs.frame_id);
   }
@@ -689,10 +736,14 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
   if (!zones) return zones.error();
   impl->zone_input = std::move(zones).value();
   transport::OutputTopics topics{
-      cfg.outputs.costmap_topic, cfg.outputs.esdf_slice_topic,
+      cfg.outputs.costmap_topic,
+      cfg.outputs.esdf_slice_topic,
       cfg.mapping.esdf_band.enabled ? cfg.outputs.esdf_band_topic : std::string(),
-      cfg.outputs.cycle_report_topic, cfg.outputs.diagnostic_array_topic};
-  transport::OutputQos oq{q.costmap, q.esdf_slice, q.esdf_band, q.diagnostics, q.diagnostics};
+      cfg.outputs.cycle_report_topic,
+      cfg.outputs.diagnostic_array_topic,
+      cfg.outputs.obstacle_grid_topic};
+  transport::OutputQos oq{q.costmap,     q.esdf_slice,  q.esdf_band,
+                          q.diagnostics, q.diagnostics, q.costmap};
   auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
   if (!outputs) return outputs.error();
   impl->outputs = std::move(outputs).value();
@@ -768,6 +819,15 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
   const auto t = totals();
   spdlog::info("executor: stopped after {} ticks ({} skipped, {} over budget), {} scans integrated",
                t.ticks, t.skipped_ticks, t.overruns, t.scans_integrated);
+  // Every drop and rejection since start, for the operator reading the journal after a stop.
+  std::string counted;
+  for (const auto* counters : {&d.drops, &d.rejections}) {
+    for (const auto& e : counters->entries()) {
+      if (e.total > 0)
+        counted += fmt::format("{}{} {}", counted.empty() ? "" : ", ", e.reason, e.total);
+    }
+  }
+  spdlog::info("executor: dropped or rejected since start: {}", counted.empty() ? "none" : counted);
 }
 
 ExecutorTotals Executor::totals() const {

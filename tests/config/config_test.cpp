@@ -278,5 +278,81 @@ TEST(Config, SecurityPathsAreRelativeToTheConfigFileAndChecked) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Config, RosTopicNamesAreMappedToTheirDdsForm_OthersRefused) {
+  auto c = load_config_string(
+      "version: 1\nsensors: [{id: roof, topic: /vehicle/roof/points}]\npose: {topic: /loc/pose}\n"
+      "outputs: {costmap_topic: /tarmac/costmap, obstacle_grid_topic: /tarmac/obstacle_grid}\n");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c.value().sensors[0].topic, "rt/vehicle/roof/points");
+  EXPECT_EQ(c.value().pose.topic, "rt/loc/pose");
+  EXPECT_EQ(c.value().outputs.costmap_topic, "rt/tarmac/costmap");
+  EXPECT_EQ(c.value().outputs.obstacle_grid_topic, "rt/tarmac/obstacle_grid");
+  // Already in DDS form: kept.
+  auto d = load_config_string("version: 1\noutputs: {costmap_topic: rt/a/b}\n");
+  ASSERT_TRUE(d.ok());
+  EXPECT_EQ(d.value().outputs.costmap_topic, "rt/a/b");
+  // Names a ROS 2 node could not see are refused, saying why.
+  const std::string plain = error_of("version: 1\noutputs: {costmap_topic: tarmac_costmap}\n");
+  EXPECT_NE(plain.find("outputs.costmap_topic: 'tarmac_costmap' is not a ROS 2 topic"),
+            std::string::npos)
+      << plain;
+  EXPECT_NE(error_of("version: 1\npose: {topic: /loc//pose}\n").find("pose.topic"),
+            std::string::npos);
+  EXPECT_NE(error_of("version: 1\npose: {topic: /loc/9pose}\n").find("starting with a digit"),
+            std::string::npos);
+  EXPECT_NE(error_of("version: 1\npose: {topic: /loc/pose/}\n").find("ends with '/'"),
+            std::string::npos);
+  EXPECT_NE(error_of("version: 1\npose: {topic: /loc/po-se}\n").find("'-'"), std::string::npos);
+  // A ROS name and its DDS form are the same topic.
+  EXPECT_NE(error_of("version: 1\nsensors: [{id: a, topic: /x/p}, {id: b, topic: rt/x/p}]\n")
+                .find("duplicate topic"),
+            std::string::npos);
+  EXPECT_NE(error_of("version: 1\noutputs: {obstacle_grid_topic: /tarmac/costmap}\n")
+                .find("must differ from outputs.costmap_topic"),
+            std::string::npos);
+}
+
+/// Sets an environment variable for one scope.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const char* value) : name_(name) {
+    if (const char* old = std::getenv(name)) old_ = old;
+    setenv(name, value, 1);
+  }
+  ~ScopedEnv() {
+    if (old_.empty()) {
+      unsetenv(name_);
+    } else {
+      setenv(name_, old_.c_str(), 1);
+    }
+  }
+
+ private:
+  const char* name_;
+  std::string old_;
+};
+
+TEST(Config, RosDomainIdApplies_OnlyWhenTheFileSetsNoDomain) {
+  {
+    ScopedEnv env("ROS_DOMAIN_ID", "42");
+    auto unset = load_config_string("version: 1\n");
+    ASSERT_TRUE(unset.ok());
+    EXPECT_EQ(unset.value().dds.participant.domain_id, 42u);
+    auto set = load_config_string("version: 1\ndds: {domain_id: 7}\n");
+    ASSERT_TRUE(set.ok());
+    EXPECT_EQ(set.value().dds.participant.domain_id, 7u) << "the file wins";
+  }
+  {
+    ScopedEnv env("ROS_DOMAIN_ID", "300");
+    EXPECT_NE(error_of("version: 1\n").find("ROS_DOMAIN_ID='300'"), std::string::npos);
+  }
+  {
+    ScopedEnv env("ROS_DOMAIN_ID", "");
+    auto c = load_config_string("version: 1\n");
+    ASSERT_TRUE(c.ok());
+    EXPECT_EQ(c.value().dds.participant.domain_id, 0u);
+  }
+}
+
 }  // namespace
 }  // namespace tarmac::config

@@ -114,5 +114,94 @@ TEST_F(Envelope, UnknownPolicyAndVirtualZones) {
   EXPECT_EQ(cost_at(0.1, 5.0), kCostFree);
 }
 
+/// Nav2's StaticLayer reading of one OccupancyGrid value (nav2_costmap_2d, StaticLayer::
+/// interpretValue), with the parameters a user sets: the model the README's table is checked
+/// against. `inscribed_param`: Nav2 releases with `inscribed_obstacle_cost_value` (default 99)
+/// map that value to 253; older ones (Humble) have no such parameter (pass -1).
+int nav2_static_layer(std::int8_t value, bool track_unknown_space, bool trinary_costmap,
+                      int inscribed_param = 99) {
+  const auto v = static_cast<unsigned char>(value);  // Nav2 reads the int8 as unsigned char
+  constexpr int kLethalThreshold = 100, kUnknownCostValue = 255;
+  if (v == kUnknownCostValue) return track_unknown_space ? 255 : 0;
+  if (inscribed_param >= 0 && v == inscribed_param) return 253;
+  if (v >= kLethalThreshold) return 254;
+  if (trinary_costmap) return 0;
+  return static_cast<unsigned char>(static_cast<double>(v) / kLethalThreshold * 254);
+}
+
+TEST(Nav2Translation, TableOfTheReadme) {
+  // The values the README's "Use with ROS 2 and Nav2" table states, with the settings it gives.
+  EXPECT_EQ(nav2_static_layer(kCostLethal, true, false), 254);
+  EXPECT_EQ(nav2_static_layer(kCostInscribed, true, false), 253);
+  EXPECT_EQ(nav2_static_layer(kCostInscribed, true, false, -1), 251);  // Humble: scaled
+  EXPECT_EQ(nav2_static_layer(kCostUnknown, true, false), 255);
+  EXPECT_EQ(nav2_static_layer(kCostFree, true, false), 0);
+  EXPECT_EQ(nav2_static_layer(50, true, false), 127);
+  for (int v = 1; v <= 98; ++v) {
+    const int cost = nav2_static_layer(static_cast<std::int8_t>(v), true, false);
+    EXPECT_GE(cost, 1) << v;
+    EXPECT_LE(cost, 252) << v << ": an inflated cost must stay below Nav2's inscribed 253";
+  }
+  // Nav2's defaults are the danger the README warns of: inflation and unknown read free.
+  EXPECT_EQ(nav2_static_layer(50, false, true), 0);
+  EXPECT_EQ(nav2_static_layer(kCostUnknown, false, true), 0);
+}
+
+TEST_F(Envelope, Nav2ReadsEveryClassOfCellRight_CostmapAndObstacleGrid) {
+  std::vector<Eigen::Vector3f> extra;
+  box(extra, {-6.1f, 2.9f, 0.05f}, {-5.9f, 3.1f, 0.55f});  // cone, 0.5 m
+  scan(extra);
+  const std::vector<VirtualZone> zones{
+      {"spill", {{2, 2}, {4, 2}, {4, 4}, {2, 4}}, -1.0, 1.0, 0, false},
+      {"stand", {{-15.9, -15.9}, {-2, -15.9}, {-2, -2}, {-15.9, -2}}, -5.0, 5.0, 0, true}};
+  build(CostmapParams{}, zones, 0);
+  Costmap grid;
+  to_obstacle_grid(layers_.costmap, grid);
+  ASSERT_EQ(grid.width(), layers_.costmap.width());
+  ASSERT_EQ(grid.height(), layers_.costmap.height());
+  EXPECT_EQ(grid.geometry().origin_x_m, layers_.costmap.geometry().origin_x_m);
+
+  const auto nav2 = [](std::int8_t v) { return nav2_static_layer(v, true, false); };
+  const auto grid_at = [&](double x, double y) {
+    const auto cell = grid.geometry().cell_of(x, y);
+    return grid.at(static_cast<std::uint32_t>(cell->x()), static_cast<std::uint32_t>(cell->y()));
+  };
+  struct Case {
+    const char* what;
+    double x, y;
+    int costmap_nav2, grid_nav2;
+  };
+  const Case cases[] = {
+      {"obstacle (cone)", -6.0, 3.0, 254, 254},
+      {"inscribed, 0.7 m from the cone", -6.0, 3.7, 253, 0},
+      {"no-go zone", 3.0, 3.0, 254, 254},
+      {"unknown, beyond the observed square", 14.5, 14.5, 255, 255},
+      {"unknown inside a restricted zone", -14.5, -14.5, 254, 254},
+      {"observed free inside a restricted zone", -5.0, -5.0, 0, 0},
+      {"free, far from everything", 9.0, -9.0, 0, 0},
+  };
+  for (const Case& c : cases) {
+    EXPECT_EQ(nav2(cost_at(c.x, c.y)), c.costmap_nav2) << c.what;
+    EXPECT_EQ(nav2(grid_at(c.x, c.y)), c.grid_nav2) << c.what;
+  }
+  // An inflated cell (1..98) reads as an inflated cost in Nav2 (1..252), and free in the grid.
+  bool inflated_seen = false;
+  const auto& cells = layers_.costmap.cells();
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    const std::int8_t v = cells[i];
+    const std::int8_t g = grid.cells()[i];
+    if (v >= 1 && v <= 98) {
+      inflated_seen = true;
+      EXPECT_GE(nav2(v), 1);
+      EXPECT_LE(nav2(v), 252);
+    }
+    // The grid has lethal/free/unknown only, and exactly where the costmap is lethal/unknown.
+    EXPECT_TRUE(g == kCostLethal || g == kCostFree || g == kCostUnknown) << int{g};
+    EXPECT_EQ(g == kCostLethal, v == kCostLethal) << i;
+    EXPECT_EQ(g == kCostUnknown, v == kCostUnknown) << i;
+  }
+  EXPECT_TRUE(inflated_seen);
+}
+
 }  // namespace
 }  // namespace tarmac::core

@@ -626,11 +626,15 @@ std::int8_t cell_at(const transport::OccupancyGridMsg& g, double x_m, double y_m
 }
 
 TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
-  const auto cfg = test_config(test::kDomainDaemonZones, 2);
+  auto cfg = test_config(test::kDomainDaemonZones, 2);
+  cfg.outputs.obstacle_grid_topic = "rt/tarmac/obstacle_grid";
   RunningExecutor executor(cfg);
   auto participant = peer(test::kDomainDaemonZones);
   auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
   ASSERT_TRUE(grids.ok());
+  auto obstacle_grids =
+      GridReader::create(participant, cfg.outputs.obstacle_grid_topic, cfg.dds.qos.costmap, 8);
+  ASSERT_TRUE(obstacle_grids.ok());
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
   options.rate_scale = 2.0;
@@ -642,6 +646,21 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   // 5 m ahead of the vehicle on open apron: observed, not lethal before the zone.
   const Eigen::Vector3d ahead = sequence().T_W_S[3].translation() + Eigen::Vector3d(5.0, 0, 0);
   ASSERT_NE(cell_at(before, ahead.x(), ahead.y()), 100);
+  // The uninflated grid of the same tick: same stamp and geometry, lethal and unknown exactly
+  // where the costmap has them, every other cell free (no inflation values).
+  transport::OccupancyGridMsg plain;
+  ASSERT_TRUE(wait_for_costmap(*obstacle_grids.value(), stats.value().last_stamp_ns, plain));
+  ASSERT_EQ(plain.data().size(), before.data().size());
+  EXPECT_EQ(plain.info().width(), before.info().width());
+  EXPECT_EQ(plain.info().origin().position().x(), before.info().origin().position().x());
+  std::size_t inflated = 0;
+  for (std::size_t i = 0; i < before.data().size(); ++i) {
+    const std::int8_t v = before.data()[i];
+    const std::int8_t want = v == 100 || v == -1 ? v : std::int8_t{0};
+    ASSERT_EQ(plain.data()[i], want) << "cell " << i << ", costmap value " << int{v};
+    inflated += v > 0 && v < 100 ? 1 : 0;
+  }
+  EXPECT_GT(inflated, 0u) << "the costmap has inflated cells the plain grid leaves out";
 
   using ZoneWriter = transport::Writer<tarmac_msgs::msg::dds_::VirtualObstacleArray_PubSubType>;
   auto zones = ZoneWriter::create(participant, cfg.outputs.virtual_obstacles_topic,

@@ -44,6 +44,9 @@ enum Domain : std::uint32_t {
   kDomainDaemonPathCorrection = 145,
   kDomainDaemonPathEarly = 146,
   kDomainDaemonEsdfBand = 147,
+  // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 150..159
+  kDomainCycloneUdpClouds = 150,
+  kDomainCycloneTinyBuffer = 151,
 };
 
 inline bool running_in_ci() {

@@ -2,6 +2,7 @@
 // participants, every field compared, with a packet capture proving nothing left loopback.
 
 #include <chrono>
+#include <fstream>
 #include <memory>
 #include <span>
 #include <string>
@@ -248,6 +249,44 @@ TEST(ParticipantConfig, LocalhostRefusesNetworkInterfaces) {
   config.network_interfaces.clear();
   config.domain_id = 233;
   EXPECT_FALSE(Participant::create(config).ok());
+}
+
+TEST(ParticipantConfig, UdpBuffersBelowOneDatagramAreRefused) {
+  ParticipantConfig config;
+  config.udp_receive_buffer_bytes = 65535;
+  ASSERT_FALSE(config.validate().ok());
+  EXPECT_NE(config.validate().error().message.find("dds.udp_receive_buffer_bytes"),
+            std::string::npos);
+  config.udp_receive_buffer_bytes = 65536;
+  config.udp_send_buffer_bytes = 1000;
+  ASSERT_FALSE(config.validate().ok());
+  EXPECT_NE(config.validate().error().message.find("dds.udp_send_buffer_bytes"), std::string::npos);
+}
+
+/// The kernel's cap on socket receive buffers (net.core.rmem_max), or 0 when unreadable.
+std::uint64_t rmem_max() {
+  std::ifstream in("/proc/sys/net/core/rmem_max");
+  std::uint64_t v = 0;
+  in >> v;
+  return v;
+}
+
+TEST(UdpBuffers, ShortfallNamesTheKeyAndTheSysctl_NoneWhenGranted) {
+  const std::uint64_t cap = rmem_max();
+  TARMAC_REQUIRE_OR_SKIP(cap > 0 && cap < (1u << 29), "net.core.rmem_max unreadable");
+  ParticipantConfig config;
+  config.udp_receive_buffer_bytes = static_cast<std::uint32_t>(cap + (1u << 20));
+  config.udp_send_buffer_bytes = 65536;
+  const auto shortfalls = udp_buffer_shortfalls(config);
+  ASSERT_EQ(shortfalls.size(), 1u);
+  EXPECT_NE(shortfalls[0].find("dds.udp_receive_buffer_bytes"), std::string::npos) << shortfalls[0];
+  EXPECT_NE(shortfalls[0].find("net.core.rmem_max = " + std::to_string(cap)), std::string::npos)
+      << shortfalls[0];
+  config.udp_receive_buffer_bytes = 65536;
+  EXPECT_TRUE(udp_buffer_shortfalls(config).empty());
+  config.udp_receive_buffer_bytes = static_cast<std::uint32_t>(cap + (1u << 20));
+  config.transport = TransportMode::kSharedMemoryOnly;  // no sockets: nothing to warn about
+  EXPECT_TRUE(udp_buffer_shortfalls(config).empty());
 }
 
 }  // namespace

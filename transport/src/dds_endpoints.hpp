@@ -114,8 +114,12 @@ class Reader : private fdds::DataReaderListener {
     if (!topic) return topic.error();
     std::unique_ptr<Reader> reader(new Reader(impl, queue_capacity));
     // The listener is attached at creation so no sample arrives unseen.
+    // Lost and rejected samples too: a scan lost in transport (fragments overflowing a socket
+    // buffer, a gap in a best-effort stream) is counted, never silent.
     reader->reader_ = impl->subscriber()->create_datareader(
-        topic.value(), to_reader_qos(qos), reader.get(), fdds::StatusMask::data_available());
+        topic.value(), to_reader_qos(qos), reader.get(),
+        fdds::StatusMask::data_available()
+            << fdds::StatusMask::sample_lost() << fdds::StatusMask::sample_rejected());
     if (reader->reader_ == nullptr) {
       return core::Error{"dds.reader",
                          "cannot create a reader on " + topic_name + security_refusal_hint(*impl)};
@@ -152,6 +156,10 @@ class Reader : private fdds::DataReaderListener {
   [[nodiscard]] std::uint64_t dropped() const { return dropped_.load(); }
   /// Samples received, since creation.
   [[nodiscard]] std::uint64_t received() const { return received_.load(); }
+  /// Samples DDS reports lost before they reached this reader (SAMPLE_LOST), since creation.
+  [[nodiscard]] std::uint64_t lost() const { return lost_.load(); }
+  /// Samples DDS received but refused for lack of resources (SAMPLE_REJECTED), since creation.
+  [[nodiscard]] std::uint64_t rejected() const { return rejected_.load(); }
 
   [[nodiscard]] std::size_t matched_writers() const {
     fdds::SubscriptionMatchedStatus status;
@@ -186,6 +194,19 @@ class Reader : private fdds::DataReaderListener {
     }
   }
 
+  void on_sample_lost(fdds::DataReader* /*reader*/, const fdds::SampleLostStatus& status) override {
+    if (status.total_count_change > 0) {
+      lost_.fetch_add(static_cast<std::uint64_t>(status.total_count_change));
+    }
+  }
+
+  void on_sample_rejected(fdds::DataReader* /*reader*/,
+                          const fdds::SampleRejectedStatus& status) override {
+    if (status.total_count_change > 0) {
+      rejected_.fetch_add(static_cast<std::uint64_t>(status.total_count_change));
+    }
+  }
+
   std::shared_ptr<ParticipantImpl> impl_;
   fdds::DataReader* reader_ = nullptr;
   const std::size_t capacity_;
@@ -194,6 +215,8 @@ class Reader : private fdds::DataReaderListener {
   std::deque<Message> queue_;
   std::atomic<std::uint64_t> dropped_{0};
   std::atomic<std::uint64_t> received_{0};
+  std::atomic<std::uint64_t> lost_{0};
+  std::atomic<std::uint64_t> rejected_{0};
 };
 
 }  // namespace tarmac::transport

@@ -69,6 +69,12 @@ std::size_t ScanInput::drain(ScanSink& sink) {
 std::uint64_t ScanInput::overflow_drops() const {
   return impl_->reader->dropped();
 }
+std::uint64_t ScanInput::transport_lost() const {
+  return impl_->reader->lost();
+}
+std::uint64_t ScanInput::transport_rejected() const {
+  return impl_->reader->rejected();
+}
 std::size_t ScanInput::matched_writers() const {
   return impl_->reader->matched_writers();
 }
@@ -130,6 +136,10 @@ std::size_t PoseInput::drain(PoseSink& sink) {
 
 std::uint64_t PoseInput::overflow_drops() const {
   return impl_->stamped ? impl_->stamped->dropped() : impl_->odometry->dropped();
+}
+std::uint64_t PoseInput::transport_lost() const {
+  return impl_->stamped ? impl_->stamped->lost() + impl_->stamped->rejected()
+                        : impl_->odometry->lost() + impl_->odometry->rejected();
 }
 std::size_t PoseInput::matched_writers() const {
   return impl_->stamped ? impl_->stamped->matched_writers() : impl_->odometry->matched_writers();

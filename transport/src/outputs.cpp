@@ -11,12 +11,14 @@ namespace tarmac::transport {
 class MapOutputs::Impl {
  public:
   std::unique_ptr<Writer<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>> costmap;
+  std::unique_ptr<Writer<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>> obstacle_grid;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapSlice_PubSubType>> slice;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>> band;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::CycleReport_PubSubType>> report;
   std::unique_ptr<Writer<diagnostic_msgs::msg::dds_::DiagnosticArray_PubSubType>> diagnostics;
   // Kept and refilled: their buffers are reused from tick to tick.
   OccupancyGridMsg costmap_msg;
+  OccupancyGridMsg obstacle_grid_msg;
   DistanceMapSliceMsg slice_msg;
   DistanceMapVolumeMsg band_msg;
   CycleReportMsg report_msg;
@@ -31,6 +33,12 @@ core::Result<std::unique_ptr<MapOutputs>> MapOutputs::create(const Participant& 
       decltype(impl->costmap)::element_type::create(participant, topics.costmap, qos.costmap);
   if (!costmap) return costmap.error();
   impl->costmap = std::move(costmap).value();
+  if (!topics.obstacle_grid.empty()) {
+    auto grid = decltype(impl->obstacle_grid)::element_type::create(
+        participant, topics.obstacle_grid, qos.obstacle_grid);
+    if (!grid) return grid.error();
+    impl->obstacle_grid = std::move(grid).value();
+  }
   auto slice =
       decltype(impl->slice)::element_type::create(participant, topics.esdf_slice, qos.esdf_slice);
   if (!slice) return slice.error();
@@ -59,6 +67,13 @@ bool MapOutputs::publish_costmap(const core::Costmap& costmap, std::int64_t stam
                                  const std::string& frame_id) {
   fill_occupancy_grid(costmap, stamp_ns, frame_id, impl_->costmap_msg);
   return impl_->costmap->write(impl_->costmap_msg);
+}
+
+bool MapOutputs::publish_obstacle_grid(const core::Costmap& grid, std::int64_t stamp_ns,
+                                       const std::string& frame_id) {
+  if (!impl_->obstacle_grid) return false;
+  fill_occupancy_grid(grid, stamp_ns, frame_id, impl_->obstacle_grid_msg);
+  return impl_->obstacle_grid->write(impl_->obstacle_grid_msg);
 }
 
 bool MapOutputs::publish_slice(const core::DistanceField& field,

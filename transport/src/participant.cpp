@@ -1,8 +1,10 @@
 #include "tarmac/transport/participant.hpp"
 
 #include <arpa/inet.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstring>
@@ -139,6 +141,35 @@ void add_security_properties(const SecurityConfig& s, fdds::DomainParticipantQos
   props.emplace_back("dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
 }
 
+std::shared_ptr<eprosima::fastdds::rtps::UDPv4TransportDescriptor> udp_transport(
+    const ParticipantConfig& config) {
+  auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+  udp->receiveBufferSize = config.udp_receive_buffer_bytes;
+  udp->sendBufferSize = config.udp_send_buffer_bytes;
+  return udp;
+}
+
+/// The size the kernel grants for `option` (SO_RCVBUF / SO_SNDBUF) when asked for `bytes`, or
+/// -1 when no socket can be made. Linux reports twice the granted size (bookkeeping overhead).
+long granted_buffer(int option, std::uint32_t bytes) {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return -1;
+  const int asked = static_cast<int>(std::min<std::uint32_t>(bytes, 1u << 30));
+  ::setsockopt(fd, SOL_SOCKET, option, &asked, sizeof asked);
+  int got = 0;
+  socklen_t len = sizeof got;
+  const int rc = ::getsockopt(fd, SOL_SOCKET, option, &got, &len);
+  ::close(fd);
+  return rc == 0 ? got / 2 : -1;
+}
+
+std::string read_sysctl(const char* path) {
+  std::ifstream in(path);
+  std::string value;
+  in >> value;
+  return value.empty() ? "?" : value;
+}
+
 fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
   fdds::DomainParticipantQos qos;
   qos.name(config.name);
@@ -155,7 +186,7 @@ fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
   switch (config.transport) {
     case TransportMode::kSharedMemoryOnly: break;
     case TransportMode::kLocalhost: {
-      auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+      auto udp = udp_transport(config);
       udp->interfaceWhiteList.emplace_back("127.0.0.1");
       // Discovery goes to the initial peer's ports of participant ids 0..N-1 only (default 4).
       // A machine runs tarmacd, replay, audit, echo, rviz and tests side by side: with more
@@ -167,7 +198,7 @@ fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
       break;
     }
     case TransportMode::kNetwork: {
-      auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+      auto udp = udp_transport(config);
       udp->interfaceWhiteList = config.network_interfaces;
       qos.transport().user_transports.push_back(udp);
       for (const auto& peer : config.initial_peers) {
@@ -180,6 +211,34 @@ fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
 }
 
 }  // namespace
+
+std::vector<std::string> udp_buffer_shortfalls(const ParticipantConfig& config) {
+  std::vector<std::string> out;
+  if (config.transport == TransportMode::kSharedMemoryOnly) return out;
+  struct Buffer {
+    const char* key;
+    int option;
+    std::uint32_t bytes;
+    const char* sysctl;
+  };
+  for (const Buffer& b : {Buffer{"dds.udp_receive_buffer_bytes", SO_RCVBUF,
+                                 config.udp_receive_buffer_bytes, "net.core.rmem_max"},
+                          Buffer{"dds.udp_send_buffer_bytes", SO_SNDBUF,
+                                 config.udp_send_buffer_bytes, "net.core.wmem_max"}}) {
+    const long granted = granted_buffer(b.option, b.bytes);
+    if (granted < 0 || granted >= static_cast<long>(b.bytes)) continue;
+    std::string proc = std::string("/proc/sys/") + b.sysctl;
+    for (char& c : proc) {
+      if (c == '.') c = '/';
+    }
+    out.push_back(std::string(b.key) + ": " + std::to_string(b.bytes) +
+                  " bytes asked, the kernel grants " + std::to_string(granted) + " (" + b.sysctl +
+                  " = " + read_sysctl(proc.c_str()) +
+                  "); large samples over UDP will be lost: " + "raise it, e.g. sysctl -w " +
+                  b.sysctl + "=" + std::to_string(b.bytes) + " (systemd/99-tarmac-net.conf)");
+  }
+  return out;
+}
 
 const char* to_string(TransportMode mode) {
   switch (mode) {
@@ -244,6 +303,13 @@ core::Status ParticipantConfig::validate() const {
   }
   if (shm_max_message_bytes < 64u * 1024u) {
     return config_error("dds.shm_max_message_bytes", "must be >= 65536");
+  }
+  // Fast DDS refuses a UDP transport whose buffers are smaller than one datagram (65500 B).
+  if (udp_receive_buffer_bytes < 64u * 1024u) {
+    return config_error("dds.udp_receive_buffer_bytes", "must be >= 65536");
+  }
+  if (udp_send_buffer_bytes < 64u * 1024u) {
+    return config_error("dds.udp_send_buffer_bytes", "must be >= 65536");
   }
   if (transport == TransportMode::kNetwork && network_interfaces.empty()) {
     return config_error("dds.network_interfaces",

@@ -121,6 +121,9 @@ struct OutputConfig {
   std::string cycle_report_topic = transport::topics::kDiagnostics;
   std::string diagnostic_array_topic = transport::topics::kDiagnosticArray;
   std::string virtual_obstacles_topic = transport::topics::kVirtualObstacles;  ///< input
+  /// The costmap without inflation (lethal 100 / free 0 / unknown −1) for a planner that
+  /// inflates by its own footprint (Nav2's StaticLayer + InflationLayer). Empty: not published.
+  std::string obstacle_grid_topic;
   std::uint32_t diagnostic_array_every = 10;  ///< ticks between DiagnosticArray messages
 };
 

@@ -108,6 +108,13 @@ std::uint8_t nav2_cost(double distance_m, const CostmapParams& params);
 /// Nav2's OccupancyGrid translation of a 0..254 cost: 0→0, 253→99, 254→100, 1..252→1..98.
 std::int8_t to_occupancy_value(std::uint8_t nav2_cost);
 
+/// The costmap without inflation, for a planner that inflates by its own footprint (Nav2's
+/// StaticLayer + InflationLayer): lethal (100) and unknown (−1) cells as in `costmap`, every
+/// other cell free (0). Which cells are lethal or unknown is decided by `build_costmap` alone
+/// (obstacles, zones, the unknown policy), so both grids always agree on them. `out` takes
+/// `costmap`'s geometry; allocates only when the size changes. RT-safe after warm-up.
+void to_obstacle_grid(const Costmap& costmap, Costmap& out);
+
 /// True when the point lies inside the polygon (even-odd rule).
 bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vector2d& p);
 

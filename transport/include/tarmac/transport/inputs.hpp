@@ -51,6 +51,11 @@ class ScanInput {
   std::size_t drain(ScanSink& sink);
   /// Samples dropped by queue overflow since creation.
   [[nodiscard]] std::uint64_t overflow_drops() const;
+  /// Scans lost in transport before the reader had them (DDS SAMPLE_LOST: e.g. fragments of a
+  /// large cloud overflowing the UDP receive buffer), since creation.
+  [[nodiscard]] std::uint64_t transport_lost() const;
+  /// Scans DDS received but refused (SAMPLE_REJECTED: reader resource limits), since creation.
+  [[nodiscard]] std::uint64_t transport_rejected() const;
   [[nodiscard]] std::size_t matched_writers() const;
 
   class Impl;
@@ -90,6 +95,8 @@ class PoseInput {
   /// Converts every queued pose into the sink, oldest first. Returns the number taken.
   std::size_t drain(PoseSink& sink);
   [[nodiscard]] std::uint64_t overflow_drops() const;
+  /// Poses lost or refused in transport (SAMPLE_LOST + SAMPLE_REJECTED), since creation.
+  [[nodiscard]] std::uint64_t transport_lost() const;
   [[nodiscard]] std::size_t matched_writers() const;
 
   class Impl;

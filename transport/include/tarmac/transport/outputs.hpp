@@ -25,6 +25,8 @@ struct OutputTopics {
   std::string esdf_band;  ///< empty: no band writer (esdf_band disabled)
   std::string cycle_report;
   std::string diagnostic_array;
+  /// Empty: none. The costmap without inflation (100 / 0 / −1) for Nav2's own inflation.
+  std::string obstacle_grid;
 };
 
 struct OutputQos {
@@ -33,6 +35,7 @@ struct OutputQos {
   QosSpec esdf_band = qos::kEsdfBand;
   QosSpec cycle_report = qos::kDiagnostics;
   QosSpec diagnostic_array = qos::kDiagnostics;
+  QosSpec obstacle_grid = qos::kCostmap;
 };
 
 class MapOutputs {
@@ -47,6 +50,10 @@ class MapOutputs {
   /// Each returns false when Fast DDS refused the sample.
   bool publish_costmap(const core::Costmap& costmap, std::int64_t stamp_ns,
                        const std::string& frame_id);
+  /// The uninflated grid (core::to_obstacle_grid). False also when no obstacle grid topic was
+  /// given.
+  bool publish_obstacle_grid(const core::Costmap& grid, std::int64_t stamp_ns,
+                             const std::string& frame_id);
   /// `field` is a 2D field laid out on `geometry` (same cells as the costmap).
   bool publish_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
                      std::int64_t stamp_ns, const std::string& frame_id);

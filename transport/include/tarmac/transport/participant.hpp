@@ -56,6 +56,16 @@ struct ParticipantConfig {
   /// take ~30 ms; 32 MiB brings it under 1 ms (STACK.md).
   std::uint32_t shm_segment_bytes = 32u << 20;
   std::uint32_t shm_max_message_bytes = 4u << 20;
+  /// Socket receive buffer (SO_RCVBUF) of every UDP socket the participant opens. A best-effort
+  /// PointCloud2 of ~1 MB from a publisher that is not on this participant's shared memory (a
+  /// ROS 2 driver on Cyclone, another computer) arrives as hundreds of UDP fragments at once; the
+  /// kernel's default buffer (~208 KB) overflows and the samples are lost below the reader. The
+  /// default holds four 1 MiB clouds. The kernel caps it at net.core.rmem_max
+  /// (see `udp_buffer_shortfalls`).
+  std::uint32_t udp_receive_buffer_bytes = 4u << 20;
+  /// Socket send buffer (SO_SNDBUF) of every UDP socket: room for a burst of output fragments
+  /// (costmap, ESDF band) without the kernel refusing them. Capped at net.core.wmem_max.
+  std::uint32_t udp_send_buffer_bytes = 4u << 20;
   SecurityConfig security;  ///< off by default
 
   [[nodiscard]] core::Status validate() const;
@@ -63,6 +73,12 @@ struct ParticipantConfig {
 
 /// Renders a mode as its config spelling ("localhost", "shm", "network").
 const char* to_string(TransportMode mode);
+
+/// What the kernel would grant of the configured UDP socket buffers: one message per buffer it
+/// caps below the configured size, naming the config key, the sizes and the sysctl to raise
+/// (net.core.rmem_max / net.core.wmem_max). Empty when both are granted in full, or when the
+/// transport uses no UDP. Probes with a throw-away socket; for start-up, not the cycle.
+std::vector<std::string> udp_buffer_shortfalls(const ParticipantConfig& config);
 
 class ParticipantImpl;
 

@@ -1,0 +1,530 @@
+/* tarmac-cyclone-replay: a client of tarmacd on another DDS implementation (Cyclone DDS), as a
+ * ROS 2 LiDAR driver and planner in other processes would be. It replays a KITTI-layout sequence
+ * (scans/NNNNNN.bin float32 x,y,z,intensity in the sensor frame, poses.txt T_world_sensor,
+ * times.txt) over UDP with ROS 2 types and QoS, and subscribes to what tarmacd publishes:
+ *
+ *   - sensor_msgs/PointCloud2 on the LiDAR topic, best effort, keep last 5 (rclcpp's
+ *     SensorDataQoS), stamped with the wall clock on a grid of 1/rate;
+ *   - geometry_msgs/PoseWithCovarianceStamped on the pose topic, reliable, keep last 100, one per
+ *     scan at the scan's stamp (the base frame is taken as the sensor frame: run tarmacd with an
+ *     identity extrinsic, as the shipped config has);
+ *   - nav_msgs/OccupancyGrid from the costmap topic (reliable, transient local): the latency of
+ *     each scan is the time from its stamp to the first costmap carrying that stamp, received;
+ *   - tarmac_msgs/CycleReport from the diagnostics topic: points integrated and drop counters.
+ *
+ * Prints a summary (scans sent, costmaps received, latency p50/p99/max, points integrated against
+ * points sent, tarmacd's transport drop counters) and writes it as JSON with --json.
+ * Exit 0 when it ran (whatever the losses), 1 on a usage or DDS error, 2 when nothing matched.
+ * Keep DDS on loopback: CYCLONEDDS_URI=file://$PWD/config/cyclonedds_localhost.xml. */
+
+#define _POSIX_C_SOURCE 200809L
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "dds/dds.h"
+#include "geometry_msgs.h"
+#include "nav_msgs.h"
+#include "sensor_msgs.h"
+#include "tarmac_msgs.h"
+
+#define FAIL(...)                               \
+  do {                                          \
+    fprintf(stderr, "tarmac-cyclone-replay: "); \
+    fprintf(stderr, __VA_ARGS__);               \
+    fprintf(stderr, "\n");                      \
+    exit(1);                                    \
+  } while (0)
+
+typedef struct {
+  const char* dataset;
+  const char* json;
+  const char* lidar_topic;
+  const char* pose_topic;
+  const char* costmap_topic;
+  const char* diagnostics_topic;
+  const char* frame_id;
+  const char* pose_frame_id;
+  int domain;
+  double rate_hz;
+  long max_scans;
+  double idle_s;
+  double wait_s;
+  long tail_scans;
+} Options;
+
+static void usage(FILE* out) {
+  fprintf(out,
+          "usage: tarmac-cyclone-replay --dataset DIR [options]\n"
+          "  --domain N               DDS domain (default 0)\n"
+          "  --rate-hz HZ             scans per second (default 10)\n"
+          "  --scans N                at most N scans (default: all)\n"
+          "  --lidar-topic T          default rt/tarmac/lidar/front/points\n"
+          "  --frame-id F             the cloud's header.frame_id (default lidar_front)\n"
+          "  --pose-topic T           default rt/tarmac/pose (frame --pose-frame-id, default map)\n"
+          "  --costmap-topic T        default rt/tarmac/costmap\n"
+          "  --diagnostics-topic T    default rt/tarmac/diagnostics\n"
+          "  --idle-s S               wait after the last scan for its costmap (default 2)\n"
+          "  --tail-scans N           then N short scans (the last cloud's first 2000 points, one\n"
+          "                           datagram each): a receiver sees losses at the end of the\n"
+          "                           stream as a gap in sequence numbers (default 0)\n"
+          "  --wait-s S               wait for tarmacd's readers to match (default 20)\n"
+          "  --json FILE              the summary as JSON\n");
+}
+
+static int64_t now_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static void sleep_ns(int64_t ns) {
+  if (ns <= 0) return;
+  struct timespec ts = {(time_t)(ns / 1000000000LL), (long)(ns % 1000000000LL)};
+  nanosleep(&ts, NULL);
+}
+
+static builtin_interfaces_msg_dds__Time_ to_time(int64_t ns) {
+  builtin_interfaces_msg_dds__Time_ t;
+  t.sec = (int32_t)(ns / 1000000000LL);
+  t.nanosec = (uint32_t)(ns % 1000000000LL);
+  return t;
+}
+
+static int64_t from_time(const builtin_interfaces_msg_dds__Time_* t) {
+  return (int64_t)t->sec * 1000000000LL + t->nanosec;
+}
+
+/* Reads a whole file; NULL when it cannot. */
+static uint8_t* read_file(const char* path, uint32_t* size) {
+  FILE* f = fopen(path, "rb");
+  if (!f) return NULL;
+  fseek(f, 0, SEEK_END);
+  const long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  uint8_t* buf = malloc(n > 0 ? (size_t)n : 1);
+  if (!buf || fread(buf, 1, (size_t)n, f) != (size_t)n) {
+    fclose(f);
+    free(buf);
+    return NULL;
+  }
+  fclose(f);
+  *size = (uint32_t)n;
+  return buf;
+}
+
+/* Rotation matrix (row-major 3x3) to a unit quaternion (x, y, z, w). */
+static void to_quaternion(const double R[9], double q[4]) {
+  const double tr = R[0] + R[4] + R[8];
+  if (tr > 0) {
+    const double s = sqrt(tr + 1.0) * 2;
+    q[3] = 0.25 * s;
+    q[0] = (R[7] - R[5]) / s;
+    q[1] = (R[2] - R[6]) / s;
+    q[2] = (R[3] - R[1]) / s;
+  } else if (R[0] > R[4] && R[0] > R[8]) {
+    const double s = sqrt(1.0 + R[0] - R[4] - R[8]) * 2;
+    q[3] = (R[7] - R[5]) / s;
+    q[0] = 0.25 * s;
+    q[1] = (R[1] + R[3]) / s;
+    q[2] = (R[2] + R[6]) / s;
+  } else if (R[4] > R[8]) {
+    const double s = sqrt(1.0 + R[4] - R[0] - R[8]) * 2;
+    q[3] = (R[2] - R[6]) / s;
+    q[0] = (R[1] + R[3]) / s;
+    q[1] = 0.25 * s;
+    q[2] = (R[5] + R[7]) / s;
+  } else {
+    const double s = sqrt(1.0 + R[8] - R[0] - R[4]) * 2;
+    q[3] = (R[3] - R[1]) / s;
+    q[0] = (R[2] + R[6]) / s;
+    q[1] = (R[5] + R[7]) / s;
+    q[2] = 0.25 * s;
+  }
+  const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (int i = 0; i < 4; ++i) q[i] /= n;
+}
+
+static int cmp_double(const void* a, const void* b) {
+  const double x = *(const double*)a, y = *(const double*)b;
+  return (x > y) - (x < y);
+}
+
+static double percentile(const double* sorted, long n, double q) {
+  if (n == 0) return 0.0;
+  long k = (long)ceil(q * (double)n) - 1;
+  if (k < 0) k = 0;
+  if (k >= n) k = n - 1;
+  return sorted[k];
+}
+
+/* What the subscriptions saw. */
+typedef struct {
+  int64_t* stamps;    /* sent scan stamps, by scan */
+  double* latency_ms; /* by scan: stamp -> first costmap with that stamp received; <0 none */
+  long scans;
+  long costmaps;
+  uint64_t points_integrated;
+  uint64_t lost, rejected, overflow; /* tarmacd's transport.scan_lost.*, _rejected.*, queue */
+  long reports;
+} Seen;
+
+static void take_costmaps(dds_entity_t reader, Seen* seen) {
+  void* samples[8] = {NULL};
+  dds_sample_info_t infos[8];
+  int n;
+  while ((n = dds_take(reader, samples, infos, 8, 8)) > 0) {
+    const int64_t t = now_ns();
+    for (int i = 0; i < n; ++i) {
+      if (!infos[i].valid_data) continue;
+      const nav_msgs_msg_dds__OccupancyGrid_* g = samples[i];
+      ++seen->costmaps;
+      const int64_t stamp = from_time(&g->header.stamp);
+      for (long k = seen->scans - 1; k >= 0; --k) {
+        if (seen->stamps[k] == stamp) {
+          if (seen->latency_ms[k] < 0) seen->latency_ms[k] = (double)(t - stamp) / 1e6;
+          break;
+        }
+      }
+    }
+    dds_return_loan(reader, samples, n);
+  }
+}
+
+static void take_reports(dds_entity_t reader, Seen* seen) {
+  void* samples[8] = {NULL};
+  dds_sample_info_t infos[8];
+  int n;
+  while ((n = dds_take(reader, samples, infos, 8, 8)) > 0) {
+    for (int i = 0; i < n; ++i) {
+      if (!infos[i].valid_data) continue;
+      const tarmac_msgs_msg_dds__CycleReport_* r = samples[i];
+      ++seen->reports;
+      seen->points_integrated += r->points_in;
+      uint64_t lost = 0, rejected = 0, overflow = 0;
+      for (uint32_t j = 0; j < r->drops._length; ++j) {
+        const char* reason = r->drops._buffer[j].reason;
+        const uint64_t total = r->drops._buffer[j].total;
+        if (strncmp(reason, "transport.scan_lost.", 20) == 0) lost += total;
+        if (strncmp(reason, "transport.scan_rejected.", 24) == 0) rejected += total;
+        if (strcmp(reason, "queue.scan_overflow") == 0) overflow += total;
+      }
+      seen->lost = lost;
+      seen->rejected = rejected;
+      seen->overflow = overflow;
+    }
+    dds_return_loan(reader, samples, n);
+  }
+}
+
+/* Sleeps until `deadline_ns` on the wall clock, taking what arrives meanwhile. */
+static void serve_until(int64_t deadline_ns, dds_entity_t costmaps, dds_entity_t reports,
+                        Seen* seen) {
+  for (;;) {
+    take_costmaps(costmaps, seen);
+    take_reports(reports, seen);
+    const int64_t left = deadline_ns - now_ns();
+    if (left <= 0) return;
+    sleep_ns(left < 1000000 ? left : 1000000);
+  }
+}
+
+static dds_entity_t make_topic(dds_entity_t participant, const dds_topic_descriptor_t* desc,
+                               const char* name) {
+  const dds_entity_t topic = dds_create_topic(participant, desc, name, NULL, NULL);
+  if (topic < 0) FAIL("create topic %s: %s", name, dds_strretcode(-topic));
+  return topic;
+}
+
+static void parse(int argc, char** argv, Options* o) {
+  for (int i = 1; i < argc; ++i) {
+    const char* a = argv[i];
+    const char* v = i + 1 < argc ? argv[i + 1] : NULL;
+    if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
+      usage(stdout);
+      exit(0);
+    }
+    if (!v) {
+      fprintf(stderr, "tarmac-cyclone-replay: %s needs a value\n", a);
+      usage(stderr);
+      exit(64);
+    }
+    char* end = NULL;
+    if (strcmp(a, "--dataset") == 0)
+      o->dataset = v;
+    else if (strcmp(a, "--json") == 0)
+      o->json = v;
+    else if (strcmp(a, "--lidar-topic") == 0)
+      o->lidar_topic = v;
+    else if (strcmp(a, "--pose-topic") == 0)
+      o->pose_topic = v;
+    else if (strcmp(a, "--costmap-topic") == 0)
+      o->costmap_topic = v;
+    else if (strcmp(a, "--diagnostics-topic") == 0)
+      o->diagnostics_topic = v;
+    else if (strcmp(a, "--frame-id") == 0)
+      o->frame_id = v;
+    else if (strcmp(a, "--pose-frame-id") == 0)
+      o->pose_frame_id = v;
+    else if (strcmp(a, "--domain") == 0)
+      o->domain = (int)strtol(v, &end, 10);
+    else if (strcmp(a, "--rate-hz") == 0)
+      o->rate_hz = strtod(v, &end);
+    else if (strcmp(a, "--scans") == 0)
+      o->max_scans = strtol(v, &end, 10);
+    else if (strcmp(a, "--idle-s") == 0)
+      o->idle_s = strtod(v, &end);
+    else if (strcmp(a, "--wait-s") == 0)
+      o->wait_s = strtod(v, &end);
+    else if (strcmp(a, "--tail-scans") == 0)
+      o->tail_scans = strtol(v, &end, 10);
+    else {
+      fprintf(stderr, "tarmac-cyclone-replay: unknown option %s\n", a);
+      usage(stderr);
+      exit(64);
+    }
+    if (end != NULL && *end != '\0') {
+      fprintf(stderr, "tarmac-cyclone-replay: %s: not a number: %s\n", a, v);
+      exit(64);
+    }
+    ++i;
+  }
+  if (!o->dataset) {
+    usage(stderr);
+    exit(64);
+  }
+  if (!(o->rate_hz > 0.0 && o->rate_hz <= 1000.0) || o->domain < 0 || o->domain > 232 ||
+      !(o->idle_s >= 0.0) || !(o->wait_s >= 0.0) || o->max_scans < 0 || o->tail_scans < 0 ||
+      o->tail_scans > 1000) {
+    fprintf(stderr, "tarmac-cyclone-replay: a value is out of range\n");
+    exit(64);
+  }
+}
+
+int main(int argc, char** argv) {
+  Options o = {NULL,
+               NULL,
+               "rt/tarmac/lidar/front/points",
+               "rt/tarmac/pose",
+               "rt/tarmac/costmap",
+               "rt/tarmac/diagnostics",
+               "lidar_front",
+               "map",
+               0,
+               10.0,
+               0,
+               2.0,
+               20.0,
+               0};
+  parse(argc, argv, &o);
+
+  /* poses.txt: one row-major 3x4 T_world_sensor per scan. */
+  char path[4096];
+  snprintf(path, sizeof path, "%s/poses.txt", o.dataset);
+  FILE* pf = fopen(path, "r");
+  if (!pf) FAIL("cannot read %s", path);
+  long capacity = 1024, scans = 0;
+  double* poses = malloc((size_t)capacity * 12 * sizeof(double));
+  for (;;) {
+    double row[12];
+    int got = 0;
+    for (; got < 12; ++got) {
+      if (fscanf(pf, "%lf", &row[got]) != 1) break;
+    }
+    if (got < 12) break;
+    if (scans == capacity) {
+      capacity *= 2;
+      poses = realloc(poses, (size_t)capacity * 12 * sizeof(double));
+    }
+    memcpy(&poses[scans * 12], row, sizeof row);
+    ++scans;
+  }
+  fclose(pf);
+  if (o.max_scans > 0 && o.max_scans < scans) scans = o.max_scans;
+  if (scans == 0) FAIL("no poses in %s", path);
+
+  const dds_entity_t participant = dds_create_participant(o.domain, NULL, NULL);
+  if (participant < 0) FAIL("create participant: %s", dds_strretcode(-participant));
+
+  dds_qos_t* sensor_qos = dds_create_qos(); /* rclcpp::SensorDataQoS */
+  dds_qset_reliability(sensor_qos, DDS_RELIABILITY_BEST_EFFORT, 0);
+  dds_qset_history(sensor_qos, DDS_HISTORY_KEEP_LAST, 5);
+  dds_qos_t* pose_qos = dds_create_qos();
+  dds_qset_reliability(pose_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  dds_qset_history(pose_qos, DDS_HISTORY_KEEP_LAST, 100);
+  dds_qos_t* grid_qos = dds_create_qos();
+  dds_qset_reliability(grid_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  dds_qset_durability(grid_qos, DDS_DURABILITY_TRANSIENT_LOCAL);
+  dds_qset_history(grid_qos, DDS_HISTORY_KEEP_LAST, 1);
+  dds_qos_t* report_qos = dds_create_qos();
+  dds_qset_reliability(report_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  dds_qset_history(report_qos, DDS_HISTORY_KEEP_LAST, 100);
+
+  const dds_entity_t cloud_writer = dds_create_writer(
+      participant, make_topic(participant, &sensor_msgs_msg_dds__PointCloud2__desc, o.lidar_topic),
+      sensor_qos, NULL);
+  const dds_entity_t pose_writer = dds_create_writer(
+      participant,
+      make_topic(participant, &geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc,
+                 o.pose_topic),
+      pose_qos, NULL);
+  const dds_entity_t grid_reader = dds_create_reader(
+      participant, make_topic(participant, &nav_msgs_msg_dds__OccupancyGrid__desc, o.costmap_topic),
+      grid_qos, NULL);
+  const dds_entity_t report_reader = dds_create_reader(
+      participant,
+      make_topic(participant, &tarmac_msgs_msg_dds__CycleReport__desc, o.diagnostics_topic),
+      report_qos, NULL);
+  if (cloud_writer < 0 || pose_writer < 0 || grid_reader < 0 || report_reader < 0) {
+    FAIL("cannot create the writers and readers");
+  }
+
+  /* Wait for tarmacd: both its readers and its costmap writer. */
+  const int64_t wait_until = now_ns() + (int64_t)(o.wait_s * 1e9);
+  for (;;) {
+    dds_publication_matched_status_t c = {0}, p = {0};
+    dds_subscription_matched_status_t g = {0};
+    dds_get_publication_matched_status(cloud_writer, &c);
+    dds_get_publication_matched_status(pose_writer, &p);
+    dds_get_subscription_matched_status(grid_reader, &g);
+    if (c.current_count > 0 && p.current_count > 0 && g.current_count > 0) break;
+    if (now_ns() > wait_until) {
+      fprintf(stderr, "tarmac-cyclone-replay: tarmacd did not match within %.0f s (domain %d)\n",
+              o.wait_s, o.domain);
+      return 2;
+    }
+    sleep_ns(10000000);
+  }
+
+  Seen seen = {0};
+  const long total = scans + o.tail_scans;
+  seen.stamps = calloc((size_t)total, sizeof(int64_t));
+  seen.latency_ms = malloc((size_t)total * sizeof(double));
+  for (long k = 0; k < total; ++k) seen.latency_ms[k] = -1.0;
+  take_costmaps(grid_reader, &seen); /* a transient-local costmap of an earlier run */
+  for (long k = 0; k < seen.scans; ++k) seen.latency_ms[k] = -1.0;
+
+  /* Stamps on the grid of the period, as a LiDAR phase-locked to PTP would send them. */
+  const int64_t period_ns = (int64_t)llround(1e9 / o.rate_hz);
+  const int64_t start_ns = (now_ns() / period_ns + 5) * period_ns;
+  uint64_t points_sent = 0, bytes_sent = 0;
+  long sent = 0, write_errors = 0;
+  for (long k = 0; k < total; ++k) {
+    const long scan = k < scans ? k : scans - 1; /* a tail scan repeats the last pose */
+    snprintf(path, sizeof path, "%s/scans/%06ld.bin", o.dataset, scan);
+    uint32_t size = 0;
+    uint8_t* data = read_file(path, &size);
+    if (!data) FAIL("cannot read %s", path);
+    uint32_t n = size / 16u;
+    if (k >= scans && n > 2000) n = 2000;
+    const int64_t stamp = start_ns + k * period_ns;
+
+    geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose;
+    memset(&pose, 0, sizeof pose);
+    pose.header.stamp = to_time(stamp);
+    pose.header.frame_id = (char*)o.pose_frame_id;
+    const double* T = &poses[scan * 12];
+    const double R[9] = {T[0], T[1], T[2], T[4], T[5], T[6], T[8], T[9], T[10]};
+    double q[4];
+    to_quaternion(R, q);
+    pose.pose.pose.position.x = T[3];
+    pose.pose.pose.position.y = T[7];
+    pose.pose.pose.position.z = T[11];
+    pose.pose.pose.orientation.x = q[0];
+    pose.pose.pose.orientation.y = q[1];
+    pose.pose.pose.orientation.z = q[2];
+    pose.pose.pose.orientation.w = q[3];
+
+    static sensor_msgs_msg_dds__PointField_ fields[4];
+    static char* names[4] = {"x", "y", "z", "intensity"};
+    for (uint32_t f = 0; f < 4; ++f) {
+      fields[f].name = names[f];
+      fields[f].offset = 4 * f;
+      fields[f].datatype = sensor_msgs_msg_PointField_Constants_FLOAT32;
+      fields[f].count = 1;
+    }
+    sensor_msgs_msg_dds__PointCloud2_ cloud;
+    memset(&cloud, 0, sizeof cloud);
+    cloud.header.stamp = to_time(stamp);
+    cloud.header.frame_id = (char*)o.frame_id;
+    cloud.height = 1;
+    cloud.width = n;
+    cloud.fields._length = cloud.fields._maximum = 4;
+    cloud.fields._buffer = fields;
+    cloud.is_bigendian = false;
+    cloud.point_step = 16;
+    cloud.row_step = 16 * n;
+    cloud.data._length = cloud.data._maximum = 16 * n;
+    cloud.data._buffer = data;
+    cloud.is_dense = true;
+
+    seen.stamps[k] = stamp;
+    seen.scans = k + 1;
+    serve_until(stamp, grid_reader, report_reader, &seen);
+    if (dds_write(pose_writer, &pose) != DDS_RETCODE_OK) ++write_errors;
+    if (dds_write(cloud_writer, &cloud) != DDS_RETCODE_OK) ++write_errors;
+    ++sent;
+    points_sent += n;
+    if (k < scans) bytes_sent += 16u * n; /* the sequence's clouds, for their mean size */
+    free(data);
+  }
+  serve_until(now_ns() + (int64_t)(o.idle_s * 1e9), grid_reader, report_reader, &seen);
+
+  double* lat = malloc((size_t)total * sizeof(double));
+  long with_costmap = 0;
+  for (long k = 0; k < total; ++k) {
+    if (seen.latency_ms[k] >= 0) lat[with_costmap++] = seen.latency_ms[k];
+  }
+  /* Scans before the first that came back in a costmap: a receiver has no reference for losses
+   * before the first sample it got from a writer (DDS counts a loss as a gap after it). */
+  long first_back = -1;
+  for (long k = 0; k < total && first_back < 0; ++k) {
+    if (seen.latency_ms[k] >= 0) first_back = k;
+  }
+  qsort(lat, (size_t)with_costmap, sizeof(double), cmp_double);
+  const double p50 = percentile(lat, with_costmap, 0.5), p99 = percentile(lat, with_costmap, 0.99);
+  const double max = with_costmap ? lat[with_costmap - 1] : 0.0;
+  const double share = points_sent ? (double)seen.points_integrated / (double)points_sent : 0.0;
+  printf(
+      "scans sent: %ld incl. %ld short tail scans (%.0f KB per cloud of the sequence on "
+      "average, %.1f Hz, %ld write errors)\n",
+      sent, o.tail_scans, (double)bytes_sent / (double)scans / 1000.0, o.rate_hz, write_errors);
+  printf("points integrated by tarmacd: %llu of %llu sent (%.2f %%)\n",
+         (unsigned long long)seen.points_integrated, (unsigned long long)points_sent,
+         100.0 * share);
+  printf("tarmacd transport drops: lost %llu, rejected %llu, queue overflow %llu (%ld reports)\n",
+         (unsigned long long)seen.lost, (unsigned long long)seen.rejected,
+         (unsigned long long)seen.overflow, seen.reports);
+  printf("costmaps received: %ld; scans with a costmap of their stamp: %ld (the first: scan %ld)\n",
+         seen.costmaps, with_costmap, first_back);
+  printf("scan stamp -> costmap received (ms): p50 %.1f  p99 %.1f  max %.1f\n", p50, p99, max);
+  if (o.json) {
+    FILE* j = fopen(o.json, "w");
+    if (!j) FAIL("cannot write %s", o.json);
+    fprintf(j,
+            "{\"scans_sent\": %ld, \"bytes_per_cloud\": %.0f, \"rate_hz\": %g, "
+            "\"write_errors\": %ld, \"points_sent\": %llu, \"points_integrated\": %llu, "
+            "\"transport_lost\": %llu, \"transport_rejected\": %llu, \"queue_overflow\": %llu, "
+            "\"costmaps_received\": %ld, \"scans_with_costmap\": %ld, \"first_scan_back\": %ld, "
+            "\"latency_ms\": {\"p50\": %.3f, \"p99\": %.3f, \"max\": %.3f}}\n",
+            sent, (double)bytes_sent / (double)scans, o.rate_hz, write_errors,
+            (unsigned long long)points_sent, (unsigned long long)seen.points_integrated,
+            (unsigned long long)seen.lost, (unsigned long long)seen.rejected,
+            (unsigned long long)seen.overflow, seen.costmaps, with_costmap, first_back, p50, p99,
+            max);
+    fclose(j);
+  }
+  dds_delete_qos(sensor_qos);
+  dds_delete_qos(pose_qos);
+  dds_delete_qos(grid_qos);
+  dds_delete_qos(report_qos);
+  dds_delete(participant);
+  free(lat);
+  free(seen.stamps);
+  free(seen.latency_ms);
+  free(poses);
+  return 0;
+}
