@@ -491,6 +491,8 @@ void read_daemon(MapReader& root, Config& c) {
     r.topic("diagnostic_array_topic", o.diagnostic_array_topic);
     r.topic("virtual_obstacles_topic", o.virtual_obstacles_topic);
     r.topic("obstacle_grid_topic", o.obstacle_grid_topic);
+    r.topic("esdf_slice_grid_topic", o.esdf_slice_grid_topic);
+    r.scalar<double>("esdf_slice_grid_range_m", o.esdf_slice_grid_range_m, 0.1, 1000.0);
     r.scalar<std::uint32_t>("diagnostic_array_every", o.diagnostic_array_every, 1, 100000);
   });
   root.map("state", [&](MapReader& r) {
@@ -525,6 +527,11 @@ core::Status validate_daemon(const Config& c) {
   }
   if (c.outputs.obstacle_grid_topic == c.outputs.costmap_topic) {
     return err("outputs.obstacle_grid_topic", "must differ from outputs.costmap_topic");
+  }
+  if (!c.outputs.esdf_slice_grid_topic.empty() &&
+      (c.outputs.esdf_slice_grid_topic == c.outputs.costmap_topic ||
+       c.outputs.esdf_slice_grid_topic == c.outputs.obstacle_grid_topic)) {
+    return err("outputs.esdf_slice_grid_topic", "must differ from the other grid topics");
   }
   if (c.mapping.esdf_band.enabled && c.outputs.esdf_band_topic.empty()) {
     return err("outputs.esdf_band_topic", "must not be empty when esdf_band.enabled is true");
@@ -718,6 +725,8 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "frame_id" << YAML::Value << ou.frame_id;
   out << YAML::Key << "costmap_topic" << YAML::Value << ou.costmap_topic;
   out << YAML::Key << "obstacle_grid_topic" << YAML::Value << ou.obstacle_grid_topic;
+  out << YAML::Key << "esdf_slice_grid_topic" << YAML::Value << ou.esdf_slice_grid_topic;
+  out << YAML::Key << "esdf_slice_grid_range_m" << YAML::Value << ou.esdf_slice_grid_range_m;
   out << YAML::Key << "esdf_slice_topic" << YAML::Value << ou.esdf_slice_topic;
   out << YAML::Key << "esdf_band_topic" << YAML::Value << ou.esdf_band_topic;
   out << YAML::Key << "cycle_report_topic" << YAML::Value << ou.cycle_report_topic;

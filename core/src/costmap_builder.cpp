@@ -182,6 +182,19 @@ void to_obstacle_grid(const Costmap& costmap, Costmap& out) {
   }
 }
 
+void to_distance_display(const DistanceField& field, const GridGeometry2D& geometry, double range_m,
+                         Costmap& out) {
+  out.reset(geometry, kCostUnknown);
+  auto& cells = out.cells();
+  const std::size_t n = std::min(cells.size(), field.distance_m.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    const float d = field.distance_m[i];
+    if (std::isnan(d)) continue;  // unknown stays −1
+    const double shade = 100.0 * (1.0 - std::min(1.0, static_cast<double>(d) / range_m));
+    cells[i] = static_cast<std::int8_t>(std::lround(shade));
+  }
+}
+
 bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vector2d& p) {
   bool inside = false;
   for (std::size_t i = 0, j = polygon.size() - 1; i < polygon.size(); j = i++) {

@@ -320,7 +320,8 @@ class Executor::Impl {
   std::unique_ptr<ThreadPool> pool;
   std::vector<core::VirtualZone> zones;
   std::string zone_rejection;
-  core::Costmap obstacle_grid;  // outputs.obstacle_grid_topic: the costmap without inflation
+  core::Costmap obstacle_grid;    // outputs.obstacle_grid_topic: the costmap without inflation
+  core::Costmap esdf_slice_grid;  // outputs.esdf_slice_grid_topic: the 2D ESDF for display
 
   ReasonCounters drops, rejections;
   std::vector<ScanScheduler::Selected> selected;
@@ -604,6 +605,11 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
       core::to_obstacle_grid(layers.costmap, obstacle_grid);
       outputs->publish_obstacle_grid(obstacle_grid, newest_stamp_ns, config.outputs.frame_id);
     }
+    if (!config.outputs.esdf_slice_grid_topic.empty()) {
+      core::to_distance_display(layers.obstacle_distance, layers.costmap.geometry(),
+                                config.outputs.esdf_slice_grid_range_m, esdf_slice_grid);
+      outputs->publish_esdf_slice_grid(esdf_slice_grid, newest_stamp_ns, config.outputs.frame_id);
+    }
     outputs->publish_slice(layers.obstacle_distance, layers.costmap.geometry(), newest_stamp_ns,
                            config.outputs.frame_id);
   }
@@ -741,9 +747,10 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
       cfg.mapping.esdf_band.enabled ? cfg.outputs.esdf_band_topic : std::string(),
       cfg.outputs.cycle_report_topic,
       cfg.outputs.diagnostic_array_topic,
-      cfg.outputs.obstacle_grid_topic};
-  transport::OutputQos oq{q.costmap,     q.esdf_slice,  q.esdf_band,
-                          q.diagnostics, q.diagnostics, q.costmap};
+      cfg.outputs.obstacle_grid_topic,
+      cfg.outputs.esdf_slice_grid_topic};
+  transport::OutputQos oq{q.costmap,     q.esdf_slice, q.esdf_band, q.diagnostics,
+                          q.diagnostics, q.costmap,    q.costmap};
   auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
   if (!outputs) return outputs.error();
   impl->outputs = std::move(outputs).value();

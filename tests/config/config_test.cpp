@@ -1,10 +1,12 @@
 #include "tarmac/config/config.hpp"
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
 #include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
 
 #include "test_env.hpp"
 
@@ -352,6 +354,38 @@ TEST(Config, RosDomainIdApplies_OnlyWhenTheFileSetsNoDomain) {
     ASSERT_TRUE(c.ok());
     EXPECT_EQ(c.value().dds.participant.domain_id, 0u);
   }
+}
+
+TEST(Config, RvizViewSubscribesToTheTopicsTarmacPublishes) {
+  // config/tarmac.rviz names ROS 2 topics; with the outputs its header asks for, each must be one
+  // tarmacd publishes or reads, with a QoS that matches.
+  const auto view = YAML::LoadFile(std::string(TARMAC_SOURCE_DIR) + "/config/tarmac.rviz");
+  auto cfg = load_config_string(
+      "version: 1\noutputs: {obstacle_grid_topic: /tarmac/obstacle_grid, "
+      "esdf_slice_grid_topic: /tarmac/esdf_slice_grid}\n");
+  ASSERT_TRUE(cfg.ok()) << cfg.error().message;
+  const auto& o = cfg.value().outputs;
+  const std::vector<std::string> grids{o.costmap_topic, o.obstacle_grid_topic,
+                                       o.esdf_slice_grid_topic};
+  int maps = 0;
+  for (const auto& display : view["Visualization Manager"]["Displays"]) {
+    const auto cls = display["Class"].as<std::string>();
+    if (cls == "rviz_default_plugins/Map") {
+      ++maps;
+      const std::string dds = "rt" + display["Topic"]["Value"].as<std::string>();
+      EXPECT_NE(std::find(grids.begin(), grids.end(), dds), grids.end()) << dds;
+      // tarmac's grids are reliable + transient local (dds.qos.costmap).
+      EXPECT_EQ(display["Topic"]["Durability Policy"].as<std::string>(), "Transient Local");
+      EXPECT_EQ(display["Topic"]["Reliability Policy"].as<std::string>(), "Reliable");
+    } else if (cls == "rviz_default_plugins/PoseWithCovariance") {
+      EXPECT_EQ("rt" + display["Topic"]["Value"].as<std::string>(), cfg.value().pose.topic);
+    } else if (cls == "rviz_default_plugins/PointCloud2") {
+      EXPECT_EQ("rt" + display["Topic"]["Value"].as<std::string>(), cfg.value().sensors[0].topic);
+    }
+  }
+  EXPECT_EQ(maps, 3);
+  EXPECT_EQ(view["Visualization Manager"]["Global Options"]["Fixed Frame"].as<std::string>(),
+            o.frame_id);
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 #include "tarmac/core/costmap_builder.hpp"
 
 #include <cmath>
+#include <limits>
 
 #include <gtest/gtest.h>
 
@@ -127,6 +128,23 @@ int nav2_static_layer(std::int8_t value, bool track_unknown_space, bool trinary_
   if (v >= kLethalThreshold) return 254;
   if (trinary_costmap) return 0;
   return static_cast<unsigned char>(static_cast<double>(v) / kLethalThreshold * 254);
+}
+
+TEST(DistanceDisplay, ShadesDistanceLinearly_UnknownStaysUnknown) {
+  DistanceField field;
+  field.dims = {6, 1, 1};
+  field.cell_size_m = 0.5;
+  const float inf = std::numeric_limits<float>::infinity();
+  field.distance_m = {0.0f, 2.5f, 5.0f, 7.0f, inf, std::numeric_limits<float>::quiet_NaN()};
+  GridGeometry2D geometry;
+  geometry.width = 6;
+  geometry.height = 1;
+  geometry.resolution_m = 0.5;
+  Costmap grid;
+  to_distance_display(field, geometry, 5.0, grid);
+  ASSERT_EQ(grid.cells().size(), 6u);
+  const std::vector<std::int8_t> want{100, 50, 0, 0, 0, -1};
+  EXPECT_EQ(grid.cells(), want);
 }
 
 TEST(Nav2Translation, TableOfTheReadme) {

@@ -628,6 +628,7 @@ std::int8_t cell_at(const transport::OccupancyGridMsg& g, double x_m, double y_m
 TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   auto cfg = test_config(test::kDomainDaemonZones, 2);
   cfg.outputs.obstacle_grid_topic = "rt/tarmac/obstacle_grid";
+  cfg.outputs.esdf_slice_grid_topic = "rt/tarmac/esdf_slice_grid";
   RunningExecutor executor(cfg);
   auto participant = peer(test::kDomainDaemonZones);
   auto grids = GridReader::create(participant, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 8);
@@ -635,6 +636,9 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   auto obstacle_grids =
       GridReader::create(participant, cfg.outputs.obstacle_grid_topic, cfg.dds.qos.costmap, 8);
   ASSERT_TRUE(obstacle_grids.ok());
+  auto esdf_grids =
+      GridReader::create(participant, cfg.outputs.esdf_slice_grid_topic, cfg.dds.qos.costmap, 8);
+  ASSERT_TRUE(esdf_grids.ok());
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
   options.rate_scale = 2.0;
@@ -661,6 +665,13 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
     inflated += v > 0 && v < 100 ? 1 : 0;
   }
   EXPECT_GT(inflated, 0u) << "the costmap has inflated cells the plain grid leaves out";
+  // The ESDF display grid of the same tick: 100 (distance 0) exactly on the costmap's obstacles.
+  transport::OccupancyGridMsg shade;
+  ASSERT_TRUE(wait_for_costmap(*esdf_grids.value(), stats.value().last_stamp_ns, shade));
+  ASSERT_EQ(shade.data().size(), before.data().size());
+  for (std::size_t i = 0; i < before.data().size(); ++i) {
+    ASSERT_EQ(shade.data()[i] == 100, before.data()[i] == 100) << "cell " << i;
+  }
 
   using ZoneWriter = transport::Writer<tarmac_msgs::msg::dds_::VirtualObstacleArray_PubSubType>;
   auto zones = ZoneWriter::create(participant, cfg.outputs.virtual_obstacles_topic,

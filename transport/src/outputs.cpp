@@ -12,6 +12,7 @@ class MapOutputs::Impl {
  public:
   std::unique_ptr<Writer<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>> costmap;
   std::unique_ptr<Writer<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>> obstacle_grid;
+  std::unique_ptr<Writer<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>> esdf_slice_grid;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapSlice_PubSubType>> slice;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>> band;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::CycleReport_PubSubType>> report;
@@ -19,6 +20,7 @@ class MapOutputs::Impl {
   // Kept and refilled: their buffers are reused from tick to tick.
   OccupancyGridMsg costmap_msg;
   OccupancyGridMsg obstacle_grid_msg;
+  OccupancyGridMsg esdf_slice_grid_msg;
   DistanceMapSliceMsg slice_msg;
   DistanceMapVolumeMsg band_msg;
   CycleReportMsg report_msg;
@@ -38,6 +40,12 @@ core::Result<std::unique_ptr<MapOutputs>> MapOutputs::create(const Participant& 
         participant, topics.obstacle_grid, qos.obstacle_grid);
     if (!grid) return grid.error();
     impl->obstacle_grid = std::move(grid).value();
+  }
+  if (!topics.esdf_slice_grid.empty()) {
+    auto grid = decltype(impl->esdf_slice_grid)::element_type::create(
+        participant, topics.esdf_slice_grid, qos.esdf_slice_grid);
+    if (!grid) return grid.error();
+    impl->esdf_slice_grid = std::move(grid).value();
   }
   auto slice =
       decltype(impl->slice)::element_type::create(participant, topics.esdf_slice, qos.esdf_slice);
@@ -74,6 +82,13 @@ bool MapOutputs::publish_obstacle_grid(const core::Costmap& grid, std::int64_t s
   if (!impl_->obstacle_grid) return false;
   fill_occupancy_grid(grid, stamp_ns, frame_id, impl_->obstacle_grid_msg);
   return impl_->obstacle_grid->write(impl_->obstacle_grid_msg);
+}
+
+bool MapOutputs::publish_esdf_slice_grid(const core::Costmap& grid, std::int64_t stamp_ns,
+                                         const std::string& frame_id) {
+  if (!impl_->esdf_slice_grid) return false;
+  fill_occupancy_grid(grid, stamp_ns, frame_id, impl_->esdf_slice_grid_msg);
+  return impl_->esdf_slice_grid->write(impl_->esdf_slice_grid_msg);
 }
 
 bool MapOutputs::publish_slice(const core::DistanceField& field,

@@ -124,6 +124,10 @@ struct OutputConfig {
   /// The costmap without inflation (lethal 100 / free 0 / unknown −1) for a planner that
   /// inflates by its own footprint (Nav2's StaticLayer + InflationLayer). Empty: not published.
   std::string obstacle_grid_topic;
+  /// The 2D ESDF shaded as an OccupancyGrid for rviz2's Map display (100 on obstacles, 0 at
+  /// esdf_slice_grid_range_m and beyond, −1 unknown). Empty: not published.
+  std::string esdf_slice_grid_topic;
+  double esdf_slice_grid_range_m = 5.0;
   std::uint32_t diagnostic_array_every = 10;  ///< ticks between DiagnosticArray messages
 };
 

@@ -115,6 +115,14 @@ std::int8_t to_occupancy_value(std::uint8_t nav2_cost);
 /// `costmap`'s geometry; allocates only when the size changes. RT-safe after warm-up.
 void to_obstacle_grid(const Costmap& costmap, Costmap& out);
 
+/// The 2D ESDF as an OccupancyGrid for display (rviz2's Map display, which shows no
+/// DistanceMapSlice): 100 on obstacles, falling linearly to 0 at `range_m` and beyond, −1 where
+/// the distance is unknown (NaN). `field` lies on `geometry`'s cells. For viewing only: the
+/// exact distances and gradients are in the DistanceMapSlice. RT-safe after warm-up.
+/// @pre range_m > 0
+void to_distance_display(const DistanceField& field, const GridGeometry2D& geometry, double range_m,
+                         Costmap& out);
+
 /// True when the point lies inside the polygon (even-odd rule).
 bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vector2d& p);
 

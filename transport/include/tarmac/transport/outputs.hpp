@@ -27,6 +27,8 @@ struct OutputTopics {
   std::string diagnostic_array;
   /// Empty: none. The costmap without inflation (100 / 0 / −1) for Nav2's own inflation.
   std::string obstacle_grid;
+  /// Empty: none. The 2D ESDF shaded as an OccupancyGrid, for rviz2 (core::to_distance_display).
+  std::string esdf_slice_grid;
 };
 
 struct OutputQos {
@@ -36,6 +38,7 @@ struct OutputQos {
   QosSpec cycle_report = qos::kDiagnostics;
   QosSpec diagnostic_array = qos::kDiagnostics;
   QosSpec obstacle_grid = qos::kCostmap;
+  QosSpec esdf_slice_grid = qos::kCostmap;  // as the costmap: rviz2's Map display reads it so
 };
 
 class MapOutputs {
@@ -54,6 +57,9 @@ class MapOutputs {
   /// given.
   bool publish_obstacle_grid(const core::Costmap& grid, std::int64_t stamp_ns,
                              const std::string& frame_id);
+  /// The ESDF display grid (core::to_distance_display). False also when no topic was given.
+  bool publish_esdf_slice_grid(const core::Costmap& grid, std::int64_t stamp_ns,
+                               const std::string& frame_id);
   /// `field` is a 2D field laid out on `geometry` (same cells as the costmap).
   bool publish_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
                      std::int64_t stamp_ns, const std::string& frame_id);
