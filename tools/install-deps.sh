@@ -11,6 +11,7 @@ packages=(
   libeigen3-dev libspdlog-dev libfmt-dev libyaml-cpp-dev libgtest-dev libgmock-dev
   libsystemd-dev openssl libssl-dev cyclonedds-dev cyclonedds-tools liboctomap-dev libdynamicedt3d-dev
   libpng-dev iproute2 systemd clang-format
+  rosidl-tools python3-catkin-pkg python3-empy   # ROS 2's msg -> IDL translator (msg_idl_agreement test)
 )
 
 missing=()
