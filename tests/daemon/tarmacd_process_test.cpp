@@ -22,6 +22,7 @@
 
 #include <gtest/gtest.h>
 
+#include "notify_socket.hpp"
 #include "rtps_sniffer.hpp"
 #include "tarmac/core/task_runner.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
@@ -33,54 +34,7 @@ namespace {
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 
-class NotifySocket {
- public:
-  explicit NotifySocket(const fs::path& path) : path_(path) {
-    fd_ = socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
-    fs::remove(path);
-    bound_ = bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
-    timeval tv{0, 100'000};
-    setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  }
-  ~NotifySocket() {
-    close(fd_);
-    fs::remove(path_);
-  }
-  [[nodiscard]] bool bound() const { return bound_; }
-
-  /// Receives datagrams until one contains `needle` or the timeout passes; keeps them all.
-  bool wait_for(const std::string& needle, std::chrono::seconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    for (const auto& m : messages_) {
-      if (m.find(needle) != std::string::npos) return true;
-    }
-    char buf[4096];
-    while (std::chrono::steady_clock::now() < deadline) {
-      const ssize_t n = recv(fd_, buf, sizeof buf, 0);
-      if (n <= 0) continue;
-      messages_.emplace_back(buf, static_cast<std::size_t>(n));
-      if (messages_.back().find(needle) != std::string::npos) return true;
-    }
-    return false;
-  }
-  /// Index of the first message containing `needle`, or -1.
-  [[nodiscard]] int first(const std::string& needle) const {
-    for (std::size_t i = 0; i < messages_.size(); ++i) {
-      if (messages_[i].find(needle) != std::string::npos) return static_cast<int>(i);
-    }
-    return -1;
-  }
-  [[nodiscard]] const std::vector<std::string>& messages() const { return messages_; }
-
- private:
-  fs::path path_;
-  int fd_ = -1;
-  bool bound_ = false;
-  std::vector<std::string> messages_;
-};
+using tarmac::test::NotifySocket;
 
 /// Starts tarmacd with `dir`/tarmac.yaml, its output in `dir`/tarmacd.log, `dir`/notify.sock as
 /// NOTIFY_SOCKET and, when given, WATCHDOG_USEC. Returns the child's pid (< 0: fork failed).
