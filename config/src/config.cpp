@@ -561,7 +561,7 @@ void read_daemon(MapReader& root, Config& c) {
   });
   root.map("executor", [&](MapReader& r) {
     auto& e = c.executor;
-    r.scalar<double>("rate_hz", e.rate_hz, 0.1, 1000.0);
+    r.scalar<double>("rate_hz", e.rate_hz, kMinRateHz, kMaxRateHz);
     r.scalar<double>("input_delay_ms", e.input_delay_ms, 0.0, 5000.0);
     r.scalar<double>("pose_wait_ms", e.pose_wait_ms, 0.0, 10000.0);
     r.scalar<double>("max_future_ms", e.max_future_ms, 0.0, 60000.0);

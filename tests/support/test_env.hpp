@@ -25,7 +25,7 @@ enum Domain : std::uint32_t {
   kDomainSecurityUnauthenticated = 117,
   kDomainSecurityOtherCa = 118,
   kDomainSecurityDenied = 119,
-  // tarmacd integration tests (tests/daemon/): 130..149
+  // tarmacd integration tests (tests/daemon/): 130..152
   kDomainDaemonWorkers1 = 130,
   kDomainDaemonWorkers2 = 131,
   kDomainDaemonWorkers4 = 132,
@@ -44,6 +44,12 @@ enum Domain : std::uint32_t {
   kDomainDaemonPathCorrection = 145,
   kDomainDaemonPathEarly = 146,
   kDomainDaemonEsdfBand = 147,
+  // Stopping and the watchdog (tests/daemon/executor_stop_test.cpp, tarmacd_process_test.cpp)
+  kDomainDaemonWatchdogStall = 148,
+  kDomainDaemonStopAsleep = 149,
+  kDomainDaemonStopStartup = 150,
+  kDomainDaemonStopReady = 151,
+  kDomainDaemonStopSlowRate = 152,
 };
 
 inline bool running_in_ci() {

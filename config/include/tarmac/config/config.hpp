@@ -68,6 +68,10 @@ struct PoseInputConfig {
   std::string correction_topic = "rt/tarmac/pose_correction";
 };
 
+/// The executor's rate bounds (YAML `executor.rate_hz`), also checked by the executor itself.
+inline constexpr double kMinRateHz = 0.1;
+inline constexpr double kMaxRateHz = 1000.0;
+
 /// The fixed-rate executor (YAML `executor`).
 struct ExecutorConfig {
   double rate_hz = 10.0;         ///< ticks per second
