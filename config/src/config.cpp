@@ -1,6 +1,7 @@
 #include "tarmac/config/config.hpp"
 
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -8,6 +9,9 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <type_traits>
+#include <utility>
+#include <vector>
 
 #include <yaml-cpp/yaml.h>
 
@@ -48,34 +52,199 @@ std::string ros_topic_problem(const std::string& name) {
   return {};
 }
 
+/// `key` appended to `path` ("executor" + "rate_hz" -> "executor.rate_hz").
+std::string join_path(const std::string& path, const std::string& key) {
+  return path.empty() ? key : path + "." + key;
+}
+
+std::string path_or_root(const std::string& path) {
+  return path.empty() ? "<root>" : path;
+}
+
+/// The YAML line and column of a node, 1-based, for messages.
+std::string where(const YAML::Mark& mark, bool with_column) {
+  std::string s = "line " + std::to_string(mark.line + 1);
+  if (with_column) s += " column " + std::to_string(mark.column + 1);
+  return s;
+}
+
+bool decodes_as_number(const YAML::Node& node) {
+  double d = 0.0;
+  return YAML::convert<double>::decode(node, d);
+}
+
+/// What a node holds, for type errors: "a map", "a list", "a bool 'yes'", "a number '2.5'",
+/// "a string 'abc'" (a quoted scalar is always a string).
+std::string describe(const YAML::Node& node) {
+  if (node.IsMap()) return "a map";
+  if (node.IsSequence()) return "a list";
+  if (!node.IsScalar()) return "nothing";
+  const std::string quoted = "'" + node.Scalar() + "'";
+  if (node.Tag() == "!") return "a string " + quoted;
+  bool b = false;
+  if (YAML::convert<bool>::decode(node, b)) return "a bool " + quoted;
+  if (decodes_as_number(node)) return "a number " + quoted;
+  return "a string " + quoted;
+}
+
+/// A YAML nesting deeper than this, or with more nodes than that, is refused: no config comes
+/// near either, and aliases can make a node contain itself (`a: &x [*x]`) or expand
+/// exponentially (each level a list of two aliases of the one before), which a walk would
+/// follow forever.
+constexpr int kMaxDepth = 32;
+constexpr std::size_t kMaxNodes = 100000;
+
+/// Refuses what yaml-cpp accepts silently, at every depth (maps inside lists included): a key
+/// given twice in one map (yaml-cpp would keep the first and drop the other), a key that is
+/// not a plain scalar, and nesting beyond kMaxDepth or kMaxNodes. `nodes` counts the visits.
+void check_structure(const YAML::Node& node, const std::string& path, int depth,
+                     std::size_t& nodes) {
+  if (depth > kMaxDepth || ++nodes > kMaxNodes) {
+    fail("structure", path_or_root(path),
+         depth > kMaxDepth
+             ? "nested deeper than " + std::to_string(kMaxDepth) +
+                   " levels (an alias that contains itself?)"
+             : "more than " + std::to_string(kMaxNodes) + " nodes (aliases that expand?)");
+  }
+  if (node.IsMap()) {
+    std::vector<std::pair<std::string, YAML::Mark>> seen;
+    for (const auto& kv : node) {
+      if (!kv.first.IsScalar()) {
+        fail("type", path_or_root(path),
+             "keys must be strings, got " + describe(kv.first) + " at " +
+                 where(kv.first.Mark(), true));
+      }
+      const std::string& key = kv.first.Scalar();
+      const std::string key_path = join_path(path, key);
+      for (const auto& [other, mark] : seen) {
+        if (other != key) continue;
+        const YAML::Mark again = kv.first.Mark();
+        const bool same_line = mark.line == again.line;
+        fail("duplicate_key", key_path,
+             "duplicate key (" + where(mark, same_line) + " and " + where(again, same_line) + ")");
+      }
+      seen.emplace_back(key, kv.first.Mark());
+      check_structure(kv.second, key_path, depth + 1, nodes);
+    }
+  } else if (node.IsSequence()) {
+    std::size_t i = 0;
+    for (const auto& item : node) {
+      check_structure(item, path + "[" + std::to_string(i++) + "]", depth + 1, nodes);
+    }
+  }
+}
+
+/// A YAML bool (true/false, yes/no, on/off).
+bool parse_bool(const YAML::Node& node, const std::string& path) {
+  bool value = false;
+  if (!node.IsScalar() || !YAML::convert<bool>::decode(node, value)) {
+    fail("type", path, "expected a bool (true or false), got " + describe(node));
+  }
+  return value;
+}
+
+template <typename T>
+[[noreturn]] void fail_range(const std::string& path, T min, T max, const std::string& got) {
+  std::ostringstream os;
+  os << "must be in [" << min << ", " << max << "], got " << got;
+  fail("range", path, os.str());
+}
+
+/// A decimal integer within [min, max]. "2.5", "1e3", "0x10" are type errors (an integer key
+/// takes an integer written as one); `.nan` and `.inf` are refused as not finite, as for reals.
+template <typename T>
+T parse_integer(const YAML::Node& node, const std::string& path, T min, T max) {
+  static_assert(std::is_integral_v<T> && !std::is_same_v<T, bool>);
+  if (!node.IsScalar()) fail("type", path, "expected an integer, got " + describe(node));
+  const std::string& text = node.Scalar();
+  const char* first = text.data();
+  const char* last = text.data() + text.size();
+  if (first != last && *first == '+') ++first;
+  long long parsed = 0;
+  const auto [end, ec] = std::from_chars(first, last, parsed, 10);
+  if (ec == std::errc::result_out_of_range) fail_range(path, min, max, text);
+  if (ec != std::errc() || end != last || first == last) {
+    double real = 0.0;
+    if (YAML::convert<double>::decode(node, real) && !std::isfinite(real)) {
+      fail("not_finite", path, "must be a finite number, got " + text);
+    }
+    fail("type", path, "expected an integer, got " + describe(node));
+  }
+  if (std::cmp_less(parsed, min) || std::cmp_greater(parsed, max)) {
+    fail_range(path, min, max, std::to_string(parsed));
+  }
+  return static_cast<T>(parsed);
+}
+
+/// A finite real number within [min, max] (compared in T, so a float key's bounds mean what
+/// they say in float). `.nan`, `.inf`, `-.inf` and numbers beyond the range of a double (1e400)
+/// are refused as not finite.
+template <typename T>
+T parse_real(const YAML::Node& node, const std::string& path, T min, T max) {
+  static_assert(std::is_floating_point_v<T>);
+  if (!node.IsScalar()) fail("type", path, "expected a number, got " + describe(node));
+  const std::string& text = node.Scalar();
+  double parsed = 0.0;
+  if (!YAML::convert<double>::decode(node, parsed)) {
+    // yaml-cpp refuses a number that overflows a double; say why instead of "not a number".
+    errno = 0;
+    char* end = nullptr;
+    const double huge = std::strtod(text.c_str(), &end);
+    if (!text.empty() && end == text.c_str() + text.size() && errno == ERANGE && std::isinf(huge)) {
+      fail("not_finite", path, "must be a finite number, got " + text);
+    }
+    fail("type", path, "expected a number, got " + describe(node));
+  }
+  if (!std::isfinite(parsed)) fail("not_finite", path, "must be a finite number, got " + text);
+  if (std::abs(parsed) > static_cast<double>(std::numeric_limits<T>::max())) {
+    fail_range(path, min, max, text);
+  }
+  const auto value = static_cast<T>(parsed);
+  if (value < min || value > max) {
+    std::ostringstream got;
+    got << value;
+    fail_range(path, min, max, got.str());
+  }
+  return value;
+}
+
+/// One scalar of type T: bool, an integer type or a floating-point type.
+template <typename T>
+T parse_scalar(const YAML::Node& node, const std::string& path, T min, T max) {
+  if constexpr (std::is_same_v<T, bool>) {
+    (void)min;
+    (void)max;
+    return parse_bool(node, path);
+  } else if constexpr (std::is_integral_v<T>) {
+    return parse_integer(node, path, min, max);
+  } else {
+    return parse_real(node, path, min, max);
+  }
+}
+
 /// Reads the keys of one YAML map and, at the end, rejects any key nobody asked for.
+/// check_structure() has run on the whole document first: no duplicate or non-scalar keys.
 class MapReader {
  public:
   MapReader(const YAML::Node& node, std::string path) : node_(node), path_(std::move(path)) {
-    if (node_ && !node_.IsNull() && !node_.IsMap()) fail("type", path_or_root(), "must be a map");
+    if (node_ && !node_.IsNull() && !node_.IsMap()) {
+      fail("type", path_or_root(path_), "expected a map, got " + describe(node_));
+    }
   }
 
+  /// A number (finite, in [min, max]), an integer (in [min, max]) or a bool, by T.
   template <typename T>
   void scalar(const std::string& key, T& value, T min, T max) {
     const YAML::Node child = take(key);
     if (!child) return;
-    T parsed{};
-    if (!child.IsScalar() || !YAML::convert<T>::decode(child, parsed)) {
-      fail("type", join(key), "expected a number, got '" + dump(child) + "'");
-    }
-    if (parsed < min || parsed > max) {
-      std::ostringstream os;
-      os << "must be in [" << min << ", " << max << "], got " << parsed;
-      fail("range", join(key), os.str());
-    }
-    value = parsed;
+    value = parse_scalar<T>(child, join(key), min, max);
   }
 
   void string(const std::string& key, std::string& value) {
     const YAML::Node child = take(key);
     if (!child) return;
-    if (!child.IsScalar()) fail("type", join(key), "expected a string");
-    value = child.as<std::string>();
+    if (!child.IsScalar()) fail("type", join(key), "expected a string, got " + describe(child));
+    value = child.Scalar();
   }
 
   /// A DDS topic name that ROS 2 nodes can see: its wire form `rt/ns/name` as is, a ROS 2 name
@@ -98,43 +267,42 @@ class MapReader {
   int choice(const std::string& key, const std::vector<std::string>& choices) {
     const YAML::Node child = take(key);
     if (!child) return -1;
-    const std::string text = child.IsScalar() ? child.as<std::string>() : dump(child);
+    std::string list;
+    for (const auto& c : choices) list += (list.empty() ? "" : ", ") + c;
+    if (!child.IsScalar()) {
+      fail("type", join(key), "expected a string (one of {" + list + "}), got " + describe(child));
+    }
+    const std::string& text = child.Scalar();
     for (std::size_t i = 0; i < choices.size(); ++i) {
       if (choices[i] == text) return static_cast<int>(i);
     }
-    std::string list;
-    for (const auto& c : choices) list += (list.empty() ? "" : ", ") + c;
     fail("value", join(key), "must be one of {" + list + "}, got '" + text + "'");
   }
 
   void string_list(const std::string& key, std::vector<std::string>& value) {
     const YAML::Node child = take(key);
     if (!child) return;
-    if (!child.IsSequence()) fail("type", join(key), "expected a list of strings");
+    if (!child.IsSequence()) {
+      fail("type", join(key), "expected a list of strings, got " + describe(child));
+    }
     value.clear();
-    for (const auto& item : child) {
-      if (!item.IsScalar()) fail("type", join(key), "expected a list of strings");
-      value.push_back(item.as<std::string>());
+    for (std::size_t i = 0; i < child.size(); ++i) {
+      if (!child[i].IsScalar()) {
+        fail("type", item(key, i), "expected a string, got " + describe(child[i]));
+      }
+      value.push_back(child[i].Scalar());
     }
   }
 
   void int_list(const std::string& key, std::vector<int>& value, int min, int max) {
     const YAML::Node child = take(key);
     if (!child) return;
-    if (!child.IsSequence()) fail("type", join(key), "expected a list of integers");
+    if (!child.IsSequence()) {
+      fail("type", join(key), "expected a list of integers, got " + describe(child));
+    }
     value.clear();
     for (std::size_t i = 0; i < child.size(); ++i) {
-      int parsed = 0;
-      const std::string item_path = join(key) + "[" + std::to_string(i) + "]";
-      if (!child[i].IsScalar() || !YAML::convert<int>::decode(child[i], parsed)) {
-        fail("type", item_path, "expected an integer, got '" + dump(child[i]) + "'");
-      }
-      if (parsed < min || parsed > max) {
-        fail("range", item_path,
-             "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " +
-                 std::to_string(parsed));
-      }
-      value.push_back(parsed);
+      value.push_back(parse_integer<int>(child[i], item(key, i), min, max));
     }
   }
 
@@ -149,9 +317,13 @@ class MapReader {
   void map_list(const std::string& key, Fn read) {
     const YAML::Node child = take(key);
     if (!child) return;
-    if (!child.IsSequence()) fail("type", join(key), "expected a list of maps");
+    if (!child.IsSequence()) {
+      fail("type", join(key), "expected a list of maps, got " + describe(child));
+    }
     for (std::size_t i = 0; i < child.size(); ++i) {
-      MapReader nested(child[i], join(key) + "[" + std::to_string(i) + "]");
+      if (!child[i].IsMap())
+        fail("type", item(key, i), "expected a map, got " + describe(child[i]));
+      MapReader nested(child[i], item(key, i));
       read(nested, i);
       nested.finish();
     }
@@ -173,7 +345,7 @@ class MapReader {
   void finish() const {
     if (!node_ || !node_.IsMap()) return;
     for (const auto& kv : node_) {
-      const auto key = kv.first.as<std::string>();
+      const std::string& key = kv.first.Scalar();
       if (seen_.count(key) == 0) fail("unknown_key", join(key), "unknown key");
     }
   }
@@ -186,14 +358,9 @@ class MapReader {
     if (child && child.IsNull()) fail("type", join(key), "has no value");
     return child;
   }
-  [[nodiscard]] std::string join(const std::string& key) const {
-    return path_.empty() ? key : path_ + "." + key;
-  }
-  [[nodiscard]] std::string path_or_root() const { return path_.empty() ? "<root>" : path_; }
-  static std::string dump(const YAML::Node& node) {
-    YAML::Emitter out;
-    out << YAML::Flow << node;
-    return out.c_str();
+  [[nodiscard]] std::string join(const std::string& key) const { return join_path(path_, key); }
+  [[nodiscard]] std::string item(const std::string& key, std::size_t i) const {
+    return join(key) + "[" + std::to_string(i) + "]";
   }
 
   YAML::Node node_;
@@ -450,7 +617,7 @@ void read_daemon(MapReader& root, Config& c) {
   });
   root.map("executor", [&](MapReader& r) {
     auto& e = c.executor;
-    r.scalar<double>("rate_hz", e.rate_hz, 0.1, 1000.0);
+    r.scalar<double>("rate_hz", e.rate_hz, kMinRateHz, kMaxRateHz);
     r.scalar<double>("input_delay_ms", e.input_delay_ms, 0.0, 5000.0);
     r.scalar<double>("pose_wait_ms", e.pose_wait_ms, 0.0, 10000.0);
     r.scalar<double>("max_future_ms", e.max_future_ms, 0.0, 60000.0);
@@ -575,6 +742,8 @@ core::Result<Config> load_config(const std::string& yaml_text, const std::string
   try {
     const YAML::Node root = YAML::Load(yaml_text);
     if (!root || root.IsNull()) return core::Error{"config.empty", "<root>: the file is empty"};
+    std::size_t nodes = 0;
+    check_structure(root, "", 0, nodes);
     MapReader r(root, "");
     int version = 0;
     r.scalar<int>("version", version, std::numeric_limits<int>::min(),

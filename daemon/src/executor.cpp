@@ -16,6 +16,7 @@
 #include <fstream>
 #include <mutex>
 #include <thread>
+#include <utility>
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -23,6 +24,7 @@
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
 
+#include "tarmac/core/assert.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/daemon/pose_buffer.hpp"
@@ -58,6 +60,57 @@ std::int64_t realtime_ns() {
 
 void sleep_until_monotonic(std::int64_t deadline_ns) {
   clock_sleep_until_ns(CLOCK_MONOTONIC, deadline_ns);
+}
+
+/// Sleeps until `deadline_ns` (CLOCK_MONOTONIC, absolute) in slices of at most
+/// Executor::kStopPollSlice, checking `stop_requested` before each; false when it asked to stop.
+/// The last slice ends on the deadline itself, so the wake is as precise as one long sleep.
+bool sleep_until_or_stopped(std::int64_t deadline_ns, const std::function<bool()>& stop_requested) {
+  constexpr std::int64_t kSliceNs =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(Executor::kStopPollSlice).count();
+  while (!stop_requested()) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= deadline_ns) return true;
+    sleep_until_monotonic(std::min(deadline_ns, now + kSliceNs));
+  }
+  return false;
+}
+
+/// What the tick schedule is computed from, checked before anything is created: a rate that is
+/// not finite (NaN fails every comparison) or a NaN delay would give a loop that never ticks,
+/// so it would never see a stop or ping the watchdog either.
+core::Status check_schedule(const config::ExecutorConfig& e) {
+  if (!std::isfinite(e.rate_hz) || e.rate_hz < config::kMinRateHz ||
+      e.rate_hz > config::kMaxRateHz) {
+    return core::Error{"config.range",
+                       fmt::format("executor.rate_hz: must be a finite number in [{}, {}], got {}",
+                                   config::kMinRateHz, config::kMaxRateHz, e.rate_hz)};
+  }
+  const std::pair<const char*, double> ms[] = {{"executor.input_delay_ms", e.input_delay_ms},
+                                               {"executor.pose_wait_ms", e.pose_wait_ms},
+                                               {"executor.max_future_ms", e.max_future_ms},
+                                               {"executor.sensor_phase_ms", e.sensor_phase_ms}};
+  for (const auto& [key, value] : ms) {
+    if (!std::isfinite(value) || value < 0.0 || value > 3.6e6) {
+      return core::Error{
+          "config.range",
+          fmt::format("{}: must be a finite number in [0, 3600000], got {}", key, value)};
+    }
+  }
+  return core::Ok{};
+}
+
+/// A period longer than half the systemd watchdog interval leaves no margin: one late tick and
+/// the service is restarted. Said once at start, naming both.
+void warn_if_watchdog_too_short(std::int64_t period_ns) {
+  std::uint64_t watchdog_us = 0;
+  if (sd_watchdog_enabled(0, &watchdog_us) <= 0) return;
+  if (2 * period_ns > static_cast<std::int64_t>(watchdog_us) * 1000) {
+    spdlog::warn(
+        "executor: the period ({} ms) is more than half the systemd watchdog interval ({} ms), "
+        "which is pinged once per tick: raise WatchdogSec= or executor.rate_hz",
+        period_ns / kNsPerMs, watchdog_us / 1000);
+  }
 }
 
 /// Fixed window of recent values with percentiles computed on a stack copy (no allocation).
@@ -709,6 +762,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
 }
 
 core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& cfg) {
+  if (auto schedule = check_schedule(cfg.executor); !schedule) return schedule.error();
   auto participant = transport::Participant::create(cfg.dds.participant);
   if (!participant) return participant.error();
   auto impl = std::make_unique<Impl>(cfg, std::move(participant).value());
@@ -776,6 +830,11 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
   const auto save_every = static_cast<std::uint64_t>(
       std::max(1.0, std::round(d.config.state.save_period_s * d.config.executor.rate_hz)));
   const std::int64_t period_ns = std::llround(1e9 / d.config.executor.rate_hz);
+  // create() refused any other rate (a NaN period never comes due: no tick, no stop seen).
+  TARMAC_ASSERT(period_ns >= std::llround(1e9 / config::kMaxRateHz) &&
+                    period_ns <= std::llround(1e9 / config::kMinRateHz),
+                "executor period outside [1 / kMaxRateHz, 1 / kMinRateHz]");
+  warn_if_watchdog_too_short(period_ns);
   // Ticks sit on multiples of the period of the stamp clock (CLOCK_REALTIME); the sleep runs on
   // CLOCK_MONOTONIC, so a wall-clock step does not distort the schedule.
   const std::int64_t real_now = realtime_ns();
@@ -794,10 +853,12 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
   const std::int64_t wake_lead_ns =
       std::chrono::duration_cast<std::chrono::nanoseconds>(ThreadPool::kWakeLead).count();
   while (!stop_requested()) {
+    // Asleep until the tick, but never longer than kStopPollSlice without looking at the stop
+    // predicate: a long period (rate_hz 0.1) must not delay a stop.
+    if (!sleep_until_or_stopped(deadline - wake_lead_ns, stop_requested)) break;
     // The workers slept since the last tick: they are woken a little before this one, so the
     // first stage's first parallel_for does not run on this thread alone while they wake up
     // (tens of µs on the project's VMs).
-    sleep_until_monotonic(deadline - wake_lead_ns);
     d.pool->wake();
     sleep_until_monotonic(deadline);
     std::int64_t late = monotonic_ns() - deadline;
@@ -813,6 +874,10 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
     d.tick(tick_real, static_cast<double>(late) / 1e6, skipped);
     if (hooks.on_tick_end) hooks.on_tick_end(d.cycle_index - 1);
     if (periodic_save && d.cycle_index % save_every == 0) d.snapshot_tsdf();
+    // The systemd watchdog is pinged here and nowhere else: after a tick completed, on the
+    // thread that runs the ticks. Not from another thread and not from the sleep above, so a
+    // loop that stops ticking (a stuck stage, a schedule that never comes due) stops the pings,
+    // and systemd restarts the service after WatchdogSec.
     sd_notify(0, "WATCHDOG=1");
     if (d.cycle_index % status_every == 0) {
       std::memcpy(status, "STATUS=", 7);
@@ -822,6 +887,7 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
     deadline += period_ns;
     tick_real += period_ns;
   }
+  if (hooks.on_loop_end) hooks.on_loop_end();
   if (periodic_save) d.stop_saver();  // an in-flight save completes before run() returns
   const auto t = totals();
   spdlog::info("executor: stopped after {} ticks ({} skipped, {} over budget), {} scans integrated",

@@ -4,6 +4,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
@@ -17,6 +19,30 @@ std::string error_of(const std::string& yaml) {
   auto result = load_config_string(yaml);
   EXPECT_FALSE(result.ok()) << yaml;
   return result.ok() ? "" : result.error().message;
+}
+
+std::string code_of(const std::string& yaml) {
+  auto result = load_config_string(yaml);
+  EXPECT_FALSE(result.ok()) << yaml;
+  return result.ok() ? "" : result.error().code;
+}
+
+/// Paths of the scalar leaves of `node` that hold a number ("executor.rate_hz",
+/// "sensors[0].extrinsic.translation_m.x", "executor.cpus[0]").
+void numeric_leaves(const YAML::Node& node, const std::string& path,
+                    std::vector<std::pair<std::string, YAML::Node>>& out) {
+  if (node.IsMap()) {
+    for (const auto& kv : node) {
+      numeric_leaves(kv.second, path.empty() ? kv.first.Scalar() : path + "." + kv.first.Scalar(),
+                     out);
+    }
+  } else if (node.IsSequence()) {
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      numeric_leaves(node[i], path + "[" + std::to_string(i) + "]", out);
+    }
+  } else if (double d = 0; node.IsScalar() && YAML::convert<double>::decode(node, d)) {
+    out.emplace_back(path, node);
+  }
 }
 
 TEST(Config, ShippedFileIsValidAndEqualsDefaults) {
@@ -38,11 +64,160 @@ TEST(Config, OutOfRangeAndBadValuesNameTheKey) {
   EXPECT_EQ(error_of("version: 1\ndds: {domain_id: 300}\n"),
             "dds.domain_id: must be in [0, 232], got 300");
   EXPECT_EQ(error_of("version: 1\ndds: {domain_id: abc}\n"),
-            "dds.domain_id: expected a number, got 'abc'");
+            "dds.domain_id: expected an integer, got a string 'abc'");
   EXPECT_EQ(error_of("version: 1\ndds: {transport: wifi}\n"),
             "dds.transport: must be one of {localhost, shm, network}, got 'wifi'");
   EXPECT_EQ(error_of("version: 1\ndds: {qos: {pose: {depth: 0}}}\n"),
             "dds.qos.pose.depth: must be in [1, 10000], got 0");
+}
+
+TEST(Config, EveryNumericKey_RefusesNanAndInfinityWithItsPath) {
+  // The effective config with every key (and one CPU, so the list is not empty), each numeric
+  // leaf in turn replaced by .nan, .inf and -.inf: every one is refused, naming its path.
+  Config c;
+  c.executor.cpus = {0};
+  const std::string text = to_yaml(c);
+  ASSERT_TRUE(load_config_string(text).ok()) << text;
+  const YAML::Node pristine = YAML::Load(text);
+  std::vector<std::pair<std::string, YAML::Node>> probe;
+  numeric_leaves(pristine, "", probe);
+  // 94 today: every numeric key the loader reads, except rpy_deg (to_yaml writes the rotation
+  // as a quaternion; the angles are checked in the next test).
+  ASSERT_GE(probe.size(), 94u);
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const auto& [value, shown] : {std::pair{std::numeric_limits<double>::quiet_NaN(), ".nan"},
+                                     std::pair{inf, ".inf"}, std::pair{-inf, "-.inf"}}) {
+    for (std::size_t i = 0; i < probe.size(); ++i) {
+      YAML::Node doc = YAML::Load(text);  // a fresh copy, then the i-th leaf replaced
+      std::vector<std::pair<std::string, YAML::Node>> leaves;
+      numeric_leaves(doc, "", leaves);
+      leaves[i].second = value;
+      YAML::Emitter out;
+      out << doc;
+      const auto result = load_config_string(out.c_str());
+      ASSERT_FALSE(result.ok()) << leaves[i].first << " = " << shown;
+      EXPECT_EQ(result.error().message,
+                leaves[i].first + ": must be a finite number, got " + std::string(shown));
+      EXPECT_EQ(result.error().code, "config.not_finite");
+    }
+  }
+}
+
+TEST(Config, NonFiniteNumbers_AreRefusedInEveryKindOfField) {
+  // Scalars of the executor (a NaN rate never ticks), as yaml-cpp spells them.
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: .nan}\n"),
+            "executor.rate_hz: must be a finite number, got .nan");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: .NaN}\n"),
+            "executor.rate_hz: must be a finite number, got .NaN");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {input_delay_ms: .inf}\n"),
+            "executor.input_delay_ms: must be a finite number, got .inf");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {input_delay_ms: -.Inf}\n"),
+            "executor.input_delay_ms: must be a finite number, got -.Inf");
+  // Beyond a double: not finite either, not "not a number".
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: 1e400}\n"),
+            "executor.rate_hz: must be a finite number, got 1e400");
+  // A float key (TSDF): finite as a double but beyond a float is out of range.
+  EXPECT_EQ(error_of("version: 1\ntsdf: {voxel_size_m: .inf}\n"),
+            "tsdf.voxel_size_m: must be a finite number, got .inf");
+  EXPECT_EQ(error_of("version: 1\ntsdf: {voxel_size_m: 1e39}\n"),
+            "tsdf.voxel_size_m: must be in [0.01, 2], got 1e39");
+  // Integer keys and list elements.
+  EXPECT_EQ(error_of("version: 1\nexecutor: {workers: .inf}\n"),
+            "executor.workers: must be a finite number, got .inf");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {cpus: [0, .nan]}\n"),
+            "executor.cpus[1]: must be a finite number, got .nan");
+  // Nested in a sensor: the extrinsic's translation, quaternion and angles, and its own keys.
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - id: front\n  - id: rear\n"
+                     "    extrinsic: {translation_m: {x: 1.0, y: .nan}}\n"),
+            "sensors[1].extrinsic.translation_m.y: must be a finite number, got .nan");
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: a, extrinsic: {quaternion: {w: .nan}}}\n"),
+            "sensors[0].extrinsic.quaternion.w: must be a finite number, got .nan");
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: a, extrinsic: {rpy_deg: {yaw: -.inf}}}\n"),
+            "sensors[0].extrinsic.rpy_deg.yaw: must be a finite number, got -.inf");
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: a, max_age_ms: .inf}\n"),
+            "sensors[0].max_age_ms: must be a finite number, got .inf");
+  EXPECT_EQ(error_of("version: 1\nfilters: {ego_box_min_m: {z: .nan}}\n"),
+            "filters.ego_box_min_m.z: must be a finite number, got .nan");
+  EXPECT_EQ(code_of("version: 1\nexecutor: {rate_hz: .nan}\n"), "config.not_finite");
+  // Finite values in range are still read.
+  auto ok = load_config_string("version: 1\nexecutor: {rate_hz: +5.0, workers: +3, cpus: [1]}\n");
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok.value().executor.rate_hz, 5.0);
+  EXPECT_EQ(ok.value().executor.workers, 3u);
+}
+
+TEST(Config, DuplicateKeys_AreRefusedWithBothLines) {
+  EXPECT_EQ(error_of("version: 1\nexecutor: {workers: 2}\nbudgets: {}\nexecutor: {workers: 3}\n"),
+            "executor: duplicate key (line 2 and line 4)");
+  EXPECT_EQ(error_of("version: 1\nversion: 1\n"), "version: duplicate key (line 1 and line 2)");
+  EXPECT_EQ(error_of("version: 1\nexecutor:\n  rate_hz: 5\n  workers: 2\n  rate_hz: 8\n"),
+            "executor.rate_hz: duplicate key (line 3 and line 5)");
+  EXPECT_EQ(error_of("version: 1\ndds:\n  qos:\n    pose:\n      depth: 3\n      depth: 4\n"),
+            "dds.qos.pose.depth: duplicate key (line 5 and line 6)");
+  // Inside a list: the second sensor's extrinsic.
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - id: front\n  - id: rear\n    extrinsic:\n"
+                     "      translation_m: {x: 1.0}\n      translation_m: {x: 2.0}\n"),
+            "sensors[1].extrinsic.translation_m: duplicate key (line 6 and line 7)");
+  // Two on one line (flow map): the columns tell them apart.
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: 5, rate_hz: 8}\n"),
+            "executor.rate_hz: duplicate key (line 2 column 12 and line 2 column 24)");
+  // Refused even where the reader would not look (an unknown section is reported as such only
+  // after the structure is sound) and whatever the values.
+  EXPECT_EQ(error_of("version: 1\nfoo: {a: 1, a: 1}\n"),
+            "foo.a: duplicate key (line 2 column 7 and line 2 column 13)");
+  EXPECT_EQ(code_of("version: 1\nversion: 1\n"), "config.duplicate_key");
+}
+
+TEST(Config, TypeErrors_SayWhatWasExpectedAndWhatWasFound) {
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: fast}\n"),
+            "executor.rate_hz: expected a number, got a string 'fast'");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: [10]}\n"),
+            "executor.rate_hz: expected a number, got a list");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {workers: 2.5}\n"),
+            "executor.workers: expected an integer, got a number '2.5'");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {workers: 0x10}\n"),
+            "executor.workers: expected an integer, got a string '0x10'");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {workers: true}\n"),
+            "executor.workers: expected an integer, got a bool 'true'");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {lock_memory: 1}\n"),
+            "executor.lock_memory: expected a bool (true or false), got a number '1'");
+  EXPECT_EQ(error_of("version: 1\npose: {topic: {name: x}}\n"),
+            "pose.topic: expected a string, got a map");
+  EXPECT_EQ(error_of("version: 1\ndds: {transport: [localhost]}\n"),
+            "dds.transport: expected a string (one of {localhost, shm, network}), got a list");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {cpus: 3}\n"),
+            "executor.cpus: expected a list of integers, got a number '3'");
+  EXPECT_EQ(error_of("version: 1\nexecutor: {cpus: [0, one]}\n"),
+            "executor.cpus[1]: expected an integer, got a string 'one'");
+  EXPECT_EQ(error_of("version: 1\ndds: {network_interfaces: [lo, [eth0]]}\n"),
+            "dds.network_interfaces[1]: expected a string, got a list");
+  EXPECT_EQ(error_of("version: 1\ndds: {initial_peers: 10.0.0.1}\n"),
+            "dds.initial_peers: expected a list of strings, got a string '10.0.0.1'");
+  EXPECT_EQ(error_of("version: 1\nexecutor: [rate_hz, 5]\n"),
+            "executor: expected a map, got a list");
+  EXPECT_EQ(error_of("version: 1\nsensors: {id: front}\n"),
+            "sensors: expected a list of maps, got a map");
+  EXPECT_EQ(error_of("version: 1\nsensors: [front]\n"),
+            "sensors[0]: expected a map, got a string 'front'");
+  EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: a, extrinsic: {translation_m: [1, 2, 3]}}\n"),
+            "sensors[0].extrinsic.translation_m: expected a map, got a list");
+  EXPECT_EQ(error_of("- version\n- 1\n"), "<root>: expected a map, got a list");
+  EXPECT_EQ(error_of("version: 1\n[a, b]: 1\n"),
+            "<root>: keys must be strings, got a list at line 2 column 1");
+  EXPECT_EQ(code_of("version: 1\nexecutor: {workers: 2.5}\n"), "config.type");
+}
+
+TEST(Config, SelfContainingOrExpandingAliases_AreRefusedNotFollowedForever) {
+  EXPECT_EQ(code_of("version: 1\nexecutor: {cpus: &loop [*loop]}\n"), "config.structure");
+  EXPECT_NE(error_of("version: 1\nexecutor: {cpus: &loop [*loop]}\n").find("nested deeper than"),
+            std::string::npos);
+  // 2^30 leaves from 30 lines ("billion laughs"): refused after kMaxNodes visits.
+  std::string laughs = "version: 1\nl0: &l0 [1, 1]\n";
+  for (int i = 1; i <= 30; ++i) {
+    laughs += "l" + std::to_string(i) + ": &l" + std::to_string(i) + " [*l" +
+              std::to_string(i - 1) + ", *l" + std::to_string(i - 1) + "]\n";
+  }
+  EXPECT_NE(error_of(laughs).find("more than 100000 nodes"), std::string::npos);
 }
 
 TEST(Config, CorrectionKeysAreReadAndChecked) {
@@ -211,7 +386,7 @@ TEST(Config, SecurityIsOffByDefaultAndItsKeysNameTheirPath) {
   EXPECT_EQ(error_of("version: 1\ndds: {security: {enable: true}}\n"),
             "dds.security.enable: unknown key");
   EXPECT_EQ(error_of("version: 1\ndds: {security: {enabled: 2}}\n"),
-            "dds.security.enabled: expected a number, got '2'");
+            "dds.security.enabled: expected a bool (true or false), got a number '2'");
   EXPECT_EQ(error_of("version: 1\ndds: {security: {enabled: true}}\n"),
             "dds.security.identity_ca: must be set when dds.security.enabled is true");
   EXPECT_EQ(

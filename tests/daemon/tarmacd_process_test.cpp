@@ -22,6 +22,7 @@
 
 #include <gtest/gtest.h>
 
+#include "notify_socket.hpp"
 #include "rtps_sniffer.hpp"
 #include "tarmac/core/task_runner.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
@@ -33,54 +34,7 @@ namespace {
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 
-class NotifySocket {
- public:
-  explicit NotifySocket(const fs::path& path) : path_(path) {
-    fd_ = socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
-    fs::remove(path);
-    bound_ = bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
-    timeval tv{0, 100'000};
-    setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  }
-  ~NotifySocket() {
-    close(fd_);
-    fs::remove(path_);
-  }
-  [[nodiscard]] bool bound() const { return bound_; }
-
-  /// Receives datagrams until one contains `needle` or the timeout passes; keeps them all.
-  bool wait_for(const std::string& needle, std::chrono::seconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    for (const auto& m : messages_) {
-      if (m.find(needle) != std::string::npos) return true;
-    }
-    char buf[4096];
-    while (std::chrono::steady_clock::now() < deadline) {
-      const ssize_t n = recv(fd_, buf, sizeof buf, 0);
-      if (n <= 0) continue;
-      messages_.emplace_back(buf, static_cast<std::size_t>(n));
-      if (messages_.back().find(needle) != std::string::npos) return true;
-    }
-    return false;
-  }
-  /// Index of the first message containing `needle`, or -1.
-  [[nodiscard]] int first(const std::string& needle) const {
-    for (std::size_t i = 0; i < messages_.size(); ++i) {
-      if (messages_[i].find(needle) != std::string::npos) return static_cast<int>(i);
-    }
-    return -1;
-  }
-  [[nodiscard]] const std::vector<std::string>& messages() const { return messages_; }
-
- private:
-  fs::path path_;
-  int fd_ = -1;
-  bool bound_ = false;
-  std::vector<std::string> messages_;
-};
+using tarmac::test::NotifySocket;
 
 /// Starts tarmacd with `dir`/tarmac.yaml, its output in `dir`/tarmacd.log, `dir`/notify.sock as
 /// NOTIFY_SOCKET and, when given, WATCHDOG_USEC. Returns the child's pid (< 0: fork failed).
@@ -387,6 +341,162 @@ TEST(TarmacdSecurity, SecuredDaemonComesUp_AndAForeignIdentityExits69NamingTheFi
       << text;
   EXPECT_NE(text.find("[dds.security]"), std::string::npos) << text;
 
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
+  fs::remove_all(dir);
+}
+
+// ---- Stopping (issue 19): SIGTERM ends tarmacd within 1 s whatever it is doing ----
+
+using SteadyClock = std::chrono::steady_clock;
+
+std::string read_file(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+/// Waits until the log `file` contains `needle`, reading it every millisecond.
+bool wait_for_log(const fs::path& file, const std::string& needle,
+                  std::chrono::milliseconds timeout) {
+  const auto deadline = SteadyClock::now() + timeout;
+  while (SteadyClock::now() < deadline) {
+    if (read_file(file).find(needle) != std::string::npos) return true;
+    std::this_thread::sleep_for(1ms);
+  }
+  return false;
+}
+
+/// SIGTERM, then the exit, timed (killed after 10 s).
+struct Stopped {
+  bool exited = false;  ///< by itself, with an exit status
+  int exit_code = -1;
+  std::chrono::milliseconds took{0};
+};
+
+Stopped sigterm_and_wait(pid_t pid) {
+  const auto t0 = SteadyClock::now();
+  kill(pid, SIGTERM);
+  int wstatus = 0;
+  pid_t waited = 0;
+  while ((waited = waitpid(pid, &wstatus, WNOHANG)) == 0 && SteadyClock::now() - t0 < 10s) {
+    std::this_thread::sleep_for(1ms);
+  }
+  Stopped stopped;
+  stopped.took = std::chrono::duration_cast<std::chrono::milliseconds>(SteadyClock::now() - t0);
+  if (waited == 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, &wstatus, 0);
+    return stopped;
+  }
+  stopped.exited = WIFEXITED(wstatus);
+  stopped.exit_code = stopped.exited ? WEXITSTATUS(wstatus) : -1;
+  return stopped;
+}
+
+/// A fresh directory whose config has no real time and a small occupancy window (so the save
+/// on exit is short: these tests time the stop, not the disk), plus `executor_extra` keys.
+fs::path stop_test_dir(const std::string& name, std::uint32_t domain,
+                       const std::string& executor_extra = "") {
+  const fs::path dir = fs::temp_directory_path() / (name + "-" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir / "state");
+  std::ofstream out(dir / "tarmac.yaml");
+  out << "version: 1\ndds: {domain_id: " << domain << "}\n"
+      << "executor: {realtime_priority: 0, lock_memory: false" << executor_extra << "}\n"
+      << "occupancy: {window_x_vox: 200, window_y_vox: 200, window_z_vox: 30}\n"
+      << "state: {dir: " << (dir / "state").string() << "}\n";
+  return dir;
+}
+
+constexpr auto kStopWithin = 1000ms;
+
+TEST(TarmacdStop, SigtermDuringStartup_ExitsAtOnceWith0AndLeavesTheStateAlone) {
+  auto sniffer = tarmac::test::RtpsSniffer::start();
+  TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
+  const fs::path dir =
+      stop_test_dir("tarmacd-stop-startup", tarmac::test::kDomainDaemonStopStartup);
+  const fs::path tsdf = dir / "state" / "tsdf.vdb";
+  ASSERT_TRUE(tarmac::core::save_tsdf(tsdf, small_tsdf(), map_info()).ok());
+  const std::string saved = read_file(tsdf);
+  NotifySocket notify(dir / "notify.sock");
+  ASSERT_TRUE(notify.bound());
+  const pid_t pid = spawn_tarmacd(dir);
+  ASSERT_GE(pid, 0);
+  // The first log line: the stop signals are handled from before it, and the DDS participant,
+  // the mapper, the TSDF load and the real-time setup all follow it.
+  ASSERT_TRUE(wait_for_log(dir / "tarmacd.log", "starting, config", 15s));
+  const Stopped stopped = sigterm_and_wait(pid);
+  const std::string log = read_file(dir / "tarmacd.log");
+  notify.collect_for(50ms);
+  ASSERT_TRUE(stopped.exited) << log;
+  EXPECT_EQ(stopped.exit_code, 0) << log;
+  EXPECT_LT(stopped.took, kStopWithin) << log;
+  EXPECT_NE(log.find("tarmacd: SIGTERM during startup: exiting (nothing to save yet)"),
+            std::string::npos)
+      << log;
+  EXPECT_EQ(notify.first("READY=1"), -1) << "stopped during startup, yet READY=1 was sent";
+  // Nothing was written: the saved TSDF is the one there before, no window was saved.
+  EXPECT_EQ(read_file(tsdf), saved);
+  EXPECT_FALSE(fs::exists(tsdf.string() + ".refused"));
+  EXPECT_FALSE(fs::exists(dir / "state" / "occupancy_window.bin"));
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
+  fs::remove_all(dir);
+}
+
+TEST(TarmacdStop, SigtermJustAfterReady_StopsSavesAndExits0Within1s) {
+  auto sniffer = tarmac::test::RtpsSniffer::start();
+  TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
+  const fs::path dir = stop_test_dir("tarmacd-stop-ready", tarmac::test::kDomainDaemonStopReady);
+  NotifySocket notify(dir / "notify.sock");
+  ASSERT_TRUE(notify.bound());
+  const pid_t pid = spawn_tarmacd(dir);
+  ASSERT_GE(pid, 0);
+  const bool ready = notify.wait_for("READY=1", 15s);
+  const Stopped stopped = sigterm_and_wait(pid);
+  const std::string log = read_file(dir / "tarmacd.log");
+  notify.collect_for(50ms);
+  EXPECT_TRUE(ready) << log;
+  ASSERT_TRUE(stopped.exited) << log;
+  EXPECT_EQ(stopped.exit_code, 0) << log;
+  EXPECT_LT(stopped.took, kStopWithin) << log;
+  EXPECT_GE(notify.first("STOPPING=1"), 0);
+  EXPECT_NE(log.find("tarmacd: Terminated received, stopping"), std::string::npos) << log;
+  EXPECT_TRUE(fs::exists(dir / "state" / "occupancy_window.bin"));
+  EXPECT_TRUE(tarmac::core::load_tsdf(dir / "state" / "tsdf.vdb").ok());
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
+  fs::remove_all(dir);
+}
+
+TEST(TarmacdStop, SigtermWhileAsleepBetweenSlowTicks_StopsWithin1s_AndOnlyTicksPingTheWatchdog) {
+  auto sniffer = tarmac::test::RtpsSniffer::start();
+  TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
+  // 0.2 Hz: 5 s asleep between ticks (before issue 19, SIGTERM was looked at once per tick).
+  const fs::path dir =
+      stop_test_dir("tarmacd-stop-slow", tarmac::test::kDomainDaemonStopSlowRate, ", rate_hz: 0.2");
+  NotifySocket notify(dir / "notify.sock");
+  ASSERT_TRUE(notify.bound());
+  const pid_t pid = spawn_tarmacd(dir, "2000000");  // WatchdogSec=2s, as the shipped unit
+  ASSERT_GE(pid, 0);
+  const bool ready = notify.wait_for("READY=1", 15s);
+  const bool ticked = notify.wait_for("WATCHDOG=1", 7s);  // the first tick, within one period
+  notify.collect_for(500ms);                              // asleep, 4.5 s before the next tick
+  const Stopped stopped = sigterm_and_wait(pid);
+  const std::string log = read_file(dir / "tarmacd.log");
+  notify.collect_for(50ms);
+  EXPECT_TRUE(ready) << log;
+  EXPECT_TRUE(ticked) << log;
+  ASSERT_TRUE(stopped.exited) << log;
+  EXPECT_EQ(stopped.exit_code, 0) << log;
+  EXPECT_LT(stopped.took, kStopWithin) << log;
+  EXPECT_NE(log.find("executor: stopped after 1 ticks"), std::string::npos) << log;
+  // One tick, one ping: the sleep between ticks pings nothing (a loop that never ticks would
+  // be restarted by systemd), and the mismatch with WatchdogSec is said at start.
+  EXPECT_EQ(notify.count("WATCHDOG=1"), 1);
+  EXPECT_NE(log.find("more than half the systemd watchdog interval (2000 ms)"), std::string::npos)
+      << log;
+  EXPECT_GE(notify.first("STOPPING=1"), 0);
   std::this_thread::sleep_for(200ms);
   EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
   fs::remove_all(dir);

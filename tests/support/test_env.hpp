@@ -25,7 +25,7 @@ enum Domain : std::uint32_t {
   kDomainSecurityUnauthenticated = 117,
   kDomainSecurityOtherCa = 118,
   kDomainSecurityDenied = 119,
-  // tarmacd integration tests (tests/daemon/): 130..149
+  // tarmacd integration tests (tests/daemon/): 130..152
   kDomainDaemonWorkers1 = 130,
   kDomainDaemonWorkers2 = 131,
   kDomainDaemonWorkers4 = 132,
@@ -44,9 +44,15 @@ enum Domain : std::uint32_t {
   kDomainDaemonPathCorrection = 145,
   kDomainDaemonPathEarly = 146,
   kDomainDaemonEsdfBand = 147,
-  // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 150..159
-  kDomainCycloneUdpClouds = 150,
-  kDomainCycloneTinyBuffer = 151,
+  // Stopping and the watchdog (tests/daemon/executor_stop_test.cpp, tarmacd_process_test.cpp)
+  kDomainDaemonWatchdogStall = 148,
+  kDomainDaemonStopAsleep = 149,
+  kDomainDaemonStopStartup = 150,
+  kDomainDaemonStopReady = 151,
+  kDomainDaemonStopSlowRate = 152,
+  // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 160..169
+  kDomainCycloneUdpClouds = 160,
+  kDomainCycloneTinyBuffer = 161,
 };
 
 inline bool running_in_ci() {

@@ -1,7 +1,11 @@
 #pragma once
 /// @file tarmacd's configuration: plain structs with defaults, loaded from one YAML file
-/// (config/tarmac.yaml documents every key). Unknown keys and out-of-range values are errors that
-/// name the key path, e.g. "dds.qos.costmap.depht: unknown key".
+/// (config/tarmac.yaml documents every key). Every error names the key path: an unknown key
+/// ("dds.qos.costmap.depht: unknown key"), a key given twice in one map, with both lines
+/// ("executor.rate_hz: duplicate key (line 3 and line 7)"), a wrong type, with the type expected
+/// and what was found ("executor.workers: expected an integer, got a number '2.5'"), a number
+/// that is not finite ("executor.rate_hz: must be a finite number, got .nan") and a value out of
+/// range ("dds.domain_id: must be in [0, 232], got 300").
 
 #include <cstdint>
 #include <string>
@@ -63,6 +67,10 @@ struct PoseInputConfig {
   /// pose input. Read when corrections.enabled.
   std::string correction_topic = "rt/tarmac/pose_correction";
 };
+
+/// The executor's rate bounds (YAML `executor.rate_hz`), also checked by the executor itself.
+inline constexpr double kMinRateHz = 0.1;
+inline constexpr double kMaxRateHz = 1000.0;
 
 /// The fixed-rate executor (YAML `executor`).
 struct ExecutorConfig {
@@ -166,7 +174,8 @@ struct Config {
                                                            ///< esdf_band, tsdf, corrections
 };
 
-/// Parses YAML text. Error code "config.<reason>", message "<key.path>: <why>".
+/// Parses YAML text. Error code "config.<reason>" (e.g. config.duplicate_key, config.type,
+/// config.not_finite, config.range, config.unknown_key), message "<key.path>: <why>".
 core::Result<Config> load_config_string(const std::string& yaml_text);
 /// Reads and parses a file; "config.io" when it cannot be read.
 core::Result<Config> load_config_file(const std::string& path);

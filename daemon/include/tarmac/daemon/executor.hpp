@@ -5,8 +5,10 @@
 /// (ScanScheduler), runs ingest + integrate per scan and the costmap once on the worker pool,
 /// publishes the costmap, the ESDF slice, a CycleReport (and now and then a DiagnosticArray),
 /// and pings the systemd watchdog. Wall time is measured and reported, never used to decide.
+/// A stop is seen within kStopPollSlice while asleep, never inside a tick.
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -47,16 +49,29 @@ struct TsdfLoadResult {
   std::string error;              ///< kRefused: the tsdf_io error ("code: message")
 };
 
-/// Instrumentation for tests and benchmarks; empty by default.
+/// Instrumentation for tests and benchmarks, and tarmacd's stop handshake; empty by default.
 struct RunHooks {
-  std::function<void()> on_thread_start;           ///< on the executor and each worker thread
-  std::function<void(std::uint64_t)> on_tick_end;  ///< on the executor thread, after each tick
+  std::function<void()> on_thread_start;  ///< on the executor and each worker thread
+  /// On the executor thread after each tick, before its watchdog ping (a hook that blocks
+  /// stalls the loop, and the pings stop).
+  std::function<void(std::uint64_t)> on_tick_end;
+  /// On the executor thread once the tick loop has ended, before run() waits for an in-flight
+  /// periodic save (tarmacd: StopSignals::loop_ended()).
+  std::function<void()> on_loop_end;
 };
 
 class Executor {
  public:
+  /// The longest the executor sleeps without checking its stop predicate: a stop reaches a
+  /// loop asleep in a long period (rate_hz 0.1: 10 s) within this.
+  static constexpr std::chrono::milliseconds kStopPollSlice{100};
+
   /// Creates the DDS participant, readers and writers and the mapper. Fails with the DDS or
-  /// config error. After it returns, every DDS entity exists (READY=1 may be sent).
+  /// config error. After it returns, every DDS entity exists (READY=1 may be sent). Refuses,
+  /// before any DDS entity exists, a schedule the loop could not keep ("config.range"): a rate
+  /// that is not finite or outside [config::kMinRateHz, config::kMaxRateHz], a delay, phase or
+  /// wait that is not finite or outside [0, 1 h] (the loader refuses them first; this guards
+  /// configs built in code).
   static core::Result<std::unique_ptr<Executor>> create(const config::Config& config);
   ~Executor();
   Executor(const Executor&) = delete;
@@ -69,8 +84,11 @@ class Executor {
   /// `hooks.on_thread_start` is taken from the first call.
   void prepare(const RunHooks& hooks = {});
 
-  /// Runs ticks on the calling thread until `stop_requested()` returns true (checked once per
-  /// tick, so a stop takes at most one period). Calls prepare(hooks) first if it has not run.
+  /// Runs ticks on the calling thread until `stop_requested()` returns true. It is checked
+  /// after every tick and at least every kStopPollSlice while the loop sleeps, never inside a
+  /// tick: the loop ends within kStopPollSlice, or when the current tick completes. Sends
+  /// WATCHDOG=1 after each completed tick, and from nowhere else. Calls prepare(hooks) first if
+  /// it has not run. `stop_requested` is called on the executor thread and must be RT-safe.
   void run(const std::function<bool()>& stop_requested, const RunHooks& hooks = {});
 
   /// Writes the occupancy window to state.dir/state.map_file. Not for the cycle.
