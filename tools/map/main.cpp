@@ -23,6 +23,7 @@
 #include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/tools/mesh_io.hpp"
+#include "tarmac/tools/safety.hpp"
 #include "tarmac/tools/stats.hpp"
 
 namespace {
@@ -306,6 +307,25 @@ int main(int argc, char** argv) {
     clearing.emplace(std::move(truth).value());
   }
 
+  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt): safety figures per cycle.
+  std::optional<tools::SafetyTracker> safety;
+  if (const auto truth_file = std::filesystem::path(opt.dataset) / "obstacle_columns.txt";
+      std::filesystem::exists(truth_file)) {
+    auto truth = tools::read_obstacle_truth(truth_file);
+    if (!truth) {
+      std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
+      return kExitData;
+    }
+    if (std::abs(truth.value().cell_m - params.occupancy.voxel_size_m) > 1e-9) {
+      std::fprintf(stderr,
+                   "tarmac-map: safety figures skipped: the truth's cells are %g m, the "
+                   "costmap's %g m\n",
+                   truth.value().cell_m, params.occupancy.voxel_size_m);
+    } else {
+      safety.emplace(std::move(truth).value());
+    }
+  }
+
   std::vector<tools::Correction> corrections;
   if (!opt.corrections.empty()) {
     auto read = tools::read_corrections(opt.corrections);
@@ -387,6 +407,9 @@ int main(int argc, char** argv) {
       clearing->observe(
           static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
           tools::blind_radius_from_ground(sensor_W, mapper.points_W(), T_W_B.translation().z()));
+    }
+    if (safety) {
+      safety->observe(mapper.costmap().costmap, static_cast<int>(k), T_W_B.translation().head<2>());
     }
     promotions += occ.promotions;
     demotions += occ.demotions;
@@ -587,6 +610,22 @@ int main(int argc, char** argv) {
        << ", \"ghost_cells\": " << r.ghost_cells << ", \"blind_at_leave\": " << r.blind_at_leave
        << ", \"in_view_p50_s\": " << r.in_view_p50_s << ", \"in_view_p90_s\": " << r.in_view_p90_s
        << ", \"in_view_max_s\": " << r.in_view_max_s << "}";
+  }
+  if (safety) {
+    const tools::SafetyReport r = safety->report();
+    std::printf(
+        "safety (obstacle columns within 20 m seen by then, %zu cycles): lethal within one cell "
+        "worst %.1f %% (scan %d), mean %.1f %%; read free %zu, inflated only %zu, unknown %zu "
+        "(column-cycles); false lethal %zu of %zu lethal cells (worst cycle %.2f %%)\n",
+        r.cycles, 100.0 * r.worst_share, r.worst_scan, 100.0 * r.mean_share, r.read_free,
+        r.read_inflated, r.read_unknown, r.false_lethal, r.lethal_cells,
+        100.0 * r.worst_false_share);
+    tj << ",\n  \"safety\": {\"cycles\": " << r.cycles << ", \"worst_share\": " << r.worst_share
+       << ", \"worst_scan\": " << r.worst_scan << ", \"mean_share\": " << r.mean_share
+       << ", \"read_free\": " << r.read_free << ", \"read_inflated\": " << r.read_inflated
+       << ", \"read_unknown\": " << r.read_unknown << ", \"lethal_cells\": " << r.lethal_cells
+       << ", \"false_lethal\": " << r.false_lethal
+       << ", \"worst_false_share\": " << r.worst_false_share << "}";
   }
   tj << "\n}\n";
   if (params.tsdf.enabled) {

@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <numbers>
 #include <system_error>
 
@@ -76,6 +77,9 @@ std::string readme(const SequenceParams& p) {
   s += "  times.txt         per scan, stamp in s (scan i at i / rate)\n";
   s += "  scene.json        the scene in the scene frame (x along the apron, y left, z up, m,\n";
   s += "                    ground z = 0) and T_world_scene (rotation about x by the tilt)\n";
+  s += "  obstacle_columns.txt  the costmap's ground truth: cells (lattice ix iy) whose span\n";
+  s += "                    " + number(p.envelope_low_m) + ".." + number(p.envelope_high_m) +
+       " m up meets a static object, with the first scan that returned a point from it\n";
   s += "  dynamic_boxes.txt moving objects' ground truth: a '# T_world_scene' line (12 numbers,\n";
   s += "                    row-major 3x4), then per scan and moving object 'scan id min_x min_y\n";
   s += "                    min_z max_x max_y max_z': its axis-aligned box in the scene frame at\n";
@@ -189,11 +193,38 @@ void Lidar::scan(const Scene& scene, const Eigen::Isometry3d& T_W_S, double t_s,
   }
 }
 
+DrivePath DrivePath::loop(const Eigen::Vector2d& min_W, const Eigen::Vector2d& max_W,
+                          double speed_mps) {
+  DrivePath p;
+  p.speed_mps = speed_mps;
+  p.waypoints_W = {min_W, {max_W.x(), min_W.y()}, max_W, {min_W.x(), max_W.y()}, min_W};
+  return p;
+}
+
+double DrivePath::length_m() const {
+  if (waypoints_W.size() < 2) return (end_W - start_W).norm();
+  double length = 0.0;
+  for (std::size_t i = 1; i < waypoints_W.size(); ++i) {
+    length += (waypoints_W[i] - waypoints_W[i - 1]).norm();
+  }
+  return length;
+}
+
 Eigen::Isometry3d DrivePath::T_W_base(double t_s) const {
   const double length = length_m();
-  const Eigen::Vector2d heading = (end_W - start_W) / length;
-  const double travelled_m = std::clamp(speed_mps * t_s, 0.0, length);
-  const Eigen::Vector2d p = start_W + travelled_m * heading;
+  double travelled_m = std::clamp(speed_mps * t_s, 0.0, length);
+  Eigen::Vector2d from = start_W, to = end_W;
+  for (std::size_t i = 1; i < waypoints_W.size(); ++i) {  // the segment travelled_m lies on
+    from = waypoints_W[i - 1];
+    to = waypoints_W[i];
+    const double segment = (to - from).norm();
+    if (travelled_m <= segment || i + 1 == waypoints_W.size()) break;
+    travelled_m -= segment;
+  }
+  const double segment = (to - from).norm();
+  const Eigen::Vector2d heading =
+      segment > 0.0 ? Eigen::Vector2d((to - from) / segment) : Eigen::Vector2d::UnitX();
+  const Eigen::Vector2d p = from + std::min(travelled_m, segment) * heading;
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = Eigen::AngleAxisd(std::atan2(heading.y(), heading.x()), Eigen::Vector3d::UnitZ())
                    .toRotationMatrix();
@@ -286,6 +317,34 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
     return result;
   }
 
+  // Ground truth for the costmap: every column (truth_cell_m on the lattice) whose envelope span
+  // meets a static object, with the first scan that returned a point from that span.
+  const double cell = params.truth_cell_m;
+  std::map<std::pair<long, long>, int> columns;  // (ix, iy) -> first scan seen, -1 never
+  for (const Object& o : scene.objects()) {
+    if (o.dynamic() || o.kind == "ground") continue;
+    const Aabb b = scene.bounds_at(o.id, 0.0);
+    if (b.max_W.z() < params.envelope_low_m || b.min_W.z() > params.envelope_high_m) continue;
+    for (long ix = static_cast<long>(std::floor(b.min_W.x() / cell));
+         ix <= static_cast<long>(std::floor(b.max_W.x() / cell)); ++ix) {
+      for (long iy = static_cast<long>(std::floor(b.min_W.y() / cell));
+           iy <= static_cast<long>(std::floor(b.max_W.y() / cell)); ++iy) {
+        // 3 x 3 points of the cell's square, every 2 cm up the envelope.
+        bool hit = false;
+        for (int sx = 0; sx < 3 && !hit; ++sx) {
+          for (int sy = 0; sy < 3 && !hit; ++sy) {
+            const double x = (static_cast<double>(ix) + 0.1 + 0.4 * sx) * cell;
+            const double y = (static_cast<double>(iy) + 0.1 + 0.4 * sy) * cell;
+            for (double z = params.envelope_low_m; z <= params.envelope_high_m && !hit; z += 0.02) {
+              hit = contains(o.shape_W, Eigen::Vector3d(x, y, z));
+            }
+          }
+        }
+        if (hit) columns.emplace(std::make_pair(ix, iy), -1);
+      }
+    }
+  }
+
   const Lidar lidar(params.lidar);
   GaussianNoise noise(params.seed);
   std::vector<LidarReturn> returns;
@@ -306,6 +365,17 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       append_le(bytes, r.intensity);
     }
     if (!write_file(scans_dir / scan_name(i), bytes, result.error)) return result;
+    for (const LidarReturn& r : returns) {
+      if (r.object_id < 0 || r.range_m <= 0.0) continue;
+      const Object& o = scene.objects()[static_cast<std::size_t>(r.object_id)];
+      if (o.dynamic() || o.kind == "ground") continue;
+      const Eigen::Vector3d p_W = T_W_S * (r.point_S * (r.true_range_m / r.range_m));
+      if (p_W.z() < params.envelope_low_m || p_W.z() > params.envelope_high_m) continue;
+      const auto key = std::make_pair(static_cast<long>(std::floor(p_W.x() / cell)),
+                                      static_cast<long>(std::floor(p_W.y() / cell)));
+      // A return on the object's surface lies in one of its columns (or on the edge of one).
+      if (auto it = columns.find(key); it != columns.end() && it->second < 0) it->second = i;
+    }
     poses += pose_line(params.written_T_O_S(i));
     times += number(t_s) + "\n";
     for (const Object& o : scene.objects()) {
@@ -334,6 +404,15 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       !write_file(out_dir / "dynamic_boxes.txt", boxes, result.error)) {
     return result;
   }
+  std::string truth = "# obstacle columns: cell_m " + number(cell) + " envelope_z_m " +
+                      number(params.envelope_low_m) + " " + number(params.envelope_high_m) +
+                      "\n# T_world_scene " + pose_line(T_O_W) +
+                      "# ix iy first_seen_scan (-1: no return from its envelope span)\n";
+  for (const auto& [key, first] : columns) {
+    truth += std::to_string(key.first) + ' ' + std::to_string(key.second) + ' ' +
+             std::to_string(first) + '\n';
+  }
+  if (!write_file(out_dir / "obstacle_columns.txt", truth, result.error)) return result;
 
   std::sort(points_per_scan.begin(), points_per_scan.end());
   result.summary.scans = n;

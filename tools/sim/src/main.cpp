@@ -36,7 +36,9 @@ void usage(std::FILE* to) {
       "  --noise-m M        Gaussian range noise, 1 sigma (default 0)\n"
       "  --seed N           noise seed (default 1)\n"
       "  --tilt-deg DEG     rotate the poses' world frame about x (default 0)\n"
-      "  --scene NAME       airside (default) or terminal (long walls beside the path)\n"
+      "  --scene NAME       airside (default), terminal (long walls beside the path) or\n"
+      "                     aircraft (a loop round a parked aircraft whose belly is in the\n"
+      "                     vehicle envelope, default speed 10 m/s)\n"
       "  --drift-m M        pose drift: written poses shifted along scene y, growing to M\n"
       "  --drift-ramp-s S   time the drift takes to reach M (default 2 s)\n"
       "  --correct-at K     true poses again from scan K on; writes corrections.txt (the\n"
@@ -56,6 +58,7 @@ int main(int argc, char** argv) {
   sim::SequenceParams params;
   std::string out_dir;
   std::string scene_name = "airside";
+  bool speed_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string_view arg = argv[i];
     if (arg == "--help" || arg == "-h") {
@@ -78,6 +81,7 @@ int main(int argc, char** argv) {
       ok = parse(value, params.rate_hz);
     } else if (arg == "--speed") {
       ok = parse(value, params.path.speed_mps);
+      speed_given = true;
     } else if (arg == "--beams") {
       ok = parse(value, params.lidar.beams);
     } else if (arg == "--azimuth-steps") {
@@ -92,7 +96,7 @@ int main(int argc, char** argv) {
       ok = parse(value, params.tilt_deg);
     } else if (arg == "--scene") {
       scene_name = value;
-      ok = scene_name == "airside" || scene_name == "terminal";
+      ok = scene_name == "airside" || scene_name == "terminal" || scene_name == "aircraft";
     } else if (arg == "--drift-m") {
       ok = parse(value, params.drift_m);
     } else if (arg == "--drift-ramp-s") {
@@ -115,15 +119,22 @@ int main(int argc, char** argv) {
     usage(stderr);
     return kExitUsage;
   }
+  if (scene_name == "aircraft") {
+    const double sensor_height_m = params.path.sensor_height_m;
+    params.path = sim::DrivePath::loop({-30.0, -22.0}, {30.0, 22.0},
+                                       speed_given ? params.path.speed_mps : 10.0);
+    params.path.sensor_height_m = sensor_height_m;
+  }
   if (const std::string error = params.validate(); !error.empty()) {
     std::fprintf(stderr, "tarmac-sim: %s\n", error.c_str());
     usage(stderr);
     return kExitUsage;
   }
 
-  const sim::SequenceResult result = sim::write_sequence(
-      scene_name == "terminal" ? sim::Scene::terminal_walls() : sim::Scene::airside_default(),
-      params, out_dir);
+  const sim::Scene scene = scene_name == "terminal"   ? sim::Scene::terminal_walls()
+                           : scene_name == "aircraft" ? sim::Scene::aircraft_stand()
+                                                      : sim::Scene::airside_default();
+  const sim::SequenceResult result = sim::write_sequence(scene, params, out_dir);
   if (!result.ok()) {
     std::fprintf(stderr, "tarmac-sim: %s\n", result.error.c_str());
     return kExitIo;

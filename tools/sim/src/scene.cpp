@@ -388,6 +388,24 @@ Scene Scene::terminal_walls() {
   return scene;
 }
 
+Scene Scene::aircraft_stand() {
+  using V = Eigen::Vector3d;
+  Scene scene;
+  scene.add("ground", "ground", Plane{V::UnitZ(), 0.0});
+  scene.add("fuselage", "fuselage", Cylinder{Axis::kX, V(-18.0, 0.0, 3.3), 36.0, 1.8});
+  scene.add("wing_right", "wing", Box{V(-3.0, -15.0, 2.6), V(3.0, -1.5, 2.9)});
+  scene.add("wing_left", "wing", Box{V(-3.0, 1.5, 2.6), V(3.0, 15.0, 2.9)});
+  scene.add("engine_right", "engine", Cylinder{Axis::kX, V(-4.0, -6.0, 1.9), 4.0, 0.7});
+  scene.add("engine_left", "engine", Cylinder{Axis::kX, V(-4.0, 6.0, 1.9), 4.0, 0.7});
+  scene.add("gear_nose", "landing_gear", Cylinder{Axis::kZ, V(14.0, 0.0, 0.0), 1.6, 0.25});
+  scene.add("gear_main_right", "landing_gear", Cylinder{Axis::kZ, V(1.0, -2.5, 0.0), 1.6, 0.35});
+  scene.add("gear_main_left", "landing_gear", Cylinder{Axis::kZ, V(1.0, 2.5, 0.0), 1.6, 0.35});
+  scene.add("tail", "tail", Box{V(15.0, -0.2, 3.3), V(18.0, 0.2, 8.0)});
+  scene.add("cone_nose", "cone", Cone{V(20.0, 0.0, 0.0), 0.2, 0.5});
+  scene.add("cone_wing", "cone", Cone{V(0.0, -16.0, 0.0), 0.2, 0.5});
+  return scene;
+}
+
 Scene Scene::airside_default() {
   using V = Eigen::Vector3d;
   Scene scene;

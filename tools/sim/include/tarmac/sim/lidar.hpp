@@ -96,16 +96,23 @@ class Lidar {
 };
 
 /// The vehicle drives in a straight line from start_W to end_W at constant speed, heading along
-/// the line, and stops at end_W. The sensor sits sensor_height_m above the base
-/// (T_base_S = translation (0, 0, sensor_height_m), no rotation).
+/// the line, and stops at end_W — or, when `waypoints_W` holds two or more points, along that
+/// polyline (start_W and end_W unused), heading along each segment in turn. The sensor sits
+/// sensor_height_m above the base (T_base_S = translation (0, 0, sensor_height_m), no rotation).
 struct DrivePath {
-  Eigen::Vector2d start_W{0.0, 0.0};  ///< m, on the ground
-  Eigen::Vector2d end_W{60.0, 0.0};   ///< m, != start_W
-  double speed_mps = 3.0;             ///< > 0
+  Eigen::Vector2d start_W{0.0, 0.0};         ///< m, on the ground
+  Eigen::Vector2d end_W{60.0, 0.0};          ///< m, != start_W
+  std::vector<Eigen::Vector2d> waypoints_W;  ///< m; 2+ points: a polyline instead of the line
+  double speed_mps = 3.0;                    ///< > 0
   double sensor_height_m = 2.0;
 
+  /// A loop round the rectangle [min_W, max_W] (counter-clockwise from its lower-left corner,
+  /// back to it) at `speed_mps`.
+  static DrivePath loop(const Eigen::Vector2d& min_W, const Eigen::Vector2d& max_W,
+                        double speed_mps);
+
   /// Length of the path (m).
-  double length_m() const { return (end_W - start_W).norm(); }
+  double length_m() const;
   /// Time to drive the whole path (s).
   double duration_s() const { return length_m() / speed_mps; }
   /// Pose of the vehicle base at time t_s (clamped to [0, duration_s()]).
@@ -128,6 +135,13 @@ struct SequenceParams {
   /// true poses are written again (the jump a GPS fix or loop closure makes). The scans are
   /// always taken from the true poses.
   double drift_m = 0.0;
+  /// Ground truth for the costmap (obstacle_columns.txt): columns of truth_cell_m on the world
+  /// lattice whose vertical span [envelope_low_m, envelope_high_m] above the ground meets a static
+  /// object, i.e. what the costmap must show lethal (the shipped config's min_obstacle_height_m and
+  /// vehicle_height_m + clearance_m, its voxel size).
+  double truth_cell_m = 0.2;
+  double envelope_low_m = 0.08;
+  double envelope_high_m = 2.8;
   double drift_ramp_s = 2.0;  ///< > 0
   int correct_at_scan = 0;
   /// The written pose of scan i (with the drift, if any).

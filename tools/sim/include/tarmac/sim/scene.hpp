@@ -177,6 +177,24 @@ class Scene {
   ///  - id 3  pillar          vertical cylinder at (30, -6), r = 0.4, z in [0, 4]
   static Scene terminal_walls();
 
+  /// A parked narrow-body aircraft to drive round (DrivePath::loop), its fuselage low enough
+  /// that the belly lies inside a 2.8 m vehicle envelope; every coordinate in m, frame W:
+  ///  - id 0  ground             plane z = 0
+  ///  - id 1  fuselage           cylinder along x, axis y = 0, z = 3.3, r = 1.8, x in [-18, 18]
+  ///                             (belly at z = 1.5)
+  ///  - id 2  wing_right         box [-3, -15, 2.6] .. [3, -1.5, 2.9] (its lower face in the
+  ///  - id 3  wing_left          box [-3, 1.5, 2.6] .. [3, 15, 2.9]    envelope's top 0.2 m)
+  ///  - id 4  engine_right       cylinder along x, axis y = -6, z = 1.9, r = 0.7, x in [-4, 0]
+  ///  - id 5  engine_left        cylinder along x, axis y = 6, z = 1.9, r = 0.7, x in [-4, 0]
+  ///  - id 6  gear_nose          vertical cylinder at (14, 0), r = 0.25, z in [0, 1.6]
+  ///  - id 7  gear_main_right    vertical cylinder at (1, -2.5), r = 0.35, z in [0, 1.6]
+  ///  - id 8  gear_main_left     vertical cylinder at (1, 2.5), r = 0.35, z in [0, 1.6]
+  ///  - id 9  tail               box [15, -0.2, 3.3] .. [18, 0.2, 8] (above the envelope)
+  ///  - id 10 cone_nose          cone, base (20, 0, 0), r = 0.2, h = 0.5
+  ///  - id 11 cone_wing          cone, base (0, -16, 0), r = 0.2, h = 0.5
+  /// The loop round it: the rectangle [-30, -22] .. [30, 22].
+  static Scene aircraft_stand();
+
  private:
   std::vector<Object> objects_;
 };

@@ -1,0 +1,107 @@
+// The costmap's safety figures: the scorer on hand-made costmaps, and the simulator's truth of
+// which columns a costmap must show lethal on the parked-aircraft scene.
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include "tarmac/sim/lidar.hpp"
+#include "tarmac/sim/scene.hpp"
+#include "tarmac/tools/safety.hpp"
+
+namespace tarmac::tools {
+namespace {
+
+/// A 20 × 20 costmap of 0.2 m cells with its corner at the lattice point (−10, −10) (−2 m), all
+/// `fill`.
+core::Costmap costmap_of(std::int8_t fill) {
+  core::GridGeometry2D g;
+  g.resolution_m = 0.2;
+  g.origin_x_m = -2.0;
+  g.origin_y_m = -2.0;
+  g.width = 20;
+  g.height = 20;
+  return core::Costmap(g, fill);
+}
+
+TEST(Safety, ScoresLethalNearFreeInflatedUnknownAndFalseLethal) {
+  ObstacleTruth truth;
+  truth.first_seen[ObstacleTruth::key(0, 0)] = 0;    // seen at scan 0: cell (10, 10)
+  truth.first_seen[ObstacleTruth::key(3, 0)] = 0;    // cell (13, 10)
+  truth.first_seen[ObstacleTruth::key(6, 0)] = 0;    // cell (16, 10)
+  truth.first_seen[ObstacleTruth::key(-5, 0)] = 0;   // cell (5, 10)
+  truth.first_seen[ObstacleTruth::key(0, 5)] = 5;    // seen only from scan 5
+  truth.first_seen[ObstacleTruth::key(0, -5)] = -1;  // never seen
+  auto map = costmap_of(core::kCostFree);
+  map.at(11, 10) = core::kCostLethal;  // one cell from column (0, 0): counts for it
+  map.at(13, 10) = 50;                 // inflated only
+  map.at(16, 10) = core::kCostUnknown;
+  // column (-5, 0) reads free: the unsafe case
+  map.at(2, 2) = core::kCostLethal;  // far from every column: false lethal
+  const SafetyCycle c = score_costmap(map, truth, 1, {0.0, 0.0}, 20.0);
+  EXPECT_EQ(c.visible, 4u);
+  EXPECT_EQ(c.lethal_near, 1u);
+  EXPECT_EQ(c.read_inflated, 1u);
+  EXPECT_EQ(c.read_unknown, 1u);
+  EXPECT_EQ(c.read_free, 1u);
+  EXPECT_EQ(c.lethal_cells, 2u);
+  EXPECT_EQ(c.false_lethal, 1u);
+  EXPECT_DOUBLE_EQ(c.share_lethal(), 0.25);
+  // Out of the radius: nothing counted.
+  const SafetyCycle far = score_costmap(map, truth, 1, {100.0, 0.0}, 20.0);
+  EXPECT_EQ(far.visible, 0u);
+  EXPECT_EQ(far.lethal_cells, 0u);
+  // From scan 5 the column (0, 5) is visible too.
+  EXPECT_EQ(score_costmap(map, truth, 5, {0.0, 0.0}, 20.0).visible, 5u);
+}
+
+TEST(Safety, TrackerReportsTheWorstCycle) {
+  ObstacleTruth truth;
+  truth.first_seen[ObstacleTruth::key(0, 0)] = 0;
+  SafetyTracker tracker(truth);
+  auto good = costmap_of(core::kCostFree);
+  good.at(10, 10) = core::kCostLethal;
+  const auto bad = costmap_of(core::kCostFree);
+  tracker.observe(good, 0, {0.0, 0.0});
+  tracker.observe(bad, 1, {0.0, 0.0});
+  tracker.observe(good, 2, {0.0, 0.0});
+  const SafetyReport r = tracker.report();
+  EXPECT_EQ(r.cycles, 3u);
+  EXPECT_DOUBLE_EQ(r.worst_share, 0.0);
+  EXPECT_EQ(r.worst_scan, 1);
+  EXPECT_NEAR(r.mean_share, 2.0 / 3.0, 1e-12);
+  EXPECT_EQ(r.read_free, 1u);
+}
+
+TEST(Safety, SimulatorTruthOfTheAircraftStand_BellyGearAndLowWingAreColumns) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("tarmac_safety_truth_" + std::to_string(::getpid()));
+  sim::SequenceParams p;
+  p.path = sim::DrivePath::loop({-30.0, -22.0}, {30.0, 22.0}, 10.0);
+  p.scans = 3;
+  p.lidar.beams = 8;
+  p.lidar.azimuth_steps = 256;
+  const auto written = sim::write_sequence(sim::Scene::aircraft_stand(), p, dir);
+  ASSERT_TRUE(written.ok()) << written.error;
+  auto truth = read_obstacle_truth(dir / "obstacle_columns.txt");
+  ASSERT_TRUE(truth.ok()) << truth.error().message;
+  const auto column = [&](double x, double y) {
+    return truth.value().is_column(static_cast<std::int64_t>(std::floor(x / 0.2)),
+                                   static_cast<std::int64_t>(std::floor(y / 0.2)));
+  };
+  EXPECT_TRUE(column(0.1, 0.1)) << "the belly (1.5 m) is inside the 2.8 m envelope";
+  EXPECT_TRUE(column(14.0, 0.0)) << "nose gear";
+  EXPECT_TRUE(column(0.0, 10.0)) << "the wing's lower face (2.6 m) is inside the envelope";
+  EXPECT_TRUE(column(-2.0, -6.0)) << "engine (bottom 1.2 m)";
+  EXPECT_TRUE(column(20.05, 0.05)) << "cone";
+  EXPECT_FALSE(column(19.0, 0.0)) << "past the fuselage's end";
+  EXPECT_FALSE(column(8.0, 1.9)) << "beside the fuselage";
+  EXPECT_FALSE(column(25.0, 10.0)) << "open apron";
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace tarmac::tools

@@ -1,0 +1,79 @@
+#pragma once
+/// @file Scores a costmap cycle by cycle against the obstacle columns a costmap must show
+/// (tarmac-sim's obstacle_columns.txt): the safety figures of DESIGN.md §4 ("judged cycle by
+/// cycle against ground truth").
+
+#include <cstdint>
+#include <filesystem>
+#include <unordered_map>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "tarmac/core/grid2d.hpp"
+#include "tarmac/core/result.hpp"
+
+namespace tarmac::tools {
+
+/// The columns whose envelope span meets a static object, on the world lattice of `cell_m`, with
+/// the first scan that returned a point from that span (−1: none did).
+struct ObstacleTruth {
+  double cell_m = 0.2;
+  std::unordered_map<std::int64_t, int> first_seen;  ///< key(ix, iy) -> scan, −1 never
+
+  static std::int64_t key(std::int64_t ix, std::int64_t iy) {
+    return (ix << 32) ^ (iy & 0xffffffff);
+  }
+  [[nodiscard]] bool is_column(std::int64_t ix, std::int64_t iy) const {
+    return first_seen.count(key(ix, iy)) != 0;
+  }
+};
+
+/// Reads obstacle_columns.txt. Errors: "truth.open", "truth.parse" (with the line number),
+/// "truth.frame" (a tilted world frame: the columns are in the scene frame).
+core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& file);
+
+/// One cycle's figures, over the obstacle columns within `radius_m` of the vehicle.
+struct SafetyCycle {
+  int scan = 0;
+  std::size_t visible = 0;        ///< columns seen (a return from their span) by this scan
+  std::size_t lethal_near = 0;    ///< of those, with a lethal cell within one cell
+  std::size_t read_free = 0;      ///< of those, whose own cell reads free (0)
+  std::size_t read_inflated = 0;  ///< of those, whose own cell reads 1..99 with no lethal near
+  std::size_t read_unknown = 0;   ///< of those, whose own cell reads unknown (−1)
+  std::size_t lethal_cells = 0;   ///< lethal cells within radius_m
+  std::size_t false_lethal = 0;   ///< of those, more than one cell from every obstacle column
+  [[nodiscard]] double share_lethal() const {
+    return visible == 0 ? 1.0 : static_cast<double>(lethal_near) / static_cast<double>(visible);
+  }
+};
+
+struct SafetyReport {
+  std::size_t cycles = 0;
+  double worst_share = 1.0, mean_share = 1.0;  ///< lethal_near / visible over the cycles
+  int worst_scan = -1;
+  std::size_t read_free = 0, read_inflated = 0, read_unknown = 0;  ///< summed over cycles
+  std::size_t lethal_cells = 0, false_lethal = 0;                  ///< summed over cycles
+  double worst_false_share = 0.0;  ///< max over cycles of false_lethal / lethal_cells
+};
+
+/// Scores one costmap (values 0..100, −1) whose cells lie on the truth's lattice (the costmap's
+/// resolution must equal cell_m and its origin a lattice point).
+SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
+                          const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0);
+
+/// Accumulates cycles into a report.
+class SafetyTracker {
+ public:
+  explicit SafetyTracker(ObstacleTruth truth) : truth_(std::move(truth)) {}
+  const SafetyCycle& observe(const core::Costmap& costmap, int scan,
+                             const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0);
+  [[nodiscard]] SafetyReport report() const;
+  [[nodiscard]] const std::vector<SafetyCycle>& cycles() const { return cycles_; }
+
+ private:
+  ObstacleTruth truth_;
+  std::vector<SafetyCycle> cycles_;
+};
+
+}  // namespace tarmac::tools

@@ -1,0 +1,134 @@
+#include "tarmac/tools/safety.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace tarmac::tools {
+
+core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  if (!in) return core::Error{"truth.open", file.string() + ": cannot be read"};
+  ObstacleTruth truth;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (line.empty()) continue;
+    std::istringstream s(line);
+    if (line[0] == '#') {
+      std::string word;
+      s >> word >> word;
+      if (word == "obstacle") {  // "# obstacle columns: cell_m V envelope_z_m LO HI"
+        s >> word >> word >> truth.cell_m;
+      } else if (word == "T_world_scene") {
+        double m[12];
+        for (double& v : m) s >> v;
+        const double identity[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+        for (int i = 0; i < 12; ++i) {
+          if (!s || std::abs(m[i] - identity[i]) > 1e-9) {
+            return core::Error{"truth.frame", file.string() + ":" + std::to_string(n) +
+                                                  ": only untilted sequences can be scored"};
+          }
+        }
+      }
+      continue;
+    }
+    std::int64_t ix = 0, iy = 0;
+    int first = 0;
+    if (!(s >> ix >> iy >> first)) {
+      return core::Error{"truth.parse", file.string() + ":" + std::to_string(n) + ": bad line"};
+    }
+    truth.first_seen[ObstacleTruth::key(ix, iy)] = first;
+  }
+  if (!(truth.cell_m > 0.0)) return core::Error{"truth.parse", file.string() + ": no cell_m"};
+  return truth;
+}
+
+SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
+                          const Eigen::Vector2d& vehicle_xy, double radius_m) {
+  SafetyCycle c;
+  c.scan = scan;
+  const auto& g = costmap.geometry();
+  const auto ox = static_cast<std::int64_t>(std::llround(g.origin_x_m / truth.cell_m));
+  const auto oy = static_cast<std::int64_t>(std::llround(g.origin_y_m / truth.cell_m));
+  const auto w = static_cast<std::int64_t>(g.width), h = static_cast<std::int64_t>(g.height);
+  const auto value = [&](std::int64_t cx, std::int64_t cy) -> int {
+    if (cx < 0 || cy < 0 || cx >= w || cy >= h) return core::kCostUnknown;
+    return costmap.at(static_cast<std::uint32_t>(cx), static_cast<std::uint32_t>(cy));
+  };
+  const auto near = [&](std::int64_t cx, std::int64_t cy, auto&& pred) {
+    for (std::int64_t dy = -1; dy <= 1; ++dy) {
+      for (std::int64_t dx = -1; dx <= 1; ++dx) {
+        if (pred(cx + dx, cy + dy)) return true;
+      }
+    }
+    return false;
+  };
+  const double r2 = radius_m * radius_m;
+  for (std::int64_t cy = 0; cy < h; ++cy) {
+    for (std::int64_t cx = 0; cx < w; ++cx) {
+      const Eigen::Vector2d centre((static_cast<double>(ox + cx) + 0.5) * truth.cell_m,
+                                   (static_cast<double>(oy + cy) + 0.5) * truth.cell_m);
+      if ((centre - vehicle_xy).squaredNorm() > r2) continue;
+      const int v = value(cx, cy);
+      if (v == core::kCostLethal) {
+        ++c.lethal_cells;
+        if (!near(cx, cy, [&](std::int64_t x, std::int64_t y) {
+              return truth.is_column(ox + x, oy + y);
+            })) {
+          ++c.false_lethal;
+        }
+      }
+      const auto it = truth.first_seen.find(ObstacleTruth::key(ox + cx, oy + cy));
+      if (it == truth.first_seen.end() || it->second < 0 || it->second > scan) continue;
+      ++c.visible;
+      if (near(cx, cy,
+               [&](std::int64_t x, std::int64_t y) { return value(x, y) == core::kCostLethal; })) {
+        ++c.lethal_near;
+      } else if (v == core::kCostFree) {
+        ++c.read_free;
+      } else if (v == core::kCostUnknown) {
+        ++c.read_unknown;
+      } else {
+        ++c.read_inflated;
+      }
+    }
+  }
+  return c;
+}
+
+const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan,
+                                          const Eigen::Vector2d& vehicle_xy, double radius_m) {
+  cycles_.push_back(score_costmap(costmap, truth_, scan, vehicle_xy, radius_m));
+  return cycles_.back();
+}
+
+SafetyReport SafetyTracker::report() const {
+  SafetyReport r;
+  r.cycles = cycles_.size();
+  double sum = 0.0;
+  std::size_t counted = 0;
+  for (const SafetyCycle& c : cycles_) {
+    r.read_free += c.read_free;
+    r.read_inflated += c.read_inflated;
+    r.read_unknown += c.read_unknown;
+    r.lethal_cells += c.lethal_cells;
+    r.false_lethal += c.false_lethal;
+    if (c.lethal_cells > 0) {
+      r.worst_false_share = std::max(r.worst_false_share, static_cast<double>(c.false_lethal) /
+                                                              static_cast<double>(c.lethal_cells));
+    }
+    if (c.visible == 0) continue;
+    ++counted;
+    sum += c.share_lethal();
+    if (c.share_lethal() < r.worst_share) {
+      r.worst_share = c.share_lethal();
+      r.worst_scan = c.scan;
+    }
+  }
+  if (counted > 0) r.mean_share = sum / static_cast<double>(counted);
+  return r;
+}
+
+}  // namespace tarmac::tools
