@@ -309,6 +309,7 @@ int main(int argc, char** argv) {
 
   // The costmap's ground truth (tarmac-sim's obstacle_columns.txt): safety figures per cycle.
   std::optional<tools::SafetyTracker> safety;
+  std::vector<tools::DynamicBox> moving_now;  // the moving objects' boxes at the current scan
   if (const auto truth_file = std::filesystem::path(opt.dataset) / "obstacle_columns.txt";
       std::filesystem::exists(truth_file)) {
     auto truth = tools::read_obstacle_truth(truth_file);
@@ -409,7 +410,14 @@ int main(int argc, char** argv) {
           tools::blind_radius_from_ground(sensor_W, mapper.points_W(), T_W_B.translation().z()));
     }
     if (safety) {
-      safety->observe(mapper.costmap().costmap, static_cast<int>(k), T_W_B.translation().head<2>());
+      moving_now.clear();
+      if (clearing) {
+        for (const auto& b : clearing->truth().boxes) {
+          if (b.scan == static_cast<int>(k)) moving_now.push_back(b);
+        }
+      }
+      safety->observe(mapper.costmap().costmap, static_cast<int>(k), T_W_B.translation().head<2>(),
+                      20.0, moving_now);
     }
     promotions += occ.promotions;
     demotions += occ.demotions;

@@ -46,7 +46,8 @@ core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& fil
 }
 
 SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
-                          const Eigen::Vector2d& vehicle_xy, double radius_m) {
+                          const Eigen::Vector2d& vehicle_xy, double radius_m,
+                          std::span<const DynamicBox> moving) {
   SafetyCycle c;
   c.scan = scan;
   const auto& g = costmap.geometry();
@@ -74,7 +75,12 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
       const int v = value(cx, cy);
       if (v == core::kCostLethal) {
         ++c.lethal_cells;
-        if (!near(cx, cy, [&](std::int64_t x, std::int64_t y) {
+        const double margin = truth.cell_m;  // within one cell of a moving object: not false
+        const bool under_moving = std::any_of(moving.begin(), moving.end(), [&](const auto& b) {
+          return centre.x() >= b.min_W.x() - margin && centre.x() <= b.max_W.x() + margin &&
+                 centre.y() >= b.min_W.y() - margin && centre.y() <= b.max_W.y() + margin;
+        });
+        if (!under_moving && !near(cx, cy, [&](std::int64_t x, std::int64_t y) {
               return truth.is_column(ox + x, oy + y);
             })) {
           ++c.false_lethal;
@@ -99,8 +105,9 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
 }
 
 const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan,
-                                          const Eigen::Vector2d& vehicle_xy, double radius_m) {
-  cycles_.push_back(score_costmap(costmap, truth_, scan, vehicle_xy, radius_m));
+                                          const Eigen::Vector2d& vehicle_xy, double radius_m,
+                                          std::span<const DynamicBox> moving) {
+  cycles_.push_back(score_costmap(costmap, truth_, scan, vehicle_xy, radius_m, moving));
   return cycles_.back();
 }
 

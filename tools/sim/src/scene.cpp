@@ -393,8 +393,8 @@ Scene Scene::aircraft_stand() {
   Scene scene;
   scene.add("ground", "ground", Plane{V::UnitZ(), 0.0});
   scene.add("fuselage", "fuselage", Cylinder{Axis::kX, V(-18.0, 0.0, 3.3), 36.0, 1.8});
-  scene.add("wing_right", "wing", Box{V(-3.0, -15.0, 2.6), V(3.0, -1.5, 2.9)});
-  scene.add("wing_left", "wing", Box{V(-3.0, 1.5, 2.6), V(3.0, 15.0, 2.9)});
+  scene.add("wing_right", "wing", Box{V(-3.0, -15.0, 3.3), V(3.0, -1.5, 3.6)});
+  scene.add("wing_left", "wing", Box{V(-3.0, 1.5, 3.3), V(3.0, 15.0, 3.6)});
   scene.add("engine_right", "engine", Cylinder{Axis::kX, V(-4.0, -6.0, 1.9), 4.0, 0.7});
   scene.add("engine_left", "engine", Cylinder{Axis::kX, V(-4.0, 6.0, 1.9), 4.0, 0.7});
   scene.add("gear_nose", "landing_gear", Cylinder{Axis::kZ, V(14.0, 0.0, 0.0), 1.6, 0.25});

@@ -61,6 +61,7 @@ struct ClearingReport {
 class ClearingTracker {
  public:
   explicit ClearingTracker(DynamicTruth truth) : truth_(std::move(truth)) {}
+  [[nodiscard]] const DynamicTruth& truth() const { return truth_; }
 
   /// After the costmap of scan `scan` (stamp `stamp_s`) was built, the sensor at `sensor_xy`
   /// (map frame) with blind radius `blind_radius_m` (0: no blind zone).

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <span>
 #include <unordered_map>
 #include <vector>
 
@@ -12,6 +13,7 @@
 
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/result.hpp"
+#include "tarmac/tools/clearing.hpp"
 
 namespace tarmac::tools {
 
@@ -42,7 +44,9 @@ struct SafetyCycle {
   std::size_t read_inflated = 0;  ///< of those, whose own cell reads 1..99 with no lethal near
   std::size_t read_unknown = 0;   ///< of those, whose own cell reads unknown (−1)
   std::size_t lethal_cells = 0;   ///< lethal cells within radius_m
-  std::size_t false_lethal = 0;   ///< of those, more than one cell from every obstacle column
+  /// Of those, more than one cell from every obstacle column and from every moving object's
+  /// box at this scan (a moving object's former place still lethal counts: a ghost).
+  std::size_t false_lethal = 0;
   [[nodiscard]] double share_lethal() const {
     return visible == 0 ? 1.0 : static_cast<double>(lethal_near) / static_cast<double>(visible);
   }
@@ -58,16 +62,19 @@ struct SafetyReport {
 };
 
 /// Scores one costmap (values 0..100, −1) whose cells lie on the truth's lattice (the costmap's
-/// resolution must equal cell_m and its origin a lattice point).
+/// resolution must equal cell_m and its origin a lattice point). `moving` are the moving
+/// objects' boxes at this scan (tarmac-sim's dynamic_boxes.txt), scene frame.
 SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
-                          const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0);
+                          const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0,
+                          std::span<const DynamicBox> moving = {});
 
 /// Accumulates cycles into a report.
 class SafetyTracker {
  public:
   explicit SafetyTracker(ObstacleTruth truth) : truth_(std::move(truth)) {}
   const SafetyCycle& observe(const core::Costmap& costmap, int scan,
-                             const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0);
+                             const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0,
+                             std::span<const DynamicBox> moving = {});
   [[nodiscard]] SafetyReport report() const;
   [[nodiscard]] const std::vector<SafetyCycle>& cycles() const { return cycles_; }
 

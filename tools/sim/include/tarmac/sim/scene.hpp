@@ -182,8 +182,8 @@ class Scene {
   ///  - id 0  ground             plane z = 0
   ///  - id 1  fuselage           cylinder along x, axis y = 0, z = 3.3, r = 1.8, x in [-18, 18]
   ///                             (belly at z = 1.5)
-  ///  - id 2  wing_right         box [-3, -15, 2.6] .. [3, -1.5, 2.9] (its lower face in the
-  ///  - id 3  wing_left          box [-3, 1.5, 2.6] .. [3, 15, 2.9]    envelope's top 0.2 m)
+  ///  - id 2  wing_right         box [-3, -15, 3.3] .. [3, -1.5, 3.6] (above the envelope)
+  ///  - id 3  wing_left          box [-3, 1.5, 3.3] .. [3, 15, 3.6]
   ///  - id 4  engine_right       cylinder along x, axis y = -6, z = 1.9, r = 0.7, x in [-4, 0]
   ///  - id 5  engine_left        cylinder along x, axis y = 6, z = 1.9, r = 0.7, x in [-4, 0]
   ///  - id 6  gear_nose          vertical cylinder at (14, 0), r = 0.25, z in [0, 1.6]
