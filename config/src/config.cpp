@@ -661,6 +661,7 @@ void read_daemon(MapReader& root, Config& c) {
     r.topic("esdf_slice_grid_topic", o.esdf_slice_grid_topic);
     r.scalar<double>("esdf_slice_grid_range_m", o.esdf_slice_grid_range_m, 0.1, 1000.0);
     r.scalar<std::uint32_t>("diagnostic_array_every", o.diagnostic_array_every, 1, 100000);
+    r.scalar<double>("costmap_max_age_ms", o.costmap_max_age_ms, 1.0, 3.6e6);
   });
   root.map("state", [&](MapReader& r) {
     r.string("dir", c.state.dir);
@@ -902,6 +903,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "diagnostic_array_topic" << YAML::Value << ou.diagnostic_array_topic;
   out << YAML::Key << "virtual_obstacles_topic" << YAML::Value << ou.virtual_obstacles_topic;
   out << YAML::Key << "diagnostic_array_every" << YAML::Value << ou.diagnostic_array_every;
+  out << YAML::Key << "costmap_max_age_ms" << YAML::Value << ou.costmap_max_age_ms;
   out << YAML::EndMap;
   out << YAML::Key << "state" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "dir" << YAML::Value << config.state.dir;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -100,6 +101,18 @@ core::Status check_schedule(const config::ExecutorConfig& e) {
   return core::Ok{};
 }
 
+/// Below this the stamp clock's drift against CLOCK_MONOTONIC is left alone (slew, read noise).
+constexpr std::int64_t kClockStepMinNs = 50'000'000;
+
+/// How far the tick times must move on the stamp clock when it has drifted `drift_ns` from the
+/// offset the ticks were placed with: whole periods (the ticks stay on their grid), once the
+/// drift reaches kClockStepMinNs and half a period; otherwise 0.
+std::int64_t clock_step_ns(std::int64_t drift_ns, std::int64_t period_ns) {
+  if (std::abs(drift_ns) < std::max(kClockStepMinNs, period_ns / 2)) return 0;
+  const std::int64_t half = drift_ns >= 0 ? period_ns / 2 : -period_ns / 2;
+  return (drift_ns + half) / period_ns * period_ns;
+}
+
 /// A period longer than half the systemd watchdog interval leaves no margin: one late tick and
 /// the service is restarted. Said once at start, naming both.
 void warn_if_watchdog_too_short(std::int64_t period_ns) {
@@ -172,6 +185,12 @@ class Executor::Impl {
    public:
     explicit PoseSinkImpl(Impl& owner) : owner_(owner) {}
     void pose(const transport::PoseSample& sample) override {
+      // Judged like a scan's stamp: a pose from the future (a clock stepped back, or a sender
+      // whose clock is ahead) would refuse every later pose as out of order.
+      if (sample.stamp_ns > owner_.tick_ns + owner_.max_future_ns) {
+        owner_.rejections.add("pose.future");
+        return;
+      }
       switch (owner_.poses.insert(sample)) {
         case PoseBuffer::Insert::kOk:
           if (owner_.config.mapping.corrections.enabled) {
@@ -211,7 +230,8 @@ class Executor::Impl {
         mapper(cfg.mapping),
         jumps(cfg.mapping.corrections),
         pose_sink(*this),
-        trajectory_sink(*this) {
+        trajectory_sink(*this),
+        max_future_ns(ms_to_ns(cfg.executor.max_future_ms)) {
     trajectory_scratch.reserve(1024);
     mapper.reserve_retained(cfg.quotas.reserve_points_per_scan);
   }
@@ -251,10 +271,11 @@ class Executor::Impl {
     }
     report.input_ages.back().input = "pose";
     // Every reason the cycle can count, reported from the first tick (0 until it happens).
-    for (const char* r : {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
-                          "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap",
-                          "points.non_finite", "points.too_close", "points.ego_vehicle",
-                          "points.isolated", "scan.tsdf_shed_quota", "scan.deskew_span"}) {
+    for (const char* r :
+         {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
+          "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite",
+          "points.too_close", "points.ego_vehicle", "points.isolated", "scan.tsdf_shed_quota",
+          "scan.deskew_span", "pose.clock_step"}) {
       drops.declare(r);
     }
     for (const char* r : {"scan.unknown_frame",
@@ -273,6 +294,8 @@ class Executor::Impl {
                           "pose.bad_quaternion",
                           "pose.out_of_order",
                           "pose.duplicate_stamp",
+                          "pose.future",
+                          "correction.clock_step",
                           "zones.polygon",
                           "zones.non_finite",
                           "zones.z_range",
@@ -295,10 +318,60 @@ class Executor::Impl {
     overflow_seen.assign(config.sensors.size(), 0);
     diag.name = "tarmacd: executor";
     diag.hardware_id = config.dds.participant.name;
-    diag.values.resize(12);
+    prepare_diagnostics();
   }
 
-  void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped);
+  /// The DiagnosticArray's keys, set once; each tick only rewrites the values and the message
+  /// in place (capacity reserved here, so publishing them does not allocate).
+  void prepare_diagnostics() {
+    static constexpr const char* kKeys[kDiagFixed] = {"cycle_ms",
+                                                      "wake_jitter_ms",
+                                                      "integrate_ms",
+                                                      "costmap_ms",
+                                                      "scans_integrated_total",
+                                                      "drops_total",
+                                                      "rejections_total",
+                                                      "skipped_ticks_total",
+                                                      "stamp_to_publish_p99_ms",
+                                                      "tsdf_ms",
+                                                      "rebuild_ms",
+                                                      "esdf_band_ms",
+                                                      "costmap_age_ms",
+                                                      "costmap_stale",
+                                                      "pending_scans",
+                                                      "pose_buffer_samples",
+                                                      "clock_steps_total"};
+    diag.values.resize(kDiagFixed + 2 * report.input_ages.size());
+    for (std::size_t i = 0; i < kDiagFixed; ++i) diag.values[i].first = kKeys[i];
+    for (std::size_t i = 0; i < report.input_ages.size(); ++i) {
+      const std::string prefix = "input." + report.input_ages[i].input;
+      diag.values[kDiagFixed + 2 * i].first = prefix + ".age_ms";
+      diag.values[kDiagFixed + 2 * i + 1].first = prefix + ".stale";
+    }
+    for (auto& v : diag.values) v.second.reserve(32);
+    diag.message.reserve(kDiagMessageSize);
+  }
+
+  /// Fills the DiagnosticArray from this tick's report: ERROR while the costmap is stale (older
+  /// than outputs.costmap_max_age_ms, or none yet: the planner is driving on an old map),
+  /// WARN while an input is stale or the tick ran over budget, OK otherwise; the message names
+  /// what is wrong, with ages.
+  void fill_diagnostics(const double* stage_ms, double jitter_ms, bool overrun);
+
+  /// One tick at `tick_time_ns` (stamp clock); `clock_step_ns` != 0: the stamp clock stepped by
+  /// that much since the last tick (on_clock_step() runs first).
+  void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped,
+            std::int64_t clock_step_ns);
+  /// The stamp clock stepped by `step_ns` (a whole number of periods) and ticks now sit at
+  /// `tick_time_ns` on it: what was stamped by the old clock beyond the new tick + max_future
+  /// (after a backward step) is forgotten — pending scans judged again ("scan.future" /
+  /// "scan.stale"), poses ("pose.clock_step"), queued corrections ("correction.clock_step"),
+  /// the scan order and the costmap's stamp — so scans stamped by the new clock are taken.
+  void on_clock_step(std::int64_t step_ns, std::int64_t tick_time_ns);
+  /// The stamp clock (RunHooks::stamp_clock_ns, else CLOCK_REALTIME).
+  [[nodiscard]] std::int64_t stamp_now() const {
+    return stamp_clock ? stamp_clock() : realtime_ns();
+  }
   /// Adds sensor `sensor`'s scans lost or rejected in DDS transport since the last tick to the
   /// drops (`transport.scan_lost.<id>`, `transport.scan_rejected.<id>`) and logs them,
   /// rate-limited.
@@ -330,7 +403,8 @@ class Executor::Impl {
     core::TsdfMapInfo info;
     info.frame_id = config.outputs.frame_id;  // the lattice lives in the pose / map frame
     info.config_hash = hash;
-    info.stamp_ns = newest_stamp_ns;
+    // A save made before the first scan after a restart holds the loaded map: its stamp.
+    info.stamp_ns = std::max(newest_stamp_ns, loaded_stamp_ns);
     return info;
   }
   /// The occupancy window's static layer, saved in the same .vdb as the TSDF.
@@ -393,6 +467,11 @@ class Executor::Impl {
   std::int64_t tick_ns = 0;  // the current tick's time on the stamp clock
   std::int64_t newest_stamp_ns = 0;
   bool have_costmap = false;
+  std::int64_t max_future_ns = 0;
+  std::int64_t loaded_stamp_ns = 0;           // stamp of the TSDF loaded at start (0: none)
+  std::function<std::int64_t()> stamp_clock;  // RunHooks::stamp_clock_ns, set by run()
+  static constexpr std::size_t kDiagFixed = 17;
+  static constexpr std::size_t kDiagMessageSize = 256;
 
   mutable std::mutex totals_mutex;  // totals and windows are read by status_line() from main
   ExecutorTotals totals;
@@ -528,11 +607,13 @@ void Executor::Impl::count_transport_losses(std::size_t sensor) {
       config.sensors[sensor].id, lost, rejected);
 }
 
-void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped) {
+void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped,
+                          std::int64_t clock_step_ns) {
   const auto t_start = Clock::now();
   tick_ns = tick_time_ns;
   drops.begin_tick();
   rejections.begin_tick();
+  if (clock_step_ns != 0) on_clock_step(clock_step_ns, tick_time_ns);
   double stage_ms[kStageCount] = {};
   std::uint64_t shed[kStageCount] = {};
 
@@ -670,7 +751,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   // Measured, never used to decide: newest integrated scan stamp -> costmap handed to DDS.
   double stamp_to_publish_ms = -1.0;
   if (update && !selected.empty()) {
-    stamp_to_publish_ms = static_cast<double>(realtime_ns() - newest_stamp_ns) / 1e6;
+    stamp_to_publish_ms = static_cast<double>(stamp_now() - newest_stamp_ns) / 1e6;
   }
 
   // ---- 3D ESDF band (esdf_band.enabled), from the costmap's ground, then its box out ----
@@ -735,30 +816,107 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   outputs->publish_report(report);
 
   if (cycle_index % config.outputs.diagnostic_array_every == 0) {
-    diag.stamp_ns = tick_ns;
-    diag.level = overrun ? 1 : 0;
-    diag.message = overrun ? "over budget" : "ok";
-    const auto put = [&](std::size_t i, const char* key, double v) {
-      diag.values[i].first = key;
-      char buf[32];
-      std::snprintf(buf, sizeof buf, "%.3f", v);
-      diag.values[i].second = buf;
-    };
-    put(0, "cycle_ms", cycle_duration);
-    put(1, "wake_jitter_ms", jitter_ms);
-    put(2, "integrate_ms", stage_ms[kIntegrate]);
-    put(3, "costmap_ms", stage_ms[kCostmap]);
-    put(4, "scans_integrated_total", static_cast<double>(totals.scans_integrated));
-    put(5, "drops_total", static_cast<double>(drops.total_sum()));
-    put(6, "rejections_total", static_cast<double>(rejections.total_sum()));
-    put(7, "skipped_ticks_total", static_cast<double>(totals.skipped_ticks));
-    put(8, "stamp_to_publish_p99_ms", stamp_to_publish.percentile(0.99));
-    put(9, "tsdf_ms", stage_ms[kTsdf]);
-    put(10, "rebuild_ms", stage_ms[kRebuild]);
-    put(11, "esdf_band_ms", stage_ms[kEsdfBand]);
+    fill_diagnostics(stage_ms, jitter_ms, overrun);
     outputs->publish_diagnostics(diag);
   }
   ++cycle_index;
+}
+
+void Executor::Impl::fill_diagnostics(const double* stage_ms, double jitter_ms, bool overrun) {
+  diag.stamp_ns = tick_ns;
+  const auto put = [&](std::size_t i, double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.3f", v);
+    diag.values[i].second = buf;
+  };
+  const auto put_flag = [&](std::size_t i, bool v) {
+    diag.values[i].second = v ? "true" : "false";
+  };
+  // The costmap carries the newest integrated scan's stamp: its age is the tick's distance to
+  // it (CycleReport: tick_ns − stamp_ns).
+  const double costmap_age_ms = have_costmap && newest_stamp_ns != 0
+                                    ? static_cast<double>(tick_ns - newest_stamp_ns) / 1e6
+                                    : -1.0;
+  const bool costmap_stale =
+      costmap_age_ms < 0.0 || costmap_age_ms > config.outputs.costmap_max_age_ms;
+  put(0, report.cycle_duration_ms);
+  put(1, jitter_ms);
+  put(2, stage_ms[kIntegrate]);
+  put(3, stage_ms[kCostmap]);
+  put(4, static_cast<double>(totals.scans_integrated));
+  put(5, static_cast<double>(drops.total_sum()));
+  put(6, static_cast<double>(rejections.total_sum()));
+  put(7, static_cast<double>(totals.skipped_ticks));
+  put(8, stamp_to_publish.percentile(0.99));
+  put(9, stage_ms[kTsdf]);
+  put(10, stage_ms[kRebuild]);
+  put(11, stage_ms[kEsdfBand]);
+  put(12, costmap_age_ms);
+  put_flag(13, costmap_stale);
+  put(14, static_cast<double>(scheduler.pending()));
+  put(15, static_cast<double>(poses.size()));
+  put(16, static_cast<double>(totals.clock_steps));
+  char message[kDiagMessageSize];
+  std::size_t used = 0;
+  // Appends `text` and, when `value_ms` >= 0, " (N ms)" (else `otherwise`, if given).
+  const auto append = [&](const char* text, double value_ms = -1.0,
+                          const char* otherwise = nullptr) {
+    int n = 0;
+    if (value_ms >= 0.0) {
+      n = std::snprintf(message + used, sizeof message - used, "%s (%.0f ms)", text, value_ms);
+    } else {
+      n = std::snprintf(message + used, sizeof message - used, "%s%s", text,
+                        otherwise != nullptr ? otherwise : "");
+    }
+    if (n > 0) used = std::min(sizeof message - 1, used + static_cast<std::size_t>(n));
+  };
+  message[0] = '\0';
+  if (costmap_stale) append("costmap stale", costmap_age_ms, " (no costmap yet)");
+  bool any_input_stale = false;
+  for (std::size_t i = 0; i < report.input_ages.size(); ++i) {
+    const auto& a = report.input_ages[i];
+    put(kDiagFixed + 2 * i, a.age_ms);
+    put_flag(kDiagFixed + 2 * i + 1, a.stale);
+    if (!a.stale) continue;
+    if (!any_input_stale) append(used > 0 ? "; input stale: " : "input stale: ");
+    if (any_input_stale) append(", ");
+    append(a.input.c_str(), a.age_ms, " (none yet)");
+    any_input_stale = true;
+  }
+  if (overrun) append(used > 0 ? "; over budget" : "over budget");
+  diag.level = costmap_stale ? 2 : (any_input_stale || overrun) ? 1 : 0;
+  diag.message = used > 0 ? message : "ok";
+}
+
+void Executor::Impl::on_clock_step(std::int64_t step_ns, std::int64_t tick_time_ns) {
+  tick_ns = tick_time_ns;
+  const std::int64_t future = tick_time_ns + max_future_ns;
+  const std::size_t scans_rejected = scheduler.on_clock_step(tick_time_ns, rejections);
+  const std::size_t poses_dropped = poses.drop_after(future);
+  drops.add("pose.clock_step", poses_dropped);
+  if (poses_dropped > 0) {
+    // Later live samples are predicted from the ones kept, not from the old clock's.
+    core::StampedPose tail[2];
+    jumps.reset(std::span<const core::StampedPose>(tail, poses.newest_two(tail)));
+  }
+  std::size_t corrections_dropped = 0;
+  while (!pending_corrections.empty() && pending_corrections.back().stamp_ns > future) {
+    pending_corrections.pop_back();  // sorted by stamp
+    ++corrections_dropped;
+  }
+  rejections.add("correction.clock_step", corrections_dropped);
+  if (newest_stamp_ns > future) newest_stamp_ns = 0;  // no age on the new clock until a scan
+  {
+    std::lock_guard lock(totals_mutex);
+    ++totals.clock_steps;
+    totals.last_clock_step_ns = step_ns;
+  }
+  // Rare (a clock set by hand, a first NTP or PTP fix), so one line each.
+  spdlog::warn(
+      "executor: the stamp clock (CLOCK_REALTIME) stepped {:+.3f} s against CLOCK_MONOTONIC; "
+      "ticks now carry the new clock's time, the schedule is unchanged; old-clock data "
+      "dropped: {} pending scan(s), {} pose(s), {} correction(s)",
+      static_cast<double>(step_ns) / 1e9, scans_rejected, poses_dropped, corrections_dropped);
 }
 
 core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& cfg) {
@@ -836,8 +994,10 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
                 "executor period outside [1 / kMaxRateHz, 1 / kMinRateHz]");
   warn_if_watchdog_too_short(period_ns);
   // Ticks sit on multiples of the period of the stamp clock (CLOCK_REALTIME); the sleep runs on
-  // CLOCK_MONOTONIC, so a wall-clock step does not distort the schedule.
-  const std::int64_t real_now = realtime_ns();
+  // CLOCK_MONOTONIC, so a wall-clock step does not distort the schedule (each tick compares the
+  // two clocks and follows a step of the stamp clock: clock_step_ns()).
+  d.stamp_clock = hooks.stamp_clock_ns;
+  const std::int64_t real_now = d.stamp_now();
   const std::int64_t mono_now = monotonic_ns();
   // Tick k sits at k·period + sensor phase + input delay: a LiDAR phase-locked to the grid (PTP)
   // waits exactly input_delay for its tick. Unsynchronised sensors wait 0..period more.
@@ -861,7 +1021,9 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
     // (tens of µs on the project's VMs).
     d.pool->wake();
     sleep_until_monotonic(deadline);
-    std::int64_t late = monotonic_ns() - deadline;
+    const std::int64_t woke = monotonic_ns();
+    const std::int64_t stamp_clock_offset = d.stamp_now() - woke;
+    std::int64_t late = woke - deadline;
     std::uint32_t skipped = 0;
     if (late >= period_ns) {
       // Late by whole periods: those ticks are skipped (counted), never run in a burst.
@@ -871,7 +1033,11 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
       tick_real += n * period_ns;
       late -= n * period_ns;
     }
-    d.tick(tick_real, static_cast<double>(late) / 1e6, skipped);
+    // A step of the stamp clock (a wall-clock jump) moves the tick times with it, in whole
+    // periods; the deadlines stay on CLOCK_MONOTONIC, so the loop neither bursts nor stalls.
+    const std::int64_t step = clock_step_ns(stamp_clock_offset - (tick_real - deadline), period_ns);
+    tick_real += step;
+    d.tick(tick_real, static_cast<double>(late) / 1e6, skipped, step);
     if (hooks.on_tick_end) hooks.on_tick_end(d.cycle_index - 1);
     if (periodic_save && d.cycle_index % save_every == 0) d.snapshot_tsdf();
     // The systemd watchdog is pinged here and nowhere else: after a tick completed, on the
@@ -1011,6 +1177,10 @@ void Executor::Impl::saver_loop() {
     const core::StaticOccupancy occupancy = std::move(saver_static);
     const core::TsdfMapInfo info = saver_info;
     lock.unlock();
+    // Said before the write: after a crash, the log shows whether one was in flight (its
+    // .tmp is left behind, the previous complete save stands).
+    spdlog::info("state: periodic TSDF save to {} started ({} voxels, stamp {} ns)",
+                 tsdf_path().string(), layer->voxel_count(), info.stamp_ns);
     const auto t0 = Clock::now();
     std::error_code ec;
     std::filesystem::create_directories(config.state.dir, ec);
@@ -1021,8 +1191,8 @@ void Executor::Impl::saver_loop() {
       ++(saved ? totals.tsdf_saves : totals.tsdf_save_failures);
     }
     if (saved) {
-      spdlog::info("state: periodic TSDF save to {} ({} voxels) in {:.0f} ms", tsdf_path().string(),
-                   layer->voxel_count(), ms);
+      spdlog::info("state: periodic TSDF save to {} ({} voxels, stamp {} ns) in {:.0f} ms",
+                   tsdf_path().string(), layer->voxel_count(), info.stamp_ns, ms);
     } else {
       spdlog::error("state: periodic TSDF save failed: {} [{}]", saved.error().message,
                     saved.error().code);
@@ -1052,6 +1222,16 @@ TsdfLoadResult Executor::load_tsdf() {
   if (!d.config.mapping.tsdf.enabled || !d.config.state.load_on_start) return result;
   const std::filesystem::path file = d.tsdf_path();
   std::error_code ec;
+  // A save cut short (a crash, kill -9, power loss) leaves its .tmp; the file itself is only
+  // ever replaced whole (rename), so it is the last complete save.
+  const std::filesystem::path partial = file.string() + ".tmp";
+  if (std::filesystem::exists(partial, ec)) {
+    std::filesystem::remove(partial, ec);
+    spdlog::warn(
+        "state: {} is a save cut short (crash or kill); removed, the last complete "
+        "save is {}",
+        partial.string(), file.string());
+  }
   if (!std::filesystem::exists(file, ec)) {
     result.kind = TsdfLoadResult::Kind::kAbsent;
     spdlog::info("state: no saved TSDF at {}; starting with an empty TSDF", file.string());
@@ -1096,6 +1276,7 @@ TsdfLoadResult Executor::load_tsdf() {
   result.kind = TsdfLoadResult::Kind::kLoaded;
   result.voxels = map.layer.voxel_count();
   result.static_voxels = map.occupancy.voxels.size();
+  d.loaded_stamp_ns = map.info.stamp_ns;
   d.mapper.tsdf() = std::move(map.layer);
   d.mapper.occupancy().import_static(map.occupancy.voxels);
   spdlog::info(

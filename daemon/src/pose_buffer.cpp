@@ -93,6 +93,15 @@ std::size_t PoseBuffer::apply_trajectory(std::span<const core::StampedPose> traj
   return changed;
 }
 
+std::size_t PoseBuffer::drop_after(std::int64_t stamp_ns) {
+  std::size_t dropped = 0;
+  while (size_ > 0 && at(size_ - 1).stamp_ns > stamp_ns) {  // sorted: the newest go first
+    --size_;
+    ++dropped;
+  }
+  return dropped;
+}
+
 std::size_t PoseBuffer::newest_two(core::StampedPose (&out)[2]) const {
   const std::size_t n = std::min<std::size_t>(size_, 2);
   for (std::size_t k = 0; k < n; ++k) {

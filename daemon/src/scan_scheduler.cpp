@@ -71,6 +71,27 @@ void ScanScheduler::commit(std::uint32_t sensor, std::int64_t tick_ns, ReasonCou
   newest_[sensor] = std::max(newest_[sensor], stamp);
 }
 
+std::size_t ScanScheduler::on_clock_step(std::int64_t tick_ns, ReasonCounters& rejections) {
+  std::size_t rejected = 0;
+  for (Slot& s : slots_) {
+    if (s.state != State::kPending) continue;
+    const std::int64_t stamp = s.cloud.stamp_ns;
+    const char* reason = stamp > tick_ns + params_.max_future_ns          ? "scan.future"
+                         : stamp < tick_ns - params_.max_age_ns[s.sensor] ? "scan.stale"
+                                                                          : nullptr;
+    if (reason == nullptr) continue;
+    rejections.add(reason);
+    s.state = State::kFree;
+    ++rejected;
+  }
+  const std::int64_t future = tick_ns + params_.max_future_ns;
+  if (have_last_ && last_stamp_ > future) have_last_ = false;
+  for (auto& newest : newest_) {
+    if (newest > future) newest = 0;
+  }
+  return rejected;
+}
+
 std::size_t ScanScheduler::pending() const {
   return static_cast<std::size_t>(std::count_if(
       slots_.begin(), slots_.end(), [](const Slot& s) { return s.state == State::kPending; }));

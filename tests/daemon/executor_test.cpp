@@ -15,6 +15,7 @@
 
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
+#include "executor_harness.hpp"
 #include "geometry_msgs.h"
 #include "loopback_only.hpp"
 #include "nav_msgsPubSubTypes.h"
@@ -35,47 +36,16 @@ namespace tarmac::daemon {
 namespace {
 
 using namespace std::chrono_literals;
+using test::kScans;
+using test::peer;
+using test::ReportReader;
+using test::RunningExecutor;
+using test::sequence;
+using test::test_config;
+using test::total_of;
+using test::wait_for_report;
 using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
-using ReportReader = transport::Reader<tarmac_msgs::msg::dds_::CycleReport_PubSubType>;
 using VolumeReader = transport::Reader<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>;
-
-constexpr int kScans = 20;
-
-/// A small sequence (16 beams) generated once for the whole binary.
-const tools::KittiSequence& sequence() {
-  static const tools::KittiSequence seq = [] {
-    const auto dir = std::filesystem::temp_directory_path() /
-                     ("tarmac-executor-test-" + std::to_string(::getpid()));
-    sim::SequenceParams p;
-    p.scans = kScans;
-    p.lidar.beams = 16;
-    p.lidar.azimuth_steps = 512;
-    const auto written = sim::write_sequence(sim::Scene::airside_default(), p, dir);
-    EXPECT_TRUE(written.ok()) << written.error;
-    auto opened = tools::open_kitti(dir);
-    EXPECT_TRUE(opened.ok()) << (opened.ok() ? "" : opened.error().message);
-    return std::move(opened).value();
-  }();
-  return seq;
-}
-
-config::Config test_config(std::uint32_t domain, std::uint32_t workers) {
-  config::Config c;
-  c.dds.participant.domain_id = domain;
-  c.dds.participant.name = "tarmacd-test";
-  // Reliable scans: a lost sample would change the map, and this test is about determinism.
-  c.dds.qos.lidar = {transport::Reliability::kReliable, transport::Durability::kVolatile, 8};
-  c.executor.workers = workers;
-  c.executor.realtime_priority = 0;
-  c.executor.lock_memory = false;
-  c.executor.input_delay_ms = 40.0;
-  c.executor.pose_wait_ms = 200.0;
-  c.mapping.occupancy.window_x_vox = 200;  // 40 x 40 x 6 m keeps the test fast
-  c.mapping.occupancy.window_y_vox = 200;
-  c.mapping.occupancy.window_z_vox = 30;
-  c.state.save_on_exit = false;
-  return c;
-}
 
 /// A scan's base pose as the daemon sees it after a wire round trip (quaternions).
 core::StampedPose wire_pose(std::int64_t stamp_ns, const Eigen::Isometry3d& T_W_S,
@@ -119,38 +89,6 @@ std::uint64_t offline_tsdf_digest(const config::Config& cfg, std::size_t scans) 
 std::string digest_of(const transport::OccupancyGridMsg& grid) {
   return tools::digest(
       {reinterpret_cast<const std::uint8_t*>(grid.data().data()), grid.data().size()});
-}
-
-/// The executor on its own thread, stopped and joined on destruction.
-class RunningExecutor {
- public:
-  explicit RunningExecutor(const config::Config& cfg) {
-    auto created = Executor::create(cfg);
-    EXPECT_TRUE(created.ok()) << (created.ok() ? "" : created.error().message);
-    executor_ = std::move(created).value();
-    thread_ = std::thread([this] { executor_->run([this] { return stop_.load(); }); });
-  }
-  ~RunningExecutor() { stop(); }
-  /// Stops and joins the executor (then its map may be read).
-  void stop() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-  }
-  Executor& get() { return *executor_; }
-
- private:
-  std::unique_ptr<Executor> executor_;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
-};
-
-transport::Participant peer(std::uint32_t domain) {
-  transport::ParticipantConfig pc;
-  pc.domain_id = domain;
-  pc.name = "executor-test-peer";
-  auto p = transport::Participant::create(pc);
-  EXPECT_TRUE(p.ok());
-  return std::move(p).value();
 }
 
 /// Waits for the costmap whose stamp is `stamp_ns`; returns false on timeout.
@@ -485,32 +423,6 @@ TEST_F(Daemon, PathCorrection_RightAfterItsScan_CostmapEqualsOfflineCore) {
 TEST_F(Daemon, PathCorrection_ArrivingEarly_WaitsForItsStamp_CostmapEqualsOfflineCore) {
   // Sent 1.5 s (15 scans) before scan 19: applied on arrival it would find no scan to correct.
   check_path_correction(test::kDomainDaemonPathEarly, 1.5);
-}
-
-/// Collects CycleReports until `done(report)` or the timeout; returns the last one.
-transport::CycleReport wait_for_report(
-    ReportReader& reader, const std::function<bool(const transport::CycleReport&)>& done,
-    std::chrono::seconds timeout = 15s) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  std::vector<transport::CycleReportMsg> batch;
-  transport::CycleReport last;
-  while (std::chrono::steady_clock::now() < deadline) {
-    reader.wait_for_sample(100ms);
-    batch.clear();
-    reader.take_all(batch);
-    for (const auto& m : batch) {
-      last = transport::from_cycle_report(m);
-      if (done(last)) return last;
-    }
-  }
-  return last;
-}
-
-std::uint64_t total_of(const std::vector<transport::ReasonReport>& list, const std::string& r) {
-  for (const auto& e : list) {
-    if (e.reason == r) return e.total;
-  }
-  return 0;
 }
 
 transport::CycleReport Daemon::replay_until_report(

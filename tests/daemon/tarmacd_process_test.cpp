@@ -1,7 +1,8 @@
 // tarmacd as systemd runs it: an AF_UNIX datagram socket stands in for systemd's notify socket
 // (NOTIFY_SOCKET, WATCHDOG_USEC); the test observes READY=1, WATCHDOG=1, STATUS=, then sends
 // SIGTERM and expects STOPPING=1, the saved map and exit status 0. The state tests restart it on
-// a saved TSDF (loaded), and on a corrupt, truncated or mismatched one (refused, still READY=1).
+// a saved TSDF (loaded), and on a corrupt, truncated or mismatched one (refused, still READY=1);
+// the kill test SIGKILLs it while it maps, some kills inside a periodic save, and restarts it.
 // The daemon's DDS stays on loopback (packet capture) on its own domain.
 
 #include <signal.h>
@@ -11,8 +12,11 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -27,6 +31,10 @@
 #include "tarmac/core/task_runner.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
 #include "tarmac/core/tsdf_io.hpp"
+#include "tarmac/replay/replayer.hpp"
+#include "tarmac/sim/lidar.hpp"
+#include "tarmac/sim/scene.hpp"
+#include "tarmac/tools/kitti.hpp"
 #include "test_env.hpp"
 
 namespace {
@@ -497,6 +505,222 @@ TEST(TarmacdStop, SigtermWhileAsleepBetweenSlowTicks_StopsWithin1s_AndOnlyTicksP
   EXPECT_NE(log.find("more than half the systemd watchdog interval (2000 ms)"), std::string::npos)
       << log;
   EXPECT_GE(notify.first("STOPPING=1"), 0);
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
+  fs::remove_all(dir);
+}
+
+// ---- kill -9 (issue 19 item 5e): the restart loads the last complete save ----
+
+/// A periodic save as tarmacd logs it: "started (N voxels, stamp S ns)" before the write, and
+/// "(N voxels, stamp S ns) in T ms" after it.
+struct SaveLine {
+  std::size_t voxels = 0;
+  std::int64_t stamp_ns = 0;
+  double logged_s = 0.0;  ///< when it was logged: seconds since local midnight
+};
+
+/// Seconds since local midnight of a log line's "[YYYY-MM-DD HH:MM:SS.mmm]" prefix.
+double logged_seconds(const std::string& line) {
+  int h = 0, m = 0;
+  double sec = 0.0;
+  if (std::sscanf(line.c_str(), "[%*d-%*d-%*d %d:%d:%lf]", &h, &m, &sec) != 3) return 0.0;
+  return h * 3600.0 + m * 60.0 + sec;
+}
+
+/// Now, as seconds since local midnight (the log's clock).
+double now_seconds() {
+  const auto now = std::chrono::system_clock::now();
+  const std::time_t t = std::chrono::system_clock::to_time_t(now);
+  std::tm local{};
+  localtime_r(&t, &local);
+  const double frac =
+      std::chrono::duration<double>(now - std::chrono::system_clock::from_time_t(t)).count();
+  return local.tm_hour * 3600.0 + local.tm_min * 60.0 + local.tm_sec + frac;
+}
+
+/// Every periodic save in `log` that started (`completed` false) or completed (true), in order.
+std::vector<SaveLine> saves_in(const std::string& log, bool completed) {
+  std::vector<SaveLine> out;
+  const std::string key = "state: periodic TSDF save to ";
+  for (std::size_t at = log.find(key); at != std::string::npos; at = log.find(key, at + 1)) {
+    const std::size_t eol = log.find('\n', at);
+    const std::string line = log.substr(at, eol == std::string::npos ? eol : eol - at);
+    const std::size_t bol = log.rfind('\n', at);
+    const double logged_s = logged_seconds(log.substr(bol == std::string::npos ? 0 : bol + 1, 32));
+    const bool started = line.find(" started (") != std::string::npos;
+    if (started == completed) continue;
+    SaveLine save;
+    const std::size_t voxels_at = line.rfind(" voxels, stamp ");
+    const std::size_t open = line.rfind('(', voxels_at);
+    if (voxels_at == std::string::npos || open == std::string::npos) continue;
+    save.voxels = std::stoull(line.substr(open + 1, voxels_at - open - 1));
+    save.stamp_ns = std::stoll(line.substr(voxels_at + std::string(" voxels, stamp ").size()));
+    save.logged_s = logged_s;
+    out.push_back(save);
+  }
+  return out;
+}
+
+/// What a start logged about the saved TSDF: loaded (voxels, stamp) or not.
+struct LoadLine {
+  bool loaded = false;
+  std::size_t voxels = 0;
+  std::int64_t stamp_ns = 0;
+};
+
+LoadLine load_in(const std::string& log) {
+  LoadLine load;
+  const std::size_t at = log.find("state: TSDF loaded from ");
+  if (at == std::string::npos) return load;
+  const std::size_t colon = log.find(": ", at + 24);
+  const std::size_t stamp_at = log.find("(saved at stamp ", at);
+  if (colon == std::string::npos || stamp_at == std::string::npos) return load;
+  load.loaded = true;
+  load.voxels = std::stoull(log.substr(colon + 2));
+  load.stamp_ns = std::stoll(log.substr(stamp_at + 16));
+  return load;
+}
+
+TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastCompleteSave) {
+  auto sniffer = tarmac::test::RtpsSniffer::start();
+  TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
+  constexpr double kSavePeriodS = 1.0;
+  const auto domain = tarmac::test::kDomainFaultKill;
+  const fs::path dir = stop_test_dir("tarmacd-kill", domain);
+  {
+    // Corrections off: each loop of the replayed sequence jumps back to its start, which would
+    // be taken as a pose correction (a rebuild per loop). A save takes tens of ms (fsync).
+    std::ofstream out(dir / "tarmac.yaml");
+    out << "version: 1\ndds: {domain_id: " << domain << "}\n"
+        << "executor: {realtime_priority: 0, lock_memory: false}\n"
+        << "occupancy: {window_x_vox: 200, window_y_vox: 200, window_z_vox: 30}\n"
+        << "corrections: {enabled: false}\n"
+        << "state: {dir: " << (dir / "state").string() << ", save_period_s: " << kSavePeriodS
+        << "}\n";
+  }
+  tarmac::sim::SequenceParams seq_params;
+  seq_params.scans = 30;
+  seq_params.lidar.beams = 16;
+  seq_params.lidar.azimuth_steps = 512;
+  ASSERT_TRUE(
+      tarmac::sim::write_sequence(tarmac::sim::Scene::airside_default(), seq_params, dir / "seq")
+          .ok());
+  auto seq = tarmac::tools::open_kitti(dir / "seq");
+  ASSERT_TRUE(seq.ok()) << seq.error().message;
+
+  // Scans and poses at 10 Hz for the whole test, from this process: the writers match each
+  // tarmacd in turn.
+  tarmac::transport::ParticipantConfig pc;
+  pc.domain_id = domain;
+  pc.name = "kill-test-replay";
+  auto participant = tarmac::transport::Participant::create(pc);
+  ASSERT_TRUE(participant.ok());
+  std::atomic<bool> stop_replay{false};
+  tarmac::tools::ReplayOptions options;
+  options.loops = 1000;
+  options.wait_for_readers_s = 20.0;
+  std::thread replay([&] {
+    auto r = tarmac::tools::replay(participant.value(), seq.value(), options, &stop_replay);
+    EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message);
+  });
+  struct StopReplay {  // also when an assertion leaves the test early
+    std::atomic<bool>& stop;
+    std::thread& thread;
+    ~StopReplay() {
+      stop = true;
+      if (thread.joinable()) thread.join();
+    }
+  } stop_replay_on_exit{stop_replay, replay};
+
+  const fs::path tsdf = dir / "state" / "tsdf.vdb";
+  const fs::path partial = tsdf.string() + ".tmp";
+  // Round 0 and 1: SIGKILL while mapping, between saves; 2..4: right after a save started.
+  constexpr int kKills = 5;
+  int kills_inside_a_save = 0;
+  std::vector<SaveLine> previous_completed, previous_started;
+  double previous_kill_s = 0.0;
+  int previous_skipped = 0;
+  for (int round = 0; round <= kKills; ++round) {
+    SCOPED_TRACE("round " + std::to_string(round));
+    NotifySocket notify(dir / "notify.sock");
+    ASSERT_TRUE(notify.bound());
+    const pid_t pid = spawn_tarmacd(dir);
+    ASSERT_GE(pid, 0);
+    const bool ready = notify.wait_for("READY=1", 15s);
+    std::string log = read_file(dir / "tarmacd.log");
+    ASSERT_TRUE(ready) << log;
+    EXPECT_EQ(log.find("state: saved TSDF"), std::string::npos) << "a save was refused\n" << log;
+    if (round > 0) {
+      // The restart loaded a complete save of the killed run: the last one it completed, or the
+      // one in flight if the kill came after its rename — never a half-written file.
+      const LoadLine load = load_in(log);
+      ASSERT_TRUE(load.loaded) << log;
+      EXPECT_GT(load.voxels, 0u);
+      ASSERT_FALSE(previous_completed.empty());
+      const bool last_complete = load.stamp_ns == previous_completed.back().stamp_ns &&
+                                 load.voxels == previous_completed.back().voxels;
+      const bool in_flight = !previous_started.empty() &&
+                             load.stamp_ns == previous_started.back().stamp_ns &&
+                             load.voxels == previous_started.back().voxels;
+      EXPECT_TRUE(last_complete || in_flight)
+          << "loaded " << load.voxels << " voxels stamped " << load.stamp_ns;
+      // At most one save period of mapping lost: the snapshot loaded was taken (its save's
+      // start line) less than a save period before the kill — plus one more for each periodic
+      // save the killed run skipped because the previous one was still writing (a loaded
+      // machine), and a margin for the save in flight.
+      const auto loaded =
+          std::find_if(previous_started.begin(), previous_started.end(), [&](const SaveLine& l) {
+            return l.stamp_ns == load.stamp_ns && l.voxels == load.voxels;
+          });
+      ASSERT_NE(loaded, previous_started.end());
+      double lost_s = previous_kill_s - loaded->logged_s;
+      if (lost_s < 0.0) lost_s += 86400.0;  // across midnight
+      EXPECT_LT(lost_s, kSavePeriodS * static_cast<double>(1 + previous_skipped) + 1.0);
+      EXPECT_FALSE(fs::exists(partial)) << "the cut-short save was not cleared at start";
+    }
+    if (round == kKills) {
+      const Stopped stopped = sigterm_and_wait(pid);
+      EXPECT_TRUE(stopped.exited && stopped.exit_code == 0) << read_file(dir / "tarmacd.log");
+      break;
+    }
+    if (round < 2) {
+      // Two saves done, then 0.4 s into the next period: mapping, not saving.
+      const auto deadline = SteadyClock::now() + 15s;
+      // The notify socket is read all along, as systemd does: a full one blocks sd_notify.
+      while (saves_in(read_file(dir / "tarmacd.log"), true).size() < 2 &&
+             SteadyClock::now() < deadline) {
+        notify.collect_for(5ms);
+      }
+      notify.collect_for(400ms);
+    } else {
+      // Right after a save logged its start: its write is under way.
+      const auto deadline = SteadyClock::now() + 15s;
+      while (saves_in(read_file(dir / "tarmacd.log"), false).size() < 2 &&
+             SteadyClock::now() < deadline) {
+        notify.collect_for(1ms);
+      }
+    }
+    previous_kill_s = now_seconds();
+    kill(pid, SIGKILL);
+    int wstatus = 0;
+    waitpid(pid, &wstatus, 0);
+    EXPECT_TRUE(WIFSIGNALED(wstatus) && WTERMSIG(wstatus) == SIGKILL);
+    log = read_file(dir / "tarmacd.log");
+    previous_completed = saves_in(log, true);
+    previous_started = saves_in(log, false);
+    previous_skipped = 0;
+    for (std::size_t at = log.find("periodic TSDF save skipped"); at != std::string::npos;
+         at = log.find("periodic TSDF save skipped", at + 1)) {
+      ++previous_skipped;
+    }
+    ASSERT_GE(previous_completed.size(), round < 2 ? 2u : 1u) << log;
+    if (round >= 2 && previous_started.size() > previous_completed.size()) ++kills_inside_a_save;
+  }
+  stop_replay = true;
+  replay.join();  // before the live tarmacd is gone, so the replay ends cleanly
+  // The kills after a save's start line landed inside the write (its completion never logged).
+  EXPECT_GE(kills_inside_a_save, 2) << "saves too quick to be caught: make the TSDF bigger";
   std::this_thread::sleep_for(200ms);
   EXPECT_EQ(sniffer.value()->counts().off_host, 0u);
   fs::remove_all(dir);

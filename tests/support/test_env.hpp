@@ -53,6 +53,15 @@ enum Domain : std::uint32_t {
   // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 160..169
   kDomainCycloneUdpClouds = 160,
   kDomainCycloneTinyBuffer = 161,
+  // Fault injection (tests/daemon/fault_injection_test.cpp, tarmacd_process_test.cpp) and the
+  // short soak: 170..179
+  kDomainFaultLidarStops = 170,
+  kDomainFaultPoseStops = 171,
+  kDomainFaultClockAhead = 172,
+  kDomainFaultClockBack = 173,
+  kDomainFaultOverload = 174,
+  kDomainFaultKill = 175,
+  kDomainSoakShort = 176,
 };
 
 inline bool running_in_ci() {

@@ -91,9 +91,11 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   ReplayStats stats;
   if (n == 0 || options.loops == 0) return stats;
   const std::size_t total = n * options.loops;
-  std::int64_t start = options.start_ns != 0
-                           ? options.start_ns
-                           : realtime_ns() + static_cast<std::int64_t>(options.lead_ms * 1e6);
+  // Stamps on the sender's clock (CLOCK_REALTIME + clock_offset_ns), sent on CLOCK_REALTIME.
+  const std::int64_t offset = options.clock_offset_ns;
+  std::int64_t start = options.start_ns != 0 ? options.start_ns
+                                             : realtime_ns() + offset +
+                                                   static_cast<std::int64_t>(options.lead_ms * 1e6);
   if (options.start_ns == 0 && options.align_ms > 0.0) {
     const auto grid = static_cast<std::int64_t>(std::llround(options.align_ms * 1e6));
     start = (start / grid + 1) * grid;
@@ -112,9 +114,11 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   std::vector<Event> events;
   events.reserve(2 * total);
   for (std::size_t k = 0; k < total; ++k) {
-    events.push_back({stamps[k] + std::llround(jitter(rng)), k, EventKind::kScan});
-    if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count)) {
-      events.push_back({stamps[k] + std::llround(jitter(rng)), k, EventKind::kPose});
+    events.push_back({stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kScan});
+    const bool in_gap =
+        k >= options.pose_gap_first && k < options.pose_gap_first + options.pose_gap_count;
+    if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count) && !in_gap) {
+      events.push_back({stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kPose});
     }
   }
   // After its scan whatever the jitter: a localiser corrects what it has seen.
@@ -126,8 +130,9 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
                                                std::to_string(after) + " of " + std::to_string(n) +
                                                ", or empty"};
     }
-    events.push_back({stamps[after] + jitter_bound - std::llround(options.correction_lead_s * 1e9),
-                      c, EventKind::kCorrection});
+    events.push_back(
+        {stamps[after] - offset + jitter_bound - std::llround(options.correction_lead_s * 1e9), c,
+         EventKind::kCorrection});
   }
   std::stable_sort(events.begin(), events.end(),
                    [](const Event& a, const Event& b) { return a.publish_ns < b.publish_ns; });

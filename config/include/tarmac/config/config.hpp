@@ -137,6 +137,9 @@ struct OutputConfig {
   std::string esdf_slice_grid_topic;
   double esdf_slice_grid_range_m = 5.0;
   std::uint32_t diagnostic_array_every = 10;  ///< ticks between DiagnosticArray messages
+  /// The costmap is reported stale (DiagnosticArray level ERROR, `costmap_stale`) when the
+  /// newest scan in it is older than this at tick time, e.g. while no pose arrives.
+  double costmap_max_age_ms = 1000.0;
 };
 
 /// Persistent state (YAML `state`).

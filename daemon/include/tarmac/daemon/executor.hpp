@@ -5,6 +5,9 @@
 /// (ScanScheduler), runs ingest + integrate per scan and the costmap once on the worker pool,
 /// publishes the costmap, the ESDF slice, a CycleReport (and now and then a DiagnosticArray),
 /// and pings the systemd watchdog. Wall time is measured and reported, never used to decide.
+/// Ticks are slept to on CLOCK_MONOTONIC and carry a time on the stamp clock (CLOCK_REALTIME);
+/// when the stamp clock steps against the monotonic one (a wall-clock jump) the tick times
+/// follow it in whole periods, while the schedule itself is untouched: no burst, no stall.
 /// A stop is seen within kStopPollSlice while asleep, never inside a tick.
 
 #include <atomic>
@@ -38,6 +41,8 @@ struct ExecutorTotals {
   std::uint64_t late_corrections = 0;    ///< of those, applied out of stamp order (arrived late)
   std::uint64_t rebuilds_completed = 0;  ///< rebuilt windows swapped in
   std::uint64_t scans_reintegrated = 0;  ///< retained scans re-integrated by rebuilds
+  std::uint64_t clock_steps = 0;         ///< steps of the stamp clock the ticks followed
+  std::int64_t last_clock_step_ns = 0;   ///< the last such step (+: the clock jumped ahead)
 };
 
 /// What load_tsdf() found in the state directory.
@@ -58,6 +63,10 @@ struct RunHooks {
   /// On the executor thread once the tick loop has ended, before run() waits for an in-flight
   /// periodic save (tarmacd: StopSignals::loop_ended()).
   std::function<void()> on_loop_end;
+  /// The stamp clock (empty: CLOCK_REALTIME), read on the executor thread at start and once per
+  /// tick; must be RT-safe. Tests step it to play a wall-clock jump, which the machine's own
+  /// clock cannot do in a test.
+  std::function<std::int64_t()> stamp_clock_ns;
 };
 
 class Executor {

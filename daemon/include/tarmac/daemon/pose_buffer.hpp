@@ -50,6 +50,10 @@ class PoseBuffer {
   /// they are left alone). Samples after `made_ns` came from the corrected localiser and are
   /// kept. Returns the samples changed. RT-safe.
   std::size_t apply_trajectory(std::span<const core::StampedPose> trajectory, std::int64_t made_ns);
+  /// Removes every sample stamped after `stamp_ns` (after a backward step of the stamp clock
+  /// they come from the old clock, and would refuse every new sample as out of order). Returns
+  /// how many. RT-safe.
+  std::size_t drop_after(std::int64_t stamp_ns);
   /// The newest min(2, size()) samples, oldest first, into `out`; returns how many.
   std::size_t newest_two(core::StampedPose (&out)[2]) const;
 

@@ -66,6 +66,14 @@ class ScanScheduler {
   TickStats select(std::int64_t tick_ns, const PoseBuffer& poses, std::vector<Selected>& out,
                    ReasonCounters& drops);
 
+  /// The stamp clock stepped (a wall-clock jump) and ticks now sit at `tick_ns` on the new
+  /// clock: each pending scan is judged again as commit() would judge it ("scan.future",
+  /// "scan.stale", counted in `rejections`, its slot freed), and the stamp order and the
+  /// per-sensor newest stamps that lie beyond tick + max_future (from the old clock, after a
+  /// backward step) are forgotten, so scans stamped by the new clock are taken. Returns the
+  /// pending scans rejected. RT-safe.
+  std::size_t on_clock_step(std::int64_t tick_ns, ReasonCounters& rejections);
+
   [[nodiscard]] core::PointCloud& cloud(std::uint32_t slot) { return slots_[slot].cloud; }
   /// Frees a selected slot for reuse.
   void release(std::uint32_t slot) { slots_[slot].state = State::kFree; }

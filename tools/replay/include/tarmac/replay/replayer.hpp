@@ -7,7 +7,7 @@
 /// T_world_base = T_world_sensor · T_base_sensor⁻¹ with the extrinsic given in the options (the
 /// daemon's config), so the daemon recovers T_world_sensor. Stamps are re-based on this
 /// machine's clock: stamp_k = start + (t_k − t_0) / rate_scale, and scan k is published at its
-/// stamp (plus an optional random jitter, for determinism tests).
+/// stamp (plus an optional random jitter, for determinism tests; minus clock_offset_ns).
 
 #include <atomic>
 #include <cstdint>
@@ -45,6 +45,13 @@ struct ReplayOptions {
   /// Poses are published for the first `pose_count` scans only (0: all); tests use it to starve
   /// the daemon of poses.
   std::size_t pose_count = 0;
+  /// No poses for the `pose_gap_count` scans from scan `pose_gap_first` on (counted over all
+  /// loops): the localiser drops out for a while, then comes back.
+  std::size_t pose_gap_first = 0;
+  std::size_t pose_gap_count = 0;
+  /// The sender's clock reads CLOCK_REALTIME + this: messages are stamped by it (start_ns too)
+  /// but sent on CLOCK_REALTIME. Tests play a sensor whose wall clock stepped (or has not yet).
+  std::int64_t clock_offset_ns = 0;
   /// false: scans only (another process publishes the poses, e.g. one replay per LiDAR).
   bool publish_poses = true;
   /// QoS of the scan writer; must be compatible with the daemon's `dds.qos.lidar`.

@@ -1,0 +1,133 @@
+#pragma once
+// What the in-process executor tests share (executor_test.cpp, fault_injection_test.cpp): a small
+// simulated sequence, a test config, the executor on its own thread, a peer participant and the
+// CycleReport reader. Every DDS test passes its own domain (test_env.hpp).
+
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "conversions.hpp"
+#include "dds_endpoints.hpp"
+#include "tarmac/config/config.hpp"
+#include "tarmac/daemon/executor.hpp"
+#include "tarmac/sim/lidar.hpp"
+#include "tarmac/sim/scene.hpp"
+#include "tarmac/tools/kitti.hpp"
+#include "tarmac_msgsPubSubTypes.h"
+
+namespace tarmac::test {
+
+using ReportReader = transport::Reader<tarmac_msgs::msg::dds_::CycleReport_PubSubType>;
+
+inline constexpr int kScans = 20;
+
+/// A small sequence (kScans scans of 16 beams at 10 Hz) generated once for the whole binary.
+inline const tools::KittiSequence& sequence() {
+  static const tools::KittiSequence seq = [] {
+    const auto dir = std::filesystem::temp_directory_path() /
+                     ("tarmac-executor-test-" + std::to_string(::getpid()));
+    sim::SequenceParams p;
+    p.scans = kScans;
+    p.lidar.beams = 16;
+    p.lidar.azimuth_steps = 512;
+    const auto written = sim::write_sequence(sim::Scene::airside_default(), p, dir);
+    EXPECT_TRUE(written.ok()) << written.error;
+    auto opened = tools::open_kitti(dir);
+    EXPECT_TRUE(opened.ok()) << (opened.ok() ? "" : opened.error().message);
+    return std::move(opened).value();
+  }();
+  return seq;
+}
+
+inline config::Config test_config(std::uint32_t domain, std::uint32_t workers) {
+  config::Config c;
+  c.dds.participant.domain_id = domain;
+  c.dds.participant.name = "tarmacd-test";
+  // Reliable scans: a lost sample would change the map, and this test is about determinism.
+  c.dds.qos.lidar = {transport::Reliability::kReliable, transport::Durability::kVolatile, 8};
+  c.executor.workers = workers;
+  c.executor.realtime_priority = 0;
+  c.executor.lock_memory = false;
+  c.executor.input_delay_ms = 40.0;
+  c.executor.pose_wait_ms = 200.0;
+  c.mapping.occupancy.window_x_vox = 200;  // 40 x 40 x 6 m keeps the test fast
+  c.mapping.occupancy.window_y_vox = 200;
+  c.mapping.occupancy.window_z_vox = 30;
+  c.state.save_on_exit = false;
+  return c;
+}
+
+/// The executor on its own thread, stopped and joined on destruction.
+class RunningExecutor {
+ public:
+  explicit RunningExecutor(const config::Config& cfg, const daemon::RunHooks& hooks = {}) {
+    auto created = daemon::Executor::create(cfg);
+    EXPECT_TRUE(created.ok()) << (created.ok() ? "" : created.error().message);
+    executor_ = std::move(created).value();
+    thread_ =
+        std::thread([this, hooks] { executor_->run([this] { return stop_.load(); }, hooks); });
+  }
+  ~RunningExecutor() { stop(); }
+  RunningExecutor(const RunningExecutor&) = delete;
+  RunningExecutor& operator=(const RunningExecutor&) = delete;
+  /// Stops and joins the executor (then its map may be read).
+  void stop() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  daemon::Executor& get() { return *executor_; }
+
+ private:
+  std::unique_ptr<daemon::Executor> executor_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+inline transport::Participant peer(std::uint32_t domain) {
+  transport::ParticipantConfig pc;
+  pc.domain_id = domain;
+  pc.name = "executor-test-peer";
+  auto p = transport::Participant::create(pc);
+  EXPECT_TRUE(p.ok());
+  return std::move(p).value();
+}
+
+/// Collects CycleReports until `done(report)` or the timeout; returns the last one.
+inline transport::CycleReport wait_for_report(
+    ReportReader& reader, const std::function<bool(const transport::CycleReport&)>& done,
+    std::chrono::seconds timeout = std::chrono::seconds(15)) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  std::vector<transport::CycleReportMsg> batch;
+  transport::CycleReport last;
+  while (std::chrono::steady_clock::now() < deadline) {
+    reader.wait_for_sample(std::chrono::milliseconds(100));
+    batch.clear();
+    reader.take_all(batch);
+    for (const auto& m : batch) {
+      last = transport::from_cycle_report(m);
+      if (done(last)) return last;
+    }
+  }
+  return last;
+}
+
+/// The total since start of `reason` in a report's drops or rejections (0 when absent).
+inline std::uint64_t total_of(const std::vector<transport::ReasonReport>& list,
+                              const std::string& reason) {
+  for (const auto& e : list) {
+    if (e.reason == reason) return e.total;
+  }
+  return 0;
+}
+
+}  // namespace tarmac::test

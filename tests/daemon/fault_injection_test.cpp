@@ -1,0 +1,441 @@
+// Faults injected into tarmacd's executor over loopback DDS (issue 19 item 5): a LiDAR that
+// stops, a pose stream that stops and comes back, the wall clock stepping an hour either way, and
+// four times the input the quotas allow. Each test has its own DDS domain and runs under the
+// packet capture (nothing off loopback).
+
+#include <time.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "conversions.hpp"
+#include "dds_endpoints.hpp"
+#include "diagnostic_msgsPubSubTypes.h"
+#include "executor_harness.hpp"
+#include "loopback_only.hpp"
+#include "tarmac/daemon/clock.hpp"
+#include "tarmac/replay/replayer.hpp"
+#include "test_env.hpp"
+
+namespace tarmac::daemon {
+namespace {
+
+using namespace std::chrono_literals;
+using test::peer;
+using test::ReportReader;
+using test::RunningExecutor;
+using test::sequence;
+using test::test_config;
+using test::total_of;
+using test::wait_for_report;
+using DiagReader = transport::Reader<diagnostic_msgs::msg::dds_::DiagnosticArray_PubSubType>;
+
+/// One DiagnosticArray as the tests read it: the executor's status, its values by key.
+struct Diag {
+  int level = -1;
+  std::string message;
+  std::vector<std::pair<std::string, std::string>> values;
+  [[nodiscard]] std::string value(const std::string& key) const {
+    for (const auto& [k, v] : values) {
+      if (k == key) return v;
+    }
+    ADD_FAILURE() << "no DiagnosticArray value " << key;
+    return "";
+  }
+  [[nodiscard]] double number(const std::string& key) const {
+    return std::strtod(value(key).c_str(), nullptr);
+  }
+};
+
+/// Everything received so far on `reader`, appended to `out`.
+void take_diags(DiagReader& reader, std::vector<Diag>& out) {
+  std::vector<transport::DiagnosticArrayMsg> batch;
+  reader.take_all(batch);
+  for (const auto& m : batch) {
+    if (m.status().empty()) continue;
+    Diag d;
+    d.level = m.status()[0].level();
+    d.message = m.status()[0].message();
+    for (const auto& kv : m.status()[0].values()) d.values.emplace_back(kv.key(), kv.value());
+    out.push_back(std::move(d));
+  }
+}
+
+/// Every CycleReport received so far, appended to `out`.
+void take_reports(ReportReader& reader, std::vector<transport::CycleReport>& out) {
+  std::vector<transport::CycleReportMsg> batch;
+  reader.take_all(batch);
+  for (const auto& m : batch) out.push_back(transport::from_cycle_report(m));
+}
+
+const transport::InputAgeReport* age_of(const transport::CycleReport& r, const std::string& input) {
+  for (const auto& a : r.input_ages) {
+    if (a.input == input) return &a;
+  }
+  return nullptr;
+}
+
+/// The CycleReports of a run, checked for a schedule that kept its pace: consecutive reports
+/// (by cycle index) are one period apart on the stamp clock, times the ticks skipped in between,
+/// plus `step_ns` exactly once when the stamp clock stepped; few ticks skipped.
+void expect_steady_schedule(const std::vector<transport::CycleReport>& reports,
+                            std::int64_t period_ns, std::int64_t step_ns) {
+  ASSERT_GT(reports.size(), 10u);
+  int steps_seen = 0;
+  std::uint64_t skipped = 0;
+  for (std::size_t i = 1; i < reports.size(); ++i) {
+    const auto& a = reports[i - 1];
+    const auto& b = reports[i];
+    skipped += b.skipped_ticks;
+    if (b.cycle_index != a.cycle_index + 1) continue;  // a report lost in between
+    const std::int64_t expected = period_ns * (1 + static_cast<std::int64_t>(b.skipped_ticks));
+    const std::int64_t diff = b.tick_ns - a.tick_ns;
+    if (step_ns != 0 && diff == expected + step_ns) {
+      ++steps_seen;
+      continue;
+    }
+    EXPECT_EQ(diff, expected) << "cycle " << b.cycle_index;
+  }
+  if (step_ns != 0) {
+    EXPECT_EQ(steps_seen, 1);
+  }
+  // A loaded 2-core machine may miss a tick now and then; a schedule that followed the wall
+  // clock would skip 36000 (+1 h) or stall for an hour (−1 h).
+  EXPECT_LE(skipped, 3u + reports.size() / 20);
+}
+
+class Faults : public test::LoopbackOnly {
+ protected:
+  Faults() { expect_loopback_traffic_ = true; }
+};
+
+// ---- a: one of two LiDARs stops ----
+
+TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsNameTheStaleOne) {
+  auto cfg = test_config(test::kDomainFaultLidarStops, 2);
+  config::SensorConfig rear;
+  rear.id = "rear";
+  rear.topic = "rt/tarmac/lidar/rear/points";
+  rear.frame_id = "lidar_rear";
+  rear.max_age_ms = 300.0;
+  cfg.sensors.push_back(rear);
+  cfg.outputs.diagnostic_array_every = 1;
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainFaultLidarStops);
+  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 400);
+  ASSERT_TRUE(reports.ok());
+  auto diags = DiagReader::create(participant, cfg.outputs.diagnostic_array_topic,
+                                  cfg.dds.qos.diagnostics, 400);
+  ASSERT_TRUE(diags.ok());
+
+  // Both LiDARs on the same stamps (a shared start): front for 3 s with the poses, rear for
+  // its first 6 scans (0.3 s) only.
+  const std::int64_t start = clock_now_ns(CLOCK_REALTIME) + 2'000'000'000;
+  tools::ReplayOptions front;
+  front.lidar_qos = cfg.dds.qos.lidar;
+  front.rate_scale = 2.0;
+  front.loops = 3;
+  front.start_ns = start;
+  tools::ReplayOptions rear_options = front;
+  rear_options.lidar_topic = rear.topic;
+  rear_options.frame_id = rear.frame_id;
+  rear_options.publish_poses = false;
+  rear_options.loops = 1;
+  rear_options.max_scans = 6;
+  core::Result<tools::ReplayStats> front_stats = core::Error{"", ""};
+  core::Result<tools::ReplayStats> rear_stats = core::Error{"", ""};
+  std::thread front_thread([&] { front_stats = tools::replay(participant, sequence(), front); });
+  std::thread rear_thread(
+      [&] { rear_stats = tools::replay(participant, sequence(), rear_options); });
+  // While front goes on: rear stale with its age, front fresh.
+  const auto stale = wait_for_report(*reports.value(), [](const transport::CycleReport& r) {
+    const auto* f = age_of(r, "front");
+    const auto* b = age_of(r, "rear");
+    return f != nullptr && b != nullptr && b->stale && b->age_ms > 600.0 && !f->stale &&
+           f->age_ms >= 0.0;
+  });
+  front_thread.join();
+  rear_thread.join();
+  ASSERT_TRUE(front_stats.ok()) << front_stats.error().message;
+  ASSERT_TRUE(rear_stats.ok()) << rear_stats.error().message;
+  const auto* rear_age = age_of(stale, "rear");
+  ASSERT_NE(rear_age, nullptr);
+  ASSERT_TRUE(rear_age->stale) << "no report with rear stale and front fresh";
+  // Its age is the distance from the tick to its last scan.
+  EXPECT_NEAR(rear_age->age_ms,
+              static_cast<double>(stale.tick_ns - rear_stats.value().last_stamp_ns) / 1e6, 1e-3);
+  // Front kept mapping after rear went stale: scans stamped past rear's last + its max age
+  // were integrated.
+  EXPECT_GT(stale.stamp_ns, rear_stats.value().last_stamp_ns + 300'000'000);
+
+  // The DiagnosticArray says the same: WARN, rear named with its age, front fresh.
+  std::vector<Diag> seen;
+  take_diags(*diags.value(), seen);
+  const auto warn = std::find_if(seen.begin(), seen.end(), [](const Diag& d) {
+    return d.level == 1 && d.value("input.rear.stale") == "true" &&
+           d.value("input.front.stale") == "false" && d.number("input.rear.age_ms") > 300.0;
+  });
+  ASSERT_NE(warn, seen.end()) << "no DiagnosticArray with rear stale and front fresh";
+  EXPECT_NE(warn->message.find("input stale: rear ("), std::string::npos) << warn->message;
+  EXPECT_EQ(warn->message.find("front"), std::string::npos) << warn->message;
+  EXPECT_EQ(warn->value("costmap_stale"), "false");
+  EXPECT_GE(warn->number("input.front.age_ms"), 0.0);
+
+  for (int i = 0; i < 50 && executor.get().totals().scans_integrated < 66; ++i) {
+    std::this_thread::sleep_for(20ms);
+  }
+  EXPECT_EQ(executor.get().totals().scans_integrated, 60u + 6u) << "every scan of both LiDARs";
+}
+
+// ---- b: the pose stream stops, then comes back ----
+
+TEST_F(Faults, PoseStreamStops_ScansDroppedCostmapStaleInDiagnostics_MappingResumesWithPoses) {
+  auto cfg = test_config(test::kDomainFaultPoseStops, 2);
+  cfg.outputs.diagnostic_array_every = 1;
+  cfg.outputs.costmap_max_age_ms = 400.0;
+  cfg.pose.max_age_ms = 300.0;
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainFaultPoseStops);
+  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 400);
+  ASSERT_TRUE(reports.ok());
+  auto diags = DiagReader::create(participant, cfg.outputs.diagnostic_array_topic,
+                                  cfg.dds.qos.diagnostics, 400);
+  ASSERT_TRUE(diags.ok());
+  // 40 scans at 20 Hz; the localiser is silent for scans 10..25 (0.8 s).
+  constexpr std::size_t kGapFirst = 10, kGap = 16, kTotal = 40;
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0;
+  options.loops = 2;
+  options.pose_gap_first = kGapFirst;
+  options.pose_gap_count = kGap;
+  core::Result<tools::ReplayStats> stats = core::Error{"", ""};
+  std::atomic<bool> done{false};
+  std::thread replay([&] {
+    stats = tools::replay(participant, sequence(), options);
+    done = true;
+  });
+  std::vector<Diag> seen;
+  std::vector<transport::CycleReport> seen_reports;
+  while (!done) {
+    diags.value()->wait_for_sample(50ms);
+    take_diags(*diags.value(), seen);
+    take_reports(*reports.value(), seen_reports);
+  }
+  replay.join();
+  ASSERT_TRUE(stats.ok()) << stats.error().message;
+  const auto last = wait_for_report(*reports.value(), [&](const transport::CycleReport& r) {
+    return r.stamp_ns == stats.value().last_stamp_ns;
+  });
+  take_diags(*diags.value(), seen);
+
+  // Every scan of the gap dropped with a counted reason: its pose never came (pose_timeout),
+  // or the poses around it came further apart than pose.max_gap_ms (pose_gap).
+  const std::uint64_t timeout = total_of(last.drops, "scan.pose_timeout");
+  EXPECT_GE(timeout, 1u);
+  EXPECT_EQ(timeout + total_of(last.drops, "scan.pose_gap"), kGap);
+  // Mapping resumed with the poses: the last scan is in the costmap, all others integrated.
+  EXPECT_EQ(last.stamp_ns, stats.value().last_stamp_ns) << "mapping did not resume";
+  EXPECT_EQ(executor.get().totals().scans_integrated, kTotal - kGap);
+
+  // During the gap the CycleReport's costmap age (tick − newest scan) grew past the limit,
+  // and the DiagnosticArray said so: ERROR, costmap_stale, the pose input stale.
+  EXPECT_TRUE(std::any_of(seen_reports.begin(), seen_reports.end(), [](const auto& r) {
+    return r.stamp_ns != 0 && r.tick_ns - r.stamp_ns > 400'000'000;
+  }));
+  const auto error = std::find_if(seen.begin(), seen.end(), [](const Diag& d) {
+    return d.level == 2 && d.value("costmap_stale") == "true" && d.number("costmap_age_ms") > 400.0;
+  });
+  ASSERT_NE(error, seen.end()) << "no DiagnosticArray with the costmap stale";
+  EXPECT_NE(error->message.find("costmap stale ("), std::string::npos) << error->message;
+  EXPECT_EQ(error->value("input.pose.stale"), "true");
+  EXPECT_NE(error->message.find("pose ("), std::string::npos) << error->message;
+  // ... and cleared once poses were back.
+  const auto after = std::find_if(error, seen.end(), [](const Diag& d) {
+    return d.value("costmap_stale") == "false" && d.value("input.pose.stale") == "false";
+  });
+  ASSERT_NE(after, seen.end()) << "costmap never fresh again after the gap";
+  EXPECT_EQ(after->level, 0) << after->message;
+  EXPECT_EQ(after->message, "ok");
+}
+
+// ---- c: the wall clock steps ±1 h ----
+
+/// The executor's stamp clock is CLOCK_REALTIME + an offset the test steps by `step_ns` (the
+/// machine's clock cannot be set in a test; RunHooks::stamp_clock_ns is the seam). Before the
+/// step 6 scans are integrated; after it, 4 scans (with poses) stamped by the old clock must be
+/// rejected with counted reasons, then 6 scans stamped by the new clock integrated; the ticks
+/// keep one period apart throughout (the step appears once, in whole periods).
+void check_clock_step(std::uint32_t domain, std::int64_t step_ns) {
+  auto cfg = test_config(domain, 2);
+  std::atomic<std::int64_t> offset{0};
+  RunHooks hooks;
+  hooks.stamp_clock_ns = [&offset] { return clock_now_ns(CLOCK_REALTIME) + offset.load(); };
+  RunningExecutor executor(cfg, hooks);
+  auto participant = peer(domain);
+  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 400);
+  ASSERT_TRUE(reports.ok());
+  std::vector<transport::CycleReport> seen;
+  const auto wait_integrated = [&](std::uint64_t n) {
+    for (int i = 0; i < 150 && executor.get().totals().scans_integrated < n; ++i) {
+      reports.value()->wait_for_sample(20ms);
+      take_reports(*reports.value(), seen);
+    }
+    return executor.get().totals().scans_integrated;
+  };
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0;
+  options.max_scans = 6;
+  ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
+  ASSERT_EQ(wait_integrated(6), 6u);
+
+  offset = step_ns;  // the wall clock steps
+  tools::ReplayOptions old_clock = options;
+  old_clock.max_scans = 4;  // a sensor and a localiser still on the old clock
+  ASSERT_TRUE(tools::replay(participant, sequence(), old_clock).ok());
+  tools::ReplayOptions new_clock = options;
+  new_clock.clock_offset_ns = step_ns;
+  auto after = tools::replay(participant, sequence(), new_clock);
+  ASSERT_TRUE(after.ok()) << after.error().message;
+  EXPECT_EQ(wait_integrated(12), 12u) << "scans stamped by the new clock not integrated";
+  const auto last = wait_for_report(*reports.value(), [&](const transport::CycleReport& r) {
+    seen.push_back(r);
+    return r.stamp_ns == after.value().last_stamp_ns;
+  });
+  EXPECT_EQ(last.stamp_ns, after.value().last_stamp_ns) << "costmap not on the new clock";
+  executor.stop();
+  take_reports(*reports.value(), seen);
+  std::sort(seen.begin(), seen.end(),
+            [](const auto& a, const auto& b) { return a.cycle_index < b.cycle_index; });
+  seen.erase(
+      std::unique(seen.begin(), seen.end(),
+                  [](const auto& a, const auto& b) { return a.cycle_index == b.cycle_index; }),
+      seen.end());
+
+  const auto t = executor.get().totals();
+  EXPECT_EQ(t.clock_steps, 1u);
+  EXPECT_EQ(t.last_clock_step_ns, step_ns);
+  EXPECT_EQ(t.scans_integrated, 12u);
+  if (step_ns > 0) {
+    // Old-clock scans are an hour old on the new clock; their poses are harmless history.
+    EXPECT_EQ(total_of(last.rejections, "scan.stale"), 4u);
+    EXPECT_EQ(total_of(last.rejections, "scan.future"), 0u);
+  } else {
+    // Old-clock scans and poses are an hour in the future; the poses of before the step,
+    // which would refuse every new pose as out of order, were dropped at the step.
+    EXPECT_EQ(total_of(last.rejections, "scan.future"), 4u);
+    EXPECT_EQ(total_of(last.rejections, "pose.future"), 4u);
+    EXPECT_GE(total_of(last.drops, "pose.clock_step"), 6u);
+    EXPECT_EQ(total_of(last.rejections, "scan.stale"), 0u);
+  }
+  EXPECT_EQ(total_of(last.rejections, "scan.late"), 0u);
+  expect_steady_schedule(seen, std::llround(1e9 / cfg.executor.rate_hz), step_ns);
+  // No burst, no stall: as many ticks as periods went by (monotonic), give or take a few.
+  EXPECT_LE(t.skipped_ticks, 3u);
+}
+
+TEST_F(Faults, WallClockStepsOneHourAhead_TicksKeepPace_OldStampsStale_NewStampsIntegrated) {
+  check_clock_step(test::kDomainFaultClockAhead, 3'600'000'000'000);
+}
+
+TEST_F(Faults, WallClockStepsOneHourBack_TicksKeepPace_OldStampsFuture_NewStampsIntegrated) {
+  check_clock_step(test::kDomainFaultClockBack, -3'600'000'000'000);
+}
+
+// ---- d: four times the input the quotas allow ----
+
+TEST_F(Faults, FourTimesTheQuota_RateHolds_SheddingCounted_EveryScanAccountedFor) {
+  const auto& seq = sequence();
+  std::uint64_t scan_points = 0;
+  core::PointCloud cloud;
+  for (const auto& file : seq.scans) {
+    ASSERT_TRUE(tools::read_kitti_scan(file, cloud).ok());
+    scan_points = std::max<std::uint64_t>(scan_points, cloud.size());
+  }
+  auto cfg = test_config(test::kDomainFaultOverload, 2);
+  // Scans come at 80 Hz into a 10 Hz cycle (8 per tick); the quotas take 2 per tick, each
+  // decimated to half its points, and the TSDF of about one of them.
+  cfg.quotas.points_per_scan = scan_points / 2;
+  cfg.quotas.points_per_cycle = scan_points;
+  cfg.quotas.tsdf_points_per_cycle = scan_points / 2;
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainFaultOverload);
+  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 400);
+  ASSERT_TRUE(reports.ok());
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 8.0;
+  options.loops = 10;  // 200 scans in 2.5 s
+  core::Result<tools::ReplayStats> stats = core::Error{"", ""};
+  std::atomic<bool> done{false};
+  std::thread replay([&] {
+    stats = tools::replay(participant, seq, options);
+    done = true;
+  });
+  std::vector<transport::CycleReport> seen;
+  while (!done) {
+    reports.value()->wait_for_sample(50ms);
+    take_reports(*reports.value(), seen);
+  }
+  replay.join();
+  ASSERT_TRUE(stats.ok()) << stats.error().message;
+  // The backlog drains at the quota's pace once the input stops; then every scan is accounted.
+  std::this_thread::sleep_for(1500ms);
+  executor.stop();
+  take_reports(*reports.value(), seen);
+  ASSERT_FALSE(seen.empty());
+  const auto& last = seen.back();
+  const auto t = executor.get().totals();
+
+  // Shedding is counted at every quota: scans shed from a full pending pool, scans deferred
+  // to the next tick, points decimated, TSDF stages shed.
+  const std::uint64_t shed_pending = total_of(last.drops, "scan.shed_pending_full");
+  EXPECT_GT(shed_pending, 0u);
+  EXPECT_GT(total_of(last.drops, "scan.tsdf_shed_quota"), 0u);
+  std::uint64_t deferred = 0, decimated = 0, max_points_in = 0;
+  for (const auto& r : seen) {
+    for (const auto& s : r.stages) {
+      if (s.name == "drain") deferred += s.shed_items;
+      if (s.name == "ingest") decimated += s.shed_items;
+    }
+    max_points_in = std::max(max_points_in, r.points_in);
+  }
+  EXPECT_GT(deferred, 0u);
+  EXPECT_GT(decimated, 0u);
+  EXPECT_LE(max_points_in, cfg.quotas.points_per_cycle) << "a tick took more than its quota";
+  // Every scan sent is integrated or dropped with a reason (reliable DDS: none lost on the way).
+  std::uint64_t dropped = shed_pending;
+  for (const char* r : {"queue.scan_overflow", "scan.pose_timeout", "scan.pose_gap",
+                        "scan.pose_before_buffer", "transport.scan_lost.front"}) {
+    dropped += total_of(last.drops, r);
+  }
+  for (const auto& e : last.rejections) {
+    if (e.reason.rfind("scan.", 0) == 0 || e.reason.rfind("pointcloud.", 0) == 0) {
+      dropped += e.total;
+    }
+  }
+  EXPECT_EQ(t.scans_integrated + dropped, stats.value().scans);
+  EXPECT_GT(t.scans_integrated, 40u);
+
+  // The rate held: one period between ticks, few skipped.
+  std::sort(seen.begin(), seen.end(),
+            [](const auto& a, const auto& b) { return a.cycle_index < b.cycle_index; });
+  expect_steady_schedule(seen, std::llround(1e9 / cfg.executor.rate_hz), 0);
+  EXPECT_LE(t.skipped_ticks, 3u + t.ticks / 20);
+}
+
+}  // namespace
+}  // namespace tarmac::daemon
