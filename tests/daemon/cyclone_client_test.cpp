@@ -159,7 +159,7 @@ class CycloneClient : public tarmac::test::LoopbackOnly {
   CycloneClient() { expect_loopback_traffic_ = true; }
 };
 
-TEST_F(CycloneClient, RealSizeCloudsOverUdp_AtLeast99PercentIntegrated) {
+TEST_F(CycloneClient, RealSizeCloudsOverUdp_NoneLostInTransport) {
   const Outcome o = run(tarmac::test::kDomainCycloneUdpClouds, 0);
   ASSERT_EQ(o.sent, kScans + kTailScans);
   // Nothing lost in transport (≤ 1 %, the bar). On a quiet machine every scan is
