@@ -349,6 +349,29 @@ core::Result<Eigen::Isometry3d> from_pose_msg(const PoseMsg& msg) {
   return T;
 }
 
+core::Result<std::int64_t> from_path_msg(const PathMsg& msg, const std::string& frame_id,
+                                         std::vector<PoseSample>& poses) {
+  poses.clear();
+  if (msg.header().frame_id() != frame_id) {
+    return core::Error{"correction.unknown_frame", "path frame '" + msg.header().frame_id() + "'"};
+  }
+  if (msg.poses().empty()) return core::Error{"correction.empty", "path has no poses"};
+  for (const auto& p : msg.poses()) {
+    if (!p.header().frame_id().empty() && p.header().frame_id() != frame_id) {
+      return core::Error{"correction.unknown_frame", "pose frame '" + p.header().frame_id() + "'"};
+    }
+    auto T = from_pose_msg(p.pose());
+    if (!T) return T.error();
+    const std::int64_t stamp = from_time_msg(p.header().stamp());
+    if (!poses.empty() && stamp <= poses.back().stamp_ns) {
+      return core::Error{"correction.unsorted", "pose stamps are not strictly increasing"};
+    }
+    poses.push_back(PoseSample{stamp, T.value()});
+  }
+  const std::int64_t made_ns = from_time_msg(msg.header().stamp());
+  return made_ns != 0 ? made_ns : poses.back().stamp_ns;
+}
+
 void fill_distance_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,
                          std::int64_t stamp_ns, const std::string& frame_id,
                          DistanceMapSliceMsg& msg) {
