@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <cstring>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -179,6 +181,57 @@ TEST(OccupancyGrid, RoundTripAndSizeCheck) {
   auto bad = from_occupancy_grid(msg);
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.error().code, "occupancy_grid.size");
+}
+
+PathMsg path(const std::string& frame, std::int64_t made_ns,
+             const std::vector<std::int64_t>& stamps_ns) {
+  PathMsg msg;
+  msg.header().frame_id(frame);
+  msg.header().stamp(to_time_msg(made_ns));
+  for (const std::int64_t ns : stamps_ns) {
+    geometry_msgs::msg::dds_::PoseStamped_ p;
+    p.header().stamp(to_time_msg(ns));
+    p.pose().orientation().w(1.0);
+    p.pose().position().x(static_cast<double>(ns) * 1e-9);
+    msg.poses().push_back(p);
+  }
+  return msg;
+}
+
+TEST(Path, AcceptsSortedPosesAndTakesTheHeaderStamp) {
+  std::vector<PoseSample> poses;
+  const auto made = from_path_msg(path("map", 50, {10, 20, 30}), "map", poses);
+  ASSERT_TRUE(made.ok()) << made.error().message;
+  EXPECT_EQ(made.value(), 50);
+  ASSERT_EQ(poses.size(), 3u);
+  EXPECT_EQ(poses[2].stamp_ns, 30);
+  EXPECT_DOUBLE_EQ(poses[2].T_W_B.translation().x(), 30e-9);
+}
+
+TEST(Path, ZeroHeaderStampMeansTheNewestPose) {
+  std::vector<PoseSample> poses;
+  const auto made = from_path_msg(path("map", 0, {10, 20}), "map", poses);
+  ASSERT_TRUE(made.ok());
+  EXPECT_EQ(made.value(), 20);
+}
+
+TEST(Path, RejectsEachMalformedPathWithItsCode) {
+  std::vector<PoseSample> poses;
+  EXPECT_EQ(from_path_msg(path("odom", 0, {10}), "map", poses).error().code,
+            "correction.unknown_frame");
+  EXPECT_EQ(from_path_msg(path("map", 0, {}), "map", poses).error().code, "correction.empty");
+  EXPECT_EQ(from_path_msg(path("map", 0, {10, 10}), "map", poses).error().code,
+            "correction.unsorted");
+  PathMsg other_pose_frame = path("map", 0, {10, 20});
+  other_pose_frame.poses()[1].header().frame_id("odom");
+  EXPECT_EQ(from_path_msg(other_pose_frame, "map", poses).error().code,
+            "correction.unknown_frame");
+  PathMsg bad_quaternion = path("map", 0, {10});
+  bad_quaternion.poses()[0].pose().orientation().w(2.0);
+  EXPECT_EQ(from_path_msg(bad_quaternion, "map", poses).error().code, "pose.bad_quaternion");
+  PathMsg nan_position = path("map", 0, {10});
+  nan_position.poses()[0].pose().position().y(std::nan(""));
+  EXPECT_EQ(from_path_msg(nan_position, "map", poses).error().code, "pose.non_finite");
 }
 
 }  // namespace
