@@ -17,7 +17,9 @@
 namespace tarmac::fuzz {
 namespace {
 
-Bytes text(const std::string& s) { return Bytes(s.begin(), s.end()); }
+Bytes text(const std::string& s) {
+  return Bytes(s.begin(), s.end());
+}
 
 Bytes file(const std::string& relative) {
   std::ifstream in(std::string(TARMAC_SOURCE_DIR) + "/" + relative);
@@ -43,8 +45,9 @@ const std::vector<Bytes>& seeds() {
     s.push_back(text("version: 1\nexecutor:\n  rate_hz: 10\n  rate_hz: 20\n"));
     s.push_back(text("version: 1\nbase: &b {voxel_size_m: 0.2}\nmapping:\n  occupancy: *b\n"));
     s.push_back(text("version: 1\nmapping:\n  occupancy:\n    <<: {voxel_size_m: 0.2}\n"));
-    s.push_back(text("version: 1\nsensors:\n  - id: a\n    topic: /lidar/a\n"
-                     "    extrinsic: {translation: [1, 2, 0x10], rpy_deg: [0, 0, 1e400]}\n"));
+    s.push_back(
+        text("version: 1\nsensors:\n  - id: a\n    topic: /lidar/a\n"
+             "    extrinsic: {translation: [1, 2, 0x10], rpy_deg: [0, 0, 1e400]}\n"));
     s.push_back(text("version: 1\n? [a, b]\n: 1\n"));
     s.push_back(text("version: !!str 1\ndds: {domain_id: ~}\n"));
     s.push_back(text(std::string(200, '[') + std::string(200, ']')));
@@ -63,10 +66,11 @@ std::vector<std::string> dictionary() {
     words.insert(it->str());
   }
   std::vector<std::string> dict(words.begin(), words.end());
-  for (const char* token : {": ", "- ", "{", "}", "[", "]", ", ", "&a ", "*a", "<<: ", "? ",
-                            "!!str ", "!!int ", "!!float ", "!!map ", "---\n", "...\n", ".nan",
-                            ".inf", "-.inf", "~", "0x", "0o", "1e999", "|\n", ">\n", "'", "\"",
-                            "#", "\n  ", "true", "false", "null", "rt/", "/tarmac/"}) {
+  for (const char* token :
+       {": ",   "- ",    "{",      "}",      "[",        "]",      ", ",    "&a ",     "*a",
+        "<<: ", "? ",    "!!str ", "!!int ", "!!float ", "!!map ", "---\n", "...\n",   ".nan",
+        ".inf", "-.inf", "~",      "0x",     "0o",       "1e999",  "|\n",   ">\n",     "'",
+        "\"",   "#",     "\n  ",   "true",   "false",    "null",   "rt/",   "/tarmac/"}) {
     dict.emplace_back(token);
   }
   return dict;

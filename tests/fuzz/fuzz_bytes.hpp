@@ -79,13 +79,12 @@ class ByteWriter {
 };
 
 /// A property the target checks failed: abort, so libFuzzer saves the input as a crash.
-#define TARMAC_FUZZ_CHECK(cond)                                                      \
-  do {                                                                               \
-    if (!(cond)) {                                                                   \
-      std::fprintf(stderr, "%s:%d: fuzz property failed: %s\n", __FILE__, __LINE__, \
-                   #cond);                                                           \
-      std::abort();                                                                  \
-    }                                                                                \
+#define TARMAC_FUZZ_CHECK(cond)                                                             \
+  do {                                                                                      \
+    if (!(cond)) {                                                                          \
+      std::fprintf(stderr, "%s:%d: fuzz property failed: %s\n", __FILE__, __LINE__, #cond); \
+      std::abort();                                                                         \
+    }                                                                                       \
   } while (false)
 
 /// For LLVMFuzzerInitialize: when the arguments are `--make-seeds DIR`, writes `seeds` as
@@ -101,7 +100,8 @@ inline void handle_make_seeds(int* argc, char*** argv, const std::vector<Bytes>&
     char name[32];
     std::snprintf(name, sizeof name, "seed-%03d", i++);
     std::ofstream out(dir / name, std::ios::binary | std::ios::trunc);
-    out.write(reinterpret_cast<const char*>(seed.data()), static_cast<std::streamsize>(seed.size()));
+    out.write(reinterpret_cast<const char*>(seed.data()),
+              static_cast<std::streamsize>(seed.size()));
     if (!out) {
       std::fprintf(stderr, "cannot write %s\n", (dir / name).c_str());
       std::exit(1);

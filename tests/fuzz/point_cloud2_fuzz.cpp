@@ -19,9 +19,8 @@ using transport::PointCloud2Msg;
 namespace pf = sensor_msgs::msg::PointField_Constants;
 
 /// Field names the parser looks for, and one it must ignore; a code past the table is a literal.
-const std::vector<std::string> kNames = {"x",         "y",         "z", "intensity", "ring",
-                                         "time",      "t",         "timestamp",
-                                         "normal_x",  ""};
+const std::vector<std::string> kNames = {"x",    "y", "z",         "intensity", "ring",
+                                         "time", "t", "timestamp", "normal_x",  ""};
 constexpr std::uint8_t kLiteralName = 255;
 
 enum Flags : std::uint8_t {
@@ -122,8 +121,8 @@ void check_round_trip(const core::PointCloud& cloud) {
   TARMAC_FUZZ_CHECK(reparsed.time_offset_s.size() == cloud.time_offset_s.size());
   const std::size_t n = cloud.size();
   TARMAC_FUZZ_CHECK(same_bits(reparsed.points_S.data(), cloud.points_S.data(), n * 12));
-  TARMAC_FUZZ_CHECK(same_bits(reparsed.intensity.data(), cloud.intensity.data(),
-                              cloud.intensity.size() * 4));
+  TARMAC_FUZZ_CHECK(
+      same_bits(reparsed.intensity.data(), cloud.intensity.data(), cloud.intensity.size() * 4));
   for (std::size_t i = 0; i < cloud.time_offset_s.size(); ++i) {
     // A float time beyond 1e8 s reads as an absolute epoch time: not a relative time to keep.
     if (!(std::abs(cloud.time_offset_s[i]) <= 1e8f)) continue;
@@ -226,28 +225,20 @@ const std::vector<Bytes>& seeds() {
                               15, 3, true)));
     // Rejections: missing z, unknown datatype, count 2, field past point_step, sizes that
     // disagree (no size flags).
-    s.push_back(encode(layout(4, 1, {{0, "", 0, pf::FLOAT32, 1}, {1, "", 4, pf::FLOAT32, 1}},
-                              8, 0, false)));
-    s.push_back(encode(layout(4, 1,
-                              {{0, "", 0, pf::FLOAT32, 1},
-                               {1, "", 4, pf::FLOAT32, 1},
-                               {2, "", 8, 9, 1}},
-                              12, 0, false)));
-    s.push_back(encode(layout(4, 1,
-                              {{0, "", 0, pf::FLOAT32, 2},
-                               {1, "", 4, pf::FLOAT32, 1},
-                               {2, "", 8, pf::FLOAT32, 1}},
-                              12, 0, false)));
-    s.push_back(encode(layout(4, 1,
-                              {{0, "", 0, pf::FLOAT32, 1},
-                               {1, "", 4, pf::FLOAT32, 1},
-                               {2, "", 10, pf::FLOAT32, 1}},
-                              12, 0, false)));
-    Recipe sizes = layout(4, 3,
-                          {{0, "", 0, pf::FLOAT32, 1},
-                           {1, "", 4, pf::FLOAT32, 1},
-                           {2, "", 8, pf::FLOAT32, 1}},
-                          12, 0, false);
+    s.push_back(encode(
+        layout(4, 1, {{0, "", 0, pf::FLOAT32, 1}, {1, "", 4, pf::FLOAT32, 1}}, 8, 0, false)));
+    s.push_back(encode(
+        layout(4, 1, {{0, "", 0, pf::FLOAT32, 1}, {1, "", 4, pf::FLOAT32, 1}, {2, "", 8, 9, 1}}, 12,
+               0, false)));
+    s.push_back(encode(layout(
+        4, 1, {{0, "", 0, pf::FLOAT32, 2}, {1, "", 4, pf::FLOAT32, 1}, {2, "", 8, pf::FLOAT32, 1}},
+        12, 0, false)));
+    s.push_back(encode(layout(
+        4, 1, {{0, "", 0, pf::FLOAT32, 1}, {1, "", 4, pf::FLOAT32, 1}, {2, "", 10, pf::FLOAT32, 1}},
+        12, 0, false)));
+    Recipe sizes = layout(
+        4, 3, {{0, "", 0, pf::FLOAT32, 1}, {1, "", 4, pf::FLOAT32, 1}, {2, "", 8, pf::FLOAT32, 1}},
+        12, 0, false);
     sizes.flags = 0;
     sizes.row_step = 40;
     s.push_back(encode(sizes));

@@ -273,10 +273,10 @@ Bytes grid_seed(std::uint8_t flags, std::uint32_t width, std::uint32_t height) {
 
 const std::vector<Bytes>& seeds() {
   static const std::vector<Bytes> all = {
-      pose_seed(true, 1.0),        pose_seed(false, 1.0),       pose_seed(true, 1e300),
-      path_seed(true, 5, 0),       path_seed(true, 3, 1),       path_seed(false, 4, 0),
-      path_seed(true, 2, 2),       zones_seed(5, 3.0),          zones_seed(2, 3.0),
-      zones_seed(4, -2.0),         grid_seed(kIdentity, 8, 6), grid_seed(kIdentity | kSized, 4, 4),
+      pose_seed(true, 1.0),  pose_seed(false, 1.0),      pose_seed(true, 1e300),
+      path_seed(true, 5, 0), path_seed(true, 3, 1),      path_seed(false, 4, 0),
+      path_seed(true, 2, 2), zones_seed(5, 3.0),         zones_seed(2, 3.0),
+      zones_seed(4, -2.0),   grid_seed(kIdentity, 8, 6), grid_seed(kIdentity | kSized, 4, 4),
       grid_seed(0, 3, 3),
   };
   return all;

@@ -116,12 +116,24 @@ std::string saved_map(bool with_static, int rays) {
 }
 
 enum MetaFlags : std::uint8_t {
-  kVersion = 1, kFrame = 2, kVoxel = 4, kTruncation = 8, kHash = 16, kStamp = 32,
-  kStaticVoxel = 64, kVersionAsFloat = 128,
+  kVersion = 1,
+  kFrame = 2,
+  kVoxel = 4,
+  kTruncation = 8,
+  kHash = 16,
+  kStamp = 32,
+  kStaticVoxel = 64,
+  kVersionAsFloat = 128,
 };
 enum GridFlags : std::uint8_t {
-  kTsdfGrid = 1, kWeightGrid = 2, kStaticGrid = 4, kTsdfAsBool = 8, kTsdfTile = 16,
-  kWeightTile = 32, kWeightOtherTransform = 64, kStaticOtherTransform = 128,
+  kTsdfGrid = 1,
+  kWeightGrid = 2,
+  kStaticGrid = 4,
+  kTsdfAsBool = 8,
+  kTsdfTile = 16,
+  kWeightTile = 32,
+  kWeightOtherTransform = 64,
+  kStaticOtherTransform = 128,
 };
 enum VoxelFlags : std::uint8_t { kNoWeight = 1, kInactive = 2 };
 constexpr std::size_t kMaxVoxels = 64, kMaxStatic = 32;
@@ -149,12 +161,15 @@ std::string described_file(ByteReader& in) {
       meta.insertMeta("tarmac.format_version", openvdb::Int32Metadata(version));
     }
   }
-  if ((meta_flags & kFrame) != 0) meta.insertMeta("tarmac.frame_id", openvdb::StringMetadata(frame));
-  if ((meta_flags & kVoxel) != 0) meta.insertMeta("tarmac.voxel_size_m", openvdb::FloatMetadata(voxel));
+  if ((meta_flags & kFrame) != 0)
+    meta.insertMeta("tarmac.frame_id", openvdb::StringMetadata(frame));
+  if ((meta_flags & kVoxel) != 0)
+    meta.insertMeta("tarmac.voxel_size_m", openvdb::FloatMetadata(voxel));
   if ((meta_flags & kTruncation) != 0) {
     meta.insertMeta("tarmac.truncation_m", openvdb::FloatMetadata(truncation));
   }
-  if ((meta_flags & kHash) != 0) meta.insertMeta("tarmac.config_hash", openvdb::StringMetadata("0"));
+  if ((meta_flags & kHash) != 0)
+    meta.insertMeta("tarmac.config_hash", openvdb::StringMetadata("0"));
   if ((meta_flags & kStamp) != 0) meta.insertMeta("tarmac.stamp_ns", openvdb::Int64Metadata(1));
   if ((meta_flags & kStaticVoxel) != 0) {
     meta.insertMeta("tarmac.static_voxel_size_m", openvdb::FloatMetadata(static_voxel));

@@ -224,8 +224,7 @@ TEST(Path, RejectsEachMalformedPathWithItsCode) {
             "correction.unsorted");
   PathMsg other_pose_frame = path("map", 0, {10, 20});
   other_pose_frame.poses()[1].header().frame_id("odom");
-  EXPECT_EQ(from_path_msg(other_pose_frame, "map", poses).error().code,
-            "correction.unknown_frame");
+  EXPECT_EQ(from_path_msg(other_pose_frame, "map", poses).error().code, "correction.unknown_frame");
   PathMsg bad_quaternion = path("map", 0, {10});
   bad_quaternion.poses()[0].pose().orientation().w(2.0);
   EXPECT_EQ(from_path_msg(bad_quaternion, "map", poses).error().code, "pose.bad_quaternion");
