@@ -1,8 +1,10 @@
 #include "conversions.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -158,6 +160,30 @@ TEST(PointCloud2, KeepsNonFinitePointsForTheFilters) {
   ASSERT_TRUE(from_point_cloud2(to_point_cloud2(cloud), back).ok());
   EXPECT_TRUE(std::isnan(back.points_S[3].x()));
   EXPECT_EQ(back.size(), cloud.size());
+}
+
+// Found by tools/fuzz.sh point_cloud2: width 0 and a height of ~2e9 with no data passed the size
+// checks and the parser walked 2e9 empty rows (seconds at -O2, inside the cycle).
+TEST(PointCloud2, EmptyCloudOfHugeHeightParsesAtOnce) {
+  for (const auto& [width, height] : {std::pair{0u, 0xFFFFFFFFu}, std::pair{0xFFFFFFFFu, 0u}}) {
+    PointCloud2Msg msg;
+    msg.header().frame_id("lidar_front");
+    add_field(msg, "x", 0, pf::FLOAT32);
+    add_field(msg, "y", 4, pf::FLOAT32);
+    add_field(msg, "z", 8, pf::FLOAT32);
+    msg.point_step(12);
+    msg.width(width);
+    msg.height(height);
+    msg.row_step(width == 0 ? 0 : 0xFFFFFFFFu);
+    core::PointCloud cloud;
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto parsed = from_point_cloud2(msg, cloud);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_TRUE(parsed.ok() || parsed.error().code == "pointcloud.bad_row_step");
+    EXPECT_EQ(cloud.size(), 0u);
+    EXPECT_EQ(cloud.frame_id, "lidar_front");
+    EXPECT_LT(s, 0.5) << "parsing an empty " << width << " x " << height << " cloud";
+  }
 }
 
 TEST(OccupancyGrid, RoundTripAndSizeCheck) {

@@ -268,6 +268,9 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
 
   const bool swap = msg.is_bigendian() != (std::endian::native == std::endian::big);
   const std::size_t n = width * height;
+  // An empty cloud is done: its other dimension is unbounded by the data (0 x 4e9 with no
+  // bytes passes the size checks) and walking its rows would stall the cycle for seconds.
+  if (n == 0) return core::Ok{};
   // Grow geometrically: clouds are parsed into reused buffers, so a slowly growing scan size
   // costs a few reallocations, not one per scan.
   const auto grow = [n](auto& v) {
