@@ -421,8 +421,8 @@ void direction_buckets(Float4 x, Float4 y, Float4 z, std::uint16_t* out) {
   // In [0, 2) on the face; anything else (a zero or non-finite direction) to 0.
   Float4 fu = u / big + one, fv = v / big + one;
   const Float4 two = one + one;
-  fu = (fu >= zero) & (fu < two) ? fu : zero;
-  fv = (fv >= zero) & (fv < two) ? fv : zero;
+  fu = ((fu >= zero) & (fu < two)) ? fu : zero;
+  fv = ((fv >= zero) & (fv < two)) ? fv : zero;
   const Float4 half_bins = one * (0.5f * kDirBins), half_bands = one * (0.5f * kDirBands);
   const Int4 bin = __builtin_convertvector(fu * half_bins, Int4);
   const Int4 band = __builtin_convertvector(fv * half_bands, Int4);

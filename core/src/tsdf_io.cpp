@@ -192,7 +192,10 @@ Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file) {
   if (!in) return Error{"tsdf_io.open", name + ": cannot be read"};
   std::ostringstream bytes;
   bytes << in.rdbuf();
-  std::string data = bytes.str();
+  return parse_tsdf(std::move(bytes).str(), name);
+}
+
+Result<LoadedTsdf> parse_tsdf(std::string data, const std::string& name) {
   if (data.size() < kTrailerBytes || std::memcmp(data.data() + data.size() - 8, kEnd, 8) != 0 ||
       std::memcmp(data.data() + data.size() - kTrailerBytes, kMagic, 8) != 0) {
     return Error{"tsdf_io.truncated",

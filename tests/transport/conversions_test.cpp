@@ -1,7 +1,11 @@
 #include "conversions.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -158,6 +162,30 @@ TEST(PointCloud2, KeepsNonFinitePointsForTheFilters) {
   EXPECT_EQ(back.size(), cloud.size());
 }
 
+// Found by tools/fuzz.sh point_cloud2: width 0 and a height of ~2e9 with no data passed the size
+// checks and the parser walked 2e9 empty rows (seconds at -O2, inside the cycle).
+TEST(PointCloud2, EmptyCloudOfHugeHeightParsesAtOnce) {
+  for (const auto& [width, height] : {std::pair{0u, 0xFFFFFFFFu}, std::pair{0xFFFFFFFFu, 0u}}) {
+    PointCloud2Msg msg;
+    msg.header().frame_id("lidar_front");
+    add_field(msg, "x", 0, pf::FLOAT32);
+    add_field(msg, "y", 4, pf::FLOAT32);
+    add_field(msg, "z", 8, pf::FLOAT32);
+    msg.point_step(12);
+    msg.width(width);
+    msg.height(height);
+    msg.row_step(width == 0 ? 0 : 0xFFFFFFFFu);
+    core::PointCloud cloud;
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto parsed = from_point_cloud2(msg, cloud);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_TRUE(parsed.ok() || parsed.error().code == "pointcloud.bad_row_step");
+    EXPECT_EQ(cloud.size(), 0u);
+    EXPECT_EQ(cloud.frame_id, "lidar_front");
+    EXPECT_LT(s, 0.5) << "parsing an empty " << width << " x " << height << " cloud";
+  }
+}
+
 TEST(OccupancyGrid, RoundTripAndSizeCheck) {
   core::Costmap costmap(core::GridGeometry2D{-40.0, -20.0, 0.2, 17, 9}, core::kCostUnknown);
   for (std::size_t i = 0; i < costmap.cells().size(); ++i) {
@@ -179,6 +207,56 @@ TEST(OccupancyGrid, RoundTripAndSizeCheck) {
   auto bad = from_occupancy_grid(msg);
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.error().code, "occupancy_grid.size");
+}
+
+PathMsg path(const std::string& frame, std::int64_t made_ns,
+             const std::vector<std::int64_t>& stamps_ns) {
+  PathMsg msg;
+  msg.header().frame_id(frame);
+  msg.header().stamp(to_time_msg(made_ns));
+  for (const std::int64_t ns : stamps_ns) {
+    geometry_msgs::msg::dds_::PoseStamped_ p;
+    p.header().stamp(to_time_msg(ns));
+    p.pose().orientation().w(1.0);
+    p.pose().position().x(static_cast<double>(ns) * 1e-9);
+    msg.poses().push_back(p);
+  }
+  return msg;
+}
+
+TEST(Path, AcceptsSortedPosesAndTakesTheHeaderStamp) {
+  std::vector<PoseSample> poses;
+  const auto made = from_path_msg(path("map", 50, {10, 20, 30}), "map", poses);
+  ASSERT_TRUE(made.ok()) << made.error().message;
+  EXPECT_EQ(made.value(), 50);
+  ASSERT_EQ(poses.size(), 3u);
+  EXPECT_EQ(poses[2].stamp_ns, 30);
+  EXPECT_DOUBLE_EQ(poses[2].T_W_B.translation().x(), 30e-9);
+}
+
+TEST(Path, ZeroHeaderStampMeansTheNewestPose) {
+  std::vector<PoseSample> poses;
+  const auto made = from_path_msg(path("map", 0, {10, 20}), "map", poses);
+  ASSERT_TRUE(made.ok());
+  EXPECT_EQ(made.value(), 20);
+}
+
+TEST(Path, RejectsEachMalformedPathWithItsCode) {
+  std::vector<PoseSample> poses;
+  EXPECT_EQ(from_path_msg(path("odom", 0, {10}), "map", poses).error().code,
+            "correction.unknown_frame");
+  EXPECT_EQ(from_path_msg(path("map", 0, {}), "map", poses).error().code, "correction.empty");
+  EXPECT_EQ(from_path_msg(path("map", 0, {10, 10}), "map", poses).error().code,
+            "correction.unsorted");
+  PathMsg other_pose_frame = path("map", 0, {10, 20});
+  other_pose_frame.poses()[1].header().frame_id("odom");
+  EXPECT_EQ(from_path_msg(other_pose_frame, "map", poses).error().code, "correction.unknown_frame");
+  PathMsg bad_quaternion = path("map", 0, {10});
+  bad_quaternion.poses()[0].pose().orientation().w(2.0);
+  EXPECT_EQ(from_path_msg(bad_quaternion, "map", poses).error().code, "pose.bad_quaternion");
+  PathMsg nan_position = path("map", 0, {10});
+  nan_position.poses()[0].pose().position().y(std::nan(""));
+  EXPECT_EQ(from_path_msg(nan_position, "map", poses).error().code, "pose.non_finite");
 }
 
 }  // namespace

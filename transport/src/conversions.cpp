@@ -268,6 +268,9 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
 
   const bool swap = msg.is_bigendian() != (std::endian::native == std::endian::big);
   const std::size_t n = width * height;
+  // An empty cloud is done: its other dimension is unbounded by the data (0 x 4e9 with no
+  // bytes passes the size checks) and walking its rows would stall the cycle for seconds.
+  if (n == 0) return core::Ok{};
   // Grow geometrically: clouds are parsed into reused buffers, so a slowly growing scan size
   // costs a few reallocations, not one per scan.
   const auto grow = [n](auto& v) {
@@ -347,6 +350,29 @@ core::Result<Eigen::Isometry3d> from_pose_msg(const PoseMsg& msg) {
   T.linear() = q.toRotationMatrix();
   T.translation() = t;
   return T;
+}
+
+core::Result<std::int64_t> from_path_msg(const PathMsg& msg, const std::string& frame_id,
+                                         std::vector<PoseSample>& poses) {
+  poses.clear();
+  if (msg.header().frame_id() != frame_id) {
+    return core::Error{"correction.unknown_frame", "path frame '" + msg.header().frame_id() + "'"};
+  }
+  if (msg.poses().empty()) return core::Error{"correction.empty", "path has no poses"};
+  for (const auto& p : msg.poses()) {
+    if (!p.header().frame_id().empty() && p.header().frame_id() != frame_id) {
+      return core::Error{"correction.unknown_frame", "pose frame '" + p.header().frame_id() + "'"};
+    }
+    auto T = from_pose_msg(p.pose());
+    if (!T) return T.error();
+    const std::int64_t stamp = from_time_msg(p.header().stamp());
+    if (!poses.empty() && stamp <= poses.back().stamp_ns) {
+      return core::Error{"correction.unsorted", "pose stamps are not strictly increasing"};
+    }
+    poses.push_back(PoseSample{stamp, T.value()});
+  }
+  const std::int64_t made_ns = from_time_msg(msg.header().stamp());
+  return made_ns != 0 ? made_ns : poses.back().stamp_ns;
 }
 
 void fill_distance_slice(const core::DistanceField& field, const core::GridGeometry2D& geometry,

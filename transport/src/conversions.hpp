@@ -22,6 +22,7 @@
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/transport/cycle_report.hpp"
+#include "tarmac/transport/inputs.hpp"
 #include "tarmac_msgs.h"
 
 namespace tarmac::transport {
@@ -68,6 +69,15 @@ PoseMsg to_pose_msg(const Eigen::Isometry3d& T);
 /// geometry_msgs/Pose -> isometry. Rejects non-finite values ("pose.non_finite") and quaternions
 /// whose norm is off by more than 1e-3 ("pose.bad_quaternion"); the quaternion is normalised.
 core::Result<Eigen::Isometry3d> from_pose_msg(const PoseMsg& msg);
+
+/// nav_msgs/Path -> a corrected trajectory in `frame_id` (TrajectoryInput's rules). `poses` is
+/// cleared (capacity kept) and receives every pose, stamps strictly increasing. Returns when the
+/// correction was made: the header stamp, or the newest pose's when that is zero. Rejections:
+/// "correction.unknown_frame" (the header, or a pose whose frame_id is neither empty nor
+/// `frame_id`), "correction.empty", "correction.unsorted" and the from_pose_msg codes.
+/// Allocates only for paths longer than any before, and for the error text.
+core::Result<std::int64_t> from_path_msg(const PathMsg& msg, const std::string& frame_id,
+                                         std::vector<PoseSample>& poses);
 
 /// 2D distance field on `geometry` -> DistanceMapSlice (NaN where unknown, the sentinel says so;
 /// +inf where no obstacle is in the window). Reuses the message's buffers.

@@ -156,34 +156,12 @@ class TrajectoryInput::Impl {
   std::vector<PoseSample> poses;  // capacity kept across drains
 
   void convert(const PathMsg& msg, TrajectorySink& sink) {
-    if (msg.header().frame_id() != frame_id) {
-      sink.reject("correction.unknown_frame");
+    const auto made_ns = from_path_msg(msg, frame_id, poses);
+    if (!made_ns) {
+      sink.reject(made_ns.error().code);
       return;
     }
-    if (msg.poses().empty()) {
-      sink.reject("correction.empty");
-      return;
-    }
-    poses.clear();
-    for (const auto& p : msg.poses()) {
-      if (!p.header().frame_id().empty() && p.header().frame_id() != frame_id) {
-        sink.reject("correction.unknown_frame");
-        return;
-      }
-      auto T = from_pose_msg(p.pose());
-      if (!T) {
-        sink.reject(T.error().code);
-        return;
-      }
-      const std::int64_t stamp = from_time_msg(p.header().stamp());
-      if (!poses.empty() && stamp <= poses.back().stamp_ns) {
-        sink.reject("correction.unsorted");
-        return;
-      }
-      poses.push_back(PoseSample{stamp, T.value()});
-    }
-    const std::int64_t made_ns = from_time_msg(msg.header().stamp());
-    sink.trajectory(made_ns != 0 ? made_ns : poses.back().stamp_ns, poses);
+    sink.trajectory(made_ns.value(), poses);
   }
 };
 

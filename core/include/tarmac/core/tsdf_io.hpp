@@ -58,6 +58,10 @@ struct LoadedTsdf {
 /// failure), "tsdf_io.format" (not a tarmac TSDF, or another format version).
 Result<LoadedTsdf> load_tsdf(const std::filesystem::path& file);
 
+/// load_tsdf on a file's bytes already in memory; `name` prefixes the error messages. Every
+/// error of load_tsdf except "tsdf_io.open".
+Result<LoadedTsdf> parse_tsdf(std::string bytes, const std::string& name);
+
 /// "tsdf_io.mismatch" unless the map was built in `frame_id` with these voxel size and
 /// truncation (the caller refuses such a map and starts empty).
 Status check_tsdf_matches(const TsdfMapInfo& info, const std::string& frame_id, float voxel_size_m,

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Builds the whole suite with a GCC sanitizer in its own build folder and runs it with ctest.
+#   tools/sanitize.sh address   ASan + UBSan (and LeakSanitizer) in build-asan/
+#   tools/sanitize.sh thread    TSan in build-tsan/
+# Ends with ctest's summary line. Third-party libraries (Fast DDS, OpenVDB, TBB, yaml-cpp) come
+# from Debian uninstrumented; tools/sanitizers/*.supp hide only reports inside them, each with
+# its reason. Tests get TARMAC_TEST_TIMEOUT_S (default 600 s here) because sanitized code runs
+# several times slower; no assertion is relaxed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$(pwd)
+
+mode=${1:-}
+case "$mode" in
+  address)
+    build=build-asan
+    # UBSan stays recoverable so ubsan.supp can apply; halt_on_error=1 makes the rest fatal.
+    flags="-fsanitize=address,undefined -fno-omit-frame-pointer"
+    ;;
+  thread)
+    build=build-tsan
+    flags="-fsanitize=thread -fno-omit-frame-pointer"
+    ;;
+  *)
+    echo "usage: tools/sanitize.sh address|thread" >&2
+    exit 2
+    ;;
+esac
+
+supp="$root/tools/sanitizers"
+# Also needed at build time: gtest_discover_tests runs each test binary to list its tests.
+export ASAN_OPTIONS="detect_leaks=1:strict_init_order=1:check_initialization_order=1:detect_stack_use_after_return=1"
+export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:suppressions=$supp/ubsan.supp"
+export TSAN_OPTIONS="suppressions=$supp/tsan.supp:second_deadlock_stack=1:history_size=4"
+
+tools/install-deps.sh
+launcher=()
+if command -v ccache >/dev/null; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+fi
+# -O1 (NDEBUG as in the normal build): the sanitizers' usual level, lighter to build than -O2.
+cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo "${launcher[@]}" \
+  -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g -DNDEBUG" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g -DNDEBUG" \
+  -DCMAKE_C_FLAGS="$flags" -DCMAKE_CXX_FLAGS="$flags" \
+  -DCMAKE_EXE_LINKER_FLAGS="$flags" -DCMAKE_SHARED_LINKER_FLAGS="$flags" \
+  -DTARMAC_TEST_TIMEOUT_S="${TARMAC_TEST_TIMEOUT_S:-600}"
+cmake --build "$build" -j "$(nproc)"
+# DDS tests use distinct domains and stay on loopback (support/test_env.hpp, STACK.md).
+cd "$build" && ctest -j "$(nproc)" --output-on-failure
