@@ -190,7 +190,8 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
   EXPECT_EQ(warn->value("costmap_stale"), "false");
   EXPECT_GE(warn->number("input.front.age_ms"), 0.0);
 
-  for (int i = 0; i < 50 && executor.get().totals().scans_integrated < 66; ++i) {
+  // The last scans may still be in the input delay and the pose wait on a loaded machine.
+  for (int i = 0; i < 250 && executor.get().totals().scans_integrated < 66; ++i) {
     std::this_thread::sleep_for(20ms);
   }
   EXPECT_EQ(executor.get().totals().scans_integrated, 60u + 6u) << "every scan of both LiDARs";
