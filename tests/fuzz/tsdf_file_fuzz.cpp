@@ -140,9 +140,10 @@ constexpr std::size_t kMaxVoxels = 64, kMaxStatic = 32;
 // Voxel coordinates are int8: within a few of OpenVDB's top-level nodes (4096 voxels wide), whose
 // 32^3-entry tables make each far-flung voxel cost milliseconds to write and read here.
 
-/// A transform for `voxel_size_m`, or a plain scale when OpenVDB would refuse the value.
+/// A transform for `voxel_size_m`, or for 1 m when OpenVDB would refuse the value (it wants a
+/// scale whose cube is clearly non-zero). The loader never builds one for a size below 0.01 m.
 openvdb::math::Transform::Ptr transform(float voxel_size_m) {
-  if (!(voxel_size_m > 1e-6f && voxel_size_m < 1e6f)) voxel_size_m = 1.0f;
+  if (!(voxel_size_m >= 0.01f && voxel_size_m <= 1000.0f)) voxel_size_m = 1.0f;
   return core::tsdf_transform(voxel_size_m);
 }
 
