@@ -29,7 +29,11 @@ esac
 
 supp="$root/tools/sanitizers"
 # Also needed at build time: gtest_discover_tests runs each test binary to list its tests.
-export ASAN_OPTIONS="detect_leaks=1:strict_init_order=1:check_initialization_order=1:detect_stack_use_after_return=1"
+# new_delete_type_mismatch=0: Fast DDS 2.9 deletes its statistics writer (StatisticsWriterImpl,
+# created in RTPSWriter) through a base without a virtual destructor, on every writer's
+# destruction, inside libfastrtps. ASan cannot suppress that check by frame, so it is off; our
+# own code is covered at compile time by -Wdelete-non-virtual-dtor (-Wall -Werror).
+export ASAN_OPTIONS="detect_leaks=1:strict_init_order=1:check_initialization_order=1:detect_stack_use_after_return=1:new_delete_type_mismatch=0"
 export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:suppressions=$supp/ubsan.supp"
 export TSAN_OPTIONS="suppressions=$supp/tsan.supp:second_deadlock_stack=1:history_size=4"

@@ -60,7 +60,10 @@ constexpr std::size_t kBitsBlock = 2048;
 template <int kVectors>
 void add_layer_bits(const float* const* layers, std::size_t offset, int zb, int zt, bool first,
                     std::uint32_t* __restrict occupied, std::uint32_t* __restrict known) {
-  Int4 occ[kVectors] = {}, obs[kVectors] = {};
+  // Unsigned: each layer shifts the words left, and with 32 layers the top bit overflows (signed
+  // overflow is undefined; UBSan found it). The bits are the same.
+  using UInt4 = std::uint32_t __attribute__((vector_size(16)));
+  UInt4 occ[kVectors] = {}, obs[kVectors] = {};
   if (!first) {
     std::memcpy(occ, occupied, sizeof occ);
     std::memcpy(obs, known, sizeof obs);
@@ -72,8 +75,8 @@ void add_layer_bits(const float* const* layers, std::size_t offset, int zb, int 
     for (int j = 0; j < kVectors; ++j) {
       Float4 v;
       std::memcpy(&v, l + 4 * j, sizeof v);
-      occ[j] = (occ[j] + occ[j]) - (v > zero);
-      obs[j] = (obs[j] + obs[j]) - (v != unknown);
+      occ[j] = (occ[j] + occ[j]) - reinterpret_cast<UInt4>(v > zero);
+      obs[j] = (obs[j] + obs[j]) - reinterpret_cast<UInt4>(v != unknown);
     }
   }
   std::memcpy(occupied, occ, sizeof occ);

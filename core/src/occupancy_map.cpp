@@ -1489,7 +1489,10 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
       l_max_(log_odds_of(params.clamp_max)) {
   TARMAC_ASSERT(params.validate().ok(), "OccupancyParams must be validated first");
   const std::size_t n = static_cast<std::size_t>(dims_.x()) * dims_.y() * dims_.z();
-  log_odds_.assign(n, kUnknown);
+  // Padded to whole 64-slot mark words (never marked, always kUnknown): miss_free_word reads and
+  // writes a word's slots four at a time, and a window whose voxel count is not a multiple of 4
+  // would otherwise have its last group reach past the end (ASan found it).
+  log_odds_.assign((n + 63) / 64 * 64, kUnknown);
   rise_cm_.assign(n, 0);
   state_.assign(n, 0);
   static_ = std::make_unique<StaticStore>(static_reservation(dims_));
@@ -2185,7 +2188,7 @@ int OccupancyMap::ring_y(int wy) const {
 }
 
 void OccupancyMap::export_log_odds(std::vector<float>& out) const {
-  out.resize(log_odds_.size());
+  out.resize(static_cast<std::size_t>(dims_.x()) * dims_.y() * dims_.z());
   std::size_t i = 0;
   for (int z = 0; z < dims_.z(); ++z) {
     for (int y = 0; y < dims_.y(); ++y) {

@@ -137,11 +137,21 @@ enum GridFlags : std::uint8_t {
 };
 enum VoxelFlags : std::uint8_t { kNoWeight = 1, kInactive = 2 };
 constexpr std::size_t kMaxVoxels = 64, kMaxStatic = 32;
+// Voxel coordinates are int8: within a few of OpenVDB's top-level nodes (4096 voxels wide), whose
+// 32^3-entry tables make each far-flung voxel cost milliseconds to write and read here.
 
-/// A transform for `voxel_size_m`, or a plain scale when OpenVDB would refuse the value.
+/// A transform for `voxel_size_m`, or for 1 m when OpenVDB would refuse the value (it wants a
+/// scale whose cube is clearly non-zero). The loader never builds one for a size below 0.01 m.
 openvdb::math::Transform::Ptr transform(float voxel_size_m) {
-  if (!(voxel_size_m > 1e-6f && voxel_size_m < 1e6f)) voxel_size_m = 1.0f;
+  if (!(voxel_size_m >= 0.01f && voxel_size_m <= 1000.0f)) voxel_size_m = 1.0f;
   return core::tsdf_transform(voxel_size_m);
+}
+
+openvdb::Coord coord(ByteReader& in) {
+  const auto x = in.get<std::int8_t>();
+  const auto y = in.get<std::int8_t>();
+  const auto z = in.get<std::int8_t>();
+  return {x, y, z};
 }
 
 /// Mode odd: the file content the bytes describe, written by OpenVDB and sealed.
@@ -182,7 +192,7 @@ std::string described_file(ByteReader& in) {
   weight->setTransform(transform((grid_flags & kWeightOtherTransform) != 0 ? voxel * 2 : voxel));
   const std::size_t voxels = in.get<std::uint8_t>() % (kMaxVoxels + 1);
   for (std::size_t i = 0; i < voxels; ++i) {
-    const openvdb::Coord c(in.get<std::int16_t>(), in.get<std::int16_t>(), in.get<std::int16_t>());
+    const openvdb::Coord c = coord(in);
     const auto d = in.get<float>();
     const auto w = in.get<float>();
     const auto flags = in.get<std::uint8_t>();
@@ -201,9 +211,7 @@ std::string described_file(ByteReader& in) {
   mask->setTransform(transform((grid_flags & kStaticOtherTransform) != 0 ? voxel : static_voxel));
   const std::size_t statics = in.get<std::uint8_t>() % (kMaxStatic + 1);
   for (std::size_t i = 0; i < statics; ++i) {
-    mask->tree().setValueOn(
-        openvdb::Coord(in.get<std::int16_t>(), in.get<std::int16_t>(), in.get<std::int16_t>()),
-        true);
+    mask->tree().setValueOn(coord(in), true);
   }
   openvdb::GridCPtrVec grids;
   if ((grid_flags & kTsdfGrid) != 0) {
@@ -236,18 +244,18 @@ Bytes described_seed(float voxel, float truncation, int voxels, bool with_static
   out.put<std::uint8_t>(kTsdfGrid | kWeightGrid | (with_static ? kStaticGrid : 0));
   out.put(static_cast<std::uint8_t>(voxels));
   for (int i = 0; i < voxels; ++i) {
-    out.put(static_cast<std::int16_t>(i));
-    out.put(static_cast<std::int16_t>(-i));
-    out.put(static_cast<std::int16_t>(i % 3));
+    out.put(static_cast<std::int8_t>(i));
+    out.put(static_cast<std::int8_t>(-i));
+    out.put(static_cast<std::int8_t>(i % 3));
     out.put(truncation * (static_cast<float>(i % 7) - 3.0f) / 3.0f);
     out.put(1.0f + static_cast<float>(i));
     out.put<std::uint8_t>(0);
   }
   out.put<std::uint8_t>(with_static ? 3 : 0);
   for (int i = 0; i < (with_static ? 3 : 0); ++i) {
-    out.put(static_cast<std::int16_t>(i * 5));
-    out.put(static_cast<std::int16_t>(-i));
-    out.put(static_cast<std::int16_t>(1));
+    out.put(static_cast<std::int8_t>(i * 5));
+    out.put(static_cast<std::int8_t>(-i));
+    out.put(static_cast<std::int8_t>(1));
   }
   return out.take();
 }
