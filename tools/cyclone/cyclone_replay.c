@@ -54,6 +54,7 @@ typedef struct {
   double idle_s;
   double wait_s;
   long tail_scans;
+  long head_scans;
 } Options;
 
 static void usage(FILE* out) {
@@ -68,6 +69,9 @@ static void usage(FILE* out) {
           "  --costmap-topic T        default rt/tarmac/costmap\n"
           "  --diagnostics-topic T    default rt/tarmac/diagnostics\n"
           "  --idle-s S               wait after the last scan for its costmap (default 2)\n"
+          "  --head-scans N           first N short scans (the first cloud's first 2000 points):\n"
+          "                           a receiver that gets one has a reference, so it sees any\n"
+          "                           later loss as a gap in sequence numbers (default 0)\n"
           "  --tail-scans N           then N short scans (the last cloud's first 2000 points, one\n"
           "                           datagram each): a receiver sees losses at the end of the\n"
           "                           stream as a gap in sequence numbers (default 0)\n"
@@ -281,6 +285,8 @@ static void parse(int argc, char** argv, Options* o) {
       o->wait_s = strtod(v, &end);
     else if (strcmp(a, "--tail-scans") == 0)
       o->tail_scans = strtol(v, &end, 10);
+    else if (strcmp(a, "--head-scans") == 0)
+      o->head_scans = strtol(v, &end, 10);
     else {
       fprintf(stderr, "tarmac-cyclone-replay: unknown option %s\n", a);
       usage(stderr);
@@ -298,7 +304,7 @@ static void parse(int argc, char** argv, Options* o) {
   }
   if (!(o->rate_hz > 0.0 && o->rate_hz <= 1000.0) || o->domain < 0 || o->domain > 232 ||
       !(o->idle_s >= 0.0) || !(o->wait_s >= 0.0) || o->max_scans < 0 || o->tail_scans < 0 ||
-      o->tail_scans > 1000) {
+      o->tail_scans > 1000 || o->head_scans < 0 || o->head_scans > 1000) {
     fprintf(stderr, "tarmac-cyclone-replay: a value is out of range\n");
     exit(64);
   }
@@ -318,6 +324,7 @@ int main(int argc, char** argv) {
                0,
                2.0,
                20.0,
+               0,
                0};
   parse(argc, argv, &o);
 
@@ -400,7 +407,7 @@ int main(int argc, char** argv) {
   }
 
   Seen seen = {0};
-  const long total = scans + o.tail_scans;
+  const long total = o.head_scans + scans + o.tail_scans;
   seen.stamps = calloc((size_t)total, sizeof(int64_t));
   seen.latency_ms = malloc((size_t)total * sizeof(double));
   for (long k = 0; k < total; ++k) seen.latency_ms[k] = -1.0;
@@ -413,13 +420,16 @@ int main(int argc, char** argv) {
   uint64_t points_sent = 0, bytes_sent = 0;
   long sent = 0, write_errors = 0;
   for (long k = 0; k < total; ++k) {
-    const long scan = k < scans ? k : scans - 1; /* a tail scan repeats the last pose */
+    /* A head scan repeats the first pose, a tail scan the last one. */
+    const long j = k - o.head_scans;
+    const int short_scan = j < 0 || j >= scans;
+    const long scan = j < 0 ? 0 : j < scans ? j : scans - 1;
     snprintf(path, sizeof path, "%s/scans/%06ld.bin", o.dataset, scan);
     uint32_t size = 0;
     uint8_t* data = read_file(path, &size);
     if (!data) FAIL("cannot read %s", path);
     uint32_t n = size / 16u;
-    if (k >= scans && n > 2000) n = 2000;
+    if (short_scan && n > 2000) n = 2000;
     const int64_t stamp = start_ns + k * period_ns;
 
     geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose;
@@ -468,7 +478,7 @@ int main(int argc, char** argv) {
     if (dds_write(cloud_writer, &cloud) != DDS_RETCODE_OK) ++write_errors;
     ++sent;
     points_sent += n;
-    if (k < scans) bytes_sent += 16u * n; /* the sequence's clouds, for their mean size */
+    if (!short_scan) bytes_sent += 16u * n; /* the sequence's clouds, for their mean size */
     free(data);
   }
   serve_until(now_ns() + (int64_t)(o.idle_s * 1e9), grid_reader, report_reader, &seen);
@@ -489,9 +499,10 @@ int main(int argc, char** argv) {
   const double max = with_costmap ? lat[with_costmap - 1] : 0.0;
   const double share = points_sent ? (double)seen.points_integrated / (double)points_sent : 0.0;
   printf(
-      "scans sent: %ld incl. %ld short tail scans (%.0f KB per cloud of the sequence on "
-      "average, %.1f Hz, %ld write errors)\n",
-      sent, o.tail_scans, (double)bytes_sent / (double)scans / 1000.0, o.rate_hz, write_errors);
+      "scans sent: %ld incl. %ld short head and %ld short tail scans (%.0f KB per cloud of the "
+      "sequence on average, %.1f Hz, %ld write errors)\n",
+      sent, o.head_scans, o.tail_scans, (double)bytes_sent / (double)scans / 1000.0, o.rate_hz,
+      write_errors);
   printf("points integrated by tarmacd: %llu of %llu sent (%.2f %%)\n",
          (unsigned long long)seen.points_integrated, (unsigned long long)points_sent,
          100.0 * share);
