@@ -172,7 +172,7 @@ struct TsdfIntegrator::Scratch {
 
 Status TsdfParams::validate() const {
   const auto bad = [](const std::string& key, const std::string& why) -> Status {
-    return Error{"tsdf.invalid", "tsdf." + key + ": " + why};
+    return Error{"config.range", "tsdf." + key + ": " + why};  // as every *Params::validate
   };
   if (!(voxel_size_m >= 0.01f && voxel_size_m <= 2.0f)) {
     return bad("voxel_size_m", "must be in [0.01, 2] m");

@@ -294,6 +294,15 @@ TEST(Config, TsdfSectionAppliesAndIsValidated) {
             "tsdf.truncation_m: must be in [voxel_size_m, 32 * voxel_size_m]");
 }
 
+// Found by tools/fuzz.sh config: the cross-key checks the core makes (a TSDF truncation against
+// its voxel size) came back with the core's code "tsdf.invalid", where every refused config
+// carries a config.* code (the fuzz target's contract, and what tarmacd prints in brackets).
+TEST(Config, CoreCrossKeyChecks_RefuseWithAConfigCode) {
+  EXPECT_EQ(code_of("version: 1\ntsdf: {voxel_size_m: 0.2, truncation_m: 0.1}\n"), "config.range");
+  EXPECT_EQ(code_of("version: 1\ntsdf: {voxel_size_m: 0.2, truncation_m: 6.5}\n"), "config.range");
+  EXPECT_EQ(code_of("version: 1\nesdf_band: {enabled: true, above_m: 10}\n"), "config.range");
+}
+
 TEST(Config, EsdfBandSectionAppliesAndIsValidated) {
   auto config = load_config_string(
       "version: 1\nesdf_band: {enabled: true, below_m: 0.4, above_m: 2.0, unknown: occupied,\n"
