@@ -80,7 +80,7 @@ TEST(Safety, SimulatorTruthOfTheAircraftStand_BellyGearEnginesAreColumns_NotTheW
   const auto dir = std::filesystem::temp_directory_path() /
                    ("tarmac_safety_truth_" + std::to_string(::getpid()));
   sim::SequenceParams p;
-  p.path = sim::DrivePath::loop({-30.0, -22.0}, {30.0, 22.0}, 10.0);
+  p.path = sim::DrivePath::loop({-30.0, -22.0}, {30.0, 22.0}, 10.0, 20.0);
   p.scans = 3;
   p.lidar.beams = 8;
   p.lidar.azimuth_steps = 256;
