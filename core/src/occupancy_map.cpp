@@ -1605,20 +1605,10 @@ void OccupancyMap::clear_slabs(int axis, int first, int count, TaskRunner& runne
   const int r0 = wrap(first, n);
   const std::array<std::array<int, 2>, 2> runs{
       {{r0, std::min(count, n - r0)}, {0, count - std::min(count, n - r0)}}};
-  // Voxels that leave reading occupied, seen in at least kKeepHits scans and never seen free
-  // since, join the static layer: what the vehicle saw and drove away from is remembered, not
-  // forgotten (a surface passed at speed is hit in short runs of scans, never the
-  // static_promote_scans in a row that promote inside the window). Collected per task, then
-  // inserted in task order.
+  // The leaving voxels to keep (keep_leaving), collected per task, inserted in task order.
   for (auto& k : kept_) k.clear();
   const auto clear = [&](std::size_t s, std::size_t len, std::vector<std::uint32_t>& kept) {
-    if (params_.static_promote_scans > 0) {
-      for (std::size_t q = s; q < s + len; ++q) {
-        if (log_odds_[q] > 0.0f && (state_[q] & kStatic) == 0 && state_[q] >= kKeepHits) {
-          kept.push_back(static_cast<std::uint32_t>(q));
-        }
-      }
-    }
+    keep_leaving(s, len, kept);
     const auto at = static_cast<std::ptrdiff_t>(s);
     std::fill_n(log_odds_.begin() + at, len, kUnknown);
     std::fill_n(rise_cm_.begin() + at, len, std::uint8_t{0});
@@ -1662,6 +1652,16 @@ void OccupancyMap::clear_slabs(int axis, int first, int count, TaskRunner& runne
   }
 }
 
+void OccupancyMap::keep_leaving(std::size_t first, std::size_t count,
+                                std::vector<std::uint32_t>& kept) const {
+  if (params_.static_promote_scans == 0) return;
+  for (std::size_t q = first; q < first + count; ++q) {
+    if (log_odds_[q] > 0.0f && (state_[q] & kStatic) == 0 && state_[q] >= kKeepHits) {
+      kept.push_back(static_cast<std::uint32_t>(q));
+    }
+  }
+}
+
 void OccupancyMap::recenter(const Eigen::Vector3d& position_W) {
   SerialRunner serial;
   recenter(position_W, serial);
@@ -1687,6 +1687,9 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W, TaskRunner& runne
     if (shift == 0) continue;
     VoxelIndex lo = min_, hi = min_ + dims_ - VoxelIndex::Ones();
     if (std::abs(shift) >= dims_[a]) {
+      keep_leaving(0, state_.size(), kept_[0]);
+      for (const std::uint32_t q : kept_[0]) static_->insert(voxel_of_slot(q));
+      kept_[0].clear();
       std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
       std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
       std::fill(hit_floor_.begin(), hit_floor_.end(), kNoHitFloor);

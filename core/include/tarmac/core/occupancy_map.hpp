@@ -189,6 +189,12 @@ class OccupancyMap {
   /// Forgets the voxels of `count` consecutive slabs along `axis`, from world index `first`
   /// (count < the window's size along the axis).
   void clear_slabs(int axis, int first, int count, TaskRunner& runner);
+  /// Appends to `kept` the slots of [first, first + count) that leave the window to join the
+  /// static layer: reading occupied, not static, with returns in kKeepHits scans or more and
+  /// never read free since. What the vehicle saw and drove away from is remembered, not
+  /// forgotten: a surface passed at speed is hit in short runs of scans, never the
+  /// static_promote_scans in a row that promote inside the window.
+  void keep_leaving(std::size_t first, std::size_t count, std::vector<std::uint32_t>& kept) const;
   /// Makes the voxels of the static layer inside [lo, hi] (world indices, inclusive, within the
   /// window) read static.
   void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
