@@ -18,6 +18,7 @@
 
 #include <gtest/gtest.h>
 
+#include "executor_harness.hpp"
 #include "rtps_sniffer.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/daemon/executor.hpp"
@@ -218,6 +219,7 @@ TEST(Allocations, SteadyStateTicks_AllocateNothingOnTheExecutorThreads) {
   cfg.mapping.tsdf.enabled = false;
   // With the 3D ESDF band and its publication: fixed shape, reserved on the first cycle.
   cfg.mapping.esdf_band.enabled = true;
+  test::scale_time(cfg);  // slow motion under a sanitizer: one scan per tick as in the normal build
   auto created = Executor::create(cfg);
   ASSERT_TRUE(created.ok()) << created.error().message;
   Executor& executor = *created.value();
@@ -251,9 +253,10 @@ TEST(Allocations, SteadyStateTicks_AllocateNothingOnTheExecutorThreads) {
   ASSERT_TRUE(participant.ok());
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 1.0 / test::kTimeScale;
   auto stats = tools::replay(participant.value(), seq.value(), options);
   ASSERT_TRUE(stats.ok()) << stats.error().message;
-  std::this_thread::sleep_for(500ms);
+  std::this_thread::sleep_for(test::kTimeScale * 500ms);
   g_recording = false;
   stop = true;
   runner.join();

@@ -113,8 +113,12 @@ Outcome run(std::uint32_t domain, std::uint32_t receive_buffer) {
     std::ofstream cfg(dir / "tarmac.yaml");
     cfg << "version: 1\ndds:\n  domain_id: " << domain << "\n";
     if (receive_buffer != 0) cfg << "  udp_receive_buffer_bytes: " << receive_buffer << "\n";
-    cfg << "executor: {realtime_priority: 0, lock_memory: false}\n"
-        << "state: {dir: " << (dir / "state").string() << ", save_on_exit: false}\n";
+    // Slow motion under a sanitizer (test_env.hpp): the shipped timing slowed by kTimeScale,
+    // and the client's rate with it.
+    const auto timing = tarmac::test::scaled_timing_yaml();
+    cfg << "executor: {realtime_priority: 0, lock_memory: false" << timing.executor_keys << "}\n"
+        << timing.sections << "state: {dir: " << (dir / "state").string()
+        << ", save_on_exit: false}\n";
   }
   Outcome out;
   const pid_t daemon =
@@ -125,11 +129,13 @@ Outcome run(std::uint32_t domain, std::uint32_t receive_buffer) {
   }
   const std::string uri =
       "file://" + (tarmac::test::source_dir() / "config" / "cyclonedds_localhost.xml").string();
-  const pid_t client = spawn({TARMAC_CYCLONE_REPLAY, "--dataset", big_cloud_sequence().string(),
-                              "--domain", std::to_string(domain), "--rate-hz", "10", "--tail-scans",
-                              std::to_string(kTailScans), "--json", (dir / "replay.json").string()},
-                             dir / "replay.log", {{"CYCLONEDDS_URI", uri}});
-  EXPECT_EQ(wait_exit(client, 120s), 0) << read_text(dir / "replay.log");
+  const pid_t client =
+      spawn({TARMAC_CYCLONE_REPLAY, "--dataset", big_cloud_sequence().string(), "--domain",
+             std::to_string(domain), "--rate-hz", std::to_string(10.0 / tarmac::test::kTimeScale),
+             "--idle-s", std::to_string(2 * tarmac::test::kTimeScale), "--tail-scans",
+             std::to_string(kTailScans), "--json", (dir / "replay.json").string()},
+            dir / "replay.log", {{"CYCLONEDDS_URI", uri}});
+  EXPECT_EQ(wait_exit(client, tarmac::test::kTimeScale * 120s), 0) << read_text(dir / "replay.log");
   kill(daemon, SIGTERM);
   EXPECT_EQ(wait_exit(daemon, 20s), 0);
   out.daemon_log = read_text(dir / "tarmacd.log");

@@ -24,6 +24,7 @@
 #include "tarmac/sim/scene.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac_msgsPubSubTypes.h"
+#include "test_env.hpp"
 
 namespace tarmac::test {
 
@@ -49,6 +50,28 @@ inline const tools::KittiSequence& sequence() {
   return seq;
 }
 
+/// `c` in slow motion by kTimeScale (test_env.hpp): the executor's rate divided; its waits, the
+/// input ages, the stage budgets and the pose-jump prediction gap multiplied. Replays then run
+/// at their rate divided by kTimeScale too, so every tick sees the same scans as in the normal
+/// build. Sensors added later need their max_age_ms scaled by the test.
+inline void scale_time(config::Config& c) {
+  const double s = kTimeScale;
+  c.executor.rate_hz /= s;
+  c.executor.input_delay_ms *= s;
+  c.executor.pose_wait_ms *= s;
+  c.executor.max_future_ms *= s;
+  c.pose.max_gap_ms *= s;
+  c.pose.max_age_ms *= s;
+  for (auto& sensor : c.sensors) sensor.max_age_ms *= s;
+  auto& b = c.budgets;
+  for (double* ms : {&b.drain_ms, &b.ingest_ms, &b.integrate_ms, &b.tsdf_ms, &b.rebuild_ms,
+                     &b.costmap_ms, &b.esdf_band_ms, &b.publish_ms, &b.cycle_ms}) {
+    *ms *= s;
+  }
+  c.outputs.costmap_max_age_ms *= s;
+  c.mapping.corrections.max_prediction_gap_s *= s;
+}
+
 inline config::Config test_config(std::uint32_t domain, std::uint32_t workers) {
   config::Config c;
   c.dds.participant.domain_id = domain;
@@ -64,6 +87,7 @@ inline config::Config test_config(std::uint32_t domain, std::uint32_t workers) {
   c.mapping.occupancy.window_y_vox = 200;
   c.mapping.occupancy.window_z_vox = 30;
   c.state.save_on_exit = false;
+  scale_time(c);
   return c;
 }
 
@@ -105,7 +129,7 @@ inline transport::Participant peer(std::uint32_t domain) {
 /// Collects CycleReports until `done(report)` or the timeout; returns the last one.
 inline transport::CycleReport wait_for_report(
     ReportReader& reader, const std::function<bool(const transport::CycleReport&)>& done,
-    std::chrono::seconds timeout = std::chrono::seconds(15)) {
+    std::chrono::seconds timeout = kTimeScale * std::chrono::seconds(15)) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   std::vector<transport::CycleReportMsg> batch;
   transport::CycleReport last;

@@ -37,6 +37,7 @@ namespace {
 
 using namespace std::chrono_literals;
 using test::kScans;
+using test::kTimeScale;
 using test::peer;
 using test::ReportReader;
 using test::RunningExecutor;
@@ -93,7 +94,7 @@ std::string digest_of(const transport::OccupancyGridMsg& grid) {
 
 /// Waits for the costmap whose stamp is `stamp_ns`; returns false on timeout.
 bool wait_for_costmap(GridReader& reader, std::int64_t stamp_ns, transport::OccupancyGridMsg& out,
-                      std::chrono::seconds timeout = 20s) {
+                      std::chrono::seconds timeout = kTimeScale * 20s) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   std::vector<transport::OccupancyGridMsg> batch;
   while (std::chrono::steady_clock::now() < deadline) {
@@ -129,8 +130,9 @@ class Daemon : public test::LoopbackOnly {
     EXPECT_TRUE(grids.ok());
     tools::ReplayOptions options;
     options.lidar_qos = cfg.dds.qos.lidar;
-    options.rate_scale = rate_scale;  // default 20 Hz into a 10 Hz executor: two scans per tick
-    options.jitter_ms = jitter_ms;
+    // Default 20 Hz into a 10 Hz executor: two scans per tick (both slowed by kTimeScale).
+    options.rate_scale = rate_scale / kTimeScale;
+    options.jitter_ms = jitter_ms * kTimeScale;
     options.seed = 7;
     if (replay_tweak) replay_tweak(options);
     auto stats = tools::replay(participant, seq, options);
@@ -142,7 +144,8 @@ class Daemon : public test::LoopbackOnly {
         << "no costmap stamped with the last scan";
     EXPECT_EQ(grid.header().frame_id(), "map");
     // The totals are updated right after the tick publishes: give it a moment.
-    for (int i = 0; i < 50 && executor.get().totals().scans_integrated < n_scans; ++i) {
+    for (int i = 0; i < 50 * kTimeScale && executor.get().totals().scans_integrated < n_scans;
+         ++i) {
       std::this_thread::sleep_for(20ms);
     }
     EXPECT_EQ(executor.get().totals().scans_integrated, n_scans);
@@ -309,7 +312,8 @@ struct OfflineCorrected {
 /// The core offline on the drift sequence with the daemon's correction logic: jump detection on
 /// the wire poses (a rigid correction of the retained scans), the corrected trajectory
 /// `correction` (if any) applied right after its scan as `tarmac-map --corrections` does, a
-/// rebuild step after each scan. `stamps`: the scans' stamps (the replay's; empty: 100 ms apart).
+/// rebuild step after each scan. `stamps`: the scans' stamps (the replay's; empty: 100 ms apart,
+/// times kTimeScale as the replay spaces them).
 OfflineCorrected offline_corrected(const config::Config& cfg,
                                    const std::vector<std::int64_t>& stamps = {},
                                    const tools::Correction* correction = nullptr) {
@@ -319,7 +323,7 @@ OfflineCorrected offline_corrected(const config::Config& cfg,
   const auto& seq = drift_sequence();
   const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
   const auto stamp_of = [&](std::size_t k) {
-    return stamps.empty() ? static_cast<std::int64_t>(k) * 100'000'000 : stamps[k];
+    return stamps.empty() ? static_cast<std::int64_t>(k) * 100'000'000 * kTimeScale : stamps[k];
   };
   OfflineCorrected out;
   core::PointCloud cloud;
@@ -393,7 +397,7 @@ void Daemon::check_path_correction(std::uint32_t domain, double lead_s) {
   const std::string got =
       replayed_digest(domain, 2, 0.0, tweak, seq, 1.0, [&](tools::ReplayOptions& o) {
         o.corrections = corrections.value();
-        o.correction_lead_s = lead_s;
+        o.correction_lead_s = lead_s * kTimeScale;
       });
   EXPECT_EQ(corrections_sent_, 1u);
   EXPECT_EQ(totals_.trajectory_corrections, 1u);
@@ -403,7 +407,8 @@ void Daemon::check_path_correction(std::uint32_t domain, double lead_s) {
 
   std::vector<std::int64_t> stamps(seq.scans.size());
   for (std::size_t k = 0; k < stamps.size(); ++k) {
-    stamps[k] = first_stamp_ns_ + std::llround((seq.times_s[k] - seq.times_s[0]) * 1e9);
+    stamps[k] =
+        first_stamp_ns_ + std::llround((seq.times_s[k] - seq.times_s[0]) * 1e9 * kTimeScale);
   }
   EXPECT_EQ(stamps.back(), last_stamp_ns_);
   auto offline_cfg = test_config(0, 2);
@@ -436,7 +441,7 @@ transport::CycleReport Daemon::replay_until_report(
   if (!reports.ok()) return {};
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
-  options.rate_scale = 2.0;
+  options.rate_scale = 2.0 / kTimeScale;
   options.max_scans = max_scans;
   options.pose_count = pose_count;
   auto stats = tools::replay(participant, sequence(), options);
@@ -496,22 +501,23 @@ TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
                    ("tarmac-periodic-save-" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   cfg.state.dir = dir.string();
-  cfg.state.save_period_s = 0.3;  // every 3 ticks at 10 Hz
+  cfg.state.save_period_s = 0.3 * kTimeScale;  // every 3 ticks
   {
     RunningExecutor executor(cfg);
     auto participant = peer(test::kDomainDaemonPeriodicSave);
     tools::ReplayOptions options;
     options.lidar_qos = cfg.dds.qos.lidar;
-    options.rate_scale = 2.0;
+    options.rate_scale = 2.0 / kTimeScale;
     options.max_scans = 4;
     ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
-    for (int i = 0; i < 100 && executor.get().totals().scans_integrated < 4; ++i) {
+    for (int i = 0; i < 100 * kTimeScale && executor.get().totals().scans_integrated < 4; ++i) {
       std::this_thread::sleep_for(20ms);
     }
     ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
     // One save may be in flight with a snapshot from before the last scan: wait for two more.
     const std::uint64_t saves_then = executor.get().totals().tsdf_saves;
-    for (int i = 0; i < 100 && executor.get().totals().tsdf_saves < saves_then + 2; ++i) {
+    for (int i = 0; i < 100 * kTimeScale && executor.get().totals().tsdf_saves < saves_then + 2;
+         ++i) {
       std::this_thread::sleep_for(50ms);
     }
     executor.stop();
@@ -553,7 +559,7 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   ASSERT_TRUE(esdf_grids.ok());
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
-  options.rate_scale = 2.0;
+  options.rate_scale = 2.0 / kTimeScale;
   options.max_scans = 4;
   auto stats = tools::replay(participant, sequence(), options);
   ASSERT_TRUE(stats.ok()) << stats.error().message;
@@ -606,7 +612,7 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   const auto t_sent = std::chrono::steady_clock::now();
   ASSERT_TRUE(zones.value()->write(msg));
   // The next tick drains the zone and republishes the costmap (same stamp: no new scan).
-  const auto deadline = t_sent + 5s;
+  const auto deadline = t_sent + kTimeScale * 5s;
   bool lethal = false;
   std::vector<transport::OccupancyGridMsg> batch;
   while (!lethal && std::chrono::steady_clock::now() < deadline) {
@@ -619,7 +625,7 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_sent).count();
   EXPECT_TRUE(lethal) << "zone cell never became lethal";
   // One period to the next tick plus that tick's own work, with slack for a loaded machine.
-  EXPECT_LT(elapsed_ms, 1000.0 / cfg.executor.rate_hz + cfg.budgets.cycle_ms + 150.0);
+  EXPECT_LT(elapsed_ms, 1000.0 / cfg.executor.rate_hz + cfg.budgets.cycle_ms + 150.0 * kTimeScale);
 }
 
 }  // namespace

@@ -29,6 +29,7 @@ namespace tarmac::daemon {
 namespace {
 
 using namespace std::chrono_literals;
+using test::kTimeScale;
 using test::peer;
 using test::ReportReader;
 using test::RunningExecutor;
@@ -125,7 +126,7 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
   rear.id = "rear";
   rear.topic = "rt/tarmac/lidar/rear/points";
   rear.frame_id = "lidar_rear";
-  rear.max_age_ms = 300.0;
+  rear.max_age_ms = 300.0 * kTimeScale;
   cfg.sensors.push_back(rear);
   cfg.outputs.diagnostic_array_every = 1;
   RunningExecutor executor(cfg);
@@ -138,11 +139,11 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
   ASSERT_TRUE(diags.ok());
 
   // Both LiDARs on the same stamps (a shared start): front for 3 s with the poses, rear for
-  // its first 6 scans (0.3 s) only.
-  const std::int64_t start = clock_now_ns(CLOCK_REALTIME) + 2'000'000'000;
+  // its first 6 scans (0.3 s) only (times kTimeScale, as every duration below).
+  const std::int64_t start = clock_now_ns(CLOCK_REALTIME) + 2'000'000'000LL * kTimeScale;
   tools::ReplayOptions front;
   front.lidar_qos = cfg.dds.qos.lidar;
-  front.rate_scale = 2.0;
+  front.rate_scale = 2.0 / kTimeScale;
   front.loops = 3;
   front.start_ns = start;
   tools::ReplayOptions rear_options = front;
@@ -160,8 +161,8 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
   const auto stale = wait_for_report(*reports.value(), [](const transport::CycleReport& r) {
     const auto* f = age_of(r, "front");
     const auto* b = age_of(r, "rear");
-    return f != nullptr && b != nullptr && b->stale && b->age_ms > 600.0 && !f->stale &&
-           f->age_ms >= 0.0;
+    return f != nullptr && b != nullptr && b->stale && b->age_ms > 600.0 * kTimeScale &&
+           !f->stale && f->age_ms >= 0.0;
   });
   front_thread.join();
   rear_thread.join();
@@ -175,14 +176,15 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
               static_cast<double>(stale.tick_ns - rear_stats.value().last_stamp_ns) / 1e6, 1e-3);
   // Front kept mapping after rear went stale: scans stamped past rear's last + its max age
   // were integrated.
-  EXPECT_GT(stale.stamp_ns, rear_stats.value().last_stamp_ns + 300'000'000);
+  EXPECT_GT(stale.stamp_ns, rear_stats.value().last_stamp_ns + 300'000'000LL * kTimeScale);
 
   // The DiagnosticArray says the same: WARN, rear named with its age, front fresh.
   std::vector<Diag> seen;
   take_diags(*diags.value(), seen);
   const auto warn = std::find_if(seen.begin(), seen.end(), [](const Diag& d) {
     return d.level == 1 && d.value("input.rear.stale") == "true" &&
-           d.value("input.front.stale") == "false" && d.number("input.rear.age_ms") > 300.0;
+           d.value("input.front.stale") == "false" &&
+           d.number("input.rear.age_ms") > 300.0 * kTimeScale;
   });
   ASSERT_NE(warn, seen.end()) << "no DiagnosticArray with rear stale and front fresh";
   EXPECT_NE(warn->message.find("input stale: rear ("), std::string::npos) << warn->message;
@@ -191,7 +193,7 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
   EXPECT_GE(warn->number("input.front.age_ms"), 0.0);
 
   // The last scans may still be in the input delay and the pose wait on a loaded machine.
-  for (int i = 0; i < 250 && executor.get().totals().scans_integrated < 66; ++i) {
+  for (int i = 0; i < 250 * kTimeScale && executor.get().totals().scans_integrated < 66; ++i) {
     std::this_thread::sleep_for(20ms);
   }
   EXPECT_EQ(executor.get().totals().scans_integrated, 60u + 6u) << "every scan of both LiDARs";
@@ -202,8 +204,8 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
 TEST_F(Faults, PoseStreamStops_ScansDroppedCostmapStaleInDiagnostics_MappingResumesWithPoses) {
   auto cfg = test_config(test::kDomainFaultPoseStops, 2);
   cfg.outputs.diagnostic_array_every = 1;
-  cfg.outputs.costmap_max_age_ms = 400.0;
-  cfg.pose.max_age_ms = 300.0;
+  cfg.outputs.costmap_max_age_ms = 400.0 * kTimeScale;
+  cfg.pose.max_age_ms = 300.0 * kTimeScale;
   RunningExecutor executor(cfg);
   auto participant = peer(test::kDomainFaultPoseStops);
   auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
@@ -212,11 +214,11 @@ TEST_F(Faults, PoseStreamStops_ScansDroppedCostmapStaleInDiagnostics_MappingResu
   auto diags = DiagReader::create(participant, cfg.outputs.diagnostic_array_topic,
                                   cfg.dds.qos.diagnostics, 400);
   ASSERT_TRUE(diags.ok());
-  // 40 scans at 20 Hz; the localiser is silent for scans 10..25 (0.8 s).
+  // 40 scans at 20 Hz; the localiser is silent for scans 10..25 (0.8 s; all times kTimeScale).
   constexpr std::size_t kGapFirst = 10, kGap = 16, kTotal = 40;
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
-  options.rate_scale = 2.0;
+  options.rate_scale = 2.0 / kTimeScale;
   options.loops = 2;
   options.pose_gap_first = kGapFirst;
   options.pose_gap_count = kGap;
@@ -252,10 +254,11 @@ TEST_F(Faults, PoseStreamStops_ScansDroppedCostmapStaleInDiagnostics_MappingResu
   // During the gap the CycleReport's costmap age (tick − newest scan) grew past the limit,
   // and the DiagnosticArray said so: ERROR, costmap_stale, the pose input stale.
   EXPECT_TRUE(std::any_of(seen_reports.begin(), seen_reports.end(), [](const auto& r) {
-    return r.stamp_ns != 0 && r.tick_ns - r.stamp_ns > 400'000'000;
+    return r.stamp_ns != 0 && r.tick_ns - r.stamp_ns > 400'000'000LL * kTimeScale;
   }));
   const auto error = std::find_if(seen.begin(), seen.end(), [](const Diag& d) {
-    return d.level == 2 && d.value("costmap_stale") == "true" && d.number("costmap_age_ms") > 400.0;
+    return d.level == 2 && d.value("costmap_stale") == "true" &&
+           d.number("costmap_age_ms") > 400.0 * kTimeScale;
   });
   ASSERT_NE(error, seen.end()) << "no DiagnosticArray with the costmap stale";
   EXPECT_NE(error->message.find("costmap stale ("), std::string::npos) << error->message;
@@ -289,7 +292,7 @@ void check_clock_step(std::uint32_t domain, std::int64_t step_ns) {
   ASSERT_TRUE(reports.ok());
   std::vector<transport::CycleReport> seen;
   const auto wait_integrated = [&](std::uint64_t n) {
-    for (int i = 0; i < 150 && executor.get().totals().scans_integrated < n; ++i) {
+    for (int i = 0; i < 150 * kTimeScale && executor.get().totals().scans_integrated < n; ++i) {
       reports.value()->wait_for_sample(20ms);
       take_reports(*reports.value(), seen);
     }
@@ -297,7 +300,7 @@ void check_clock_step(std::uint32_t domain, std::int64_t step_ns) {
   };
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
-  options.rate_scale = 2.0;
+  options.rate_scale = 2.0 / kTimeScale;
   options.max_scans = 6;
   ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
   ASSERT_EQ(wait_integrated(6), 6u);
@@ -366,8 +369,8 @@ TEST_F(Faults, FourTimesTheQuota_RateHolds_SheddingCounted_EveryScanAccountedFor
     scan_points = std::max<std::uint64_t>(scan_points, cloud.size());
   }
   auto cfg = test_config(test::kDomainFaultOverload, 2);
-  // Scans come at 80 Hz into a 10 Hz cycle (8 per tick); the quotas take 2 per tick, each
-  // decimated to half its points, and the TSDF of about one of them.
+  // Scans come at 80 Hz into a 10 Hz cycle (8 per tick; both slowed by kTimeScale); the quotas
+  // take 2 per tick, each decimated to half its points, and the TSDF of about one of them.
   cfg.quotas.points_per_scan = scan_points / 2;
   cfg.quotas.points_per_cycle = scan_points;
   cfg.quotas.tsdf_points_per_cycle = scan_points / 2;
@@ -378,7 +381,7 @@ TEST_F(Faults, FourTimesTheQuota_RateHolds_SheddingCounted_EveryScanAccountedFor
   ASSERT_TRUE(reports.ok());
   tools::ReplayOptions options;
   options.lidar_qos = cfg.dds.qos.lidar;
-  options.rate_scale = 8.0;
+  options.rate_scale = 8.0 / kTimeScale;
   options.loops = 10;  // 200 scans in 2.5 s
   core::Result<tools::ReplayStats> stats = core::Error{"", ""};
   std::atomic<bool> done{false};
@@ -394,7 +397,7 @@ TEST_F(Faults, FourTimesTheQuota_RateHolds_SheddingCounted_EveryScanAccountedFor
   replay.join();
   ASSERT_TRUE(stats.ok()) << stats.error().message;
   // The backlog drains at the quota's pace once the input stops; then every scan is accounted.
-  std::this_thread::sleep_for(1500ms);
+  std::this_thread::sleep_for(kTimeScale * 1500ms);
   executor.stop();
   take_reports(*reports.value(), seen);
   ASSERT_FALSE(seen.empty());

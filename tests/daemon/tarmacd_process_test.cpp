@@ -585,7 +585,9 @@ LoadLine load_in(const std::string& log) {
 TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastCompleteSave) {
   auto sniffer = tarmac::test::RtpsSniffer::start();
   TARMAC_REQUIRE_OR_SKIP(sniffer.ok(), "packet capture unavailable");
-  constexpr double kSavePeriodS = 1.0;
+  // Slow motion under a sanitizer (test_env.hpp): every period and wait times kTimeScale.
+  constexpr int kS = tarmac::test::kTimeScale;
+  constexpr double kSavePeriodS = 1.0 * kS;
   const auto domain = tarmac::test::kDomainFaultKill;
   const fs::path dir = stop_test_dir("tarmacd-kill", domain);
   {
@@ -593,7 +595,9 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
     // be taken as a pose correction (a rebuild per loop). A save takes tens of ms (fsync).
     std::ofstream out(dir / "tarmac.yaml");
     out << "version: 1\ndds: {domain_id: " << domain << "}\n"
-        << "executor: {realtime_priority: 0, lock_memory: false}\n"
+        << "executor: {realtime_priority: 0, lock_memory: false"
+        << tarmac::test::scaled_timing_yaml().executor_keys << "}\n"
+        << tarmac::test::scaled_timing_yaml().sections
         << "occupancy: {window_x_vox: 200, window_y_vox: 200, window_z_vox: 30}\n"
         << "corrections: {enabled: false}\n"
         << "state: {dir: " << (dir / "state").string() << ", save_period_s: " << kSavePeriodS
@@ -619,6 +623,7 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
   std::atomic<bool> stop_replay{false};
   tarmac::tools::ReplayOptions options;
   options.loops = 1000;
+  options.rate_scale = 1.0 / kS;
   options.wait_for_readers_s = 20.0;
   std::thread replay([&] {
     auto r = tarmac::tools::replay(participant.value(), seq.value(), options, &stop_replay);
@@ -647,7 +652,7 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
     ASSERT_TRUE(notify.bound());
     const pid_t pid = spawn_tarmacd(dir);
     ASSERT_GE(pid, 0);
-    const bool ready = notify.wait_for("READY=1", 15s);
+    const bool ready = notify.wait_for("READY=1", kS * 15s);
     std::string log = read_file(dir / "tarmacd.log");
     ASSERT_TRUE(ready) << log;
     EXPECT_EQ(log.find("state: saved TSDF"), std::string::npos) << "a save was refused\n" << log;
@@ -676,7 +681,7 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
       ASSERT_NE(loaded, previous_started.end());
       double lost_s = previous_kill_s - loaded->logged_s;
       if (lost_s < 0.0) lost_s += 86400.0;  // across midnight
-      EXPECT_LT(lost_s, kSavePeriodS * static_cast<double>(1 + previous_skipped) + 1.0);
+      EXPECT_LT(lost_s, kSavePeriodS * static_cast<double>(1 + previous_skipped) + 1.0 * kS);
       EXPECT_FALSE(fs::exists(partial)) << "the cut-short save was not cleared at start";
     }
     if (round == kKills) {
@@ -686,16 +691,16 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
     }
     if (round < 2) {
       // Two saves done, then 0.4 s into the next period: mapping, not saving.
-      const auto deadline = SteadyClock::now() + 15s;
+      const auto deadline = SteadyClock::now() + kS * 15s;
       // The notify socket is read all along, as systemd does: a full one blocks sd_notify.
       while (saves_in(read_file(dir / "tarmacd.log"), true).size() < 2 &&
              SteadyClock::now() < deadline) {
         notify.collect_for(5ms);
       }
-      notify.collect_for(400ms);
+      notify.collect_for(kS * 400ms);
     } else {
       // Right after a save logged its start: its write is under way.
-      const auto deadline = SteadyClock::now() + 15s;
+      const auto deadline = SteadyClock::now() + kS * 15s;
       while (saves_in(read_file(dir / "tarmacd.log"), false).size() < 2 &&
              SteadyClock::now() < deadline) {
         notify.collect_for(1ms);

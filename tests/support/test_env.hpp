@@ -67,6 +67,43 @@ enum Domain : std::uint32_t {
   kDomainSafetyDds = 180,
 };
 
+/// How many times slower than the normal build this build runs: 1, or more under a sanitizer
+/// (tools/sanitize.sh: ASan + UBSan, or TSan). Tests that run tarmacd against the clock play the
+/// same inputs in slow motion by this factor — rates divided, periods, waits, ages and budgets
+/// multiplied — and assert the same things; without it a sanitized tick outlasts its period and
+/// the test measures the machine, not tarmac.
+/// A power of two, so that stamps scaled by it stay exact.
+#if defined(__SANITIZE_THREAD__)
+inline constexpr int kTimeScale = 16;
+#elif defined(__SANITIZE_ADDRESS__)
+inline constexpr int kTimeScale = 8;
+#else
+inline constexpr int kTimeScale = 1;
+#endif
+
+/// For a tarmacd process: the shipped timing in slow motion by kTimeScale, as YAML. Both parts
+/// are empty when kTimeScale is 1 (the shipped values apply).
+struct ScaledTimingYaml {
+  /// ", rate_hz: …, input_delay_ms: …, pose_wait_ms: …, max_future_ms: …": to go inside
+  /// `executor: {…}` after its other keys.
+  std::string executor_keys;
+  /// Whole sections: one sensor `front` with its max_age_ms, `pose` ages and the cycle budget.
+  std::string sections;
+};
+
+inline ScaledTimingYaml scaled_timing_yaml() {
+  ScaledTimingYaml y;
+  if (kTimeScale == 1) return y;
+  const auto num = [](double v) { return std::to_string(v * kTimeScale); };
+  y.executor_keys = ", rate_hz: " + std::to_string(10.0 / kTimeScale) +
+                    ", input_delay_ms: " + num(20.0) + ", pose_wait_ms: " + num(100.0) +
+                    ", max_future_ms: " + num(200.0);
+  y.sections = "sensors: [{id: front, max_age_ms: " + num(500.0) + "}]\n" +
+               "pose: {max_gap_ms: " + num(250.0) + ", max_age_ms: " + num(1000.0) + "}\n" +
+               "budgets: {cycle_ms: " + num(90.0) + "}\n";
+  return y;
+}
+
 inline bool running_in_ci() {
   const char* ci = std::getenv("CI");
   return ci != nullptr && std::string(ci) == "true";
