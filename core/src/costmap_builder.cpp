@@ -27,10 +27,23 @@ void for_row_runs(const OccupancyMap& map, const float* layer, int wy, Fn&& fn) 
   if (rx0 > 0) fn(nx - rx0, row, rx0);
 }
 
-/// lowest[k] = z where layer z is occupied (called from the top layer down).
-void mark_lowest(std::int16_t* __restrict lowest, const float* __restrict log_odds, int count,
-                 std::int16_t z) {
-  for (int k = 0; k < count; ++k) lowest[k] = log_odds[k] > 0.0f ? z : lowest[k];
+/// lowest[k] = z where layer z is occupied, observed[k] = z where it is observed (called from
+/// the top layer down).
+void mark_lowest(std::int16_t* __restrict lowest, std::int16_t* __restrict observed,
+                 const float* __restrict log_odds, int count, std::int16_t z) {
+  for (int k = 0; k < count; ++k) {
+    lowest[k] = log_odds[k] > 0.0f ? z : lowest[k];
+    observed[k] = log_odds[k] != OccupancyMap::kUnknown ? z : observed[k];
+  }
+}
+
+/// A column's ground candidate: its lowest occupied layer, or, when observed free space reaches
+/// more than a layer below that (the occupied voxel hovers: an engine's underside), its lowest
+/// observed layer; −1 without an occupied layer.
+std::int16_t ground_candidate(int lowest_occupied, int lowest_observed) {
+  if (lowest_occupied < 0) return -1;
+  return static_cast<std::int16_t>(lowest_observed < lowest_occupied - 1 ? lowest_observed
+                                                                         : lowest_occupied);
 }
 
 /// Accumulates, for one layer z of a row run, whether each column's envelope holds a known
@@ -227,8 +240,12 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   }
   out.esdf_input.resize(geometry.cell_count());
 
-  // 1. Lowest occupied voxel per column (layer by layer, in memory order), then per coarse
-  //    ground cell. Unknown (−1e9) and free (< 0) are both "not > 0".
+  // 1. Per column, its ground candidate (layer by layer, in memory order), then per coarse
+  //    ground cell the lowest of those. The candidate is the lowest occupied voxel, unless
+  //    observed free space reaches more than a voxel below it: rays that graze the ground clear
+  //    the voxel that holds its surface, and where they have, the lowest occupied voxel is
+  //    whatever hovers above (an engine's underside at 1.2 m), which must not be taken for the
+  //    ground under a wing; the lowest observed voxel is then the free one just over the ground.
   auto& lowest = out.lowest_occupied;
   // Windows of at most 64 layers: one pass over all layers builds per-column bit sets of the
   // occupied and the observed layers; the lowest occupied layer and the envelope tests of step 3
@@ -244,6 +261,7 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
     lowest.resize(cells_n);  // every cell is written below
   } else {
     lowest.assign(cells_n, -1);
+    out.ground_layer.assign(cells_n, -1);
   }
   // Each layer's storage, looked up once per call.
   std::array<const float*, 64> layer_data{};
@@ -268,15 +286,20 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
     }
     // Top down, overwriting: what stays is the lowest occupied layer. A plain select per cell,
     // which the compiler vectorises (the "first occupied from below" test did not).
+    std::int16_t* observed = out.ground_layer.data();  // scratch until step 3
     for (int z = nz - 1; z >= 0; --z) {
       const float* layer = map.ring_layer(z);
       const auto zz = static_cast<std::int16_t>(z);
       for (int y = y0; y < y1; ++y) {
-        std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+        const std::size_t row = static_cast<std::size_t>(y) * nx;
         for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
-          mark_lowest(low + x0, l, count, zz);
+          mark_lowest(&lowest[row + x0], observed + row + x0, l, count, zz);
         });
       }
+    }
+    for (std::size_t i = static_cast<std::size_t>(y0) * nx; i < static_cast<std::size_t>(y1) * nx;
+         ++i) {
+      lowest[i] = ground_candidate(lowest[i], observed[i]);
     }
   });
   if (use_bits) {
@@ -290,7 +313,9 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
           const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
           const std::uint64_t b = occupied_bits[sl] | std::uint64_t{occupied_bits[cells_n + sl]}
                                                           << 32;
-          low[x] = b == 0 ? std::int16_t{-1} : static_cast<std::int16_t>(std::countr_zero(b));
+          const std::uint64_t k = known_bits[sl] | std::uint64_t{known_bits[cells_n + sl]} << 32;
+          low[x] = b == 0 ? std::int16_t{-1}
+                          : ground_candidate(std::countr_zero(b), std::countr_zero(k));
         }
       }
     });

@@ -138,6 +138,21 @@ std::size_t static_reservation(const Eigen::Vector3i& dims) {
 constexpr std::uint8_t kStatic = 0x80;
 constexpr std::uint8_t kCount = 0x7f;
 
+/// Scans (with a return, the voxel reading occupied since) that a voxel leaving the window
+/// needs to join the static layer: one return alone may be noise.
+constexpr std::uint8_t kKeepHits = 2;
+
+/// OccupancyMap::hit_floor_: the lowest return inside a voxel, in 32nds of the voxel's height.
+constexpr int kFloorSteps = 32;
+constexpr std::uint8_t kNoHitFloor = 0xff;
+
+/// Where coordinate c (m) lies inside its voxel of size v (m), in 32nds: 0..31.
+std::uint8_t sub_voxel(float c, double v) {
+  const double u = static_cast<double>(c) / v;
+  return static_cast<std::uint8_t>(
+      std::clamp(static_cast<int>((u - std::floor(u)) * kFloorSteps), 0, kFloorSteps - 1));
+}
+
 /// Non-negative remainder.
 int wrap(int i, int n) {
   const int r = i % n;
@@ -1494,10 +1509,13 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   // would otherwise have its last group reach past the end (ASan found it).
   log_odds_.assign((n + 63) / 64 * 64, kUnknown);
   rise_cm_.assign(n, 0);
+  hit_floor_.assign(n, kNoHitFloor);
   state_.assign(n, 0);
   static_ = std::make_unique<StaticStore>(static_reservation(dims_));
-  demoted_.resize(kApplyTasks);
-  for (auto& d : demoted_) d.reserve(4096);  // demotions per scan and task; grows once if more
+  kept_.resize(kSlabTasks);
+  for (auto& k : kept_) k.reserve(4096);
+  candidates_.resize(kApplyTasks);
+  for (auto& c : candidates_) c.reserve(4096);  // per scan and task; grows once if more
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
                         std::numeric_limits<float>::infinity());
   scan_ground_near_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
@@ -1544,6 +1562,7 @@ OccupancyMap::~OccupancyMap() = default;
 std::size_t OccupancyMap::memory_bytes() const {
   std::size_t bytes =
       log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() + state_.capacity() +
+      hit_floor_.capacity() + scan_rays_.memory_bytes() +
       static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t)) +
       (scan_ground_z_.capacity() + scan_ground_near_z_.capacity()) * sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
@@ -1555,7 +1574,8 @@ std::size_t OccupancyMap::memory_bytes() const {
       ray_bucket_.capacity() * sizeof(std::uint16_t);
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_words_) bytes += d.capacity() * sizeof(std::uint64_t);
-  for (const auto& d : demoted_) bytes += d.capacity() * sizeof(std::uint32_t);
+  for (const auto& c : candidates_) bytes += c.capacity() * sizeof(std::uint32_t);
+  bytes += miss_decision_.capacity();
   return bytes;
 }
 
@@ -1585,10 +1605,14 @@ void OccupancyMap::clear_slabs(int axis, int first, int count, TaskRunner& runne
   const int r0 = wrap(first, n);
   const std::array<std::array<int, 2>, 2> runs{
       {{r0, std::min(count, n - r0)}, {0, count - std::min(count, n - r0)}}};
-  const auto clear = [&](std::size_t s, std::size_t len) {
+  // The leaving voxels to keep (keep_leaving), collected per task, inserted in task order.
+  for (auto& k : kept_) k.clear();
+  const auto clear = [&](std::size_t s, std::size_t len, std::vector<std::uint32_t>& kept) {
+    keep_leaving(s, len, kept);
     const auto at = static_cast<std::ptrdiff_t>(s);
     std::fill_n(log_odds_.begin() + at, len, kUnknown);
     std::fill_n(rise_cm_.begin() + at, len, std::uint8_t{0});
+    std::fill_n(hit_floor_.begin() + at, len, kNoHitFloor);
     std::fill_n(state_.begin() + at, len, std::uint8_t{0});
     clear_floor_bits(s, len);
   };
@@ -1605,7 +1629,7 @@ void OccupancyMap::clear_slabs(int axis, int first, int count, TaskRunner& runne
         task + 1 == kSlabTasks ? total : (total * (task + 1) / kSlabTasks) & ~std::size_t{63};
     const auto clip = [&](std::size_t s, std::size_t len) {
       const std::size_t a = std::max(s, lo), b = std::min(s + len, hi);
-      if (a < b) clear(a, b - a);
+      if (a < b) clear(a, b - a, kept_[task]);
     };
     for (const auto& [r, len] : runs) {
       if (len == 0) continue;
@@ -1623,6 +1647,19 @@ void OccupancyMap::clear_slabs(int axis, int first, int count, TaskRunner& runne
       }
     }
   });
+  for (const auto& kept : kept_) {
+    for (const std::uint32_t q : kept) static_->insert(voxel_of_slot(q));
+  }
+}
+
+void OccupancyMap::keep_leaving(std::size_t first, std::size_t count,
+                                std::vector<std::uint32_t>& kept) const {
+  if (params_.static_promote_scans == 0) return;
+  for (std::size_t q = first; q < first + count; ++q) {
+    if (log_odds_[q] > 0.0f && (state_[q] & kStatic) == 0 && state_[q] >= kKeepHits) {
+      kept.push_back(static_cast<std::uint32_t>(q));
+    }
+  }
 }
 
 void OccupancyMap::recenter(const Eigen::Vector3d& position_W) {
@@ -1650,8 +1687,12 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W, TaskRunner& runne
     if (shift == 0) continue;
     VoxelIndex lo = min_, hi = min_ + dims_ - VoxelIndex::Ones();
     if (std::abs(shift) >= dims_[a]) {
+      keep_leaving(0, state_.size(), kept_[0]);
+      for (const std::uint32_t q : kept_[0]) static_->insert(voxel_of_slot(q));
+      kept_[0].clear();
       std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
       std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
+      std::fill(hit_floor_.begin(), hit_floor_.end(), kNoHitFloor);
       std::fill(state_.begin(), state_.end(), std::uint8_t{0});
       std::fill(floor_bits_.begin(), floor_bits_.end(), std::uint64_t{0});
       lo[a] = target[a];
@@ -1889,6 +1930,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   float* const log_odds = log_odds_.data();
   std::uint8_t* const state = state_.data();
   std::uint8_t* const rise_cm = rise_cm_.data();
+  std::uint8_t* const hit_floor = hit_floor_.data();
   std::uint64_t* const hit_bits = hit_bits_.data();
   std::uint64_t* const floor_bits = floor_bits_.data();
   const float l_hit = l_hit_, l_min = l_min_, l_max = l_max_;
@@ -1910,11 +1952,14 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
     const std::uint8_t rise = rise_of_hit[i];
     std::uint64_t& word = hit_bits[s >> 6];
     const std::uint64_t bit = std::uint64_t{1} << (s & 63);
+    const std::uint8_t here = sub_voxel(points_W[i].z(), v_m);
     if ((word & bit) == 0) {
       word |= bit;
       floor_bits[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
       first_hits[n_first++] = s;
       float& l = log_odds[s];
+      // Reading free or unknown until now: its lowest return starts again from this one.
+      hit_floor[s] = l > 0.0f ? std::min(hit_floor[s], here) : here;
       l = std::clamp((l == kUnknown ? 0.0f : l) + l_hit, l_min, l_max);
       std::uint8_t& st = state[s];
       if ((st & kStatic) != 0) {
@@ -1931,6 +1976,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
       rise_cm[s] = rise;  // the latest scan's returns replace older ones
     } else {
       rise_cm[s] = std::max(rise_cm[s], rise);
+      hit_floor[s] = std::min(hit_floor[s], here);
     }
   }
   n_hit_slots_ = n_first;
@@ -1979,6 +2025,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   runner.parallel_for(1 + kRayTasks, [&](std::size_t job) {
     if (job == 0) {
       integrate_hits(origin_W, points_W, up_W, stats);
+      scan_rays_.build(origin_W, points_W, clearing_dirs_W, max_range, clear_range);
       return;
     }
     const std::size_t task = job - 1;
@@ -2005,13 +2052,12 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   std::array<std::uint64_t*, kRayTasks> task_bits{};
   for (std::size_t t = 0; t < kRayTasks; ++t) task_bits[t] = free_bits_[t].data();
   std::array<std::uint64_t, kApplyTasks> task_updates{};
-  const int demote = params_.static_demote_scans;
-  const float l_floor = l_hit_;
   const MissLanes miss_lanes(l_miss_, l_min_);
+
   runner.parallel_for(kApplyTasks, [&](std::size_t task) {
     std::uint64_t updates = 0;
-    std::vector<std::uint32_t>& demoted = demoted_[task];
-    demoted.clear();
+    std::vector<std::uint32_t>& candidates = candidates_[task];
+    candidates.clear();
     // Words whose marks need an update (not hit, not at the lower clamp), collected with their
     // log-odds lines prefetched, then updated together: the voxels are scattered over the
     // window, and waiting for them one by one was most of this pass's time.
@@ -2053,25 +2099,10 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
             l = next;  // a miss only lowers
           }
         }
+        // Voxels reading occupied: decided after this pass (see below).
         for (; occupied != 0; occupied &= occupied - 1) {
-          const std::size_t s = base + static_cast<std::size_t>(std::countr_zero(occupied));
-          float& l = log_odds_[s];
-          std::uint8_t& st = state_[s];
-          if ((st & kStatic) == 0) {
-            l = std::max(l + l_miss_, l_min_);
-            if (l <= 0.0f) {  // reads free: the run of hits is broken, the heights are void
-              st = 0;
-              rise_cm_[s] = 0;
-            }
-          } else if ((st & kCount) + 1 >= demote) {
-            st = 0;  // strong free evidence: leaves the static layer and reads free
-            l = std::max(l_miss_, l_min_);
-            rise_cm_[s] = 0;
-            demoted.push_back(static_cast<std::uint32_t>(s));
-          } else {
-            ++st;
-            l = std::max(l + l_miss_, l_floor);
-          }
+          candidates.push_back(static_cast<std::uint32_t>(
+              base + static_cast<std::size_t>(std::countr_zero(occupied))));
         }
       }
       n_pending = 0;
@@ -2161,15 +2192,85 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     task_updates[task] = updates;
   });
   for (std::size_t k = 0; k < n_hit_slots_; ++k) hit_bits_[hit_slots_[k] >> 6] = 0;
-  for (const auto& demoted : demoted_) {
-    for (const std::uint32_t s : demoted) static_->erase(voxel_of_slot(s));
-    stats.demotions += demoted.size();
-  }
+  miss_occupied(runner, stats);
 
   stats.rays = n_rays;
   for (const auto v : task_visits) stats.voxel_visits += v;
   for (const auto u : task_updates) stats.miss_updates += u;
   return stats;
+}
+
+void OccupancyMap::miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats) {
+  // a) Decide, reading only (so that no decision sees another's write): which of the occupied
+  //    voxels a ray crossed this scan get a miss. A voxel with observed free space below it and
+  //    none above (unknown, or occupied) is the underside of something: an aircraft's belly,
+  //    an engine, a truck bed. Rays that cross such a voxel under its lowest return only pass
+  //    under the surface; they miss it only when one passes through the voxel at or above its
+  //    lowest return and goes on more than a voxel (ScanRays::any_passes). Every other
+  //    occupied voxel a ray crossed gets its miss, as any free voxel does: the top of a tug
+  //    that drove away has free space above it, and clears as fast as before.
+  const std::size_t n_tasks = candidates_.size();
+  std::array<std::size_t, kApplyTasks + 1> first{};
+  for (std::size_t t = 0; t < n_tasks; ++t) first[t + 1] = first[t] + candidates_[t].size();
+  const std::size_t n = first[n_tasks];
+  miss_decision_.resize(std::max(miss_decision_.size(), n));
+  const double v = params_.voxel_size_m;
+  const int nz = dims_.z();
+  const std::size_t layer = static_cast<std::size_t>(dims_.x()) * dims_.y();
+  const int ring_z0 = wrap(min_.z(), nz);
+  const auto reads_free = [&](std::size_t s) {
+    const float l = log_odds_[s];
+    return l != kUnknown && l <= 0.0f;
+  };
+  runner.parallel_for(n_tasks, [&](std::size_t task) {
+    const std::vector<std::uint32_t>& list = candidates_[task];
+    for (std::size_t k = 0; k < list.size(); ++k) {
+      const std::size_t s = list[k];
+      bool miss = true;
+      const std::uint8_t floor32 = hit_floor_[s];
+      const int rel_z = wrap(static_cast<int>(s / layer) - ring_z0, nz);
+      if (floor32 != kNoHitFloor && rel_z > 0) {
+        const std::size_t below = s >= layer ? s - layer : s + layer * (nz - 1);
+        const bool above_free =
+            rel_z + 1 < nz &&
+            reads_free(s + layer < layer * nz ? s + layer : s + layer - layer * nz);
+        if (reads_free(below) && !above_free) {
+          const Eigen::Vector3d corner = voxel_of_slot(s).cast<double>() * v;
+          const Eigen::Vector3d lo(corner.x(), corner.y(), corner.z() + floor32 * v / kFloorSteps);
+          miss = scan_rays_.any_passes(lo, corner + Eigen::Vector3d::Constant(v), v);
+        }
+      }
+      miss_decision_[first[task] + k] = miss ? 1 : 0;
+    }
+  });
+  // b) Apply, in the lists' order: the misses, and the static layer's runs of free
+  //    observations (a static voxel leaves the layer after static_demote_scans in a row).
+  const int demote = params_.static_demote_scans;
+  for (std::size_t t = 0; t < n_tasks; ++t) {
+    const std::vector<std::uint32_t>& list = candidates_[t];
+    for (std::size_t k = 0; k < list.size(); ++k) {
+      if (miss_decision_[first[t] + k] == 0) continue;
+      const std::size_t s = list[k];
+      float& l = log_odds_[s];
+      std::uint8_t& st = state_[s];
+      if ((st & kStatic) == 0) {
+        l = std::max(l + l_miss_, l_min_);
+        if (l <= 0.0f) {  // reads free: the run of hits is broken, the heights are void
+          st = 0;
+          rise_cm_[s] = 0;
+        }
+      } else if ((st & kCount) + 1 >= demote) {
+        st = 0;  // strong free evidence: leaves the static layer and reads free
+        l = std::max(l_miss_, l_min_);
+        rise_cm_[s] = 0;
+        static_->erase(voxel_of_slot(s));
+        ++stats.demotions;
+      } else {
+        ++st;
+        l = std::max(l + l_miss_, l_hit_);  // a static voxel reads at least one hit
+      }
+    }
+  }
 }
 
 const float* OccupancyMap::ring_layer(int wz) const {
@@ -2204,12 +2305,13 @@ void OccupancyMap::reset() {
   // a rebuilt window must equal a fresh one).
   std::fill(log_odds_.begin(), log_odds_.end(), kUnknown);
   std::fill(rise_cm_.begin(), rise_cm_.end(), std::uint8_t{0});
+  std::fill(hit_floor_.begin(), hit_floor_.end(), kNoHitFloor);
   std::fill(state_.begin(), state_.end(), std::uint8_t{0});
   std::fill(floor_bits_.begin(), floor_bits_.end(), std::uint64_t{0});
   // The static layer too: a rebuild re-derives it from the retained scans (what was static
   // before the correction sits in the uncorrected frame).
   static_->clear();
-  for (auto& d : demoted_) d.clear();
+  for (auto& c : candidates_) c.clear();
   min_ = VoxelIndex::Zero();
   placed_ = false;
 }

@@ -735,6 +735,81 @@ TEST(OccupancyMap, StaticLayer_ZeroPromotionDisablesIt) {
 
 // Ranges are bounded: a walk's voxel indices are 32-bit. Beyond 2^31 voxels of range the walks
 // would wrap (the lanes' conversions saturate instead), so such a config is refused.
+/// An underside: a plate's bottom at z = 1.65 (in the voxel [1.6, 1.8) of column x 3.0..3.2),
+/// seen from a sensor 1 m up below it, with free space observed under it and nothing above.
+struct Underside {
+  Eigen::Vector3d origin{0.0, 0.0, 1.0};
+  Scan seen() const {  // returns on the plate, and a ray to a wall beyond passing under it
+    Scan s{origin, {}, {}};
+    for (int i = 0; i < 4; ++i) s.points.emplace_back(3.02f + 0.05f * i, 0.05f, 1.65f);
+    s.points.emplace_back(6.0f, 0.05f, 2.0f);  // at x 3.0..3.2 it is at 1.50..1.53 m
+    return s;
+  }
+  Scan grazing() const {  // under the plate's surface, through the voxel's empty bottom
+    return Scan{origin, {{6.0f, 0.05f, 2.2f}}, {}};  // 1.60..1.64 m at x 3.0..3.2
+  }
+  Scan through() const {  // through the voxel above its lowest return: where the plate was
+    return Scan{origin, {{6.0f, 0.05f, 2.4f}}, {}};  // 1.70..1.75 m at x 3.0..3.2
+  }
+};
+
+TEST(OccupancyMap, Underside_RaysGrazingUnderItsLowestReturnDoNotClearIt) {
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const Underside u;
+  integrate(map, u.seen());
+  const VoxelIndex plate = map.voxel_of({3.1, 0.05, 1.65});
+  ASSERT_GT(map.log_odds(plate), 0.0f);
+  ASSERT_LT(map.log_odds(plate - VoxelIndex::UnitZ()), 0.0f);                    // free below
+  ASSERT_EQ(map.log_odds(plate + VoxelIndex::UnitZ()), OccupancyMap::kUnknown);  // none above
+  for (int i = 0; i < 20; ++i) integrate(map, u.grazing());
+  EXPECT_GT(map.log_odds(plate), 0.0f) << "grazing rays eroded the underside";
+  // A ray through where its returns were shows it gone: five misses from the clamp.
+  for (int i = 0; i < 5; ++i) integrate(map, u.through());
+  EXPECT_LE(map.log_odds(plate), 0.0f);
+}
+
+TEST(OccupancyMap, TopSurface_ClearedByAnyRayThroughIt) {
+  // The same plate seen from above (free space above it, nothing below): a tug's roof. Any ray
+  // through its voxel is a miss, as before, so a vehicle that drove away clears as fast.
+  OccupancyMap map(small_params());
+  map.recenter(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const Eigen::Vector3d origin(0.0, 0.0, 1.9);
+  Scan seen{origin, {}, {}};
+  for (int i = 0; i < 4; ++i) seen.points.emplace_back(3.02f + 0.05f * i, 0.05f, 1.45f);
+  integrate(map, seen);
+  const VoxelIndex roof = map.voxel_of({3.1, 0.05, 1.45});
+  ASSERT_GT(map.log_odds(roof), 0.0f);
+  // Rays over the roof's returns (1.56..1.58 m at x 3.0..3.2) to something beyond.
+  const Scan over{origin, {{10.0f, 0.05f, 0.833f}}, {}};
+  for (int i = 0; i < 5; ++i) integrate(map, over);
+  EXPECT_LE(map.log_odds(roof), 0.0f);
+}
+
+TEST(OccupancyMap, LeavingTheWindow_OccupiedWithReturnsInTwoScansIsKept_OneIsNot) {
+  OccupancyMap map(small_params());  // 20 m window
+  map.recenter(Eigen::Vector3d::Zero());
+  const Target t;
+  const VoxelIndex twice = map.voxel_of(t.at.cast<double>());
+  for (int i = 0; i < 2; ++i) integrate(map, t.present());
+  const Eigen::Vector3f once_at(-3.05f, 2.05f, 0.55f);
+  integrate(map, Scan{Eigen::Vector3d::Zero(), {once_at}, {}});
+  const VoxelIndex once = map.voxel_of(once_at.cast<double>());
+  ASSERT_GT(map.log_odds(once), 0.0f);
+  EXPECT_FALSE(map.is_static(twice));
+  map.recenter(Eigen::Vector3d(30.0, 0.0, 0.0));  // both leave (scrolled slabs)
+  EXPECT_TRUE(map.is_static(twice));
+  EXPECT_FALSE(map.is_static(once));
+  map.recenter(Eigen::Vector3d::Zero());
+  EXPECT_GT(map.log_odds(twice), 0.0f);
+  EXPECT_EQ(map.log_odds(once), OccupancyMap::kUnknown);
+  // A jump farther than the window (the whole window cleared at once) keeps the same way.
+  const Eigen::Vector3f far_at(1.05f, -2.05f, 0.35f);
+  for (int i = 0; i < 2; ++i) integrate(map, Scan{Eigen::Vector3d::Zero(), {far_at}, {}});
+  map.recenter(Eigen::Vector3d(500.0, 0.0, 0.0));
+  EXPECT_TRUE(map.is_static(map.voxel_of(far_at.cast<double>())));
+}
+
 TEST(OccupancyMap, Params_RangesAreBounded) {
   OccupancyParams p = small_params();
   p.max_range_m = 1000.0;

@@ -62,6 +62,9 @@ enum Domain : std::uint32_t {
   kDomainFaultOverload = 174,
   kDomainFaultKill = 175,
   kDomainSoakShort = 176,
+  // tarmacd's costmaps over DDS scored against the simulator's truth
+  // (tests/daemon/safety_dds_test.cpp): 180..189
+  kDomainSafetyDds = 180,
 };
 
 /// How many times slower than the normal build this build runs: 1, or more under a sanitizer

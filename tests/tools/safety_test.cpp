@@ -1,4 +1,5 @@
-// The costmap's safety figures: the scorer on hand-made costmaps, and the simulator's truth of
+// The costmap's safety figures: the scorer on hand-made costmaps, the stamped scorer's choice of
+// scan for a costmap that arrives stamped (tarmacd's over DDS), and the simulator's truth of
 // which columns a costmap must show lethal on the parked-aircraft scene.
 
 #include <filesystem>
@@ -11,6 +12,7 @@
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
 #include "tarmac/tools/safety.hpp"
+#include "tarmac/tools/stamped_safety.hpp"
 
 namespace tarmac::tools {
 namespace {
@@ -80,7 +82,7 @@ TEST(Safety, SimulatorTruthOfTheAircraftStand_BellyGearEnginesAreColumns_NotTheW
   const auto dir = std::filesystem::temp_directory_path() /
                    ("tarmac_safety_truth_" + std::to_string(::getpid()));
   sim::SequenceParams p;
-  p.path = sim::DrivePath::loop({-30.0, -22.0}, {30.0, 22.0}, 10.0);
+  p.path = sim::DrivePath::loop({-30.0, -22.0}, {30.0, 22.0}, 10.0, 20.0);
   p.scans = 3;
   p.lidar.beams = 8;
   p.lidar.azimuth_steps = 256;
@@ -101,6 +103,77 @@ TEST(Safety, SimulatorTruthOfTheAircraftStand_BellyGearEnginesAreColumns_NotTheW
   EXPECT_FALSE(column(8.0, 1.9)) << "beside the fuselage";
   EXPECT_FALSE(column(25.0, 10.0)) << "open apron";
   std::filesystem::remove_all(dir);
+}
+
+/// One column at (0, 0), first seen at scan 1, so a cycle's `visible` tells which scan it was
+/// scored against; the vehicle stays at the origin for 4 scans.
+StampedSafetyScorer stamped_scorer() {
+  ObstacleTruth truth;
+  truth.first_seen[ObstacleTruth::key(0, 0)] = 1;
+  return StampedSafetyScorer(truth, std::vector<Eigen::Vector2d>(4, Eigen::Vector2d::Zero()), {});
+}
+
+TEST(StampedSafety, CostmapIsScoredAsTheLatestScanAtOrBeforeItsStamp) {
+  StampedSafetyScorer scorer = stamped_scorer();
+  ASSERT_TRUE(scorer.add_scan_stamp(1000).ok());
+  ASSERT_TRUE(scorer.add_scan_stamp(2000).ok());
+  ASSERT_TRUE(scorer.add_costmap(costmap_of(core::kCostFree), 500).ok());   // before scan 0
+  ASSERT_TRUE(scorer.add_costmap(costmap_of(core::kCostFree), 1000).ok());  // scan 0
+  ASSERT_TRUE(scorer.add_costmap(costmap_of(core::kCostFree), 1500).ok());  // between: scan 0
+  ASSERT_TRUE(scorer.add_costmap(costmap_of(core::kCostFree), 2000).ok());  // scan 1
+  ASSERT_EQ(scorer.costmaps(), 3u);
+  const auto& cycles = scorer.tracker().cycles();
+  EXPECT_EQ(cycles[0].scan, 0);
+  EXPECT_EQ(cycles[0].visible, 0u);
+  EXPECT_EQ(cycles[1].scan, 0);
+  EXPECT_EQ(cycles[2].scan, 1);
+  EXPECT_EQ(cycles[2].visible, 1u);
+  EXPECT_EQ(cycles[2].read_free, 1u);
+  EXPECT_EQ(scorer.before_first_scan(), 1u);
+  EXPECT_EQ(scorer.stamp_not_a_scan(), 1u);
+  EXPECT_EQ(scorer.scans_with_costmap(), 2u);
+}
+
+TEST(StampedSafety, CostmapAheadOfThePosesWaitsForItsScan) {
+  StampedSafetyScorer scorer = stamped_scorer();
+  ASSERT_TRUE(scorer.add_scan_stamp(1000).ok());
+  // Costmaps of scans 1 and 2 arrive before those scans' stamps: not scored against scan 0.
+  ASSERT_TRUE(scorer.add_costmap(costmap_of(core::kCostFree), 2000).ok());
+  ASSERT_TRUE(scorer.add_costmap(costmap_of(core::kCostFree), 3000).ok());
+  EXPECT_EQ(scorer.costmaps(), 0u);
+  ASSERT_TRUE(scorer.add_scan_stamp(2000).ok());
+  ASSERT_EQ(scorer.costmaps(), 1u);
+  EXPECT_EQ(scorer.tracker().cycles()[0].scan, 1);
+  ASSERT_TRUE(scorer.add_scan_stamp(3000).ok());
+  ASSERT_EQ(scorer.costmaps(), 2u);
+  EXPECT_EQ(scorer.tracker().cycles()[1].scan, 2);
+  // At the end, a costmap newer than every scan is scored as the last scan.
+  ASSERT_TRUE(scorer.add_costmap(costmap_of(core::kCostFree), 3500).ok());
+  EXPECT_EQ(scorer.costmaps(), 2u);
+  scorer.finish();
+  ASSERT_EQ(scorer.costmaps(), 3u);
+  EXPECT_EQ(scorer.tracker().cycles()[2].scan, 2);
+  EXPECT_EQ(scorer.stamp_not_a_scan(), 1u);
+}
+
+TEST(StampedSafety, RefusesStampsOutOfOrderExtraScansAndAnotherResolution) {
+  StampedSafetyScorer scorer = stamped_scorer();
+  ASSERT_TRUE(scorer.add_scan_stamp(1000).ok());
+  const auto same = scorer.add_scan_stamp(1000);
+  ASSERT_FALSE(same.ok());
+  EXPECT_EQ(same.error().code, "safety.stamp_order");
+  for (std::int64_t t : {2000, 3000, 4000}) ASSERT_TRUE(scorer.add_scan_stamp(t).ok());
+  const auto fifth = scorer.add_scan_stamp(5000);
+  ASSERT_FALSE(fifth.ok());
+  EXPECT_EQ(fifth.error().code, "safety.too_many_scans");
+  core::GridGeometry2D g = costmap_of(0).geometry();
+  g.resolution_m = 0.1;
+  const auto finer = scorer.add_costmap(core::Costmap(g, core::kCostFree), 1000);
+  ASSERT_FALSE(finer.ok());
+  EXPECT_EQ(finer.error().code, "safety.resolution");
+  // float32 resolution as nav_msgs/OccupancyGrid carries it: accepted.
+  g.resolution_m = static_cast<double>(0.2f);
+  EXPECT_TRUE(scorer.add_costmap(core::Costmap(g, core::kCostFree), 1000).ok());
 }
 
 }  // namespace

@@ -1,7 +1,8 @@
 // tarmac-audit: subscribes to tarmacd's CycleReport and costmap over localhost DDS and prints,
 // per stage, the last, p50, p99 and max duration against its budget and the overruns, plus the
 // end-to-end latency from scan stamp to costmap reception (the costmap's stamp is the newest
-// integrated scan's). Optionally writes the same as JSON and the last costmap as PNG.
+// integrated scan's). Optionally writes the same as JSON and the last costmap as PNG, and with
+// --score scores every costmap against a simulated dataset's ground truth, as tarmac-map does.
 
 #include <signal.h>
 #include <time.h>
@@ -15,15 +16,21 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
+#include "geometry_msgsPubSubTypes.h"
 #include "nav_msgsPubSubTypes.h"
 #include "tarmac/config/config.hpp"
 #include "tarmac/tools/array_io.hpp"
+#include "tarmac/tools/clearing.hpp"
+#include "tarmac/tools/kitti.hpp"
+#include "tarmac/tools/safety.hpp"
+#include "tarmac/tools/stamped_safety.hpp"
 #include "tarmac/tools/stats.hpp"
 #include "tarmac_msgsPubSubTypes.h"
 
@@ -33,6 +40,7 @@ using namespace tarmac;
 using namespace std::chrono_literals;
 
 constexpr int kExitUsage = 64;
+constexpr int kExitData = 65;
 constexpr int kExitUnavailable = 69;
 constexpr int kExitIo = 74;
 constexpr int kExitConfig = 78;
@@ -43,7 +51,7 @@ void usage(std::FILE* to) {
   std::fprintf(
       to,
       "usage: tarmac-audit [--config FILE] [--cycles N] [--idle-s S] [--timeout-s S]\n"
-      "                    [--json FILE] [--png FILE] [--identity DIR]\n"
+      "                    [--json FILE] [--png FILE] [--identity DIR] [--score DIR]\n"
       "  Listens on the CycleReport and costmap topics of FILE (default config) and, at\n"
       "  the end, prints a per-stage table (last, p50, p99, max vs budget, overruns) and\n"
       "  the end-to-end latency scan stamp -> costmap received.\n"
@@ -55,6 +63,12 @@ void usage(std::FILE* to) {
       "                config's (dds.security; e.g. the 'monitor' of make-dds-security.sh)\n"
       "  --png FILE    write the last costmap as PNG (white free, black lethal, yellow to\n"
       "                dark red inflated, slate unknown; north up)\n"
+      "  --score DIR   score every costmap against the ground truth of DIR, a tarmac-sim\n"
+      "                dataset (obstacle_columns.txt, dynamic_boxes.txt, poses.txt) being\n"
+      "                replayed with tarmac-replay: each costmap as the map of the latest scan\n"
+      "                stamped at or before it, the scans' stamps read from the pose topic\n"
+      "                (start the replay after 'matched', with --pose-readers 2); prints the\n"
+      "                'safety (...)' line of tarmac-map, --json adds it under \"safety\"\n"
       "  Stops on SIGINT/SIGTERM too. Exit 0 when at least one report arrived.\n");
 }
 
@@ -95,10 +109,77 @@ std::vector<std::uint8_t> render(const transport::OccupancyGridMsg& grid) {
   return rgb;
 }
 
+/// --score: a dataset's ground truth, and the scans' stamps learnt from the pose topic.
+struct Scoring {
+  std::string dir;
+  /// The pose tarmac-replay publishes for each scan (T_world_base, the config's first sensor).
+  std::vector<Eigen::Isometry3d> T_W_B;
+  std::optional<tools::StampedSafetyScorer> scorer;
+  std::size_t poses = 0;
+  std::string error;  ///< the first failure; scoring stops there
+};
+
+/// Reads DIR's poses.txt, obstacle_columns.txt and (when present) dynamic_boxes.txt.
+core::Result<Scoring> open_scoring(const std::string& dir, const Eigen::Isometry3d& T_B_S) {
+  auto seq = tools::open_kitti(dir);
+  if (!seq) return seq.error();
+  auto truth = tools::read_obstacle_truth(std::filesystem::path(dir) / "obstacle_columns.txt");
+  if (!truth) return truth.error();
+  std::vector<tools::DynamicBox> moving;
+  if (const auto file = std::filesystem::path(dir) / "dynamic_boxes.txt";
+      std::filesystem::exists(file)) {
+    auto boxes = tools::read_dynamic_truth(file);
+    if (!boxes) return boxes.error();
+    moving = std::move(boxes).value().boxes;
+  }
+  Scoring s;
+  s.dir = dir;
+  std::vector<Eigen::Vector2d> vehicle_xy;
+  for (const Eigen::Isometry3d& T_W_S : seq.value().T_W_S) {
+    s.T_W_B.push_back(T_W_S * T_B_S.inverse());
+    // tarmac-map's vehicle position: the base under the sensor, i.e. the sensor's x, y.
+    vehicle_xy.push_back(T_W_S.translation().head<2>());
+  }
+  s.scorer.emplace(std::move(truth).value(), std::move(vehicle_xy), std::move(moving));
+  return s;
+}
+
+/// One pose of the replay: the stamp of the next scan, once its pose is the dataset's.
+void on_pose(Scoring& s, const transport::PoseStampedMsg& m) {
+  if (!s.error.empty()) return;
+  const std::size_t k = s.poses++;
+  const auto T = transport::from_pose_msg(m.pose().pose());
+  if (!T || k >= s.T_W_B.size() ||
+      (T.value().translation() - s.T_W_B[k].translation()).norm() > 1e-3) {
+    s.error = "pose " + std::to_string(k) + " on the pose topic is not scan " + std::to_string(k) +
+              " of " + s.dir +
+              " (another dataset, another --sensor, or the replay started before this audit "
+              "matched: give tarmac-replay --pose-readers 2)";
+    return;
+  }
+  if (auto added = s.scorer->add_scan_stamp(transport::from_time_msg(m.header().stamp())); !added) {
+    s.error = added.error().message;
+  }
+}
+
+void on_costmap(Scoring& s, const transport::OccupancyGridMsg& m) {
+  if (!s.error.empty()) return;
+  auto costmap = transport::from_occupancy_grid(m);
+  if (!costmap) {
+    s.error = "costmap: " + costmap.error().message;
+    return;
+  }
+  if (auto added = s.scorer->add_costmap(std::move(costmap).value(),
+                                         transport::from_time_msg(m.header().stamp()));
+      !added) {
+    s.error = added.error().message;
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string config_path, json_path, png_path, identity_dir;
+  std::string config_path, json_path, png_path, identity_dir, score_dir;
   std::uint64_t max_cycles = 0;
   double idle_s = 0.0, timeout_s = 600.0;
   for (int i = 1; i < argc; ++i) {
@@ -118,6 +199,8 @@ int main(int argc, char** argv) {
       json_path = argv[++i];
     } else if (a == "--png" && has_value) {
       png_path = argv[++i];
+    } else if (a == "--score" && has_value) {
+      score_dir = argv[++i];
     } else if (a == "--help" || a == "-h") {
       usage(stdout);
       return 0;
@@ -136,6 +219,19 @@ int main(int argc, char** argv) {
     }
     cfg = std::move(loaded).value();
   }
+  std::optional<Scoring> scoring;
+  if (!score_dir.empty()) {
+    if (cfg.pose.type != config::PoseType::kPoseWithCovarianceStamped) {
+      std::fprintf(stderr, "tarmac-audit: --score reads PoseWithCovarianceStamped poses only\n");
+      return kExitConfig;
+    }
+    auto opened = open_scoring(score_dir, cfg.sensors.front().T_base_sensor);
+    if (!opened) {
+      std::fprintf(stderr, "tarmac-audit: --score: %s\n", opened.error().message.c_str());
+      return kExitData;
+    }
+    scoring.emplace(std::move(opened).value());
+  }
   cfg.dds.participant.name = "tarmac-audit";
   if (!identity_dir.empty()) cfg.dds.participant.security.use_identity_dir(identity_dir);
   auto participant = transport::Participant::create(cfg.dds.participant);
@@ -149,7 +245,14 @@ int main(int argc, char** argv) {
                                       cfg.dds.qos.diagnostics, 1000);
   auto grids =
       GridReader::create(participant.value(), cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 16);
-  if (!reports || !grids) {
+  using PoseReader =
+      transport::Reader<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType>;
+  std::unique_ptr<PoseReader> poses;
+  if (scoring) {
+    auto created = PoseReader::create(participant.value(), cfg.pose.topic, cfg.dds.qos.pose, 1000);
+    if (created) poses = std::move(created).value();
+  }
+  if (!reports || !grids || (scoring && !poses)) {
     std::fprintf(stderr, "tarmac-audit: cannot create readers\n");
     return kExitUnavailable;
   }
@@ -184,6 +287,7 @@ int main(int argc, char** argv) {
   bool have_grid = false;
   std::vector<transport::CycleReportMsg> report_batch;
   std::vector<transport::OccupancyGridMsg> grid_batch;
+  std::vector<transport::PoseStampedMsg> pose_batch;
   const auto t_start = std::chrono::steady_clock::now();
   auto t_last_grid = t_start;
   const bool tty = isatty(STDERR_FILENO) != 0;
@@ -193,6 +297,13 @@ int main(int argc, char** argv) {
     const std::int64_t now = realtime_ns();
     grid_batch.clear();
     grids.value()->take_all(grid_batch);
+    if (scoring) {
+      // The poses first: a costmap's scan has normally been stamped by then.
+      pose_batch.clear();
+      poses->take_all(pose_batch);
+      for (const auto& p : pose_batch) on_pose(*scoring, p);
+      for (const auto& g : grid_batch) on_costmap(*scoring, g);
+    }
     for (auto& g : grid_batch) {
       const std::int64_t stamp = transport::from_time_msg(g.header().stamp());
       if (stamp != last_costmap_stamp) {
@@ -280,6 +391,16 @@ int main(int argc, char** argv) {
                 last_grid.info().height(), static_cast<double>(last_costmap_stamp) / 1e9,
                 tools::digest({reinterpret_cast<const std::uint8_t*>(d.data()), d.size()}).c_str());
   }
+  if (scoring) {
+    scoring->scorer->finish();
+    const tools::StampedSafetyScorer& sc = *scoring->scorer;
+    std::printf("%s\n", tools::safety_summary(sc.tracker().report()).c_str());
+    std::printf(
+        "scored %zu costmaps against %zu of the %zu scans stamped on the pose topic (%s); %zu "
+        "costmaps stamped between scans, %zu before the first\n",
+        sc.costmaps(), sc.scans_with_costmap(), sc.scans_stamped(), scoring->dir.c_str(),
+        sc.stamp_not_a_scan(), sc.before_first_scan());
+  }
 
   if (!json_path.empty()) {
     std::ofstream j(json_path);
@@ -298,7 +419,18 @@ int main(int argc, char** argv) {
       << ", \"p50\": " << percentile(e2e_ms, 0.5) << ", \"p99\": " << percentile(e2e_ms, 0.99)
       << ", \"max\": " << e2e_max
       << "},\n  \"wake_jitter_ms\": {\"p50\": " << percentile(jitter_ms, 0.5)
-      << ", \"p99\": " << percentile(jitter_ms, 0.99) << "}\n}\n";
+      << ", \"p99\": " << percentile(jitter_ms, 0.99) << "}";
+    if (scoring) {
+      const tools::StampedSafetyScorer& sc = *scoring->scorer;
+      j << ",\n  \"scored\": {\"dataset\": \"" << scoring->dir
+        << "\", \"scans_stamped\": " << sc.scans_stamped() << ", \"costmaps\": " << sc.costmaps()
+        << ", \"scans_with_costmap\": " << sc.scans_with_costmap()
+        << ", \"stamp_not_a_scan\": " << sc.stamp_not_a_scan()
+        << ", \"before_first_scan\": " << sc.before_first_scan() << ", \"error\": \""
+        << scoring->error << "\"},\n  \"safety\": ";
+      tools::write_safety_json(j, sc.tracker());
+    }
+    j << "\n}\n";
     if (!j) {
       std::fprintf(stderr, "tarmac-audit: %s: cannot be written\n", json_path.c_str());
       return kExitIo;
@@ -317,6 +449,14 @@ int main(int argc, char** argv) {
       return kExitIo;
     }
     std::printf("wrote %s\n", png_path.c_str());
+  }
+  if (scoring && !scoring->error.empty()) {
+    std::fprintf(stderr, "tarmac-audit: --score stopped: %s\n", scoring->error.c_str());
+    return kExitData;
+  }
+  if (scoring && scoring->scorer->costmaps() == 0) {
+    std::fprintf(stderr, "tarmac-audit: --score: no costmap scored\n");
+    return kExitData;
   }
   return 0;
 }

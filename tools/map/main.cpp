@@ -620,20 +620,9 @@ int main(int argc, char** argv) {
        << ", \"in_view_max_s\": " << r.in_view_max_s << "}";
   }
   if (safety) {
-    const tools::SafetyReport r = safety->report();
-    std::printf(
-        "safety (obstacle columns within 20 m seen by then, %zu cycles): lethal within one cell "
-        "worst %.1f %% (scan %d), mean %.1f %%; read free %zu, inflated only %zu, unknown %zu "
-        "(column-cycles); false lethal %zu of %zu lethal cells (worst cycle %.2f %%)\n",
-        r.cycles, 100.0 * r.worst_share, r.worst_scan, 100.0 * r.mean_share, r.read_free,
-        r.read_inflated, r.read_unknown, r.false_lethal, r.lethal_cells,
-        100.0 * r.worst_false_share);
-    tj << ",\n  \"safety\": {\"cycles\": " << r.cycles << ", \"worst_share\": " << r.worst_share
-       << ", \"worst_scan\": " << r.worst_scan << ", \"mean_share\": " << r.mean_share
-       << ", \"read_free\": " << r.read_free << ", \"read_inflated\": " << r.read_inflated
-       << ", \"read_unknown\": " << r.read_unknown << ", \"lethal_cells\": " << r.lethal_cells
-       << ", \"false_lethal\": " << r.false_lethal
-       << ", \"worst_false_share\": " << r.worst_false_share << "}";
+    std::printf("%s\n", tools::safety_summary(safety->report()).c_str());
+    tj << ",\n  \"safety\": ";
+    tools::write_safety_json(tj, *safety);
   }
   tj << "\n}\n";
   if (params.tsdf.enabled) {

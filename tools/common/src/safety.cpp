@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -136,6 +137,39 @@ SafetyReport SafetyTracker::report() const {
   }
   if (counted > 0) r.mean_share = sum / static_cast<double>(counted);
   return r;
+}
+
+std::string safety_summary(const SafetyReport& r) {
+  char line[512];
+  std::snprintf(
+      line, sizeof line,
+      "safety (obstacle columns within 20 m seen by then, %zu cycles): lethal within one cell "
+      "worst %.1f %% (scan %d), mean %.1f %%; read free %zu, inflated only %zu, unknown %zu "
+      "(column-cycles); false lethal %zu of %zu lethal cells (worst cycle %.2f %%)",
+      r.cycles, 100.0 * r.worst_share, r.worst_scan, 100.0 * r.mean_share, r.read_free,
+      r.read_inflated, r.read_unknown, r.false_lethal, r.lethal_cells, 100.0 * r.worst_false_share);
+  return line;
+}
+
+void write_safety_json(std::ostream& out, const SafetyTracker& tracker) {
+  const SafetyReport r = tracker.report();
+  out << "{\"cycles\": " << r.cycles << ", \"worst_share\": " << r.worst_share
+      << ", \"worst_scan\": " << r.worst_scan << ", \"mean_share\": " << r.mean_share
+      << ", \"read_free\": " << r.read_free << ", \"read_inflated\": " << r.read_inflated
+      << ", \"read_unknown\": " << r.read_unknown << ", \"lethal_cells\": " << r.lethal_cells
+      << ", \"false_lethal\": " << r.false_lethal
+      << ", \"worst_false_share\": " << r.worst_false_share
+      << ",\n    \"cycle_fields\": [\"scan\", \"visible\", \"lethal_near\", \"read_free\", "
+         "\"read_inflated\", \"read_unknown\", \"lethal_cells\", \"false_lethal\"],\n"
+      << "    \"per_cycle\": [";
+  const auto& cycles = tracker.cycles();
+  for (std::size_t i = 0; i < cycles.size(); ++i) {
+    const SafetyCycle& c = cycles[i];
+    out << (i == 0 ? "\n      [" : ",\n      [") << c.scan << ", " << c.visible << ", "
+        << c.lethal_near << ", " << c.read_free << ", " << c.read_inflated << ", " << c.read_unknown
+        << ", " << c.lethal_cells << ", " << c.false_lethal << "]";
+  }
+  out << "]}";
 }
 
 }  // namespace tarmac::tools

@@ -29,7 +29,7 @@ void usage(std::FILE* to) {
                "usage: tarmac-replay --dataset DIR [--rate-scale X] [--config FILE] [--scans N]\n"
                "                     [--poses FILE] [--jitter-ms MS] [--sensor ID] [--loop N]\n"
                "                     [--no-poses] [--align-ms MS] [--identity DIR]\n"
-               "                     [--corrections FILE]\n"
+               "                     [--corrections FILE] [--pose-readers N]\n"
                "  Publishes DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt\n"
                "  T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and\n"
                "  geometry_msgs/PoseWithCovarianceStamped on the topics of FILE (default: the\n"
@@ -50,7 +50,9 @@ void usage(std::FILE* to) {
                "                  'publisher')\n"
                "  --corrections FILE  corrected trajectories (tarmac-sim --correct-at writes\n"
                "                  DIR/corrections.txt): each sent as nav_msgs/Path on the\n"
-               "                  config's pose.correction_topic right after its scan K\n");
+               "                  config's pose.correction_topic right after its scan K\n"
+               "  --pose-readers N  wait for N matched readers of the poses before the first\n"
+               "                  message (default 1, tarmacd; 2 with tarmac-audit --score)\n");
 }
 
 }  // namespace
@@ -70,6 +72,8 @@ int main(int argc, char** argv) {
       options.rate_scale = std::atof(argv[++i]);
     } else if (a == "--scans" && has_value) {
       options.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
+    } else if (a == "--pose-readers" && has_value) {
+      options.pose_readers = static_cast<std::size_t>(std::max(1, std::atoi(argv[++i])));
     } else if (a == "--align-ms" && has_value) {
       options.align_ms = std::atof(argv[++i]);
     } else if (a == "--no-poses") {

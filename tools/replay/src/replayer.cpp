@@ -79,11 +79,14 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   const auto wait = std::chrono::milliseconds(
       static_cast<std::int64_t>(std::llround(options.wait_for_readers_s * 1000.0)));
   if (!clouds.value()->wait_for_readers(1, wait) ||
-      (options.publish_poses && !poses.value()->wait_for_readers(1, wait)) ||
+      (options.publish_poses &&
+       !poses.value()->wait_for_readers(std::max<std::size_t>(1, options.pose_readers), wait)) ||
       (paths && !paths->wait_for_readers(1, wait))) {
-    return core::Error{"replay.no_reader", "no reader matched " + options.lidar_topic + " and " +
-                                               options.pose_topic + " (is tarmacd running on " +
-                                               "this domain?)"};
+    return core::Error{"replay.no_reader",
+                       "no reader matched " + options.lidar_topic + ", or fewer than " +
+                           std::to_string(std::max<std::size_t>(1, options.pose_readers)) +
+                           " matched " + options.pose_topic +
+                           " (is tarmacd running on this domain?)"};
   }
 
   const std::size_t n =

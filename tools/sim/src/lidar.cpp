@@ -87,10 +87,21 @@ std::string readme(const SequenceParams& p) {
   s += "Each scan is one revolution taken at its stamp (no motion distortion). Beams that hit\n";
   s += "nothing within the maximum range give no point.\n\n";
   s += "Parameters:\n";
-  s += "  path              (" + number(p.path.start_W.x()) + ", " + number(p.path.start_W.y()) +
-       ") -> (" + number(p.path.end_W.x()) + ", " + number(p.path.end_W.y()) + ") m at " +
-       number(p.path.speed_mps) + " m/s, sensor " + number(p.path.sensor_height_m) +
-       " m above the base\n";
+  if (p.path.waypoints_W.size() >= 2) {
+    s += "  path              ";
+    for (std::size_t i = 0; i < p.path.waypoints_W.size(); ++i) {
+      s += (i == 0 ? "(" : " -> (") + number(p.path.waypoints_W[i].x()) + ", " +
+           number(p.path.waypoints_W[i].y()) + ")";
+    }
+    s += " m, turns of " + number(p.path.corner_radius_m) + " m radius, at " +
+         number(p.path.speed_mps) + " m/s, sensor " + number(p.path.sensor_height_m) +
+         " m above the base\n";
+  } else {
+    s += "  path              (" + number(p.path.start_W.x()) + ", " + number(p.path.start_W.y()) +
+         ") -> (" + number(p.path.end_W.x()) + ", " + number(p.path.end_W.y()) + ") m at " +
+         number(p.path.speed_mps) + " m/s, sensor " + number(p.path.sensor_height_m) +
+         " m above the base\n";
+  }
   s += "  beams             " + std::to_string(l.beams) + ", elevation " +
        number(l.min_elevation_deg) + " .. " + number(l.max_elevation_deg) + " deg\n";
   s += "  azimuth steps     " + std::to_string(l.azimuth_steps) + "\n";
@@ -194,40 +205,99 @@ void Lidar::scan(const Scene& scene, const Eigen::Isometry3d& T_W_S, double t_s,
 }
 
 DrivePath DrivePath::loop(const Eigen::Vector2d& min_W, const Eigen::Vector2d& max_W,
-                          double speed_mps) {
+                          double speed_mps, double corner_radius_m) {
   DrivePath p;
   p.speed_mps = speed_mps;
-  p.waypoints_W = {min_W, {max_W.x(), min_W.y()}, max_W, {min_W.x(), max_W.y()}, min_W};
+  p.corner_radius_m = corner_radius_m;
+  const Eigen::Vector2d start(0.5 * (min_W.x() + max_W.x()), min_W.y());
+  p.waypoints_W = {start, {max_W.x(), min_W.y()}, max_W, {min_W.x(), max_W.y()}, min_W, start};
   return p;
 }
+
+namespace {
+
+/// One piece of a drive path: a straight segment (radius 0) or a circular arc.
+struct PathPiece {
+  Eigen::Vector2d from;    ///< start point
+  double heading = 0.0;    ///< heading at the start, rad
+  double length = 0.0;     ///< m
+  double curvature = 0.0;  ///< 1/m, signed (left positive); 0: straight
+};
+
+double heading_of(const Eigen::Vector2d& d) {
+  return std::atan2(d.y(), d.x());
+}
+
+/// The path's pieces: straight segments between the vertices, each inner vertex replaced by an
+/// arc of radius r tangent to both segments (shrunk where a segment is too short for it).
+std::vector<PathPiece> path_pieces(const std::vector<Eigen::Vector2d>& points, double r) {
+  std::vector<PathPiece> pieces;
+  const std::size_t n = points.size();
+  Eigen::Vector2d from = points[0];
+  for (std::size_t i = 1; i < n; ++i) {
+    const Eigen::Vector2d in = points[i] - points[i - 1];
+    Eigen::Vector2d to = points[i];
+    double tangent = 0.0, turn = 0.0, radius = 0.0;
+    if (i + 1 < n && r > 0.0) {
+      const Eigen::Vector2d out = points[i + 1] - points[i];
+      turn = std::remainder(heading_of(out) - heading_of(in), 2.0 * std::numbers::pi);
+      const double half = std::tan(0.5 * std::abs(turn));
+      // A segment between two turns gives each half of it; the first and the last all of it.
+      const double in_share = i == 1 ? in.norm() : 0.5 * in.norm();
+      const double out_share = i + 2 == n ? out.norm() : 0.5 * out.norm();
+      tangent = std::min({r * half, in_share, out_share});
+      radius = half > 0.0 ? tangent / half : 0.0;
+      to = points[i] - tangent * in.normalized();
+    }
+    if ((to - from).norm() > 0.0) {
+      pieces.push_back({from, heading_of(in), (to - from).norm(), 0.0});
+    }
+    if (radius > 0.0) {
+      const double k = (turn > 0.0 ? 1.0 : -1.0) / radius;
+      pieces.push_back({to, heading_of(in), std::abs(turn) * radius, k});
+      const Eigen::Vector2d out = points[i + 1] - points[i];
+      from = points[i] + tangent * out.normalized();
+    } else {
+      from = points[i];
+    }
+  }
+  return pieces;
+}
+
+}  // namespace
 
 double DrivePath::length_m() const {
   if (waypoints_W.size() < 2) return (end_W - start_W).norm();
   double length = 0.0;
-  for (std::size_t i = 1; i < waypoints_W.size(); ++i) {
-    length += (waypoints_W[i] - waypoints_W[i - 1]).norm();
-  }
+  for (const PathPiece& piece : path_pieces(waypoints_W, corner_radius_m)) length += piece.length;
   return length;
 }
 
 Eigen::Isometry3d DrivePath::T_W_base(double t_s) const {
   const double length = length_m();
   double travelled_m = std::clamp(speed_mps * t_s, 0.0, length);
-  Eigen::Vector2d from = start_W, to = end_W;
-  for (std::size_t i = 1; i < waypoints_W.size(); ++i) {  // the segment travelled_m lies on
-    from = waypoints_W[i - 1];
-    to = waypoints_W[i];
-    const double segment = (to - from).norm();
-    if (travelled_m <= segment || i + 1 == waypoints_W.size()) break;
-    travelled_m -= segment;
+  const std::vector<PathPiece> pieces =
+      waypoints_W.size() < 2
+          ? std::vector<PathPiece>{{start_W, heading_of(end_W - start_W), length, 0.0}}
+          : path_pieces(waypoints_W, corner_radius_m);
+  std::size_t i = 0;
+  while (i + 1 < pieces.size() && travelled_m > pieces[i].length) travelled_m -= pieces[i++].length;
+  const PathPiece& piece = pieces[i];
+  const double s = std::min(travelled_m, piece.length);
+  double heading = piece.heading;
+  Eigen::Vector2d p;
+  if (piece.curvature == 0.0) {
+    p = piece.from + s * Eigen::Vector2d(std::cos(heading), std::sin(heading));
+  } else {
+    // On the circle through `from` whose centre lies 1/k to the left of the heading.
+    const double k = piece.curvature;
+    const Eigen::Vector2d centre =
+        piece.from + Eigen::Vector2d(-std::sin(heading), std::cos(heading)) / k;
+    heading += k * s;
+    p = centre + Eigen::Vector2d(std::sin(heading), -std::cos(heading)) / k;
   }
-  const double segment = (to - from).norm();
-  const Eigen::Vector2d heading =
-      segment > 0.0 ? Eigen::Vector2d((to - from) / segment) : Eigen::Vector2d::UnitX();
-  const Eigen::Vector2d p = from + std::min(travelled_m, segment) * heading;
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = Eigen::AngleAxisd(std::atan2(heading.y(), heading.x()), Eigen::Vector3d::UnitZ())
-                   .toRotationMatrix();
+  T.linear() = Eigen::AngleAxisd(heading, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   T.translation() = Eigen::Vector3d(p.x(), p.y(), 0.0);
   return T;
 }

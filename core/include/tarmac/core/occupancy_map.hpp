@@ -5,10 +5,17 @@
 ///  - dynamic: the log-odds themselves, with a low upper clamp so that a voxel the object left
 ///    reads free after a few misses (clamp_max 0.85 with prob_miss 0.4: 5 scans, 0.5 s at 10 Hz);
 ///  - static: a voxel observed occupied in static_promote_scans consecutive hits (never reading
-///    free in between) joins it; while static, misses do not lower it below one hit's log-odds, and
-///    it leaves only after static_demote_scans consecutive observations as free space with no
-///    return in it. The static layer is site-wide and sparse (it survives the window scrolling
-///    away and back, and is what the daemon persists).
+///    free in between) joins it, and so does a voxel that leaves the window reading occupied
+///    after returns in two scans or more (what the vehicle saw and drove away from is
+///    remembered, not forgotten: a surface passed at speed is hit in short runs of scans); while
+///    static, misses do not lower it below one hit's log-odds, and it leaves only after
+///    static_demote_scans consecutive observations as free space with no return in it. The
+///    static layer is site-wide and sparse (it survives the window scrolling away and back, and
+///    is what the daemon persists).
+///  Undersides (an occupied voxel with observed free space below it and none above: an
+///  aircraft's belly, an engine) are missed only by rays that pass through them at or above
+///  their lowest return: rays grazing under a belly cross the empty bottom of the voxel that
+///  holds the belly surface, and have not shown it gone (integrate()).
 /// The window's log-odds are the combined result (static voxels read occupied), so the costmap
 /// and the ESDF read one array. Unknown stays unknown: only rays change a voxel.
 
@@ -21,6 +28,7 @@
 #include <Eigen/Core>
 
 #include "tarmac/core/result.hpp"
+#include "tarmac/core/scan_rays.hpp"
 #include "tarmac/core/task_runner.hpp"
 
 namespace tarmac::core {
@@ -110,7 +118,11 @@ class OccupancyMap {
 
   /// Integrates one scan: `points_W` are returns in the world frame taken from `origin_W`.
   /// Each voxel is updated at most once per scan, occupied winning over free; free space is
-  /// every voxel a ray passes through before its return voxel. Non-finite points are skipped
+  /// every voxel a ray passes through before its return voxel — except undersides: a voxel
+  /// reading occupied with observed free space below it and none above is missed only by a
+  /// ray that passes through it at or above its lowest return and goes on more than a voxel
+  /// (rays grazing under an aircraft's belly cross the empty bottom of the voxel that holds
+  /// the belly surface; they have not shown the surface gone). Non-finite points are skipped
   /// (filters count them). Returns beyond max_range_m clear up to clearing_range_m.
   /// `clearing_dirs_W` are unit directions of beams with no return: they clear up to
   /// clearing_range_m. Deterministic for any runner.
@@ -177,6 +189,12 @@ class OccupancyMap {
   /// Forgets the voxels of `count` consecutive slabs along `axis`, from world index `first`
   /// (count < the window's size along the axis).
   void clear_slabs(int axis, int first, int count, TaskRunner& runner);
+  /// Appends to `kept` the slots of [first, first + count) that leave the window to join the
+  /// static layer: reading occupied, not static, with returns in kKeepHits scans or more and
+  /// never read free since. What the vehicle saw and drove away from is remembered, not
+  /// forgotten: a surface passed at speed is hit in short runs of scans, never the
+  /// static_promote_scans in a row that promote inside the window.
+  void keep_leaving(std::size_t first, std::size_t count, std::vector<std::uint32_t>& kept) const;
   /// Makes the voxels of the static layer inside [lo, hi] (world indices, inclusive, within the
   /// window) read static.
   void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
@@ -187,6 +205,9 @@ class OccupancyMap {
   /// then one hit per voxel in point order (the static layer's promotions too).
   void integrate_hits(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vector3f> points_W,
                       const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats);
+  /// integrate()'s last step: the misses of the occupied voxels a ray crossed (candidates_),
+  /// decided against the map as the free-space misses left it, then applied.
+  void miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats);
   /// Clears the floor bits of slots [first, first + count) (their log-odds are being rewritten).
   void clear_floor_bits(std::size_t first, std::size_t count);
 
@@ -197,12 +218,21 @@ class OccupancyMap {
   float l_hit_, l_miss_, l_min_, l_max_;
   std::vector<float> log_odds_;
   std::vector<std::uint8_t> rise_cm_;  ///< see ring_layer_rise_cm()
+  /// Per voxel, slot order: the height of its lowest return since it last read free or
+  /// unknown, in 32nds of the voxel above its bottom (0..31; 0xff: none). Decides the misses of
+  /// undersides (miss_occupied()).
+  std::vector<std::uint8_t> hit_floor_;
+  ScanRays scan_rays_;  ///< the rays of the scan being integrated, by direction
   /// Static layer state per voxel, slot order: bit 7 static; bits 0..6 the consecutive hits
   /// (not static) or consecutive free observations (static). Non-zero only where the log-odds
   /// read occupied, so the apply pass reads it only for occupied voxels.
   std::vector<std::uint8_t> state_;
   std::unique_ptr<StaticStore> static_;  ///< the site-wide static layer (sparse bit blocks)
-  std::vector<std::vector<std::uint32_t>> demoted_;  ///< per apply task, slots demoted this scan
+  /// Per apply task: the voxels reading occupied that a ray crossed this scan (slots), and per
+  /// such voxel (the tasks' lists in order) whether it gets its miss.
+  std::vector<std::vector<std::uint32_t>> candidates_;
+  std::vector<std::uint8_t> miss_decision_;
+  std::vector<std::vector<std::uint32_t>> kept_;  ///< per slab task, leaving slots kept as static
   /// Per scan: lowest return height per window column (m along the up axis, +inf where none)
   /// and the columns that hold one (reset next scan).
   std::vector<float> scan_ground_z_;

@@ -5,7 +5,9 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <ostream>
 #include <span>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -82,5 +84,13 @@ class SafetyTracker {
   ObstacleTruth truth_;
   std::vector<SafetyCycle> cycles_;
 };
+
+/// The one-line summary that tarmac-map and tarmac-audit print ("safety (...)"), no newline.
+std::string safety_summary(const SafetyReport& report);
+
+/// The report and every cycle as one JSON object (the value of "safety" in tarmac-map's
+/// timing.json and tarmac-audit's --json): the report's fields, "cycle_fields" naming the columns
+/// and "per_cycle", one array per cycle in observation order.
+void write_safety_json(std::ostream& out, const SafetyTracker& tracker);
 
 }  // namespace tarmac::tools

@@ -42,6 +42,9 @@ struct ReplayOptions {
   std::size_t max_scans = 0;         ///< 0: all
   std::size_t loops = 1;             ///< replay the sequence this many times, stamps continuing
   double wait_for_readers_s = 10.0;  ///< wait this long for a matched reader on both topics
+  /// Readers the pose topic must have matched before the first message (tarmacd, and e.g.
+  /// tarmac-audit --score, which must not miss the first poses: their QoS is volatile).
+  std::size_t pose_readers = 1;
   /// Poses are published for the first `pose_count` scans only (0: all); tests use it to starve
   /// the daemon of poses.
   std::size_t pose_count = 0;

@@ -97,19 +97,24 @@ class Lidar {
 
 /// The vehicle drives in a straight line from start_W to end_W at constant speed, heading along
 /// the line, and stops at end_W — or, when `waypoints_W` holds two or more points, along that
-/// polyline (start_W and end_W unused), heading along each segment in turn. The sensor sits
-/// sensor_height_m above the base (T_base_S = translation (0, 0, sensor_height_m), no rotation).
+/// polyline (start_W and end_W unused), heading along each segment in turn, its inner vertices
+/// rounded into circular arcs of corner_radius_m (tangent to both segments, shrunk where a
+/// segment is too short). The sensor sits sensor_height_m above the base (T_base_S =
+/// translation (0, 0, sensor_height_m), no rotation).
 struct DrivePath {
   Eigen::Vector2d start_W{0.0, 0.0};         ///< m, on the ground
   Eigen::Vector2d end_W{60.0, 0.0};          ///< m, != start_W
   std::vector<Eigen::Vector2d> waypoints_W;  ///< m; 2+ points: a polyline instead of the line
-  double speed_mps = 3.0;                    ///< > 0
+  /// Radius of the polyline's turns, m; 0: the heading jumps at each vertex (a vehicle cannot
+  /// drive that at speed, and a localiser's pose stream would not show it).
+  double corner_radius_m = 0.0;
+  double speed_mps = 3.0;  ///< > 0
   double sensor_height_m = 2.0;
 
-  /// A loop round the rectangle [min_W, max_W] (counter-clockwise from its lower-left corner,
-  /// back to it) at `speed_mps`.
+  /// A loop round the rectangle [min_W, max_W], counter-clockwise from the middle of its lower
+  /// side back to it, at `speed_mps`, its corners turned on arcs of `corner_radius_m`.
   static DrivePath loop(const Eigen::Vector2d& min_W, const Eigen::Vector2d& max_W,
-                        double speed_mps);
+                        double speed_mps, double corner_radius_m);
 
   /// Length of the path (m).
   double length_m() const;

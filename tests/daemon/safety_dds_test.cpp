@@ -1,0 +1,205 @@
+// tarmacd's costmaps as a planner receives them, scored against the simulator's ground truth:
+// tarmac-sim writes a short loop round the parked aircraft, tarmac-replay publishes it over
+// loopback DDS into tarmacd (the shipped defaults), tarmac-audit --score scores every costmap it
+// receives, and tarmac-map maps the same sequence offline with the same config. Every costmap
+// scored over DDS must carry a scan's stamp, none may show a seen obstacle column free, and, when
+// tarmacd integrated every scan, each has the figures of tarmac-map's costmap after that scan.
+// The short version of tools/safety-dds.sh.
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "loopback_only.hpp"
+#include "test_env.hpp"
+
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+constexpr int kScans = 40;
+
+std::string read_text(const fs::path& path) {
+  std::ifstream in(path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+pid_t spawn(const std::vector<std::string>& args, const fs::path& log) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    freopen(log.c_str(), "w", stdout);
+    dup2(fileno(stdout), STDERR_FILENO);  // one file offset: neither stream overwrites the other
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+
+/// The exit code, -1 on a signal, -2 when it had to be killed after `timeout`.
+int wait_exit(pid_t pid, std::chrono::seconds timeout) {
+  int status = 0;
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (waitpid(pid, &status, WNOHANG) == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    std::this_thread::sleep_for(50ms);
+  }
+  kill(pid, SIGKILL);
+  waitpid(pid, &status, 0);
+  return -2;
+}
+
+bool wait_for_line(const fs::path& log, const std::string& text, std::chrono::seconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (read_text(log).find(text) != std::string::npos) return true;
+    std::this_thread::sleep_for(50ms);
+  }
+  return false;
+}
+
+/// The number after `"key": ` in the first object `"section": {...}` of `json`, or -1.
+double json_number(const std::string& json, const std::string& section, const std::string& key) {
+  const auto at = json.find("\"" + section + "\": {");
+  if (at == std::string::npos) return -1.0;
+  const std::regex re("\"" + key + "\": (-?[0-9.e+-]+)");
+  std::smatch m;
+  const std::string rest = json.substr(at);
+  return std::regex_search(rest, m, re) ? std::stod(m[1].str()) : -1.0;
+}
+
+using CycleFigures = std::array<long, 8>;  ///< write_safety_json's cycle_fields, scan first
+
+/// The "per_cycle" arrays of the "safety" object, in order.
+std::vector<CycleFigures> per_cycle(const std::string& json) {
+  std::vector<CycleFigures> cycles;
+  const auto at = json.find("\"per_cycle\": [");
+  if (at == std::string::npos) return cycles;
+  const std::string rest = json.substr(at + 14, json.find("]]", at) + 1 - (at + 14));
+  const std::regex row("\\[([0-9, ]+)\\]");
+  for (auto it = std::sregex_iterator(rest.begin(), rest.end(), row); it != std::sregex_iterator();
+       ++it) {
+    CycleFigures c{};
+    std::istringstream s((*it)[1].str());
+    char comma = 0;
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      s >> c[i];
+      if (i + 1 < c.size()) s >> comma;
+    }
+    cycles.push_back(c);
+  }
+  return cycles;
+}
+
+class SafetyDds : public tarmac::test::LoopbackOnly {
+ protected:
+  SafetyDds() { expect_loopback_traffic_ = true; }
+};
+
+TEST_F(SafetyDds, AircraftLoop_CostmapsOverDdsScoredLikeTarmacMap) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("tarmac_safety_dds_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path data = dir / "sim";
+  ASSERT_EQ(wait_exit(spawn({TARMAC_SIM, "--out", data.string(), "--scene", "aircraft", "--beams",
+                             "16", "--scans", std::to_string(kScans)},
+                            dir / "sim.log"),
+                      120s),
+            0)
+      << read_text(dir / "sim.log");
+  const fs::path config = dir / "tarmac.yaml";
+  {
+    // The shipped defaults (identity extrinsic: the "base" is the sensor), own domain and state.
+    std::ofstream out(config);
+    out << "version: 1\ndds: {domain_id: " << tarmac::test::kDomainSafetyDds << "}\n"
+        << "executor: {realtime_priority: 0, lock_memory: false}\n"
+        << "state: {dir: " << (dir / "state").string() << ", save_on_exit: false}\n";
+  }
+  const pid_t daemon = spawn({TARMAC_TARMACD, "--config", config.string()}, dir / "tarmacd.log");
+  ASSERT_TRUE(wait_for_line(dir / "tarmacd.log", "tarmacd: ready", 20s))
+      << read_text(dir / "tarmacd.log");
+  const pid_t audit =
+      spawn({TARMAC_AUDIT, "--config", config.string(), "--score", data.string(), "--idle-s", "2",
+             "--timeout-s", "120", "--json", (dir / "audit.json").string()},
+            dir / "audit.log");
+  EXPECT_TRUE(wait_for_line(dir / "audit.log", "tarmac-audit: matched", 20s));
+  const int replay_rc =
+      wait_exit(spawn({TARMAC_REPLAY, "--dataset", data.string(), "--config", config.string(),
+                       "--align-ms", "100", "--pose-readers", "2"},
+                      dir / "replay.log"),
+                120s);
+  const int audit_rc = wait_exit(audit, 60s);
+  kill(daemon, SIGTERM);
+  EXPECT_EQ(wait_exit(daemon, 20s), 0) << read_text(dir / "tarmacd.log");
+  ASSERT_EQ(replay_rc, 0) << read_text(dir / "replay.log");
+  ASSERT_EQ(audit_rc, 0) << read_text(dir / "audit.log");
+  ASSERT_EQ(wait_exit(spawn({TARMAC_MAP, "--dataset", data.string(), "--config", config.string(),
+                             "--sensor-height", "0", "--out", (dir / "offline").string()},
+                            dir / "offline.log"),
+                      120s),
+            0)
+      << read_text(dir / "offline.log");
+
+  const std::string audit_log = read_text(dir / "audit.log");
+  const std::string daemon_log = read_text(dir / "tarmacd.log");
+  const std::string dds = read_text(dir / "audit.json");
+  const std::string offline = read_text(dir / "offline" / "timing.json");
+  fs::remove_all(dir);
+  if (const auto at = audit_log.find("safety ("); at != std::string::npos) {
+    std::printf("%s", audit_log.substr(at).c_str());
+  }
+
+  // Every scan's stamp was learnt, and every costmap carries one of them (the newest scan
+  // integrated), so none is scored against a scan it may not hold yet.
+  EXPECT_EQ(json_number(dds, "scored", "scans_stamped"), kScans) << audit_log;
+  EXPECT_EQ(json_number(dds, "scored", "stamp_not_a_scan"), 0.0) << audit_log;
+  EXPECT_EQ(json_number(dds, "scored", "before_first_scan"), 0.0) << audit_log;
+  // At 10 Hz a costmap per scan is the rule; under the suite's load a cycle may take two.
+  EXPECT_GE(json_number(dds, "scored", "costmaps"), kScans / 2) << audit_log;
+  // What must hold in every cycle: no seen obstacle column reads free.
+  EXPECT_EQ(json_number(dds, "safety", "read_free"), 0.0) << audit_log;
+
+  // Cycle by cycle against tarmac-map's costmap after the same scan. Equal maps need the same
+  // scans integrated: when the daemon dropped one (late under load), say so instead.
+  const auto dds_cycles = per_cycle(dds);
+  const auto offline_cycles = per_cycle(offline);
+  ASSERT_EQ(offline_cycles.size(), static_cast<std::size_t>(kScans)) << offline;
+  ASSERT_EQ(dds_cycles.size(), static_cast<std::size_t>(json_number(dds, "scored", "costmaps")));
+  std::smatch m;
+  const bool all_integrated =
+      std::regex_search(daemon_log, m, std::regex("(\\d+) scans integrated")) &&
+      std::stol(m[1].str()) == kScans;
+  if (!all_integrated) {
+    GTEST_SKIP() << "tarmacd did not integrate all " << kScans
+                 << " scans (loaded machine?): the cycle-by-cycle comparison needs them\n"
+                 << daemon_log;
+  }
+  for (const CycleFigures& c : dds_cycles) {
+    ASSERT_GE(c[0], 0);
+    ASSERT_LT(c[0], kScans);
+    EXPECT_EQ(c, offline_cycles[static_cast<std::size_t>(c[0])]) << "scan " << c[0];
+  }
+}
+
+}  // namespace
