@@ -110,7 +110,9 @@ inline void fill_row(const std::int16_t* __restrict oy_in, int k, const Parabola
 /// (8-lane integer min, 4-lane double sqrt and division), picked once at load time; the
 /// baseline build (SSE2) stays for other CPUs. Integer and IEEE float operations give the same
 /// bits in both (no FMA contraction: the file builds with -ffp-contract=off).
-#if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__)
+/// Not under ThreadSanitizer: GCC instruments the ifunc resolver that target_clones generates,
+/// the dynamic loader runs it before TSan's runtime is up, and the process crashes at load.
+#if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__) && !defined(__SANITIZE_THREAD__)
 #define TARMAC_ESDF_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define TARMAC_ESDF_CLONES
