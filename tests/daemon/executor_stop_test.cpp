@@ -2,7 +2,7 @@
 // complete (issue 19 item 2). In this process: a schedule the loop could not keep is refused
 // before any DDS entity exists; a stop reaches a loop asleep in a long period within
 // Executor::kStopPollSlice; a stalled tick stops the WATCHDOG=1 pings, and a stop waits for the
-// tick to complete instead of cutting it. StopSignals, in forked children: a stop during startup
+// tick to complete instead of cutting it. StopSignals, in child processes: a stop during startup
 // exits 0 at once, a stop while running is left to the loop, a loop stuck past kStopGrace exits
 // 70. (tarmacd_process_test.cpp sends SIGTERM to the daemon binary at several moments.)
 
@@ -15,9 +15,9 @@
 #include <condition_variable>
 #include <cstdlib>
 #include <filesystem>
-#include <functional>
 #include <limits>
 #include <mutex>
+#include <string>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -169,22 +169,24 @@ TEST_F(ExecutorStop, Watchdog_StopsWhileATickIsStalled_AndAStopWaitsForTheTick) 
   unsetenv("NOTIFY_SOCKET");
 }
 
-/// StopSignals in a forked child (it blocks signals and starts a thread for the whole process):
-/// `child` runs there and reports through `ready` that it is set up; the parent then sends
-/// SIGTERM and times the exit. Returns the wait status, or -1 when it had to be killed.
+/// StopSignals in a child process, tarmac-stop-signals-child PART (stop_signals_child.cpp says
+/// why it is a program of its own): it reports through a pipe that it is set up; the parent then
+/// sends SIGTERM and times the exit. Returns the wait status, or -1 when it had to be killed.
 struct ChildStop {
   int wstatus = -1;
   std::chrono::milliseconds took{0};
 };
 
-ChildStop stop_child(const std::function<void(int ready_fd)>& child) {
+ChildStop stop_child(const char* part) {
   int fds[2];
   if (pipe(fds) != 0) return {};
+  const std::string ready_fd = std::to_string(fds[1]);  // made before fork: the child only execs
   const pid_t pid = fork();
   if (pid == 0) {
     close(fds[0]);
-    child(fds[1]);
-    _exit(99);  // the child's body decides its own exit; reaching here is a failure
+    execl(TARMAC_STOP_SIGNALS_CHILD, TARMAC_STOP_SIGNALS_CHILD, part, ready_fd.c_str(),
+          static_cast<char*>(nullptr));
+    _exit(127);
   }
   close(fds[1]);
   char byte = 0;
@@ -213,47 +215,25 @@ ChildStop stop_child(const std::function<void(int ready_fd)>& child) {
   return result;
 }
 
-void report_ready(int fd) {
-  (void)!write(fd, "r", 1);
-  close(fd);
-}
-
 TEST(StopSignals, DuringStartup_TheProcessExitsAtOnceWith0) {
-  const ChildStop stopped = stop_child([](int ready) {
-    StopSignals::install();
-    report_ready(ready);
-    std::this_thread::sleep_for(10s);  // "creating the participant", "loading the TSDF"
-  });
+  const ChildStop stopped = stop_child("startup");
   ASSERT_TRUE(WIFEXITED(stopped.wstatus)) << stopped.wstatus;
   EXPECT_EQ(WEXITSTATUS(stopped.wstatus), 0);
-  EXPECT_LT(stopped.took, 500ms);
+  EXPECT_LT(stopped.took, 500ms + test::kExitDelay);
 }
 
 TEST(StopSignals, WhileRunning_TheStopIsLeftToTheLoop) {
-  const ChildStop stopped = stop_child([](int ready) {
-    StopSignals& stop = StopSignals::install();
-    stop.begin_loop();
-    report_ready(ready);
-    while (!stop.requested()) std::this_thread::sleep_for(1ms);
-    stop.loop_ended();
-    // The save on exit may take longer than the grace: nothing ends the process meanwhile.
-    std::this_thread::sleep_for(StopSignals::kStopGrace + 300ms);
-    _exit(stop.signal() == SIGTERM ? 42 : 43);
-  });
+  const ChildStop stopped = stop_child("running");
   ASSERT_TRUE(WIFEXITED(stopped.wstatus)) << stopped.wstatus;
   EXPECT_EQ(WEXITSTATUS(stopped.wstatus), 42);
 }
 
 TEST(StopSignals, ALoopStuckPastTheGrace_EndsWithExitStatus70) {
-  const ChildStop stopped = stop_child([](int ready) {
-    StopSignals::install().begin_loop();
-    report_ready(ready);
-    std::this_thread::sleep_for(10s);  // a stage that never returns
-  });
+  const ChildStop stopped = stop_child("stuck");
   ASSERT_TRUE(WIFEXITED(stopped.wstatus)) << stopped.wstatus;
   EXPECT_EQ(WEXITSTATUS(stopped.wstatus), StopSignals::kExitStuck);
   EXPECT_GE(stopped.took, StopSignals::kStopGrace);
-  EXPECT_LT(stopped.took, 1500ms);
+  EXPECT_LT(stopped.took, 1500ms + test::kExitDelay);
 }
 
 }  // namespace
