@@ -162,9 +162,10 @@ std::string owner_of(const Stack& stack, std::string& where) {
       owner = "fastdds";
       break;
     }
+    // "backtrace": under a sanitizer the stack starts in its interceptor of backtrace().
     if (name.rfind("std::", 0) == 0 || name.rfind("operator new", 0) == 0 ||
         name.rfind("__gnu_cxx", 0) == 0 || name.find("counted_malloc") != std::string::npos ||
-        name == "malloc") {
+        name == "malloc" || name == "backtrace") {
       continue;
     }
     where = name.substr(0, 120);
