@@ -129,27 +129,33 @@ TEST_F(SafetyDds, AircraftLoop_CostmapsOverDdsScoredLikeTarmacMap) {
             0)
       << read_text(dir / "sim.log");
   const fs::path config = dir / "tarmac.yaml";
+  // Slow motion under a sanitizer (test_env.hpp): the shipped timing, the replay's rate and its
+  // stamps' grid, the audit's idle time and every wait, all by kTimeScale.
+  constexpr int kS = tarmac::test::kTimeScale;
   {
     // The shipped defaults (identity extrinsic: the "base" is the sensor), own domain and state.
+    const auto timing = tarmac::test::scaled_timing_yaml();
     std::ofstream out(config);
     out << "version: 1\ndds: {domain_id: " << tarmac::test::kDomainSafetyDds << "}\n"
-        << "executor: {realtime_priority: 0, lock_memory: false}\n"
-        << "state: {dir: " << (dir / "state").string() << ", save_on_exit: false}\n";
+        << "executor: {realtime_priority: 0, lock_memory: false" << timing.executor_keys << "}\n"
+        << timing.sections << "state: {dir: " << (dir / "state").string()
+        << ", save_on_exit: false}\n";
   }
   const pid_t daemon = spawn({TARMAC_TARMACD, "--config", config.string()}, dir / "tarmacd.log");
   ASSERT_TRUE(wait_for_line(dir / "tarmacd.log", "tarmacd: ready", 20s))
       << read_text(dir / "tarmacd.log");
-  const pid_t audit =
-      spawn({TARMAC_AUDIT, "--config", config.string(), "--score", data.string(), "--idle-s", "2",
-             "--timeout-s", "120", "--json", (dir / "audit.json").string()},
-            dir / "audit.log");
+  const pid_t audit = spawn({TARMAC_AUDIT, "--config", config.string(), "--score", data.string(),
+                             "--idle-s", std::to_string(2 * kS), "--timeout-s",
+                             std::to_string(120 * kS), "--json", (dir / "audit.json").string()},
+                            dir / "audit.log");
   EXPECT_TRUE(wait_for_line(dir / "audit.log", "tarmac-audit: matched", 20s));
   const int replay_rc =
       wait_exit(spawn({TARMAC_REPLAY, "--dataset", data.string(), "--config", config.string(),
-                       "--align-ms", "100", "--pose-readers", "2"},
+                       "--rate-scale", std::to_string(1.0 / kS), "--align-ms",
+                       std::to_string(100 * kS), "--pose-readers", "2"},
                       dir / "replay.log"),
-                120s);
-  const int audit_rc = wait_exit(audit, 60s);
+                kS * 120s);
+  const int audit_rc = wait_exit(audit, kS * 60s);
   kill(daemon, SIGTERM);
   EXPECT_EQ(wait_exit(daemon, 20s), 0) << read_text(dir / "tarmacd.log");
   ASSERT_EQ(replay_rc, 0) << read_text(dir / "replay.log");
