@@ -39,6 +39,13 @@ void ScanRays::build(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vec
   origin_W_ = origin_W;
   unsorted_.clear();
   ray_bin_.clear();
+  // Room for half as many rays again as this scan has, so that scans varying in size (the
+  // beams without return change with the scene) stop allocating once the largest has come.
+  if (const std::size_t n = points_W.size() + dirs_W.size(); unsorted_.capacity() < n) {
+    unsorted_.reserve(n + n / 2);
+    ray_bin_.reserve(n + n / 2);
+    rays_.reserve(n + n / 2);
+  }
   const auto add = [&](const Eigen::Vector3d& end, bool returned) {
     const double length = end.norm();
     if (!(length > 0.0)) return;
