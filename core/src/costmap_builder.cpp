@@ -624,7 +624,8 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
             const bool obstacle = (occupied & e.obstacle_mask) != 0;
             const bool seen = observed(known, e);
             bool low_obj = false;
-            if (!obstacle && seen) {
+            // A low object blocks whatever the free rule says of the rest of the envelope.
+            if (!obstacle && (known & e.seen_mask) != 0) {
               for (int z = e.rise_begin; z < e.rise_end; ++z) {
                 low_obj |= rise_layers[static_cast<std::size_t>(z)][sl] >= min_rise_cm;
               }
@@ -678,9 +679,10 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
         const std::size_t i = static_cast<std::size_t>(y) * nx + x;
         const bool seen = observed_count(any_known[i], ground_layer[i]);
-        const bool free = any_obstacle[i] == 0 && seen;
-        classes[i] = column_class(
-            any_obstacle[i] != 0 || (free && low_object(ring_row + rx, ground_layer[i])), seen);
+        // A low object blocks whatever the free rule says of the rest of the envelope.
+        const bool low = any_obstacle[i] == 0 && any_known[i] != 0 &&
+                         low_object(ring_row + rx, ground_layer[i]);
+        classes[i] = column_class(any_obstacle[i] != 0 || low, seen);
         out.esdf_input[i] = esdf_state(classes[i]);
       }
     }

@@ -96,6 +96,23 @@ TEST_F(Envelope, LowStructureInsideEnvelopeBlocks) {
   EXPECT_EQ(cost_at(4.5, 0.0), kCostLethal);
 }
 
+TEST_F(Envelope, LowObjectBlocks_WhateverTheFreeRuleSaysOfTheEnvelopeAbove) {
+  // 10 cm debris: found from its returns' heights inside the ground voxel. The envelope above the
+  // sensor is never observed here (no sky beams), so the whole-envelope rule leaves the open
+  // apron unknown; the debris still reads lethal, not unknown.
+  std::vector<Eigen::Vector3f> extra;
+  box(extra, {2.95f, -4.05f, 0.15f}, {3.05f, -3.95f, 0.15f});
+  scan(extra);
+  CostmapParams cp;
+  cp.free_rule = FreeRule::kWholeEnvelope;
+  build(cp);
+  EXPECT_EQ(cost_at(3.0, -4.0), kCostLethal);
+  EXPECT_EQ(cost_at(-6.0, 6.0), kCostUnknown);
+  build(params());
+  EXPECT_EQ(cost_at(3.0, -4.0), kCostLethal);
+  EXPECT_EQ(cost_at(-6.0, 6.0), kCostFree);
+}
+
 TEST_F(Envelope, UnknownPolicyAndVirtualZones) {
   scan({});
   CostmapParams cp = params();
