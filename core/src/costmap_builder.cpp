@@ -680,8 +680,8 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
         const std::size_t i = static_cast<std::size_t>(y) * nx + x;
         const bool seen = observed_count(any_known[i], ground_layer[i]);
         // A low object blocks whatever the free rule says of the rest of the envelope.
-        const bool low = any_obstacle[i] == 0 && any_known[i] != 0 &&
-                         low_object(ring_row + rx, ground_layer[i]);
+        const bool low =
+            any_obstacle[i] == 0 && any_known[i] != 0 && low_object(ring_row + rx, ground_layer[i]);
         classes[i] = column_class(any_obstacle[i] != 0 || low, seen);
         out.esdf_input[i] = esdf_state(classes[i]);
       }

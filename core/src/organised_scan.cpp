@@ -129,13 +129,12 @@ OrganisedCounts split_organised(PointCloud& cloud, std::size_t rows, std::size_t
         ++counts.underivable;
         continue;
       }
-      const double elevation = std::clamp(s.row_angle[i / cols], -std::numbers::pi / 2,
-                                          std::numbers::pi / 2);
+      const double elevation =
+          std::clamp(s.row_angle[i / cols], -std::numbers::pi / 2, std::numbers::pi / 2);
       const double azimuth = s.col_angle[i % cols];
-      cloud.no_return_S.emplace_back(
-          static_cast<float>(std::cos(elevation) * std::cos(azimuth)),
-          static_cast<float>(std::cos(elevation) * std::sin(azimuth)),
-          static_cast<float>(std::sin(elevation)));
+      cloud.no_return_S.emplace_back(static_cast<float>(std::cos(elevation) * std::cos(azimuth)),
+                                     static_cast<float>(std::cos(elevation) * std::sin(azimuth)),
+                                     static_cast<float>(std::sin(elevation)));
       ++counts.no_returns;
       continue;
     }

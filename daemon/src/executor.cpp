@@ -275,8 +275,7 @@ class Executor::Impl {
          {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
           "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite",
           "points.too_close", "points.ego_vehicle", "points.isolated", "points.no_return_refused",
-          "scan.tsdf_shed_quota",
-          "scan.deskew_span", "pose.clock_step"}) {
+          "scan.tsdf_shed_quota", "scan.deskew_span", "pose.clock_step"}) {
       drops.declare(r);
     }
     for (const char* r : {"scan.unknown_frame",

@@ -45,7 +45,9 @@ TEST(OrganisedScan, SkyRowsAndEmptyColumns_DirectionsRebuiltFromTheReturns) {
   // 16 beams over -15..15 deg, 64 columns: the upper 6 rows return nothing (sky), nor do columns
   // 10..14 (an opening), nor every 5th cell below (dropouts).
   const int rows = 16, cols = 64;
-  const auto hit = [](int r, int c) { return r < 10 && !(c >= 10 && c <= 14) && (r * cols + c) % 5; };
+  const auto hit = [](int r, int c) {
+    return r < 10 && !(c >= 10 && c <= 14) && (r * cols + c) % 5;
+  };
   PointCloud cloud = sweep(rows, cols, -15.0, 15.0, hit);
   OrganisedScratch scratch;
   const OrganisedCounts counts = split_organised(cloud, rows, cols, scratch);
