@@ -23,14 +23,18 @@ double wrapped_difference(double a, double b) {
   return d;
 }
 
+/// How many entries have returns.
+std::size_t count_defined(const std::vector<std::uint32_t>& n) {
+  return static_cast<std::size_t>(
+      std::count_if(n.begin(), n.end(), [](std::uint32_t k) { return k > 0; }));
+}
+
 /// Fills the rows without returns (n[i] == 0) of v: interpolated between the nearest rows with
 /// returns on both sides, else extrapolated from the two nearest on the one side. False when
 /// fewer than two rows have returns (then v is left as it is).
 bool fill_rows(std::vector<double>& v, const std::vector<std::uint32_t>& n) {
   const std::size_t count = v.size();
-  std::size_t defined = 0;
-  for (std::size_t i = 0; i < count; ++i) defined += n[i] > 0 ? 1 : 0;
-  if (defined < 2) return false;
+  if (count_defined(n) < 2) return false;
   const auto nearest = [&](std::size_t from, int step) -> std::ptrdiff_t {
     for (auto i = static_cast<std::ptrdiff_t>(from) + step;
          i >= 0 && i < static_cast<std::ptrdiff_t>(count); i += step) {
@@ -62,9 +66,7 @@ bool fill_rows(std::vector<double>& v, const std::vector<std::uint32_t>& n) {
 /// have returns.
 bool fill_columns(std::vector<double>& v, const std::vector<std::uint32_t>& n) {
   const std::size_t count = v.size();
-  std::size_t defined = 0;
-  for (std::size_t i = 0; i < count; ++i) defined += n[i] > 0 ? 1 : 0;
-  if (defined < 2) return false;
+  if (count_defined(n) < 2) return false;
   for (std::size_t i = 0; i < count; ++i) {
     if (n[i] > 0) continue;
     std::size_t da = 1;

@@ -77,7 +77,7 @@ TEST(OrganisedScan, SkyRowsAndEmptyColumns_DirectionsRebuiltFromTheReturns) {
 }
 
 TEST(OrganisedScan, OriginPointsAreNoReturnsToo_ColumnsRoundTheWrap) {
-  // Ouster's convention (0, 0, 0); the empty columns straddle azimuth 0 (columns 62, 63, 0, 1).
+  // No return as (0, 0, 0); the empty columns straddle azimuth 0 (columns 62, 63, 0, 1).
   const int rows = 8, cols = 64;
   const auto hit = [](int r, int c) { return r < 5 && c >= 2 && c <= 61; };
   PointCloud cloud = sweep(rows, cols, -10.0, 10.0, hit, /*zeros=*/true);

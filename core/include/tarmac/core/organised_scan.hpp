@@ -1,8 +1,8 @@
 #pragma once
 /// @file Organised scans: a spinning LiDAR's sweep as a grid of rows (beams) by columns (firing
 /// azimuths), row-major — a PointCloud2 with height > 1, or the organised files tarmac-sim
-/// writes. A cell with a non-finite coordinate, or exactly at the origin (Ouster's convention),
-/// is a beam that returned nothing within the sensor's range.
+/// writes. A cell with a non-finite coordinate, or exactly at the origin (a convention of some
+/// drivers), is a beam that returned nothing within the sensor's range.
 ///
 /// Such a beam is evidence too: the air along it is free. The costmap's free-space rule needs it
 /// (a column is free only when its whole envelope was observed, and above the sensor only beams
