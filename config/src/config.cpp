@@ -442,6 +442,7 @@ void read_dds(MapReader& r, DdsConfig& dds, const std::string& base_dir) {
 }
 
 const std::vector<std::string> kUnknownCost = {"unknown", "lethal", "free"};
+const std::vector<std::string> kFreeRule = {"whole_envelope", "any_voxel"};
 /// core::UnknownPolicy, in its order.
 const std::vector<std::string> kUnknownPolicy = {"report", "occupied"};
 
@@ -494,6 +495,9 @@ void read_mapping(MapReader& root, core::MapperParams& p) {
     r.scalar<double>("ground_tolerance_m", c.ground_tolerance_m, 0.0, 10.0);
     if (const int i = r.choice("unknown_cost", kUnknownCost); i >= 0) {
       c.unknown_cost = static_cast<core::UnknownCost>(i);
+    }
+    if (const int i = r.choice("free_rule", kFreeRule); i >= 0) {
+      c.free_rule = static_cast<core::FreeRule>(i);
     }
   });
   root.map("esdf_band", [&](MapReader& r) {
@@ -959,6 +963,7 @@ std::string to_yaml(const Config& config) {
   out << YAML::Key << "ground_tolerance_m" << YAML::Value << c.ground_tolerance_m;
   out << YAML::Key << "unknown_cost" << YAML::Value
       << kUnknownCost[static_cast<int>(c.unknown_cost)];
+  out << YAML::Key << "free_rule" << YAML::Value << kFreeRule[static_cast<int>(c.free_rule)];
   out << YAML::EndMap;
   const auto& band = m.esdf_band;
   out << YAML::Key << "esdf_band" << YAML::Value << YAML::BeginMap;

@@ -55,7 +55,9 @@ void mark_envelope(std::uint8_t* __restrict known, std::uint8_t* __restrict obst
     const int above = z - ground[k];
     const bool envelope = above >= 0 && above < top_layers;
     const float l = log_odds[k];
-    known[k] |= static_cast<std::uint8_t>(envelope & (l != OccupancyMap::kUnknown));
+    // A count (saturating): the whole-envelope rule compares it with the envelope's layers.
+    known[k] +=
+        static_cast<std::uint8_t>(envelope & (l != OccupancyMap::kUnknown) & (known[k] != 255));
     obstacle[k] |= static_cast<std::uint8_t>(envelope & (above >= lo_layers) & (l > 0.0f));
   }
 }
@@ -552,15 +554,32 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   // What a column's test needs of its ground layer gl: the envelope's masks (observed, obstacle),
   // the ground height, the layers of the low-object test. Tabulated once per call for gl in
   // [−nz, 2·nz) (computed when a ground lies outside).
+  // With FreeRule::kWholeEnvelope a column is free only when every voxel of its envelope was
+  // observed, so an envelope reaching out of the window (which holds no observation there) is
+  // never free.
+  const bool whole_envelope = params.free_rule == FreeRule::kWholeEnvelope;
   struct GroundEntry {
     std::uint64_t seen_mask, obstacle_mask;
     float z_m;
     int rise_begin, rise_end;
+    bool in_window;  ///< the whole envelope lies inside the window's layers
   };
   const auto ground_entry = [&](int gl) {
-    return GroundEntry{bit_range(gl, gl + top_layers), bit_range(gl + lo_layers, gl + top_layers),
-                       static_cast<float>((wmin.z() + gl + 0.5) * v), std::max(0, gl),
-                       std::min(nz, gl + lo_layers)};
+    return GroundEntry{bit_range(gl, gl + top_layers),
+                       bit_range(gl + lo_layers, gl + top_layers),
+                       static_cast<float>((wmin.z() + gl + 0.5) * v),
+                       std::max(0, gl),
+                       std::min(nz, gl + lo_layers),
+                       gl >= 0 && gl + top_layers <= nz};
+  };
+  // Whether a column with `known` envelope voxels (of the entry's mask, or counted) reads as
+  // observed under the free rule.
+  const auto observed = [whole_envelope](std::uint64_t known, const GroundEntry& e) {
+    return whole_envelope ? e.in_window && (known & e.seen_mask) == e.seen_mask
+                          : (known & e.seen_mask) != 0;
+  };
+  const auto observed_count = [whole_envelope, top_layers, nz](int known, int gl) {
+    return whole_envelope ? gl >= 0 && gl + top_layers <= nz && known == top_layers : known != 0;
   };
   std::array<GroundEntry, 3 * 64> by_ground;
   const int ground_first = -nz;
@@ -577,7 +596,7 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
     if (use_bits) {
       // One pass per column: its ground, the envelope tests as bit masks, the low-object test.
       // A column is an obstacle when any envelope voxel at least lo_layers above its ground is
-      // occupied, free when any envelope voxel is known, unknown otherwise.
+      // occupied, free when its envelope is observed by the free rule, unknown otherwise.
       std::uint8_t* __restrict cls = classes.data();
       CellState* __restrict esdf_in = out.esdf_input.data();
       const std::uint32_t* __restrict occ_bits = occupied_bits.data();
@@ -603,9 +622,10 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
             const std::uint64_t occupied = occ_bits[sl] | std::uint64_t{occ_bits[cells_n + sl]}
                                                               << 32;
             const bool obstacle = (occupied & e.obstacle_mask) != 0;
-            const bool seen = (known & e.seen_mask) != 0;
+            const bool seen = observed(known, e);
             bool low_obj = false;
-            if (!obstacle && seen) {
+            // A low object blocks whatever the free rule says of the rest of the envelope.
+            if (!obstacle && (known & e.seen_mask) != 0) {
               for (int z = e.rise_begin; z < e.rise_end; ++z) {
                 low_obj |= rise_layers[static_cast<std::size_t>(z)][sl] >= min_rise_cm;
               }
@@ -658,10 +678,11 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
       const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
       for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
         const std::size_t i = static_cast<std::size_t>(y) * nx + x;
-        const bool free = any_obstacle[i] == 0 && any_known[i] != 0;
-        classes[i] = column_class(
-            any_obstacle[i] != 0 || (free && low_object(ring_row + rx, ground_layer[i])),
-            any_known[i] != 0);
+        const bool seen = observed_count(any_known[i], ground_layer[i]);
+        // A low object blocks whatever the free rule says of the rest of the envelope.
+        const bool low =
+            any_obstacle[i] == 0 && any_known[i] != 0 && low_object(ring_row + rx, ground_layer[i]);
+        classes[i] = column_class(any_obstacle[i] != 0 || low, seen);
         out.esdf_input[i] = esdf_state(classes[i]);
       }
     }

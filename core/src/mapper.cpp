@@ -19,6 +19,29 @@ void transform_points(const Eigen::Isometry3d& T_W_S, std::span<const Eigen::Vec
   for (std::size_t i = 0; i < points_S.size(); ++i) points_W[i] = R_W_S * points_S[i] + t_W_S;
 }
 
+/// Rotates the directions of beams without return into the world frame (float, like the points).
+void rotate_directions(const Eigen::Isometry3d& T_W_S, std::span<const Eigen::Vector3f> dirs_S,
+                       std::vector<Eigen::Vector3f>& dirs_W) {
+  const Eigen::Matrix3f R_W_S = T_W_S.linear().cast<float>();
+  dirs_W.resize(dirs_S.size());
+  for (std::size_t i = 0; i < dirs_S.size(); ++i) dirs_W[i] = R_W_S * dirs_S[i];
+}
+
+/// Keeps the usable directions of beams without return, normalised, in `out`; counts both.
+void accept_no_returns(std::span<const Eigen::Vector3f> dirs_S, std::vector<Eigen::Vector3f>& out,
+                       FilterCounts& counts) {
+  out.clear();
+  for (const Eigen::Vector3f& d : dirs_S) {
+    const float n = d.norm();
+    if (!(n >= 0.5f && n <= 2.0f)) {  // NaN fails too
+      ++counts.no_returns_refused;
+      continue;
+    }
+    out.push_back(d / n);
+  }
+  counts.no_returns = out.size();
+}
+
 }  // namespace
 
 Status MapperParams::validate() const {
@@ -57,6 +80,8 @@ Mapper::Mapper(const MapperParams& params)
   filter_scratch_.reserve(kWarmUpPoints, params.filters);
   points_W_.assign(kWarmUpPoints, Eigen::Vector3f::Zero());
   points_W_.clear();
+  clearing_W_.reserve(kWarmUpPoints / 2);  // an organised 64 x 1024 sweep into the open sky
+  no_return_scratch_S_.reserve(kWarmUpPoints / 2);
   SerialRunner serial;
   build_costmap(map_, params_.costmap, T_W_B_, {}, 0, layers_, serial);
   // The 3D band likewise (about 50 MB of states, scratch and field at the default window).
@@ -89,9 +114,13 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   }
   // The survivors in the world frame, and, when scans are retained, straight into the slot this
   // scan takes in the sensor frame (nothing reads a slot's points between here and below).
-  const FilterCounts counts =
+  FilterCounts counts =
       filter_scan(*input, T_W_S, T_B_S, params_.filters, points_W_, filter_scratch_, runner,
                   retained_.empty() ? nullptr : &retained(next_seq_).points_S);
+  std::vector<Eigen::Vector3f>& no_return_S =
+      retained_.empty() ? no_return_scratch_S_ : retained(next_seq_).no_return_S;
+  accept_no_returns(cloud.no_return_S, no_return_S, counts);
+  rotate_directions(T_W_S, no_return_S, clearing_W_);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&
         cursor_seq_ <= next_seq_ - retained_.size()) {
@@ -112,12 +141,15 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
 }
 
 void Mapper::reserve_retained(std::size_t points_per_scan) {
-  for (auto& r : retained_) r.points_S.reserve(points_per_scan);
+  for (auto& r : retained_) {
+    r.points_S.reserve(points_per_scan);
+    r.no_return_S.reserve(points_per_scan);  // an organised sweep: returns + beams without
+  }
 }
 
 OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
   map_.recenter(T_W_B_.translation(), runner);
-  return map_.integrate(sensor_W_, points_W_, {}, runner, T_W_B_.linear().col(2));
+  return map_.integrate(sensor_W_, points_W_, clearing_W_, runner, T_W_B_.linear().col(2));
 }
 
 const TsdfUpdate& Mapper::integrate_tsdf(TaskRunner& runner) {
@@ -248,8 +280,10 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
     if (quota != 0 && step.scans >= 2 && step.points + n > quota) break;
     const Eigen::Isometry3d T_W_S = r.T_W_B * r.T_B_S;
     transform_points(T_W_S, r.points_S, rebuild_points_W_);
+    rotate_directions(T_W_S, r.no_return_S, rebuild_clearing_W_);
     spare_->recenter(r.T_W_B.translation());
-    spare_->integrate(T_W_S.translation(), rebuild_points_W_, {}, runner, r.T_W_B.linear().col(2));
+    spare_->integrate(T_W_S.translation(), rebuild_points_W_, rebuild_clearing_W_, runner,
+                      r.T_W_B.linear().col(2));
     if (params_.tsdf.enabled && r.tsdf_wanted) {
       record_tsdf(
           r, tsdf_integrator_.integrate(T_W_S.translation(), rebuild_points_W_, tsdf_, runner));

@@ -2022,6 +2022,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   }
   const std::span<const std::uint32_t> order =
       wide ? std::span<const std::uint32_t>{} : std::span<const std::uint32_t>(ray_order_);
+  has_no_returns_ = !clearing_dirs_W.empty();
   runner.parallel_for(1 + kRayTasks, [&](std::size_t job) {
     if (job == 0) {
       integrate_hits(origin_W, points_W, up_W, stats);
@@ -2229,16 +2230,21 @@ void OccupancyMap::miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats
       bool miss = true;
       const std::uint8_t floor32 = hit_floor_[s];
       const int rel_z = wrap(static_cast<int>(s / layer) - ring_z0, nz);
+      const Eigen::Vector3d corner = voxel_of_slot(s).cast<double>() * v;
       if (floor32 != kNoHitFloor && rel_z > 0) {
         const std::size_t below = s >= layer ? s - layer : s + layer * (nz - 1);
         const bool above_free =
             rel_z + 1 < nz &&
             reads_free(s + layer < layer * nz ? s + layer : s + layer - layer * nz);
         if (reads_free(below) && !above_free) {
-          const Eigen::Vector3d corner = voxel_of_slot(s).cast<double>() * v;
           const Eigen::Vector3d lo(corner.x(), corner.y(), corner.z() + floor32 * v / kFloorSteps);
-          miss = scan_rays_.any_passes(lo, corner + Eigen::Vector3d::Constant(v), v);
+          miss = scan_rays_.any_passes(lo, corner + Eigen::Vector3d::Constant(v), v, true);
         }
+      }
+      // Beams without a return never empty an occupied voxel: a black or mirror-like surface
+      // returns nothing too. Only a ray that ended at a return shows it empty.
+      if (miss && has_no_returns_) {
+        miss = scan_rays_.any_passes(corner, corner + Eigen::Vector3d::Constant(v), 0.0, true);
       }
       miss_decision_[first[task] + k] = miss ? 1 : 0;
     }

@@ -13,6 +13,7 @@ void PointCloud::clear() {
   intensity.clear();
   ring.clear();
   time_offset_s.clear();
+  no_return_S.clear();
 }
 
 }  // namespace tarmac::core

@@ -39,10 +39,17 @@ void ScanRays::build(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vec
   origin_W_ = origin_W;
   unsorted_.clear();
   ray_bin_.clear();
-  const auto add = [&](const Eigen::Vector3d& end, bool returned) {
+  // Room for half as many rays again as this scan has, so that scans varying in size (the
+  // beams without return change with the scene) stop allocating once the largest has come.
+  if (const std::size_t n = points_W.size() + dirs_W.size(); unsorted_.capacity() < n) {
+    unsorted_.reserve(n + n / 2);
+    ray_bin_.reserve(n + n / 2);
+    rays_.reserve(n + n / 2);
+  }
+  const auto add = [&](const Eigen::Vector3d& end, bool returned, bool measured) {
     const double length = end.norm();
     if (!(length > 0.0)) return;
-    unsorted_.push_back(Ray{end.cast<float>(), static_cast<float>(length), returned});
+    unsorted_.push_back(Ray{end.cast<float>(), static_cast<float>(length), returned, measured});
     ray_bin_.push_back(static_cast<std::uint32_t>(el_bin(end.z() / length) * kAzBins +
                                                   az_bin(diamond_angle(end.x(), end.y()))));
   };
@@ -51,15 +58,15 @@ void ScanRays::build(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vec
     const Eigen::Vector3d rel = p.cast<double>() - origin_W;
     const double range = rel.norm();
     if (range <= max_range_m) {
-      add(rel, true);
+      add(rel, true, true);
     } else if (clear_range_m > 0.0) {
-      add(rel * (clear_range_m / range), false);
+      add(rel * (clear_range_m / range), false, true);
     }
   }
   for (const Eigen::Vector3f& d : dirs_W) {
     const double norm = d.cast<double>().norm();
     if (!d.allFinite() || norm == 0.0 || clear_range_m <= 0.0) continue;
-    add(d.cast<double>() * (clear_range_m / norm), false);
+    add(d.cast<double>() * (clear_range_m / norm), false, false);
   }
   // Counting sort by bin (stable: the rays of a bin keep the scan's order).
   bin_first_.assign(static_cast<std::size_t>(kAzBins) * kElBins + 1, 0);
@@ -93,8 +100,8 @@ bool ScanRays::ray_passes(const Ray& r, const Eigen::Vector3d& lo, const Eigen::
   return (1.0 - t1) * r.length_m > behind_m;
 }
 
-bool ScanRays::any_passes(const Eigen::Vector3d& lo_W, const Eigen::Vector3d& hi_W,
-                          double behind_m) const {
+bool ScanRays::any_passes(const Eigen::Vector3d& lo_W, const Eigen::Vector3d& hi_W, double behind_m,
+                          bool measured_only) const {
   if (rays_.empty()) return false;
   const Eigen::Vector3d lo = lo_W - origin_W_, hi = hi_W - origin_W_;
   // Horizontal distances from the origin's vertical line to the box: nearest and farthest.
@@ -142,7 +149,8 @@ bool ScanRays::any_passes(const Eigen::Vector3d& lo_W, const Eigen::Vector3d& hi
       const int last = std::min(kAzBins - 1, first + (a1 - a));
       for (std::uint32_t i = bin_first_[row + first], end = bin_first_[row + last + 1]; i < end;
            ++i) {
-        if (ray_passes(rays_[i], lo, hi, behind_m)) return true;
+        const Ray& r = rays_[i];
+        if ((r.measured || !measured_only) && ray_passes(r, lo, hi, behind_m)) return true;
       }
       a += last - first + 1;
     }

@@ -274,8 +274,8 @@ class Executor::Impl {
     for (const char* r :
          {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full",
           "scan.pose_timeout", "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite",
-          "points.too_close", "points.ego_vehicle", "points.isolated", "scan.tsdf_shed_quota",
-          "scan.deskew_span", "pose.clock_step"}) {
+          "points.too_close", "points.ego_vehicle", "points.isolated", "points.no_return_refused",
+          "scan.tsdf_shed_quota", "scan.deskew_span", "pose.clock_step"}) {
       drops.declare(r);
     }
     for (const char* r : {"scan.unknown_frame",
@@ -679,6 +679,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     drops.add("points.too_close", counts.too_close);
     drops.add("points.ego_vehicle", counts.ego_vehicle);
     drops.add("points.isolated", counts.isolated);
+    drops.add("points.no_return_refused", counts.no_returns_refused);
     newest_stamp_ns = std::max(newest_stamp_ns, cloud.stamp_ns);
     scheduler.release(sel.slot);
     // ---- rebuild after a pose correction: a points quota of retained scans per scan, so

@@ -106,10 +106,19 @@ std::int64_t ScanScheduler::oldest_pending_stamp() const {
 }
 
 void ScanScheduler::decimate(core::PointCloud& cloud, TickStats& stats) const {
+  // The quota counts rays: returns and beams without return (both are cast).
   const std::size_t n = cloud.size();
-  if (n <= params_.points_per_scan) return;
-  // Every k-th point, k the smallest stride that fits the quota: deterministic by index.
-  const std::size_t k = (n + params_.points_per_scan - 1) / params_.points_per_scan;
+  const std::size_t m = cloud.no_return_S.size();
+  if (n + m <= params_.points_per_scan) return;
+  // Every k-th point and every k-th beam without return, k the smallest stride that fits the
+  // quota: deterministic by index.
+  const std::size_t q = params_.points_per_scan;
+  const auto kept = [n, m](std::size_t stride) {
+    return (n + stride - 1) / stride + (m + stride - 1) / stride;
+  };
+  std::size_t k = (n + m + q - 1) / q;
+  // Each part rounds up: at most two more steps (a quota of 1 keeps one of each).
+  while (kept(k) > q && k < n + m) ++k;
   std::size_t w = 0;
   for (std::size_t r = 0; r < n; r += k, ++w) {
     cloud.points_S[w] = cloud.points_S[r];
@@ -121,7 +130,10 @@ void ScanScheduler::decimate(core::PointCloud& cloud, TickStats& stats) const {
   if (cloud.has_intensity()) cloud.intensity.resize(w);
   if (cloud.has_ring()) cloud.ring.resize(w);
   if (cloud.has_time()) cloud.time_offset_s.resize(w);
-  stats.decimated_points += n - w;
+  std::size_t v = 0;
+  for (std::size_t r = 0; r < m; r += k, ++v) cloud.no_return_S[v] = cloud.no_return_S[r];
+  cloud.no_return_S.resize(v);
+  stats.decimated_points += (n - w) + (m - v);
 }
 
 namespace {
@@ -200,11 +212,12 @@ ScanScheduler::TickStats ScanScheduler::select(std::int64_t tick_ns, const PoseB
       continue;
     }
     decimate(s.cloud, stats);
-    if (!out.empty() && points + s.cloud.size() > params_.points_per_cycle) {
+    const std::size_t rays = s.cloud.size() + s.cloud.no_return_S.size();
+    if (!out.empty() && points + rays > params_.points_per_cycle) {
       stats.deferred_scans = order_.size() - k;  // this one and every later one wait
       break;
     }
-    points += s.cloud.size();
+    points += rays;
     s.state = State::kSelected;
     have_last_ = true;
     last_stamp_ = stamp;

@@ -1,7 +1,9 @@
 #include "tarmac/core/costmap_builder.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 #include <gtest/gtest.h>
 
@@ -35,9 +37,17 @@ TEST(Polygon, EvenOddContainment) {
 }
 
 /// A flat apron seen from a sensor 2 m up at the origin: ground points every 0.1 m within 12 m,
-/// plus whatever `extra` adds.
+/// plus whatever `extra` adds. No beam goes into the sky here, so the envelope above the sensor
+/// is never observed: these tests take FreeRule::kAnyVoxel (params()); the whole-envelope rule
+/// has its own tests (FreeRule.*).
 class Envelope : public ::testing::Test {
  protected:
+  static CostmapParams params() {
+    CostmapParams cp;
+    cp.free_rule = FreeRule::kAnyVoxel;
+    return cp;
+  }
+
   Envelope() : map_(test::apron_window_params()) { map_.recenter(Eigen::Vector3d::Zero()); }
 
   void scan(const std::vector<Eigen::Vector3f>& extra, int times = 3) {
@@ -51,7 +61,7 @@ class Envelope : public ::testing::Test {
                               static_cast<std::uint32_t>(cell->y()));
   }
 
-  void build(const CostmapParams& cp = {}, std::span<const VirtualZone> zones = {},
+  void build(const CostmapParams& cp = params(), std::span<const VirtualZone> zones = {},
              std::int64_t stamp_ns = 0) {
     SerialRunner runner;
     build_costmap(map_, cp, Eigen::Isometry3d::Identity(), zones, stamp_ns, layers_, runner);
@@ -86,9 +96,26 @@ TEST_F(Envelope, LowStructureInsideEnvelopeBlocks) {
   EXPECT_EQ(cost_at(4.5, 0.0), kCostLethal);
 }
 
+TEST_F(Envelope, LowObjectBlocks_WhateverTheFreeRuleSaysOfTheEnvelopeAbove) {
+  // 10 cm debris: found from its returns' heights inside the ground voxel. The envelope above the
+  // sensor is never observed here (no sky beams), so the whole-envelope rule leaves the open
+  // apron unknown; the debris still reads lethal, not unknown.
+  std::vector<Eigen::Vector3f> extra;
+  box(extra, {2.95f, -4.05f, 0.15f}, {3.05f, -3.95f, 0.15f});
+  scan(extra);
+  CostmapParams cp;
+  cp.free_rule = FreeRule::kWholeEnvelope;
+  build(cp);
+  EXPECT_EQ(cost_at(3.0, -4.0), kCostLethal);
+  EXPECT_EQ(cost_at(-6.0, 6.0), kCostUnknown);
+  build(params());
+  EXPECT_EQ(cost_at(3.0, -4.0), kCostLethal);
+  EXPECT_EQ(cost_at(-6.0, 6.0), kCostFree);
+}
+
 TEST_F(Envelope, UnknownPolicyAndVirtualZones) {
   scan({});
-  CostmapParams cp;
+  CostmapParams cp = params();
   build(cp);
   EXPECT_EQ(cost_at(14.5, 14.5), kCostUnknown);  // beyond the observed 12 m square
   cp.unknown_cost = UnknownCost::kLethal;
@@ -99,20 +126,103 @@ TEST_F(Envelope, UnknownPolicyAndVirtualZones) {
   VirtualZone restricted{
       "stand-7", {{-15.9, -15.9}, {-2, -15.9}, {-2, -2}, {-15.9, -2}}, -5.0, 5.0, 0, true};
   const std::vector<VirtualZone> zones{spill, restricted};
-  build(CostmapParams{}, zones, 1'000);
+  build(params(), zones, 1'000);
   EXPECT_EQ(cost_at(3.0, 3.0), kCostLethal);
   EXPECT_EQ(cost_at(-5.0, -5.0), kCostFree) << "observed free stays drivable in a restricted zone";
   EXPECT_EQ(cost_at(-14.5, -14.5), kCostLethal) << "unknown inside a restricted zone is lethal";
-  build(CostmapParams{}, zones, 6'000);  // the spill zone expired at 5 µs
+  build(params(), zones, 6'000);  // the spill zone expired at 5 µs
   EXPECT_EQ(cost_at(3.0, 3.0), kCostFree);
 
   // Vertices far outside the int range of cell indices: clamped, every cell inside lethal.
   const std::vector<VirtualZone> huge{
       {"huge", {{-1e30, -1e30}, {1e30, -1e30}, {1e30, -9.0}, {-1e30, -9.0}}}};
-  build(CostmapParams{}, huge, 0);
+  build(params(), huge, 0);
   EXPECT_EQ(cost_at(-15.9, -15.9), kCostLethal);
   EXPECT_EQ(cost_at(15.9, -9.1), kCostLethal);
   EXPECT_EQ(cost_at(0.1, 5.0), kCostFree);
+}
+
+/// The free-space rule on an apron seen as a spinning LiDAR 2 m up sees it: ground returns out to
+/// 30 m (rays to far ground observe the layers just below the sensor near it) and beams without
+/// return into the sky, aimed at every voxel above the sensor within 4 m and up to 3.5 m. An
+/// overhang 2.2–2.6 m up over [1.5, 2.5] x [-2.5, -1.5] that no return came from (a black
+/// underside) stops the sky beams that would cross it: its voxels stay unknown.
+class FreeRuleApron : public ::testing::Test {
+ protected:
+  FreeRuleApron() : map_(test::apron_window_params()) {
+    map_.recenter(Eigen::Vector3d::Zero());
+    const Eigen::Vector3f origin(0.05f, 0.05f, 2.0f);
+    std::vector<Eigen::Vector3f> ground;
+    for (int a = 0; a < 720; ++a) {
+      const float az = static_cast<float>(a) * 0.5f * std::numbers::pi_v<float> / 180.0f;
+      for (float r = 0.5f; r <= 30.0f; r += 0.2f)
+        ground.emplace_back(r * std::cos(az) + 0.05f, r * std::sin(az) + 0.05f, 0.05f);
+    }
+    const Eigen::AlignedBox3f overhang(Eigen::Vector3f(1.5f, -2.5f, 2.2f),
+                                       Eigen::Vector3f(2.5f, -1.5f, 2.6f));
+    std::vector<Eigen::Vector3f> sky;
+    for (float x = -4.1f; x <= 4.1f; x += 0.2f) {
+      for (float y = -4.1f; y <= 4.1f; y += 0.2f) {
+        for (float z = 2.1f; z <= 3.5f; z += 0.2f) {
+          const Eigen::Vector3f d = (Eigen::Vector3f(x, y, z) - origin).normalized();
+          if (!crosses(overhang, origin, d)) sky.push_back(d);
+        }
+      }
+    }
+    SerialRunner runner;
+    for (int i = 0; i < 3; ++i) map_.integrate(origin.cast<double>(), ground, sky, runner);
+  }
+
+  /// The ray origin + t·d, t in [0, 30 m], meets the box.
+  static bool crosses(const Eigen::AlignedBox3f& box, const Eigen::Vector3f& o,
+                      const Eigen::Vector3f& d) {
+    float t0 = 0.0f;
+    float t1 = 30.0f;
+    for (int a = 0; a < 3; ++a) {
+      if (d[a] == 0.0f) {
+        if (o[a] < box.min()[a] || o[a] > box.max()[a]) return false;
+        continue;
+      }
+      float ta = (box.min()[a] - o[a]) / d[a];
+      float tb = (box.max()[a] - o[a]) / d[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    return t0 <= t1;
+  }
+
+  std::int8_t cost_at(FreeRule rule, double x, double y) {
+    CostmapParams cp;
+    cp.free_rule = rule;
+    SerialRunner runner;
+    build_costmap(map_, cp, Eigen::Isometry3d::Identity(), {}, 0, layers_, runner);
+    const auto cell = layers_.costmap.geometry().cell_of(x, y);
+    EXPECT_TRUE(cell.has_value());
+    return layers_.costmap.at(static_cast<std::uint32_t>(cell->x()),
+                              static_cast<std::uint32_t>(cell->y()));
+  }
+
+  OccupancyMap map_;
+  CostmapLayers layers_;
+};
+
+TEST_F(FreeRuleApron, WholeEnvelopeObserved_Free) {
+  EXPECT_EQ(cost_at(FreeRule::kWholeEnvelope, 2.5, 1.5), kCostFree);
+  EXPECT_EQ(cost_at(FreeRule::kWholeEnvelope, -3.0, -1.0), kCostFree);
+}
+
+TEST_F(FreeRuleApron, UnseenOverhangInTheEnvelope_UnknownNotFree) {
+  // Rays under the overhang observed its column's lower voxels: free by the any-voxel rule,
+  // which is the failure the whole-envelope rule exists for.
+  EXPECT_EQ(cost_at(FreeRule::kAnyVoxel, 2.0, -2.0), kCostFree);
+  EXPECT_EQ(cost_at(FreeRule::kWholeEnvelope, 2.0, -2.0), kCostUnknown);
+}
+
+TEST_F(FreeRuleApron, EnvelopeAboveTheSensorNeverObserved_Unknown) {
+  // Beyond 4 m no sky beam was aimed: the envelope's top layers there are unknown.
+  EXPECT_EQ(cost_at(FreeRule::kWholeEnvelope, 9.0, 0.0), kCostUnknown);
+  EXPECT_EQ(cost_at(FreeRule::kAnyVoxel, 9.0, 0.0), kCostFree);
 }
 
 /// Nav2's StaticLayer reading of one OccupancyGrid value (nav2_costmap_2d, StaticLayer::
@@ -172,7 +282,7 @@ TEST_F(Envelope, Nav2ReadsEveryClassOfCellRight_CostmapAndObstacleGrid) {
   const std::vector<VirtualZone> zones{
       {"spill", {{2, 2}, {4, 2}, {4, 4}, {2, 4}}, -1.0, 1.0, 0, false},
       {"stand", {{-15.9, -15.9}, {-2, -15.9}, {-2, -2}, {-15.9, -2}}, -5.0, 5.0, 0, true}};
-  build(CostmapParams{}, zones, 0);
+  build(params(), zones, 0);
   Costmap grid;
   to_obstacle_grid(layers_.costmap, grid);
   ASSERT_EQ(grid.width(), layers_.costmap.width());

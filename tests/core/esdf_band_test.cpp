@@ -28,9 +28,17 @@ class Band : public ::testing::Test {
     test::scan_apron(map_, points);
   }
 
+  /// The apron has no beam into the sky (its envelope above the sensor is never observed): the
+  /// costmap's slice takes the any-voxel free rule.
+  static CostmapParams costmap_params() {
+    CostmapParams cp;
+    cp.free_rule = FreeRule::kAnyVoxel;
+    return cp;
+  }
+
   void build(TaskRunner& runner, std::span<const VirtualZone> zones = {}, EsdfBand* out = nullptr) {
-    build_costmap(map_, CostmapParams{}, Eigen::Isometry3d::Identity(), zones, 0, layers_, runner);
-    build_esdf_band(map_, layers_, CostmapParams{}, band_params_, Eigen::Isometry3d::Identity(),
+    build_costmap(map_, costmap_params(), Eigen::Isometry3d::Identity(), zones, 0, layers_, runner);
+    build_esdf_band(map_, layers_, costmap_params(), band_params_, Eigen::Isometry3d::Identity(),
                     zones, 0, out != nullptr ? *out : band_, runner);
   }
 

@@ -83,6 +83,20 @@ TEST(ScanRays, AnyPasses_SameAsTestingEveryRay) {
   EXPECT_GT(agreed_false, 1000u);
 }
 
+TEST(ScanRays, MeasuredOnly_LeavesOutBeamsWithoutReturn) {
+  // A box 5 m along x: crossed by a beam without a return, and by a return beyond max range
+  // (a measured ray, clearing up to the clearing range).
+  const Eigen::Vector3d lo(4.9, -0.1, -0.1), hi(5.1, 0.1, 0.1);
+  ScanRays rays;
+  const std::vector<Eigen::Vector3f> dirs{{1.0f, 0.0f, 0.0f}};
+  rays.build(Eigen::Vector3d::Zero(), {}, dirs, 10.0, 20.0);
+  EXPECT_TRUE(rays.any_passes(lo, hi, 0.0));
+  EXPECT_FALSE(rays.any_passes(lo, hi, 0.0, /*measured_only=*/true));
+  const std::vector<Eigen::Vector3f> far{{50.0f, 0.0f, 0.0f}};
+  rays.build(Eigen::Vector3d::Zero(), far, {}, 10.0, 20.0);
+  EXPECT_TRUE(rays.any_passes(lo, hi, 0.0, /*measured_only=*/true));
+}
+
 TEST(ScanRays, ReturnEndingJustBehindTheBox_HasNotShownItEmpty) {
   ScanRays rays;
   const std::vector<Eigen::Vector3f> points{{5.1f, 0.0f, 0.0f}};

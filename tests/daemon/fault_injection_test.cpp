@@ -374,18 +374,22 @@ TEST_F(Faults, WallClockStepsOneHourBack_TicksKeepPace_OldStampsFuture_NewStamps
 
 TEST_F(Faults, FourTimesTheQuota_RateHolds_SheddingCounted_EveryScanAccountedFor) {
   const auto& seq = sequence();
-  std::uint64_t scan_points = 0;
+  std::uint64_t scan_points = 0, scan_returns = 0;
   core::PointCloud cloud;
-  for (const auto& file : seq.scans) {
-    ASSERT_TRUE(tools::read_kitti_scan(file, cloud).ok());
-    scan_points = std::max<std::uint64_t>(scan_points, cloud.size());
+  core::OrganisedScratch scratch;
+  for (std::size_t k = 0; k < seq.scans.size(); ++k) {
+    ASSERT_TRUE(tools::read_sequence_scan(seq, k, cloud, scratch).ok());
+    // The quotas count rays: returns and beams without return.
+    scan_points = std::max<std::uint64_t>(scan_points, cloud.size() + cloud.no_return_S.size());
+    scan_returns = std::max<std::uint64_t>(scan_returns, cloud.size());
   }
   auto cfg = test_config(test::kDomainFaultOverload, 2);
   // Scans come at 80 Hz into a 10 Hz cycle (8 per tick; both slowed by kTimeScale); the quotas
-  // take 2 per tick, each decimated to half its points, and the TSDF of about one of them.
+  // take 2 per tick, each decimated to half its rays, and the TSDF (which counts returns only)
+  // of about one of them.
   cfg.quotas.points_per_scan = scan_points / 2;
   cfg.quotas.points_per_cycle = scan_points;
-  cfg.quotas.tsdf_points_per_cycle = scan_points / 2;
+  cfg.quotas.tsdf_points_per_cycle = scan_returns / 4;
   RunningExecutor executor(cfg);
   auto participant = peer(test::kDomainFaultOverload);
   auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,

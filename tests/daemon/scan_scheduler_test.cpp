@@ -24,11 +24,13 @@ SchedulerParams params(std::size_t sensors = 2) {
 
 struct Harness {
   explicit Harness(const SchedulerParams& p) : scheduler(p) {}
-  void add(std::uint32_t sensor, std::int64_t stamp_ns, std::int64_t tick_ns, int points = 10) {
+  void add(std::uint32_t sensor, std::int64_t stamp_ns, std::int64_t tick_ns, int points = 10,
+           int no_returns = 0) {
     core::PointCloud& c = scheduler.slot(drops);
     c.clear();
     c.stamp_ns = stamp_ns;
     for (int i = 0; i < points; ++i) c.points_S.emplace_back(static_cast<float>(i), 0.f, 0.f);
+    for (int i = 0; i < no_returns; ++i) c.no_return_S.emplace_back(0.f, 0.f, 1.f);
     scheduler.commit(sensor, tick_ns, rejections);
   }
   std::vector<std::pair<std::int64_t, std::uint32_t>> select(std::int64_t tick_ns) {
@@ -173,6 +175,29 @@ TEST(ScanScheduler, Quota_DefersWhatDoesNotFitAndDecimatesBigScans) {
   EXPECT_EQ(got[2].first, 200 * kMs);
   EXPECT_EQ(h.last_stats.decimated_points, 81u - 27u);
   EXPECT_EQ(h.last_stats.deferred_scans, 0u);
+}
+
+TEST(ScanScheduler, Quota_CountsBeamsWithoutReturnAsRays) {
+  auto p = params(1);
+  p.points_per_cycle = 100;
+  p.points_per_scan = 50;
+  Harness h(p);
+  const std::int64_t t = 1000 * kMs;
+  h.pose_at(0);
+  h.pose_at(t);
+  // 51 returns + 50 beams without return: stride 3 would keep 17 + 17 = 34 (≤ 50), stride 2
+  // 26 + 25 = 51 (> 50), so 3; both halves decimated alike.
+  h.add(0, 100 * kMs, t, 51, 50);
+  h.add(0, 101 * kMs, t, 20, 20);  // 40 rays: fits beside the first (34 + 40 <= 100)
+  h.add(0, 102 * kMs, t, 20, 20);  // would make 114: waits
+  std::vector<ScanScheduler::Selected> out;
+  const auto stats = h.scheduler.select(t, h.poses, out, h.drops);
+  ASSERT_EQ(out.size(), 2u);
+  const core::PointCloud& first = h.scheduler.cloud(out[0].slot);
+  EXPECT_EQ(first.size(), 17u);
+  EXPECT_EQ(first.no_return_S.size(), 17u);
+  EXPECT_EQ(stats.decimated_points, (51u - 17u) + (50u - 17u));
+  EXPECT_EQ(stats.deferred_scans, 1u);
 }
 
 TEST(ScanScheduler, Slots_ShedTheOldestWhenFull) {

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <random>
 
 #include <unistd.h>
@@ -13,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/organised_scan.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
@@ -24,6 +26,23 @@ namespace tarmac {
 namespace {
 
 using core::ColumnClass;
+
+/// A sweep's returns as the organised cloud a spinning LiDAR's driver publishes (beams by
+/// azimuth steps, NaN where nothing returned), split as tarmacd splits it: the returns and the
+/// beams without return, which observe the envelope above the sensor (FreeRule::kWholeEnvelope).
+void to_cloud(const std::vector<sim::LidarReturn>& returns, const sim::LidarParams& lidar,
+              core::PointCloud& cloud, core::OrganisedScratch& scratch) {
+  const auto rows = static_cast<std::size_t>(lidar.beams);
+  const auto cols = static_cast<std::size_t>(lidar.azimuth_steps);
+  cloud.clear();
+  cloud.points_S.assign(rows * cols,
+                        Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+  for (const auto& r : returns) {
+    cloud.points_S[static_cast<std::size_t>(r.beam) * cols +
+                   static_cast<std::size_t>(r.azimuth_step)] = r.point_S.cast<float>();
+  }
+  core::split_organised(cloud, rows, cols, scratch);
+}
 
 struct Drive {
   core::CostmapLayers layers;
@@ -47,12 +66,12 @@ Drive drive(double tilt_deg, double stop_x_m, bool base_at_sensor = false) {
   out.T_O_W = seq.T_O_W();
   std::vector<sim::LidarReturn> returns;
   core::PointCloud cloud;
+  core::OrganisedScratch scratch;
   const int scans = static_cast<int>(stop_x_m / seq.path.speed_mps * seq.rate_hz) + 1;
   for (int i = 0; i < scans; ++i) {
     const double t_s = seq.stamp_s(i);
     lidar.scan(scene, seq.path.T_W_S(t_s), t_s, nullptr, returns);
-    cloud.clear();
-    for (const auto& r : returns) cloud.points_S.push_back(r.point_S.cast<float>());
+    to_cloud(returns, seq.lidar, cloud, scratch);
     const Eigen::Isometry3d T_W_B = base_at_sensor ? seq.path.T_W_S(t_s) : seq.path.T_W_base(t_s);
     mapper.ingest(cloud, out.T_O_W * T_W_B, T_B_S);
     mapper.integrate(pool);
@@ -96,14 +115,18 @@ void expect_envelope_rule(const Drive& d) {
   EXPECT_GT(census(d, 32.8, 33.2, 2.8, 3.2).obstacle, 0) << "rear landing gear";
   EXPECT_GT(census(d, 23.5, 27.5, 4.6, 5.4).obstacle, 0) << "engine";
   EXPECT_GT(census(d, 53.7, 54.3, -5.3, -4.7).obstacle, 0) << "jet bridge pillar";
-  // Not blocking: the path under the wing (4.0 m up) and under the jet bridge (4 m up) is
-  // observed free, every cell of it; so is open apron around the debris.
+  // Not blocking: the path under the wing (4.0 m up, passed 4-12 m back) is observed free, every
+  // cell of it. Under the jet bridge (4 m up, 14-18 m ahead) no cell blocks; by the whole-envelope
+  // rule a cell is free only once every voxel of its envelope has been crossed, and at that range
+  // the 32 beams (1.45 deg apart, 0.4 m at 16 m) leave some of the top voxels unobserved yet: those
+  // cells read unknown, never free on a guess.
   const Census wing = census(d, 26.2, 33.8, -0.8, 0.8);
   EXPECT_EQ(wing.obstacle, 0) << "under the wing";
   EXPECT_EQ(wing.free, wing.cells) << "under the wing";
   const Census bridge = census(d, 52.2, 55.8, -0.8, 0.8);
   EXPECT_EQ(bridge.obstacle, 0) << "under the jet bridge";
-  EXPECT_EQ(bridge.free, bridge.cells) << "under the jet bridge";
+  EXPECT_EQ(bridge.free + bridge.unknown, bridge.cells) << "under the jet bridge";
+  EXPECT_GT(bridge.free, bridge.cells / 10) << "under the jet bridge";
   const Census apron = census(d, 44.0, 46.4, -2.0, 2.0);
   EXPECT_EQ(apron.obstacle, 0) << "open apron before the debris";
   EXPECT_GT(apron.cells, 0);
@@ -139,12 +162,12 @@ void drive_sequence(int scans, const core::MapperParams& params,
   T_B_S.translation().z() = seq.path.sensor_height_m;
   std::vector<sim::LidarReturn> returns;
   core::PointCloud cloud;
+  core::OrganisedScratch scratch;
   for (int i = 0; i < scans; ++i) {
     const double t_s = seq.stamp_s(i);
     lidar.scan(scene, seq.path.T_W_S(t_s), t_s, nullptr, returns);
     if (perturb) perturb(returns);
-    cloud.clear();
-    for (const auto& r : returns) cloud.points_S.push_back(r.point_S.cast<float>());
+    to_cloud(returns, seq.lidar, cloud, scratch);
     mapper.ingest(cloud, seq.path.T_W_base(t_s), T_B_S);
     mapper.integrate(pool);
     mapper.update_costmap({}, 0, pool);
@@ -260,8 +283,11 @@ TEST(AirsideMapping, AircraftLoop_EveryCycleShowsWhatWasSeen_NoneFree_FewFalse) 
   Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
   T_B_S.translation().z() = p.path.sensor_height_m;
   core::PointCloud cloud;
+  core::OrganisedScratch scratch;
+  const auto& s = seq.value();
+  ASSERT_EQ(s.organised.size(), s.scans.size()) << "tarmac-sim writes organised sweeps";
   for (std::size_t k = 0; k < seq.value().scans.size(); ++k) {
-    ASSERT_TRUE(tools::read_kitti_scan(seq.value().scans[k], cloud).ok());
+    ASSERT_TRUE(tools::read_organised_scan(s.organised[k], s.rows, s.cols, cloud, scratch).ok());
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
     mapper.ingest(cloud, T_W_B, T_B_S);
     mapper.integrate(pool);

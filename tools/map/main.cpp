@@ -269,6 +269,16 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tarmac-map: %s\n", seq.error().message.c_str());
     return kExitData;
   }
+  if (!seq.value().organised.empty()) {
+    std::fprintf(
+        stderr, "tarmac-map: organised sweeps (%zu x %zu): beams without return clear free space\n",
+        seq.value().rows, seq.value().cols);
+  } else if (params.costmap.free_rule == core::FreeRule::kWholeEnvelope) {
+    std::fprintf(stderr,
+                 "tarmac-map: note: unorganised scans carry no beams without return; with "
+                 "costmap.free_rule whole_envelope the envelope above the sensor stays unknown "
+                 "where nothing above returns (README, \"Safety argument\")\n");
+  }
   std::error_code ec;
   std::filesystem::create_directories(opt.out, ec);
   if (ec) {
@@ -361,10 +371,13 @@ int main(int argc, char** argv) {
                 demotions = 0;
   const bool tty = isatty(STDERR_FILENO) != 0;
   core::PointCloud cloud;
+  core::OrganisedScratch organised_scratch;
   for (std::size_t k = 0; k < n; ++k) {
     const auto& s = seq.value();
     t_read.ms.push_back(timed_ms([&] {
-      if (auto r = tools::read_kitti_scan(s.scans[k], cloud); !r) {
+      // Organised sweeps when the sequence has them (tarmac-sim): their beams without return
+      // clear free space, as tarmacd derives them from an organised PointCloud2.
+      if (auto r = tools::read_sequence_scan(s, k, cloud, organised_scratch); !r) {
         std::fprintf(stderr, "tarmac-map: %s\n", r.error().message.c_str());
         std::exit(kExitData);
       }

@@ -5,6 +5,7 @@
 #include "geometry_msgsPubSubTypes.h"
 #include "nav_msgsPubSubTypes.h"
 #include "sensor_msgsPubSubTypes.h"
+#include "tarmac/core/organised_scan.hpp"
 #include "tarmac_msgsPubSubTypes.h"
 
 namespace tarmac::transport {
@@ -32,6 +33,7 @@ class ScanInput::Impl {
   std::unique_ptr<Reader> reader;
   std::string frame_id;
   std::vector<PointCloud2Msg> batch;  // capacity kept across drains
+  core::OrganisedScratch organised;   // organised sweeps: per-row/column sums, reused
 };
 
 core::Result<std::unique_ptr<ScanInput>> ScanInput::create(const Participant& participant,
@@ -62,6 +64,9 @@ std::size_t ScanInput::drain(ScanSink& sink) {
       sink.reject(parsed.error().code);
       return;
     }
+    // An organised cloud (height > 1) is a spinning LiDAR's sweep, rows = beams: its cells
+    // without a return become beams that clear free space (organised_scan.hpp).
+    if (msg.height() > 1) core::split_organised(cloud, msg.height(), msg.width(), impl_->organised);
     sink.commit();
   });
 }

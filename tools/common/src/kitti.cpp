@@ -53,6 +53,19 @@ core::Result<KittiSequence> open_kitti(const std::filesystem::path& dir,
                                            std::to_string(seq.T_W_S.size()) + " poses in " +
                                            poses_file};
   }
+  if (std::ifstream shape(dir / "organised" / "shape.txt"); shape) {
+    if (!(shape >> seq.rows >> seq.cols) || seq.rows == 0 || seq.cols == 0 ||
+        seq.rows * seq.cols > (std::size_t{1} << 24)) {
+      return core::Error{"dataset.organised", "organised/shape.txt: needs \"rows cols\""};
+    }
+    for (const auto& scan : seq.scans) {
+      seq.organised.push_back(dir / "organised" / scan.filename());
+      if (!std::filesystem::is_regular_file(seq.organised.back(), ec)) {
+        return core::Error{"dataset.organised",
+                           seq.organised.back().string() + ": missing (one per scan)"};
+      }
+    }
+  }
   std::ifstream times(dir / "times.txt");
   double t = 0.0;
   while (times && times >> t) seq.times_s.push_back(t);
@@ -82,6 +95,26 @@ core::Status read_kitti_scan(const std::filesystem::path& file, core::PointCloud
     cloud.intensity.push_back(raw[4 * i + 3]);
   }
   return core::Ok{};
+}
+
+core::Status read_organised_scan(const std::filesystem::path& file, std::size_t rows,
+                                 std::size_t cols, core::PointCloud& cloud,
+                                 core::OrganisedScratch& scratch) {
+  if (auto s = read_kitti_scan(file, cloud); !s) return s;
+  if (cloud.size() != rows * cols) {
+    return core::Error{"dataset.scan", file.string() + ": " + std::to_string(cloud.size()) +
+                                           " cells, organised/shape.txt says " +
+                                           std::to_string(rows) + " x " + std::to_string(cols)};
+  }
+  core::split_organised(cloud, rows, cols, scratch);
+  return core::Ok{};
+}
+
+core::Status read_sequence_scan(const KittiSequence& seq, std::size_t k, core::PointCloud& cloud,
+                                core::OrganisedScratch& scratch) {
+  return seq.organised.empty()
+             ? read_kitti_scan(seq.scans[k], cloud)
+             : read_organised_scan(seq.organised[k], seq.rows, seq.cols, cloud, scratch);
 }
 
 core::Result<std::vector<Correction>> read_corrections(const std::filesystem::path& file) {

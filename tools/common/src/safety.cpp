@@ -87,6 +87,12 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
           ++c.false_lethal;
         }
       }
+      if ((centre - vehicle_xy).squaredNorm() <= kOpenRadiusM * kOpenRadiusM &&
+          !near(cx, cy,
+                [&](std::int64_t x, std::int64_t y) { return truth.is_column(ox + x, oy + y); })) {
+        ++c.open_cells;
+        if (v == core::kCostUnknown) ++c.open_unknown;
+      }
       const auto it = truth.first_seen.find(ObstacleTruth::key(ox + cx, oy + cy));
       if (it == truth.first_seen.end() || it->second < 0 || it->second > scan) continue;
       ++c.visible;
@@ -115,7 +121,7 @@ const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan
 SafetyReport SafetyTracker::report() const {
   SafetyReport r;
   r.cycles = cycles_.size();
-  double sum = 0.0;
+  double sum = 0.0, open_sum = 0.0;
   std::size_t counted = 0;
   for (const SafetyCycle& c : cycles_) {
     r.read_free += c.read_free;
@@ -127,6 +133,8 @@ SafetyReport SafetyTracker::report() const {
       r.worst_false_share = std::max(r.worst_false_share, static_cast<double>(c.false_lethal) /
                                                               static_cast<double>(c.lethal_cells));
     }
+    open_sum += c.share_open_known();
+    r.worst_open_known = std::min(r.worst_open_known, c.share_open_known());
     if (c.visible == 0) continue;
     ++counted;
     sum += c.share_lethal();
@@ -136,18 +144,21 @@ SafetyReport SafetyTracker::report() const {
     }
   }
   if (counted > 0) r.mean_share = sum / static_cast<double>(counted);
+  if (!cycles_.empty()) r.mean_open_known = open_sum / static_cast<double>(cycles_.size());
   return r;
 }
 
 std::string safety_summary(const SafetyReport& r) {
-  char line[512];
+  char line[640];
   std::snprintf(
       line, sizeof line,
       "safety (obstacle columns within 20 m seen by then, %zu cycles): lethal within one cell "
       "worst %.1f %% (scan %d), mean %.1f %%; read free %zu, inflated only %zu, unknown %zu "
-      "(column-cycles); false lethal %zu of %zu lethal cells (worst cycle %.2f %%)",
+      "(column-cycles); false lethal %zu of %zu lethal cells (worst cycle %.2f %%); open ground "
+      "within %.0f m known (not unknown) worst %.1f %%, mean %.1f %%",
       r.cycles, 100.0 * r.worst_share, r.worst_scan, 100.0 * r.mean_share, r.read_free,
-      r.read_inflated, r.read_unknown, r.false_lethal, r.lethal_cells, 100.0 * r.worst_false_share);
+      r.read_inflated, r.read_unknown, r.false_lethal, r.lethal_cells, 100.0 * r.worst_false_share,
+      kOpenRadiusM, 100.0 * r.worst_open_known, 100.0 * r.mean_open_known);
   return line;
 }
 
@@ -159,6 +170,8 @@ void write_safety_json(std::ostream& out, const SafetyTracker& tracker) {
       << ", \"read_unknown\": " << r.read_unknown << ", \"lethal_cells\": " << r.lethal_cells
       << ", \"false_lethal\": " << r.false_lethal
       << ", \"worst_false_share\": " << r.worst_false_share
+      << ", \"worst_open_known\": " << r.worst_open_known
+      << ", \"mean_open_known\": " << r.mean_open_known
       << ",\n    \"cycle_fields\": [\"scan\", \"visible\", \"lethal_near\", \"read_free\", "
          "\"read_inflated\", \"read_unknown\", \"lethal_cells\", \"false_lethal\"],\n"
       << "    \"per_cycle\": [";

@@ -169,10 +169,27 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
       paths->write(msg);
       ++stats.corrections;
     } else {
-      if (auto read = read_kitti_scan(seq.scans[e.index % n], cloud); !read) return read.error();
+      // Organised sweeps (tarmac-sim) go out organised, NaN where a beam returned nothing, as a
+      // spinning LiDAR's driver publishes them.
+      const bool organised = !seq.organised.empty();
+      if (auto read = read_kitti_scan(
+              organised ? seq.organised[e.index % n] : seq.scans[e.index % n], cloud);
+          !read) {
+        return read.error();
+      }
+      if (organised && cloud.size() != seq.rows * seq.cols) {
+        return core::Error{"dataset.scan", seq.organised[e.index % n].string() +
+                                               ": not rows x cols of organised/shape.txt"};
+      }
       cloud.frame_id = options.frame_id;
       cloud.stamp_ns = stamps[e.index];
-      const auto msg = transport::to_point_cloud2(cloud);
+      auto msg = transport::to_point_cloud2(cloud);
+      if (organised) {
+        msg.height(static_cast<std::uint32_t>(seq.rows));
+        msg.width(static_cast<std::uint32_t>(seq.cols));
+        msg.row_step(msg.point_step() * msg.width());
+        msg.is_dense(false);
+      }
       sleep_until_realtime(e.publish_ns);
       stats.max_late_ms =
           std::max(stats.max_late_ms, static_cast<double>(realtime_ns() - e.publish_ns) / 1e6);

@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <numbers>
 #include <system_error>
@@ -71,6 +72,9 @@ std::string readme(const SequenceParams& p) {
   s += "bridge, traffic cones, 10 cm debris, a tug crossing the path).\n\n";
   s += "Files:\n";
   s += "  scans/NNNNNN.bin  float32 little-endian x, y, z, intensity per point, sensor frame S\n";
+  s += "  organised/NNNNNN.bin  the same sweep as a grid of beams (rows, lowest first) by azimuth\n"
+       "                    steps (columns), row-major, float32 x, y, z, intensity; NaN x, y, z\n"
+       "                    where the beam returned nothing (organised/shape.txt: rows cols)\n";
   s += "                    (x forward, y left, z up, m); intensity " + number(kGroundIntensity) +
        " ground, " + number(kObjectIntensity) + " other objects\n";
   s += "  poses.txt         per scan, row-major 3x4 T_world_sensor (12 numbers)\n";
@@ -361,23 +365,32 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
     return result;
   }
   const std::filesystem::path scans_dir = out_dir / "scans";
+  const std::filesystem::path organised_dir = out_dir / "organised";
   std::error_code ec;
-  std::filesystem::create_directories(scans_dir, ec);
-  if (ec) {
-    result.error = scans_dir.string() + ": " + ec.message();
-    return result;
-  }
-  for (const auto& entry : std::filesystem::directory_iterator(scans_dir, ec)) {
-    if (entry.is_regular_file() && is_scan_name(entry.path().filename().string())) {
-      std::filesystem::remove(entry.path(), ec);
-      if (ec) {
-        result.error = entry.path().string() + ": " + ec.message();
-        return result;
+  for (const auto& dir : {scans_dir, organised_dir}) {
+    std::filesystem::create_directories(dir, ec);
+    if (ec) {
+      result.error = dir.string() + ": " + ec.message();
+      return result;
+    }
+    for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+      if (entry.is_regular_file() && is_scan_name(entry.path().filename().string())) {
+        std::filesystem::remove(entry.path(), ec);
+        if (ec) {
+          result.error = entry.path().string() + ": " + ec.message();
+          return result;
+        }
       }
     }
+    if (ec) {
+      result.error = dir.string() + ": " + ec.message();
+      return result;
+    }
   }
-  if (ec) {
-    result.error = scans_dir.string() + ": " + ec.message();
+  const int rows = params.lidar.beams;
+  const int cols = params.lidar.azimuth_steps;
+  if (!write_file(organised_dir / "shape.txt",
+                  std::to_string(rows) + " " + std::to_string(cols) + "\n", result.error)) {
     return result;
   }
 
@@ -418,6 +431,7 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
   const Lidar lidar(params.lidar);
   GaussianNoise noise(params.seed);
   std::vector<LidarReturn> returns;
+  std::vector<float> organised;
   std::vector<std::size_t> points_per_scan;
   std::string poses, times, bytes;
   std::string boxes = "# T_world_scene " + pose_line(T_O_W);
@@ -435,6 +449,22 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       append_le(bytes, r.intensity);
     }
     if (!write_file(scans_dir / scan_name(i), bytes, result.error)) return result;
+    // The same sweep organised, beams by azimuth steps (row-major), NaN where a beam returned
+    // nothing: what a spinning LiDAR's driver publishes, beams without return included.
+    organised.assign(static_cast<std::size_t>(rows) * static_cast<std::size_t>(cols) * 4,
+                     std::numeric_limits<float>::quiet_NaN());
+    for (const LidarReturn& r : returns) {
+      float* cell = &organised[(static_cast<std::size_t>(r.beam) * static_cast<std::size_t>(cols) +
+                                static_cast<std::size_t>(r.azimuth_step)) *
+                               4];
+      cell[0] = static_cast<float>(r.point_S.x());
+      cell[1] = static_cast<float>(r.point_S.y());
+      cell[2] = static_cast<float>(r.point_S.z());
+      cell[3] = r.intensity;
+    }
+    bytes.clear();
+    for (const float f : organised) append_le(bytes, f);
+    if (!write_file(organised_dir / scan_name(i), bytes, result.error)) return result;
     for (const LidarReturn& r : returns) {
       if (r.object_id < 0 || r.range_m <= 0.0) continue;
       const Object& o = scene.objects()[static_cast<std::size_t>(r.object_id)];

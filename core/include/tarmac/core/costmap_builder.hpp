@@ -29,6 +29,20 @@ enum class UnknownCost : std::uint8_t {
   kFree,     ///< 0 (optimistic; for tests and open-apron demos only)
 };
 
+/// When a column without obstacle is free (else unknown). The column's envelope is its voxels
+/// from its ground up to vehicle_height_m + clearance_m.
+enum class FreeRule : std::uint8_t {
+  /// Every voxel of the envelope observed (by a return, a ray through it, or a beam without
+  /// return). Safe: an obstacle never seen (an overhang whose underside no ray touched) lies in
+  /// voxels that stay unknown. Needs the beams without return (organised scans) where the
+  /// envelope rises above the sensor and nothing above returns.
+  kWholeEnvelope,
+  /// Some voxel of the envelope observed: free space where only part of the envelope was seen
+  /// (a wing above rays that passed under it reads free). For sensors that report no beams
+  /// without return, with the risk stated in the README's safety argument.
+  kAnyVoxel,
+};
+
 struct CostmapParams {
   /// Returns this far above the local ground surface mark an obstacle (sub-voxel: heights of the
   /// returns inside voxels are kept), so the brief's 10 cm debris blocks with margin.
@@ -46,6 +60,7 @@ struct CostmapParams {
   double max_ground_slope = 0.05;
   double ground_tolerance_m = 0.5;
   UnknownCost unknown_cost = UnknownCost::kUnknown;
+  FreeRule free_rule = FreeRule::kWholeEnvelope;
 
   [[nodiscard]] Status validate() const;
 };
@@ -86,7 +101,7 @@ struct CostmapLayers {
   /// and the counting sort's cursor per level.
   std::vector<std::size_t> level_first, level_next;
   std::vector<std::uint32_t> level_cells;
-  std::vector<std::uint8_t> any_known;     ///< per cell: some envelope voxel observed
+  std::vector<std::uint8_t> any_known;     ///< per cell: envelope voxels observed (count)
   std::vector<std::uint8_t> any_obstacle;  ///< per cell: some envelope voxel is an obstacle
   /// Per cell in the occupancy window's ring (storage) order, bit z set when window layer z is
   /// occupied / observed (windows of <= 64 layers; layers 0..31 in the first cell-count words,

@@ -60,7 +60,9 @@ class Mapper {
   /// T_W_B is the vehicle base pose at the scan stamp, T_B_S the sensor's extrinsic. With
   /// `motion` and per-point times in `cloud`, the points are first motion-compensated into the
   /// sensor frame at the stamp (deskew_points); without either, the sweep is taken as rigid.
-  /// The filters run on `runner` (same result for any runner).
+  /// The filters run on `runner` (same result for any runner). The cloud's beams without return
+  /// (no_return_S) clear free space in integrate(): finite directions of length 0.5..2 are
+  /// normalised and kept, others refused (FilterCounts::no_returns_refused).
   FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                       const Eigen::Isometry3d& T_B_S, TaskRunner& runner,
                       const ScanMotion* motion = nullptr);
@@ -125,6 +127,8 @@ class Mapper {
   /// The poses of the retained scans, oldest first (for tests and tools).
   void retained_poses(std::vector<StampedPose>& out) const;
 
+  /// The last ingested scan's beams without return (unit directions, world frame).
+  [[nodiscard]] const std::vector<Eigen::Vector3f>& clearing_W() const { return clearing_W_; }
   /// The last ingested scan's surviving points, world frame, and the sensor origin.
   [[nodiscard]] const std::vector<Eigen::Vector3f>& points_W() const { return points_W_; }
   [[nodiscard]] const Eigen::Vector3d& sensor_W() const { return sensor_W_; }
@@ -145,10 +149,11 @@ class Mapper {
     std::int64_t stamp_ns = 0;
     Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
     Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
-    std::vector<Eigen::Vector3f> points_S;  ///< filtered, sensor frame
-    bool tsdf_wanted = false;               ///< the scan was (or is to be) TSDF-integrated
-    bool tsdf_done = false;                 ///< its TSDF contribution is in the layer
-    std::vector<BlockIndex> tsdf_blocks;    ///< blocks of that contribution
+    std::vector<Eigen::Vector3f> points_S;     ///< filtered, sensor frame
+    std::vector<Eigen::Vector3f> no_return_S;  ///< accepted beams without return, sensor frame
+    bool tsdf_wanted = false;                  ///< the scan was (or is to be) TSDF-integrated
+    bool tsdf_done = false;                    ///< its TSDF contribution is in the layer
+    std::vector<BlockIndex> tsdf_blocks;       ///< blocks of that contribution
   };
   RetainedScan& retained(std::uint64_t seq) { return retained_[seq % retained_.size()]; }
   [[nodiscard]] std::uint64_t oldest_seq() const;
@@ -170,6 +175,9 @@ class Mapper {
   CostmapLayers layers_;
   EsdfBand band_;
   std::vector<Eigen::Vector3f> points_W_;
+  std::vector<Eigen::Vector3f> clearing_W_;  ///< the last scan's beams without return, world
+  std::vector<Eigen::Vector3f> rebuild_clearing_W_;
+  std::vector<Eigen::Vector3f> no_return_scratch_S_;  ///< accepted directions when not retained
   FilterScratch filter_scratch_;
   PointCloud deskewed_;  ///< the scan after deskew (points only), reused
   Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();

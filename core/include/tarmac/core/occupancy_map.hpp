@@ -222,7 +222,8 @@ class OccupancyMap {
   /// unknown, in 32nds of the voxel above its bottom (0..31; 0xff: none). Decides the misses of
   /// undersides (miss_occupied()).
   std::vector<std::uint8_t> hit_floor_;
-  ScanRays scan_rays_;  ///< the rays of the scan being integrated, by direction
+  ScanRays scan_rays_;           ///< the rays of the scan being integrated, by direction
+  bool has_no_returns_ = false;  ///< the scan being integrated has beams without a return
   /// Static layer state per voxel, slot order: bit 7 static; bits 0..6 the consecutive hits
   /// (not static) or consecutive free observations (static). Non-zero only where the log-odds
   /// read occupied, so the apply pass reads it only for occupied voxels.

@@ -18,6 +18,10 @@ struct PointCloud {
   std::vector<float> intensity;           ///< optional, sensor units
   std::vector<std::uint16_t> ring;        ///< optional, beam index
   std::vector<float> time_offset_s;       ///< optional, per-point time relative to stamp_ns, s
+  /// Optional: unit directions (sensor frame) of the beams that returned nothing within the
+  /// sensor's range. They clear free space like returns beyond range (OccupancyParams::
+  /// clearing_range_m); organised_scan.hpp rebuilds them from an organised scan. Any length.
+  std::vector<Eigen::Vector3f> no_return_S;
 
   [[nodiscard]] std::size_t size() const { return points_S.size(); }
   [[nodiscard]] bool has_intensity() const { return !intensity.empty(); }

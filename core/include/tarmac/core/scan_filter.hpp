@@ -38,6 +38,8 @@ struct FilterCounts {
   std::uint64_t ego_vehicle = 0;
   std::uint64_t isolated = 0;
   std::uint64_t kept = 0;
+  std::uint64_t no_returns = 0;          ///< beams without return kept (clear free space)
+  std::uint64_t no_returns_refused = 0;  ///< their directions not finite or not ~unit length
 };
 
 /// Buffers of the filter, reused across scans (no allocation after warm-up).

@@ -29,8 +29,10 @@ class ScanRays {
   /// that hits the same surface just after the box has not shown the box empty); a beam without
   /// a return must leave the box before its clearing range ends. Exact per ray (a slab test in
   /// the origin's frame); the binning only selects which rays are tested.
+  /// With `measured_only`, beams without a return (dirs_W) are left out: only rays that ended
+  /// at a return, within range or beyond it, count.
   [[nodiscard]] bool any_passes(const Eigen::Vector3d& lo_W, const Eigen::Vector3d& hi_W,
-                                double behind_m) const;
+                                double behind_m, bool measured_only = false) const;
 
   [[nodiscard]] std::size_t size() const { return rays_.size(); }
   [[nodiscard]] std::size_t memory_bytes() const;
@@ -45,6 +47,7 @@ class ScanRays {
     Eigen::Vector3f end;  ///< end point relative to the origin
     float length_m;       ///< |end|
     bool returned;        ///< ends at a return (else a clearing segment)
+    bool measured;        ///< from a return (within range or beyond), not a beam without one
   };
   [[nodiscard]] bool ray_passes(const Ray& r, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
                                 double behind_m) const;

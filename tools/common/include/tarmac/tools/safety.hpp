@@ -49,6 +49,16 @@ struct SafetyCycle {
   /// Of those, more than one cell from every obstacle column and from every moving object's
   /// box at this scan (a moving object's former place still lethal counts: a ghost).
   std::size_t false_lethal = 0;
+  /// Open ground within kOpenRadiusM of the vehicle: cells more than one cell from every obstacle
+  /// column (what a planner may drive), and of those the ones reading unknown (the cost of a
+  /// conservative free rule).
+  std::size_t open_cells = 0;
+  std::size_t open_unknown = 0;
+  [[nodiscard]] double share_open_known() const {
+    return open_cells == 0
+               ? 1.0
+               : 1.0 - static_cast<double>(open_unknown) / static_cast<double>(open_cells);
+  }
   [[nodiscard]] double share_lethal() const {
     return visible == 0 ? 1.0 : static_cast<double>(lethal_near) / static_cast<double>(visible);
   }
@@ -61,7 +71,11 @@ struct SafetyReport {
   std::size_t read_free = 0, read_inflated = 0, read_unknown = 0;  ///< summed over cycles
   std::size_t lethal_cells = 0, false_lethal = 0;                  ///< summed over cycles
   double worst_false_share = 0.0;  ///< max over cycles of false_lethal / lethal_cells
+  double worst_open_known = 1.0, mean_open_known = 1.0;  ///< SafetyCycle::share_open_known
 };
+
+/// The radius of the open-ground figure (SafetyCycle::open_cells), m.
+inline constexpr double kOpenRadiusM = 10.0;
 
 /// Scores one costmap (values 0..100, −1) whose cells lie on the truth's lattice (the costmap's
 /// resolution must equal cell_m and its origin a lattice point). `moving` are the moving
