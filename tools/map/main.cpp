@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/tsdf_changes.hpp"
@@ -31,7 +32,6 @@ namespace {
 using namespace tarmac;
 using Clock = std::chrono::steady_clock;
 
-constexpr int kExitUsage = 64;
 constexpr int kExitData = 65;
 constexpr int kExitIo = 74;
 constexpr int kExitConfig = 78;
@@ -42,20 +42,6 @@ struct Options {
   std::size_t max_scans = 0;  // 0: all
   double sensor_height_m = 1.9;
 };
-
-void usage() {
-  std::fprintf(stderr,
-               "usage: tarmac-map --dataset DIR [--out DIR] [--config FILE] [--threads N]\n"
-               "                  [--poses FILE] [--scans N] [--sensor-height M] [--prior FILE]\n"
-               "                  [--corrections FILE]\n"
-               "  DIR in KITTI layout: scans/NNNNNN.bin, poses.txt (T_world_sensor), times.txt\n"
-               "  --poses FILE      pose file inside DIR (default poses.txt)\n"
-               "  --sensor-height M sensor above the vehicle base, m (default 1.9)\n"
-               "  --prior FILE      a tsdf.vdb from an earlier run: writes changes.npy/.png\n"
-               "  --corrections FILE corrected trajectories: lines 'K stamp_s' + 12 numbers of\n"
-               "                    T_world_sensor (as poses.txt); the lines of one K form one\n"
-               "                    correction, applied after scan K (tarmac-sim --correct-at)\n");
-}
 
 struct StageTimes {
   const char* name;
@@ -215,40 +201,31 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
 
 int main(int argc, char** argv) {
   Options opt;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--dataset" && has_value)
-      opt.dataset = argv[++i];
-    else if (a == "--out" && has_value)
-      opt.out = argv[++i];
-    else if (a == "--config" && has_value)
-      opt.config = argv[++i];
-    else if (a == "--poses" && has_value)
-      opt.poses = argv[++i];
-    else if (a == "--threads" && has_value)
-      opt.threads = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--scans" && has_value)
-      opt.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
-    else if (a == "--sensor-height" && has_value)
-      opt.sensor_height_m = std::atof(argv[++i]);
-    else if (a == "--prior" && has_value)
-      opt.prior = argv[++i];
-    else if (a == "--corrections" && has_value)
-      opt.corrections = argv[++i];
-    else if (a == "--help" || a == "-h") {
-      usage();
-      return 0;
-    } else {
-      std::fprintf(stderr, "tarmac-map: unexpected argument '%s'\n", a.c_str());
-      usage();
-      return kExitUsage;
-    }
-  }
-  if (opt.dataset.empty()) {
-    usage();
-    return kExitUsage;
-  }
+  cli::App app("tarmac-map",
+               "Runs tarmacd's core pipeline scan by scan on a sequence in KITTI layout and writes "
+               "the maps, images, timings and a digest.");
+  app.add_option("--dataset", opt.dataset,
+                 "the sequence: scans/NNNNNN.bin, poses.txt (T_world_sensor), times.txt")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--out", opt.out, "output directory (created)")->type_name("DIR");
+  app.add_option("--config", opt.config, "tarmacd config (default: the built-in defaults)")
+      ->type_name("FILE");
+  app.add_option("--threads", opt.threads, "worker threads")
+      ->transform(cli::positive<std::size_t>());
+  app.add_option("--poses", opt.poses, "pose file inside DIR")->type_name("FILE");
+  app.add_option("--scans", opt.max_scans, "first N scans only (0: all)")
+      ->transform(cli::number<std::size_t>());
+  app.add_option("--sensor-height", opt.sensor_height_m, "sensor above the vehicle base, m")
+      ->transform(cli::number<double>());
+  app.add_option("--prior", opt.prior, "a tsdf.vdb from an earlier run: writes changes.npy/.png")
+      ->check(CLI::ExistingFile);
+  app.add_option("--corrections", opt.corrections,
+                 "corrected trajectories: lines 'K stamp_s' + 12 numbers of T_world_sensor (as "
+                 "poses.txt); the lines of one K form one correction, applied after scan K "
+                 "(tarmac-sim --correct-at)")
+      ->check(CLI::ExistingFile);
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
 
   config::Config cfg;
   if (!opt.config.empty()) {
