@@ -14,12 +14,14 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <map>
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
@@ -382,36 +384,43 @@ int main(int argc, char** argv) {
   }
 
   if (!json_path.empty()) {
-    std::ofstream j(json_path);
-    j << "{\n  \"cycles\": " << n_reports << ",\n  \"skipped_ticks\": " << skipped
-      << ",\n  \"config_hash\": \"" << last.config_hash << "\",\n  \"stages_ms\": {\n";
-    const auto obj = [&](const std::string& name, const Series& s, bool comma) {
+    const auto stats = [](const Series& s) {
       const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
-      j << "    \"" << name << "\": {\"last\": " << (s.ms.empty() ? 0.0 : s.ms.back())
-        << ", \"p50\": " << percentile(s.ms, 0.5) << ", \"p99\": " << percentile(s.ms, 0.99)
-        << ", \"max\": " << mx << ", \"budget\": " << s.budget_ms
-        << ", \"overruns\": " << s.overruns << "}" << (comma ? "," : "") << "\n";
+      return nlohmann::ordered_json{{"last", s.ms.empty() ? 0.0 : s.ms.back()},
+                                    {"p50", percentile(s.ms, 0.5)},
+                                    {"p99", percentile(s.ms, 0.99)},
+                                    {"max", mx},
+                                    {"budget", s.budget_ms},
+                                    {"overruns", s.overruns}};
     };
-    for (const auto& name : stage_order) obj(name, stages[name], true);
-    obj("cycle", cycle, false);
-    j << "  },\n  \"e2e_latency_ms\": {\"samples\": " << e2e_ms.size()
-      << ", \"p50\": " << percentile(e2e_ms, 0.5) << ", \"p99\": " << percentile(e2e_ms, 0.99)
-      << ", \"max\": " << e2e_max
-      << "},\n  \"wake_jitter_ms\": {\"p50\": " << percentile(jitter_ms, 0.5)
-      << ", \"p99\": " << percentile(jitter_ms, 0.99) << "}";
+    nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
+    for (const auto& name : stage_order) stages_ms[name] = stats(stages[name]);
+    stages_ms["cycle"] = stats(cycle);
+    nlohmann::ordered_json j = {
+        {"cycles", n_reports},
+        {"skipped_ticks", skipped},
+        {"config_hash", last.config_hash},
+        {"stages_ms", std::move(stages_ms)},
+        {"e2e_latency_ms",
+         {{"samples", e2e_ms.size()},
+          {"p50", percentile(e2e_ms, 0.5)},
+          {"p99", percentile(e2e_ms, 0.99)},
+          {"max", e2e_max}}},
+        {"wake_jitter_ms",
+         {{"p50", percentile(jitter_ms, 0.5)}, {"p99", percentile(jitter_ms, 0.99)}}}};
     if (scoring) {
       const tools::StampedSafetyScorer& sc = *scoring->scorer;
-      j << ",\n  \"scored\": {\"dataset\": \"" << scoring->dir
-        << "\", \"scans_stamped\": " << sc.scans_stamped() << ", \"costmaps\": " << sc.costmaps()
-        << ", \"scans_with_costmap\": " << sc.scans_with_costmap()
-        << ", \"stamp_not_a_scan\": " << sc.stamp_not_a_scan()
-        << ", \"before_first_scan\": " << sc.before_first_scan() << ", \"error\": \""
-        << scoring->error << "\"},\n  \"safety\": ";
-      tools::write_safety_json(j, sc.tracker());
+      j["scored"] = {{"dataset", scoring->dir},
+                     {"scans_stamped", sc.scans_stamped()},
+                     {"costmaps", sc.costmaps()},
+                     {"scans_with_costmap", sc.scans_with_costmap()},
+                     {"stamp_not_a_scan", sc.stamp_not_a_scan()},
+                     {"before_first_scan", sc.before_first_scan()},
+                     {"error", scoring->error}};
+      j["safety"] = tools::safety_json(sc.tracker());
     }
-    j << "\n}\n";
-    if (!j) {
-      std::fprintf(stderr, "tarmac-audit: %s: cannot be written\n", json_path.c_str());
+    if (auto w = tools::write_json(json_path, j); !w) {
+      std::fprintf(stderr, "tarmac-audit: %s\n", w.error().message.c_str());
       return kExitIo;
     }
     std::printf("wrote %s\n", json_path.c_str());

@@ -4,14 +4,16 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <optional>
-#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
@@ -110,6 +112,16 @@ std::vector<std::uint8_t> render_distance(const core::DistanceField& field, doub
 /// Frame of the TSDF lattice written by this tool: the dataset's pose frame.
 constexpr const char* kTsdfFrame = "world";
 
+/// A float for JSON: the double of its shortest decimal (0.1f is written 0.1, not
+/// 0.10000000149011612).
+double decimal(float value) {
+  char text[32];
+  const auto written = std::to_chars(text, text + sizeof text, value);
+  double d = 0.0;
+  std::from_chars(text, written.ptr, d);
+  return d;
+}
+
 std::vector<std::uint8_t> render_changes(const core::ChangeMap& m) {
   const std::uint32_t w = m.geometry.width, h = m.geometry.height;
   std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
@@ -158,11 +170,19 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
   result.vertices = mesh.vertices_W.size();
   result.triangles = mesh.triangles.size();
   if (auto w = tools::write_ply(out / "mesh.ply", mesh); !w) return w;
-  std::ofstream j(out / "tsdf.json");
-  j << "{\n  \"frame\": \"" << kTsdfFrame << "\",\n  \"voxel_size_m\": " << tsdf.voxel_size_m()
-    << ",\n  \"truncation_m\": " << tsdf.truncation_m() << ",\n  \"blocks\": " << tsdf.block_count()
-    << ",\n  \"voxels\": " << tsdf.voxel_count() << ",\n  \"memory_bytes\": " << tsdf.memory_bytes()
-    << ",\n  \"config_hash\": \"" << config_hash << "\",\n  \"stamp_ns\": " << stamp_ns;
+  nlohmann::ordered_json j = {{"frame", kTsdfFrame},
+                              {"voxel_size_m", decimal(tsdf.voxel_size_m())},
+                              {"truncation_m", decimal(tsdf.truncation_m())},
+                              {"blocks", tsdf.block_count()},
+                              {"voxels", tsdf.voxel_count()},
+                              {"memory_bytes", tsdf.memory_bytes()},
+                              {"config_hash", config_hash},
+                              {"stamp_ns", stamp_ns}};
+  nlohmann::ordered_json files = {
+      {"tsdf.vdb",
+       "OpenVDB float grids 'tsdf' (signed distance, m, + in front) and 'weight' (scans, "
+       "capped), + tarmac trailer; index i = voxel centre (i + 0.5) * v"},
+      {"mesh.ply", "binary PLY of the zero level set, world frame, m"}};
   if (prior != nullptr) {
     core::Status detected = core::Ok{};
     result.changes_ms = timed_ms([&] {
@@ -177,24 +197,21 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
         !w) {
       return w;
     }
-    j << ",\n  \"changes\": {\"origin_m\": [" << g.origin_x_m << ", " << g.origin_y_m
-      << "], \"resolution_m\": " << g.resolution_m << ", \"shape\": [" << g.height << ", "
-      << g.width << "], \"compared_voxels\": " << result.changes.compared_voxels
-      << ", \"new_voxels\": " << result.changes.new_voxels
-      << ", \"removed_voxels\": " << result.changes.removed_voxels << "}";
+    j["changes"] = {{"origin_m", {g.origin_x_m, g.origin_y_m}},
+                    {"resolution_m", g.resolution_m},
+                    {"shape", {g.height, g.width}},
+                    {"compared_voxels", result.changes.compared_voxels},
+                    {"new_voxels", result.changes.new_voxels},
+                    {"removed_voxels", result.changes.removed_voxels}};
+    files["changes.npy"] =
+        "float32 (ny, nx) per voxel column: +c new surface, -c removed, confidence c in (0, 1]; "
+        "0 unchanged; NaN not observed in both maps";
+    files["changes.png"] =
+        "red new, blue removed (fainter = less confident), white unchanged, slate unknown; north "
+        "up";
   }
-  j << ",\n  \"files\": {\n"
-    << "    \"tsdf.vdb\": \"OpenVDB float grids 'tsdf' (signed distance, m, + in front) and "
-       "'weight' (scans, capped), + tarmac trailer; index i = voxel centre (i + 0.5) * v\",\n"
-    << "    \"mesh.ply\": \"binary PLY of the zero level set, world frame, m\"";
-  if (prior != nullptr) {
-    j << ",\n    \"changes.npy\": \"float32 (ny, nx) per voxel column: +c new surface, -c "
-         "removed, confidence c in (0, 1]; 0 unchanged; NaN not observed in both maps\",\n"
-      << "    \"changes.png\": \"red new, blue removed (fainter = less confident), white "
-         "unchanged, slate unknown; north up\"";
-  }
-  j << "\n  }\n}\n";
-  return core::Ok{};
+  j["files"] = std::move(files);
+  return tools::write_json(out / "tsdf.json", j);
 }
 
 }  // namespace
@@ -512,40 +529,43 @@ int main(int argc, char** argv) {
   }
   const double ox = occ_map.window_min().x() * v, oy = occ_map.window_min().y() * v,
                oz = occ_map.window_min().z() * v;
-  {
-    std::ofstream j(out / "map.json");
-    j << "{\n  \"frame\": \"world (the dataset's pose frame)\",\n"
-      << "  \"voxel_size_m\": " << v << ",\n"
-      << "  \"origin_m\": [" << ox << ", " << oy << ", " << oz << "],\n"
-      << "  \"lattice\": \"voxel i along an axis covers [origin + i*v, origin + (i+1)*v)\",\n"
-      << "  \"axis_order\": \"arrays are C order, shape (nz, ny, nx) or (ny, nx): x varies "
-         "fastest\",\n"
-      << "  \"shape_3d\": [" << dims.z() << ", " << dims.y() << ", " << dims.x() << "],\n"
-      << "  \"shape_2d\": [" << dims.y() << ", " << dims.x() << "],\n"
-      << "  \"scans\": " << n << ",\n";
-    if (have_band) {
-      j << "  \"esdf_band\": {\"origin_m\": [" << band.min.x() * v << ", " << band.min.y() * v
-        << ", " << band.min.z() * v << "], \"shape\": [" << band.field.dims.z() << ", " << dims.y()
-        << ", " << dims.x() << "], \"obstacles\": " << core::esdf_band_obstacles(band) << "},\n";
-    }
-    j << "  \"files\": {\n"
-      << "    \"occupancy.npy\": \"float32 occupancy probability, NaN = unknown (3D window at the "
-         "end)\",\n"
-      << "    \"esdf.npy\": \"float32 m to the nearest occupied voxel, ground layer excluded, NaN "
-         "= unknown, inf = none in window\",\n"
-      << "    \"esdf_slice.npy\": \"float32 m to the nearest costmap obstacle cell (vehicle height "
-         "band), NaN = unknown\",\n"
-      << (have_band ? "    \"esdf_band.npy\": \"float32 m to the nearest obstacle voxel of the 3D "
-                      "band around the vehicle (esdf_band: costmap rules per voxel, overhangs "
-                      "included), NaN = unknown; origin and shape under esdf_band\",\n"
-                    : "")
-      << "    \"costmap.npy\": \"int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 "
-         "lethal, -1 unknown\",\n"
-      << "    \"costmap.png\": \"white free, yellow-orange inflated, dark red inscribed, black "
-         "lethal, slate unknown, magenta virtual zone; north up\",\n"
-      << "    \"esdf_slice.png\": \"red near an obstacle to blue at >= 5 m, slate unknown; north "
-         "up\"\n"
-      << "  }\n}\n";
+  nlohmann::ordered_json map_json = {
+      {"frame", "world (the dataset's pose frame)"},
+      {"voxel_size_m", v},
+      {"origin_m", {ox, oy, oz}},
+      {"lattice", "voxel i along an axis covers [origin + i*v, origin + (i+1)*v)"},
+      {"axis_order", "arrays are C order, shape (nz, ny, nx) or (ny, nx): x varies fastest"},
+      {"shape_3d", {dims.z(), dims.y(), dims.x()}},
+      {"shape_2d", {dims.y(), dims.x()}},
+      {"scans", n}};
+  if (have_band) {
+    map_json["esdf_band"] = {{"origin_m", {band.min.x() * v, band.min.y() * v, band.min.z() * v}},
+                             {"shape", {band.field.dims.z(), dims.y(), dims.x()}},
+                             {"obstacles", core::esdf_band_obstacles(band)}};
+  }
+  nlohmann::ordered_json files = {
+      {"occupancy.npy", "float32 occupancy probability, NaN = unknown (3D window at the end)"},
+      {"esdf.npy",
+       "float32 m to the nearest occupied voxel, ground layer excluded, NaN = unknown, inf = none "
+       "in window"},
+      {"esdf_slice.npy",
+       "float32 m to the nearest costmap obstacle cell (vehicle height band), NaN = unknown"}};
+  if (have_band) {
+    files["esdf_band.npy"] =
+        "float32 m to the nearest obstacle voxel of the 3D band around the vehicle (esdf_band: "
+        "costmap rules per voxel, overhangs included), NaN = unknown; origin and shape under "
+        "esdf_band";
+  }
+  files["costmap.npy"] =
+      "int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 lethal, -1 unknown";
+  files["costmap.png"] =
+      "white free, yellow-orange inflated, dark red inscribed, black lethal, slate unknown, "
+      "magenta virtual zone; north up";
+  files["esdf_slice.png"] = "red near an obstacle to blue at >= 5 m, slate unknown; north up";
+  map_json["files"] = std::move(files);
+  if (auto w = tools::write_json(out / "map.json", map_json); !w) {
+    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+    return kExitIo;
   }
 
   // ---- timing table ----
@@ -559,20 +579,22 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(dropped_close), static_cast<unsigned long long>(dropped_ego),
       static_cast<unsigned long long>(dropped_isolated), opt.threads);
   std::printf("%-16s %9s %9s %9s %9s   (ms per scan)\n", "stage", "mean", "p50", "p99", "max");
-  std::ofstream tj(out / "timing.json");
-  tj << "{\n  \"scans\": " << n << ",\n  \"threads\": " << opt.threads << ",\n  \"stages_ms\": {\n";
+  nlohmann::ordered_json timing = {{"scans", n}, {"threads", opt.threads}};
+  nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
   std::vector<const StageTimes*> stages = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
   if (params.esdf_band.enabled) stages.insert(stages.end() - 1, &t_band);
   if (params.tsdf.enabled) stages.insert(stages.begin() + 3, &t_tsdf);
-  for (std::size_t i = 0; i < stages.size(); ++i) {
-    const auto& s = *stages[i];
+  for (const StageTimes* stage : stages) {
+    const auto& s = *stage;
     const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
     std::printf("%-16s %9.2f %9.2f %9.2f %9.2f\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
                 percentile(s.ms, 0.99), mx);
-    tj << "    \"" << s.name << "\": {\"mean\": " << mean(s.ms)
-       << ", \"p50\": " << percentile(s.ms, 0.5) << ", \"p99\": " << percentile(s.ms, 0.99)
-       << ", \"max\": " << mx << "}" << (i + 1 < stages.size() ? "," : "") << "\n";
+    stages_ms[s.name] = {{"mean", mean(s.ms)},
+                         {"p50", percentile(s.ms, 0.5)},
+                         {"p99", percentile(s.ms, 0.99)},
+                         {"max", mx}};
   }
+  timing["stages_ms"] = std::move(stages_ms);
   const double pts_per_s = total_s > 0 ? static_cast<double>(points_used) / total_s : 0.0;
   std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d", esdf3d_ms,
               dims.x(), dims.y(), dims.z());
@@ -580,17 +602,19 @@ int main(int argc, char** argv) {
       "pipeline throughput: %.2f M points/s (filter+occupancy+tsdf+costmap), %.1f voxel "
       "visits/point\n",
       pts_per_s / 1e6, points_used > 0 ? static_cast<double>(voxel_visits) / points_used : 0.0);
-  tj << "  },\n  \"esdf3d_ms\": " << esdf3d_ms << ",\n  \"points_per_s\": " << pts_per_s;
+  timing["esdf3d_ms"] = esdf3d_ms;
+  timing["points_per_s"] = pts_per_s;
   if (params.tsdf.enabled) {
-    tj << ",\n  \"tsdf_mesh_ms\": " << tsdf_out.mesh_ms
-       << ",\n  \"tsdf_save_ms\": " << tsdf_out.save_ms;
-    if (prior) tj << ",\n  \"tsdf_changes_ms\": " << tsdf_out.changes_ms;
+    timing["tsdf_mesh_ms"] = tsdf_out.mesh_ms;
+    timing["tsdf_save_ms"] = tsdf_out.save_ms;
+    if (prior) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
   }
   std::printf("static layer: %zu voxels at the end (%llu promotions, %llu demotions)\n",
               occ_map.static_count(), static_cast<unsigned long long>(promotions),
               static_cast<unsigned long long>(demotions));
-  tj << ",\n  \"static_voxels\": " << occ_map.static_count()
-     << ",\n  \"static_promotions\": " << promotions << ",\n  \"static_demotions\": " << demotions;
+  timing["static_voxels"] = occ_map.static_count();
+  timing["static_promotions"] = promotions;
+  timing["static_demotions"] = demotions;
   if (clearing) {
     const tools::ClearingReport r = clearing->report();
     std::printf(
@@ -601,20 +625,27 @@ int main(int argc, char** argv) {
         "the others: p50 %.2f s, p90 %.2f s, max %.2f s\n",
         r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
         r.ghost_cells, r.blind_at_leave, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
-    tj << ",\n  \"dynamic_clearing\": {\"path_cells\": " << r.path_cells
-       << ", \"measured\": " << r.measured << ", \"cleared\": " << r.cleared
-       << ", \"not_cleared\": " << r.not_cleared << ", \"time_to_clear_p50_s\": " << r.p50_s
-       << ", \"time_to_clear_p90_s\": " << r.p90_s << ", \"time_to_clear_max_s\": " << r.max_s
-       << ", \"ghost_cells\": " << r.ghost_cells << ", \"blind_at_leave\": " << r.blind_at_leave
-       << ", \"in_view_p50_s\": " << r.in_view_p50_s << ", \"in_view_p90_s\": " << r.in_view_p90_s
-       << ", \"in_view_max_s\": " << r.in_view_max_s << "}";
+    timing["dynamic_clearing"] = {{"path_cells", r.path_cells},
+                                  {"measured", r.measured},
+                                  {"cleared", r.cleared},
+                                  {"not_cleared", r.not_cleared},
+                                  {"time_to_clear_p50_s", r.p50_s},
+                                  {"time_to_clear_p90_s", r.p90_s},
+                                  {"time_to_clear_max_s", r.max_s},
+                                  {"ghost_cells", r.ghost_cells},
+                                  {"blind_at_leave", r.blind_at_leave},
+                                  {"in_view_p50_s", r.in_view_p50_s},
+                                  {"in_view_p90_s", r.in_view_p90_s},
+                                  {"in_view_max_s", r.in_view_max_s}};
   }
   if (safety) {
     std::printf("%s\n", tools::safety_summary(safety->report()).c_str());
-    tj << ",\n  \"safety\": ";
-    tools::write_safety_json(tj, *safety);
+    timing["safety"] = tools::safety_json(*safety);
   }
-  tj << "\n}\n";
+  if (auto w = tools::write_json(out / "timing.json", timing); !w) {
+    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+    return kExitIo;
+  }
   if (params.tsdf.enabled) {
     std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
                 "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
