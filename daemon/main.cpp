@@ -19,6 +19,7 @@
 
 #include <systemd/sd-daemon.h>
 
+#include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/daemon/executor.hpp"
 #include "tarmac/daemon/stop_signals.hpp"
@@ -27,44 +28,28 @@
 namespace {
 
 constexpr int kExitOk = 0;
-constexpr int kExitUsage = 64;   // EX_USAGE
 constexpr int kExitConfig = 78;  // EX_CONFIG
 constexpr int kExitDds = 69;     // EX_UNAVAILABLE
-
-void usage(std::FILE* out) {
-  std::fprintf(out,
-               "usage: tarmacd --config FILE        run the daemon\n"
-               "       tarmacd --check-config FILE  validate FILE and exit (0 valid, %d invalid)\n"
-               "       tarmacd --version\n",
-               kExitConfig);
-}
 
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string config_path;
-  bool check_only = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if ((arg == "--config" || arg == "--check-config") && i + 1 < argc) {
-      check_only = check_only || arg == "--check-config";
-      config_path = argv[++i];
-    } else if (arg == "--version") {
-      std::printf("tarmacd %s\n", TARMAC_VERSION);
-      return kExitOk;
-    } else if (arg == "--help" || arg == "-h") {
-      usage(stdout);
-      return kExitOk;
-    } else {
-      std::fprintf(stderr, "tarmacd: unexpected argument '%s'\n", arg.c_str());
-      usage(stderr);
-      return kExitUsage;
-    }
-  }
+  tarmac::cli::App app("tarmacd", "tarmac's real-time LiDAR mapping daemon.");
+  auto* run =
+      app.add_option("--config", config_path, "run the daemon with this config")->type_name("FILE");
+  auto* check =
+      app.add_option("--check-config", config_path, "validate FILE and exit (0 valid, 78 invalid)")
+          ->type_name("FILE")
+          ->excludes(run);
+  app.footer(
+      "Exit status: 0 stopped by SIGTERM/SIGINT (map saved) or config valid, 64 usage, 69 DDS "
+      "unavailable, 70 a tick stuck at stop (map not saved), 78 config invalid.");
+  if (auto exit = tarmac::cli::parse(app, argc, argv)) return *exit;
   if (config_path.empty()) {
-    usage(stderr);
-    return kExitUsage;
+    return tarmac::cli::usage_error(app, "--config FILE or --check-config FILE is required");
   }
+  const bool check_only = check->count() > 0;
 
   // Running (not only checking): from here a stop signal is handled, not fatal. Before any
   // thread exists, so every thread inherits the blocked mask and only StopSignals' own thread

@@ -9,6 +9,7 @@ packages=(
   libfastrtps-dev libfastcdr-dev libfoonathan-memory-dev fastddsgen fastdds-tools
   libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev libimath-dev zlib1g-dev
   libeigen3-dev libspdlog-dev libfmt-dev libyaml-cpp-dev libgtest-dev libgmock-dev
+  libcli11-dev nlohmann-json3-dev                # command lines (CLI11), JSON outputs
   libsystemd-dev openssl libssl-dev cyclonedds-dev cyclonedds-tools liboctomap-dev libdynamicedt3d-dev
   libpng-dev iproute2 systemd clang-format
   rosidl-tools python3-catkin-pkg python3-empy   # ROS 2's msg -> IDL translator (msg_idl_agreement test)

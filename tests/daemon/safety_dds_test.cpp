@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "loopback_only.hpp"
 #include "test_env.hpp"
@@ -78,35 +79,24 @@ bool wait_for_line(const fs::path& log, const std::string& text, std::chrono::se
   return false;
 }
 
-/// The number after `"key": ` in the first object `"section": {...}` of `json`, or -1.
+/// The number `json`[section][key], or -1 (none, or `json` is not JSON).
 double json_number(const std::string& json, const std::string& section, const std::string& key) {
-  const auto at = json.find("\"" + section + "\": {");
-  if (at == std::string::npos) return -1.0;
-  const std::regex re("\"" + key + "\": (-?[0-9.e+-]+)");
-  std::smatch m;
-  const std::string rest = json.substr(at);
-  return std::regex_search(rest, m, re) ? std::stod(m[1].str()) : -1.0;
+  const auto j = nlohmann::json::parse(json, nullptr, false);  // not JSON: a discarded value
+  const auto s = j.is_object() ? j.find(section) : j.end();
+  if (s == j.end() || !s->is_object()) return -1.0;
+  const auto v = s->find(key);
+  return v != s->end() && v->is_number() ? v->get<double>() : -1.0;
 }
 
-using CycleFigures = std::array<long, 8>;  ///< write_safety_json's cycle_fields, scan first
+using CycleFigures = std::array<long, 8>;  ///< safety_json's cycle_fields, scan first
 
 /// The "per_cycle" arrays of the "safety" object, in order.
 std::vector<CycleFigures> per_cycle(const std::string& json) {
   std::vector<CycleFigures> cycles;
-  const auto at = json.find("\"per_cycle\": [");
-  if (at == std::string::npos) return cycles;
-  const std::string rest = json.substr(at + 14, json.find("]]", at) + 1 - (at + 14));
-  const std::regex row("\\[([0-9, ]+)\\]");
-  for (auto it = std::sregex_iterator(rest.begin(), rest.end(), row); it != std::sregex_iterator();
-       ++it) {
-    CycleFigures c{};
-    std::istringstream s((*it)[1].str());
-    char comma = 0;
-    for (std::size_t i = 0; i < c.size(); ++i) {
-      s >> c[i];
-      if (i + 1 < c.size()) s >> comma;
-    }
-    cycles.push_back(c);
+  const auto j = nlohmann::json::parse(json, nullptr, false);
+  if (!j.is_object() || !j.contains("safety")) return cycles;
+  for (const auto& row : j["safety"].value("per_cycle", nlohmann::json::array())) {
+    cycles.push_back(row.get<CycleFigures>());
   }
   return cycles;
 }

@@ -14,17 +14,20 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <map>
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
 #include "geometry_msgsPubSubTypes.h"
 #include "nav_msgsPubSubTypes.h"
+#include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/tools/array_io.hpp"
 #include "tarmac/tools/clearing.hpp"
@@ -39,38 +42,12 @@ namespace {
 using namespace tarmac;
 using namespace std::chrono_literals;
 
-constexpr int kExitUsage = 64;
 constexpr int kExitData = 65;
 constexpr int kExitUnavailable = 69;
 constexpr int kExitIo = 74;
 constexpr int kExitConfig = 78;
 
 std::atomic<bool> g_stop{false};
-
-void usage(std::FILE* to) {
-  std::fprintf(
-      to,
-      "usage: tarmac-audit [--config FILE] [--cycles N] [--idle-s S] [--timeout-s S]\n"
-      "                    [--json FILE] [--png FILE] [--identity DIR] [--score DIR]\n"
-      "  Listens on the CycleReport and costmap topics of FILE (default config) and, at\n"
-      "  the end, prints a per-stage table (last, p50, p99, max vs budget, overruns) and\n"
-      "  the end-to-end latency scan stamp -> costmap received.\n"
-      "  --cycles N    stop after N cycle reports\n"
-      "  --idle-s S    stop S seconds after the last costmap (once one arrived)\n"
-      "  --timeout-s S stop after S seconds in any case (default 600)\n"
-      "  --json FILE   write the table as JSON\n"
-      "  --identity DIR  DDS Security identity DIR/cert.pem, DIR/key.pem instead of the\n"
-      "                config's (dds.security; e.g. the 'monitor' of make-dds-security.sh)\n"
-      "  --png FILE    write the last costmap as PNG (white free, black lethal, yellow to\n"
-      "                dark red inflated, slate unknown; north up)\n"
-      "  --score DIR   score every costmap against the ground truth of DIR, a tarmac-sim\n"
-      "                dataset (obstacle_columns.txt, dynamic_boxes.txt, poses.txt) being\n"
-      "                replayed with tarmac-replay: each costmap as the map of the latest scan\n"
-      "                stamped at or before it, the scans' stamps read from the pose topic\n"
-      "                (start the replay after 'matched', with --pose-readers 2); prints the\n"
-      "                'safety (...)' line of tarmac-map, --json adds it under \"safety\"\n"
-      "  Stops on SIGINT/SIGTERM too. Exit 0 when at least one report arrived.\n");
-}
 
 std::int64_t realtime_ns() {
   timespec ts{};
@@ -182,34 +159,38 @@ int main(int argc, char** argv) {
   std::string config_path, json_path, png_path, identity_dir, score_dir;
   std::uint64_t max_cycles = 0;
   double idle_s = 0.0, timeout_s = 600.0;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--config" && has_value) {
-      config_path = argv[++i];
-    } else if (a == "--identity" && has_value) {
-      identity_dir = argv[++i];
-    } else if (a == "--cycles" && has_value) {
-      max_cycles = static_cast<std::uint64_t>(std::max(0, std::atoi(argv[++i])));
-    } else if (a == "--idle-s" && has_value) {
-      idle_s = std::atof(argv[++i]);
-    } else if (a == "--timeout-s" && has_value) {
-      timeout_s = std::atof(argv[++i]);
-    } else if (a == "--json" && has_value) {
-      json_path = argv[++i];
-    } else if (a == "--png" && has_value) {
-      png_path = argv[++i];
-    } else if (a == "--score" && has_value) {
-      score_dir = argv[++i];
-    } else if (a == "--help" || a == "-h") {
-      usage(stdout);
-      return 0;
-    } else {
-      std::fprintf(stderr, "tarmac-audit: unexpected argument '%s'\n", a.c_str());
-      usage(stderr);
-      return kExitUsage;
-    }
-  }
+  cli::App app("tarmac-audit",
+               "Listens on the CycleReport and costmap topics of the config and, at the end, "
+               "prints a per-stage table (last, p50, p99, max vs budget, overruns) and the "
+               "end-to-end latency scan stamp -> costmap received.");
+  app.add_option("--config", config_path, "tarmacd config (default: the built-in defaults)")
+      ->type_name("FILE");
+  app.add_option("--cycles", max_cycles, "stop after N cycle reports (0: no limit)")
+      ->transform(cli::number<std::uint64_t>());
+  app.add_option("--idle-s", idle_s,
+                 "stop S seconds after the last costmap, once one arrived (0: never)")
+      ->transform(cli::non_negative<double>());
+  app.add_option("--timeout-s", timeout_s, "stop after S seconds in any case")
+      ->transform(cli::positive<double>());
+  app.add_option("--json", json_path, "write the table as JSON")->type_name("FILE");
+  app.add_option("--png", png_path,
+                 "write the last costmap as PNG (white free, black lethal, yellow to dark red "
+                 "inflated, slate unknown; north up)")
+      ->type_name("FILE");
+  app.add_option("--identity", identity_dir,
+                 "DDS Security identity DIR/cert.pem, DIR/key.pem instead of the config's "
+                 "(dds.security; e.g. the 'monitor' of make-dds-security.sh)")
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--score", score_dir,
+                 "score every costmap against the ground truth of DIR, a tarmac-sim dataset "
+                 "(obstacle_columns.txt, dynamic_boxes.txt, poses.txt) being replayed with "
+                 "tarmac-replay: each costmap as the map of the latest scan stamped at or before "
+                 "it, the scans' stamps read from the pose topic (start the replay after "
+                 "'matched', with --pose-readers 2); prints the 'safety (...)' line of "
+                 "tarmac-map, --json adds it under \"safety\"")
+      ->check(CLI::ExistingDirectory);
+  app.footer("Stops on SIGINT/SIGTERM too. Exit 0 when at least one report arrived.");
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
   config::Config cfg;
   if (!config_path.empty()) {
     auto loaded = config::load_config_file(config_path);
@@ -403,36 +384,43 @@ int main(int argc, char** argv) {
   }
 
   if (!json_path.empty()) {
-    std::ofstream j(json_path);
-    j << "{\n  \"cycles\": " << n_reports << ",\n  \"skipped_ticks\": " << skipped
-      << ",\n  \"config_hash\": \"" << last.config_hash << "\",\n  \"stages_ms\": {\n";
-    const auto obj = [&](const std::string& name, const Series& s, bool comma) {
+    const auto stats = [](const Series& s) {
       const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
-      j << "    \"" << name << "\": {\"last\": " << (s.ms.empty() ? 0.0 : s.ms.back())
-        << ", \"p50\": " << percentile(s.ms, 0.5) << ", \"p99\": " << percentile(s.ms, 0.99)
-        << ", \"max\": " << mx << ", \"budget\": " << s.budget_ms
-        << ", \"overruns\": " << s.overruns << "}" << (comma ? "," : "") << "\n";
+      return nlohmann::ordered_json{{"last", s.ms.empty() ? 0.0 : s.ms.back()},
+                                    {"p50", percentile(s.ms, 0.5)},
+                                    {"p99", percentile(s.ms, 0.99)},
+                                    {"max", mx},
+                                    {"budget", s.budget_ms},
+                                    {"overruns", s.overruns}};
     };
-    for (const auto& name : stage_order) obj(name, stages[name], true);
-    obj("cycle", cycle, false);
-    j << "  },\n  \"e2e_latency_ms\": {\"samples\": " << e2e_ms.size()
-      << ", \"p50\": " << percentile(e2e_ms, 0.5) << ", \"p99\": " << percentile(e2e_ms, 0.99)
-      << ", \"max\": " << e2e_max
-      << "},\n  \"wake_jitter_ms\": {\"p50\": " << percentile(jitter_ms, 0.5)
-      << ", \"p99\": " << percentile(jitter_ms, 0.99) << "}";
+    nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
+    for (const auto& name : stage_order) stages_ms[name] = stats(stages[name]);
+    stages_ms["cycle"] = stats(cycle);
+    nlohmann::ordered_json j = {
+        {"cycles", n_reports},
+        {"skipped_ticks", skipped},
+        {"config_hash", last.config_hash},
+        {"stages_ms", std::move(stages_ms)},
+        {"e2e_latency_ms",
+         {{"samples", e2e_ms.size()},
+          {"p50", percentile(e2e_ms, 0.5)},
+          {"p99", percentile(e2e_ms, 0.99)},
+          {"max", e2e_max}}},
+        {"wake_jitter_ms",
+         {{"p50", percentile(jitter_ms, 0.5)}, {"p99", percentile(jitter_ms, 0.99)}}}};
     if (scoring) {
       const tools::StampedSafetyScorer& sc = *scoring->scorer;
-      j << ",\n  \"scored\": {\"dataset\": \"" << scoring->dir
-        << "\", \"scans_stamped\": " << sc.scans_stamped() << ", \"costmaps\": " << sc.costmaps()
-        << ", \"scans_with_costmap\": " << sc.scans_with_costmap()
-        << ", \"stamp_not_a_scan\": " << sc.stamp_not_a_scan()
-        << ", \"before_first_scan\": " << sc.before_first_scan() << ", \"error\": \""
-        << scoring->error << "\"},\n  \"safety\": ";
-      tools::write_safety_json(j, sc.tracker());
+      j["scored"] = {{"dataset", scoring->dir},
+                     {"scans_stamped", sc.scans_stamped()},
+                     {"costmaps", sc.costmaps()},
+                     {"scans_with_costmap", sc.scans_with_costmap()},
+                     {"stamp_not_a_scan", sc.stamp_not_a_scan()},
+                     {"before_first_scan", sc.before_first_scan()},
+                     {"error", scoring->error}};
+      j["safety"] = tools::safety_json(sc.tracker());
     }
-    j << "\n}\n";
-    if (!j) {
-      std::fprintf(stderr, "tarmac-audit: %s: cannot be written\n", json_path.c_str());
+    if (auto w = tools::write_json(json_path, j); !w) {
+      std::fprintf(stderr, "tarmac-audit: %s\n", w.error().message.c_str());
       return kExitIo;
     }
     std::printf("wrote %s\n", json_path.c_str());

@@ -21,6 +21,7 @@
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
 #include "sensor_msgsPubSubTypes.h"
+#include "tarmac/config/cli.hpp"
 #include "tarmac/transport/participant.hpp"
 
 namespace {
@@ -51,47 +52,29 @@ double percentile(std::vector<double> v, double p) {
   return v[i];
 }
 
-void usage(std::FILE* to) {
-  std::fprintf(to,
-               "usage: tarmac-dds-bench [--security DIR] [--transport localhost|shm] [--points N]\n"
-               "                        [--scans N] [--domain D]\n"
-               "  DIR: the output of tools/make-dds-security.sh (identities 'publisher' and\n"
-               "  'tarmacd'); without it, no security. --points: points per scan (default\n"
-               "  65536: 2 MB, an Ouster-64 scan), --scans: timed one by one (default 100),\n"
-               "  CPU: user + system time of the process (both sides) per timed scan.\n");
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string security_dir, mode = "localhost";
   int points = 65536, scans = 100;
   std::uint32_t domain = 7;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--security" && has_value) {
-      security_dir = argv[++i];
-    } else if (a == "--transport" && has_value) {
-      mode = argv[++i];
-    } else if (a == "--points" && has_value) {
-      points = std::max(1, std::atoi(argv[++i]));
-    } else if (a == "--scans" && has_value) {
-      scans = std::max(1, std::atoi(argv[++i]));
-    } else if (a == "--domain" && has_value) {
-      domain = static_cast<std::uint32_t>(std::atoi(argv[++i]));
-    } else if (a == "--help" || a == "-h") {
-      usage(stdout);
-      return 0;
-    } else {
-      usage(stderr);
-      return 64;
-    }
-  }
-  if (mode != "localhost" && mode != "shm") {
-    usage(stderr);
-    return 64;
-  }
+  cli::App app("tarmac-dds-bench",
+               "The cost of DDS Security on this machine: discovery time, then the latency and "
+               "CPU time of scans published one at a time between two participants in one "
+               "process.");
+  app.add_option("--security", security_dir,
+                 "the output of tools/make-dds-security.sh (identities 'publisher' and "
+                 "'tarmacd'); without it, no security")
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--transport", mode, "localhost (UDP) or shm")
+      ->check(CLI::IsMember({"localhost", "shm"}));
+  app.add_option("--points", points, "points per scan (65536: 2 MB, an Ouster-64 scan)")
+      ->transform(cli::positive<int>());
+  app.add_option("--scans", scans, "scans timed one by one")->transform(cli::positive<int>());
+  app.add_option("--domain", domain, "DDS domain id")
+      ->transform(cli::in_range<std::uint32_t>(0, 232));
+  app.footer("CPU: user + system time of the process (both sides) per timed scan.");
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
   eprosima::fastrtps::LibrarySettingsAttributes library;
   library.intraprocess_delivery = eprosima::fastrtps::INTRAPROCESS_OFF;
   eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings(library);

@@ -8,6 +8,7 @@
 
 #include <sys/resource.h>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -17,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "tarmac/config/cli.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/kitti.hpp"
@@ -48,7 +50,7 @@ struct Options {
   std::uint32_t tsdf_reserve_blocks = 0;
   bool tsdf_only = false;
   /// Occupancy window in voxels (x, y, z); 0: derived from the max range (x, y) and 8 m (z).
-  int window_x = 0, window_y = 0, window_z = 0;
+  std::array<int, 3> window{0, 0, 0};
 };
 
 template <typename Fn>
@@ -105,73 +107,58 @@ void print_row(const char* name, const std::vector<double>& ms) {
 
 int main(int argc, char** argv) {
   Options opt;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool v = i + 1 < argc;
-    if (a == "--dataset" && v)
-      opt.dataset = argv[++i];
-    else if (a == "--poses" && v)
-      opt.poses = argv[++i];
-    else if (a == "--resolution" && v)
-      opt.resolution_m = std::atof(argv[++i]);
-    else if (a == "--max-range" && v)
-      opt.max_range_m = std::atof(argv[++i]);
-    else if (a == "--threads" && v)
-      opt.threads = static_cast<std::size_t>(std::max(1, std::atoi(argv[++i])));
-    else if (a == "--scans" && v)
-      opt.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
-    else if (a == "--sensor-height" && v)
-      opt.sensor_height_m = std::atof(argv[++i]);
-    else if (a == "--no-esdf")
-      opt.esdf = false;
-    else if (a == "--tsdf-voxel" && v)
-      opt.tsdf_voxel_m = static_cast<float>(std::atof(argv[++i]));
-    else if (a == "--tsdf-truncation" && v)
-      opt.tsdf_truncation_m = static_cast<float>(std::atof(argv[++i]));
-    else if (a == "--tsdf-reserve-blocks" && v)
-      opt.tsdf_reserve_blocks = static_cast<std::uint32_t>(std::atol(argv[++i]));
-    else if (a == "--tsdf-only")
-      opt.tsdf_only = true;
-    else if (a == "--narrow-walk")
-      opt.walk_lanes = 1;
-    else if (a == "--walk-lanes" && v) {
-      const std::string lanes = argv[++i];
-      if (lanes != "8" && lanes != "4" && lanes != "1") {
-        std::fprintf(stderr, "tarmac-bench: --walk-lanes takes 8, 4 or 1\n");
-        return 64;
-      }
-      opt.walk_lanes = std::stoi(lanes);
-    } else if (a == "--phases")
-      opt.phases = true;
-    else if (a == "--asleep-workers")
-      opt.asleep_workers = true;
-    else if (a == "--window" && v) {
-      if (std::sscanf(argv[++i], "%d,%d,%d", &opt.window_x, &opt.window_y, &opt.window_z) != 3 ||
-          opt.window_x <= 0 || opt.window_y <= 0 || opt.window_z <= 0) {
-        std::fprintf(stderr, "tarmac-bench: --window takes X,Y,Z voxels, e.g. 400,400,40\n");
-        return 64;
-      }
-    } else {
-      std::fprintf(
-          stderr,
-          "usage: tarmac-bench --dataset DIR [--resolution M] [--max-range M] [--threads N]\n"
-          "                    [--scans N] [--poses FILE] [--sensor-height M] [--no-esdf]\n"
-          "                    [--tsdf-voxel M] [--tsdf-truncation M] [--tsdf-only]\n"
-          "                    [--window X,Y,Z]   (voxels; default: 2*ceil(range/res)+2 x same x "
-          "8 m)\n"
-          "                    [--tsdf-reserve-blocks N] [--walk-lanes 8|4|1]   (most rays "
-          "walked at a time: AVX-512, AVX2, one; --narrow-walk is 1)\n"
-          "                    [--phases]   (per stage: each parallel_for call and the serial "
-          "stretches between)\n"
-          "                    [--asleep-workers]   (do not wake the workers before each scan, "
-          "as tarmacd does before each tick)\n");
-      return a == "--help" ? 0 : 64;
-    }
-  }
-  if (opt.dataset.empty() || !(opt.resolution_m > 0.0) || !(opt.max_range_m > 0.0)) {
-    std::fprintf(stderr, "tarmac-bench: --dataset DIR is required; resolution and max range > 0\n");
-    return 64;
-  }
+  cli::App app("tarmac-bench",
+               "tarmac's occupancy integration against OctoMap (insertPointCloud, same resolution, "
+               "max range and sensor model) on the same scans in one run; map agreement; "
+               "tarmac's full pipeline per stage; tarmac's exact ESDF against dynamicEDT3D; its "
+               "TSDF against VDBFusion's algorithm.");
+  app.add_option("--dataset", opt.dataset, "the sequence, KITTI layout")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--poses", opt.poses, "pose file inside DIR")->type_name("FILE");
+  app.add_option("--resolution", opt.resolution_m, "occupancy voxel size, m")
+      ->transform(cli::positive<double>());
+  app.add_option("--max-range", opt.max_range_m, "max range, m")
+      ->transform(cli::positive<double>());
+  app.add_option("--threads", opt.threads, "worker threads")
+      ->transform(cli::positive<std::size_t>());
+  app.add_option("--scans", opt.max_scans, "first N scans only (0: all)")
+      ->transform(cli::number<std::size_t>());
+  app.add_option("--sensor-height", opt.sensor_height_m, "sensor above the vehicle base, m")
+      ->transform(cli::number<double>());
+  app.add_flag_callback(
+      "--no-esdf", [&opt] { opt.esdf = false; }, "no 3D ESDF comparison and no 3D band stage");
+  app.add_option("--tsdf-voxel", opt.tsdf_voxel_m, "TSDF voxel size, m")
+      ->transform(cli::positive<float>());
+  app.add_option("--tsdf-truncation", opt.tsdf_truncation_m, "TSDF truncation distance, m")
+      ->transform(cli::positive<float>());
+  app.add_option("--tsdf-reserve-blocks", opt.tsdf_reserve_blocks,
+                 "TSDF blocks reserved up front (tsdf.reserve_blocks)")
+      ->transform(cli::number<std::uint32_t>());
+  app.add_flag("--tsdf-only", opt.tsdf_only,
+               "the TSDF only: no occupancy, costmap, OctoMap or ESDF stages");
+  app.add_option("--window", opt.window,
+                 "occupancy window in voxels, e.g. 400,400,40 (default: 2*ceil(range/res)+2 x "
+                 "same x 8 m)")
+      ->delimiter(',')
+      ->type_name("X,Y,Z")
+      ->default_str("")
+      ->multi_option_policy(CLI::MultiOptionPolicy::Throw)  // 1,2,3,4: an error, not 2,3,4
+      ->transform(cli::positive<int>());
+  auto* lanes =
+      app.add_option("--walk-lanes", opt.walk_lanes,
+                     "most rays walked at a time: 8 (AVX-512), 4 (AVX2), 1; as the CPU supports")
+          ->check(CLI::IsMember({8, 4, 1}));
+  app.add_flag_callback(
+         "--narrow-walk", [&opt] { opt.walk_lanes = 1; },
+         "rays walked one at a time (--walk-lanes 1)")
+      ->excludes(lanes);
+  app.add_flag("--phases", opt.phases,
+               "per stage: each parallel_for call and the serial stretches between");
+  app.add_flag("--asleep-workers", opt.asleep_workers,
+               "do not wake the workers before each scan, as tarmacd does before each tick");
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
+
   auto seq = tools::open_kitti(opt.dataset, opt.poses);
   if (!seq) {
     std::fprintf(stderr, "tarmac-bench: %s\n", seq.error().message.c_str());
@@ -187,10 +174,10 @@ int main(int argc, char** argv) {
   core::MapperParams params;
   params.occupancy.voxel_size_m = opt.resolution_m;
   const int half = static_cast<int>(std::ceil(opt.max_range_m / opt.resolution_m));
-  params.occupancy.window_x_vox = opt.window_x > 0 ? opt.window_x : 2 * half + 2;
-  params.occupancy.window_y_vox = opt.window_y > 0 ? opt.window_y : 2 * half + 2;
+  params.occupancy.window_x_vox = opt.window[0] > 0 ? opt.window[0] : 2 * half + 2;
+  params.occupancy.window_y_vox = opt.window[1] > 0 ? opt.window[1] : 2 * half + 2;
   params.occupancy.window_z_vox =
-      opt.window_z > 0 ? opt.window_z : static_cast<int>(std::ceil(8.0 / opt.resolution_m));
+      opt.window[2] > 0 ? opt.window[2] : static_cast<int>(std::ceil(8.0 / opt.resolution_m));
   params.occupancy.max_range_m = opt.max_range_m;
   // OctoMap's insertPointCloud: a return beyond max range clears free space up to max range.
   params.occupancy.clearing_range_m = opt.max_range_m;
@@ -203,10 +190,7 @@ int main(int argc, char** argv) {
   // base), unless the window is too low for it.
   params.esdf_band.enabled = opt.esdf && !opt.tsdf_only;
   if (params.esdf_band.enabled && !params.validate()) params.esdf_band.enabled = false;
-  if (auto valid = params.validate(); !valid) {
-    std::fprintf(stderr, "tarmac-bench: %s\n", valid.error().message.c_str());
-    return 64;
-  }
+  if (auto valid = params.validate(); !valid) return cli::usage_error(app, valid.error().message);
   daemon::ThreadPool pool(opt.threads);
   // --phases: the filter, occupancy, costmap and band stages run on a PhaseRunner over the same
   // pool (the same tasks on the same threads; a clock read around each task is added).

@@ -20,6 +20,7 @@
 #include "geometry_msgsPubSubTypes.h"
 #include "nav_msgsPubSubTypes.h"
 #include "sensor_msgsPubSubTypes.h"
+#include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac_msgsPubSubTypes.h"
 
@@ -148,32 +149,24 @@ int echo(const transport::Participant& participant, const std::string& topic,
 int main(int argc, char** argv) {
   std::string topic, config_path, identity_dir;
   std::size_t count = 0;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--config" && i + 1 < argc) {
-      config_path = argv[++i];
-    } else if (a == "--identity" && i + 1 < argc) {
-      identity_dir = argv[++i];
-    } else if (a == "--count" && i + 1 < argc) {
-      count = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
-    } else if (a == "--help" || a == "-h" || (!a.empty() && a[0] == '-')) {
-      std::fprintf(
-          a[0] == '-' && a != "--help" && a != "-h" ? stderr : stdout,
-          "usage: tarmac-echo TOPIC [--config FILE] [--count N] [--identity DIR]\n"
-          "  TOPIC: any topic of the config (costmap, esdf slice, esdf band, cycle report,\n"
-          "  DiagnosticArray, pose, a sensor's points, virtual obstacles), e.g.\n"
-          "  rt/tarmac/costmap. One line per sample until --count or SIGINT.\n"
-          "  --identity DIR: DDS Security identity DIR/cert.pem, DIR/key.pem instead\n"
-          "  of the config's (dds.security; e.g. make-dds-security.sh's 'monitor').\n");
-      return a == "--help" || a == "-h" ? 0 : 64;
-    } else {
-      topic = a;
-    }
-  }
-  if (topic.empty()) {
-    std::fprintf(stderr, "usage: tarmac-echo TOPIC [--config FILE] [--count N] [--identity DIR]\n");
-    return 64;
-  }
+  cli::App app("tarmac-echo",
+               "Subscribes to one tarmac topic over localhost DDS and prints one line per sample "
+               "until --count or SIGINT.");
+  app.add_option("topic", topic,
+                 "any topic of the config (costmap, esdf slice, esdf band, cycle report, "
+                 "DiagnosticArray, pose, a sensor's points, virtual obstacles), e.g. "
+                 "rt/tarmac/costmap")
+      ->type_name("TOPIC")
+      ->required();
+  app.add_option("--config", config_path, "tarmacd config (default: the built-in defaults)")
+      ->type_name("FILE");
+  app.add_option("--count", count, "stop after N samples (0: no limit)")
+      ->transform(cli::number<std::size_t>());
+  app.add_option("--identity", identity_dir,
+                 "DDS Security identity DIR/cert.pem, DIR/key.pem instead of the config's "
+                 "(dds.security; e.g. make-dds-security.sh's 'monitor')")
+      ->check(CLI::ExistingDirectory);
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
   config::Config cfg;
   if (!config_path.empty()) {
     auto loaded = config::load_config_file(config_path);
@@ -226,6 +219,5 @@ int main(int argc, char** argv) {
       return echo<sensor_msgs::msg::dds_::PointCloud2_PubSubType>(p, topic, q.lidar, count);
     }
   }
-  std::fprintf(stderr, "tarmac-echo: %s is not a topic of this config\n", topic.c_str());
-  return 64;
+  return cli::usage_error(app, topic + " is not a topic of this config");
 }

@@ -4,15 +4,18 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <optional>
-#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
+#include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/tsdf_changes.hpp"
@@ -31,7 +34,6 @@ namespace {
 using namespace tarmac;
 using Clock = std::chrono::steady_clock;
 
-constexpr int kExitUsage = 64;
 constexpr int kExitData = 65;
 constexpr int kExitIo = 74;
 constexpr int kExitConfig = 78;
@@ -42,20 +44,6 @@ struct Options {
   std::size_t max_scans = 0;  // 0: all
   double sensor_height_m = 1.9;
 };
-
-void usage() {
-  std::fprintf(stderr,
-               "usage: tarmac-map --dataset DIR [--out DIR] [--config FILE] [--threads N]\n"
-               "                  [--poses FILE] [--scans N] [--sensor-height M] [--prior FILE]\n"
-               "                  [--corrections FILE]\n"
-               "  DIR in KITTI layout: scans/NNNNNN.bin, poses.txt (T_world_sensor), times.txt\n"
-               "  --poses FILE      pose file inside DIR (default poses.txt)\n"
-               "  --sensor-height M sensor above the vehicle base, m (default 1.9)\n"
-               "  --prior FILE      a tsdf.vdb from an earlier run: writes changes.npy/.png\n"
-               "  --corrections FILE corrected trajectories: lines 'K stamp_s' + 12 numbers of\n"
-               "                    T_world_sensor (as poses.txt); the lines of one K form one\n"
-               "                    correction, applied after scan K (tarmac-sim --correct-at)\n");
-}
 
 struct StageTimes {
   const char* name;
@@ -124,6 +112,16 @@ std::vector<std::uint8_t> render_distance(const core::DistanceField& field, doub
 /// Frame of the TSDF lattice written by this tool: the dataset's pose frame.
 constexpr const char* kTsdfFrame = "world";
 
+/// A float for JSON: the double of its shortest decimal (0.1f is written 0.1, not
+/// 0.10000000149011612).
+double decimal(float value) {
+  char text[32];
+  const auto written = std::to_chars(text, text + sizeof text, value);
+  double d = 0.0;
+  std::from_chars(text, written.ptr, d);
+  return d;
+}
+
 std::vector<std::uint8_t> render_changes(const core::ChangeMap& m) {
   const std::uint32_t w = m.geometry.width, h = m.geometry.height;
   std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
@@ -172,11 +170,19 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
   result.vertices = mesh.vertices_W.size();
   result.triangles = mesh.triangles.size();
   if (auto w = tools::write_ply(out / "mesh.ply", mesh); !w) return w;
-  std::ofstream j(out / "tsdf.json");
-  j << "{\n  \"frame\": \"" << kTsdfFrame << "\",\n  \"voxel_size_m\": " << tsdf.voxel_size_m()
-    << ",\n  \"truncation_m\": " << tsdf.truncation_m() << ",\n  \"blocks\": " << tsdf.block_count()
-    << ",\n  \"voxels\": " << tsdf.voxel_count() << ",\n  \"memory_bytes\": " << tsdf.memory_bytes()
-    << ",\n  \"config_hash\": \"" << config_hash << "\",\n  \"stamp_ns\": " << stamp_ns;
+  nlohmann::ordered_json j = {{"frame", kTsdfFrame},
+                              {"voxel_size_m", decimal(tsdf.voxel_size_m())},
+                              {"truncation_m", decimal(tsdf.truncation_m())},
+                              {"blocks", tsdf.block_count()},
+                              {"voxels", tsdf.voxel_count()},
+                              {"memory_bytes", tsdf.memory_bytes()},
+                              {"config_hash", config_hash},
+                              {"stamp_ns", stamp_ns}};
+  nlohmann::ordered_json files = {
+      {"tsdf.vdb",
+       "OpenVDB float grids 'tsdf' (signed distance, m, + in front) and 'weight' (scans, "
+       "capped), + tarmac trailer; index i = voxel centre (i + 0.5) * v"},
+      {"mesh.ply", "binary PLY of the zero level set, world frame, m"}};
   if (prior != nullptr) {
     core::Status detected = core::Ok{};
     result.changes_ms = timed_ms([&] {
@@ -191,64 +197,52 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
         !w) {
       return w;
     }
-    j << ",\n  \"changes\": {\"origin_m\": [" << g.origin_x_m << ", " << g.origin_y_m
-      << "], \"resolution_m\": " << g.resolution_m << ", \"shape\": [" << g.height << ", "
-      << g.width << "], \"compared_voxels\": " << result.changes.compared_voxels
-      << ", \"new_voxels\": " << result.changes.new_voxels
-      << ", \"removed_voxels\": " << result.changes.removed_voxels << "}";
+    j["changes"] = {{"origin_m", {g.origin_x_m, g.origin_y_m}},
+                    {"resolution_m", g.resolution_m},
+                    {"shape", {g.height, g.width}},
+                    {"compared_voxels", result.changes.compared_voxels},
+                    {"new_voxels", result.changes.new_voxels},
+                    {"removed_voxels", result.changes.removed_voxels}};
+    files["changes.npy"] =
+        "float32 (ny, nx) per voxel column: +c new surface, -c removed, confidence c in (0, 1]; "
+        "0 unchanged; NaN not observed in both maps";
+    files["changes.png"] =
+        "red new, blue removed (fainter = less confident), white unchanged, slate unknown; north "
+        "up";
   }
-  j << ",\n  \"files\": {\n"
-    << "    \"tsdf.vdb\": \"OpenVDB float grids 'tsdf' (signed distance, m, + in front) and "
-       "'weight' (scans, capped), + tarmac trailer; index i = voxel centre (i + 0.5) * v\",\n"
-    << "    \"mesh.ply\": \"binary PLY of the zero level set, world frame, m\"";
-  if (prior != nullptr) {
-    j << ",\n    \"changes.npy\": \"float32 (ny, nx) per voxel column: +c new surface, -c "
-         "removed, confidence c in (0, 1]; 0 unchanged; NaN not observed in both maps\",\n"
-      << "    \"changes.png\": \"red new, blue removed (fainter = less confident), white "
-         "unchanged, slate unknown; north up\"";
-  }
-  j << "\n  }\n}\n";
-  return core::Ok{};
+  j["files"] = std::move(files);
+  return tools::write_json(out / "tsdf.json", j);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   Options opt;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--dataset" && has_value)
-      opt.dataset = argv[++i];
-    else if (a == "--out" && has_value)
-      opt.out = argv[++i];
-    else if (a == "--config" && has_value)
-      opt.config = argv[++i];
-    else if (a == "--poses" && has_value)
-      opt.poses = argv[++i];
-    else if (a == "--threads" && has_value)
-      opt.threads = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--scans" && has_value)
-      opt.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
-    else if (a == "--sensor-height" && has_value)
-      opt.sensor_height_m = std::atof(argv[++i]);
-    else if (a == "--prior" && has_value)
-      opt.prior = argv[++i];
-    else if (a == "--corrections" && has_value)
-      opt.corrections = argv[++i];
-    else if (a == "--help" || a == "-h") {
-      usage();
-      return 0;
-    } else {
-      std::fprintf(stderr, "tarmac-map: unexpected argument '%s'\n", a.c_str());
-      usage();
-      return kExitUsage;
-    }
-  }
-  if (opt.dataset.empty()) {
-    usage();
-    return kExitUsage;
-  }
+  cli::App app("tarmac-map",
+               "Runs tarmacd's core pipeline scan by scan on a sequence in KITTI layout and writes "
+               "the maps, images, timings and a digest.");
+  app.add_option("--dataset", opt.dataset,
+                 "the sequence: scans/NNNNNN.bin, poses.txt (T_world_sensor), times.txt")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--out", opt.out, "output directory (created)")->type_name("DIR");
+  app.add_option("--config", opt.config, "tarmacd config (default: the built-in defaults)")
+      ->type_name("FILE");
+  app.add_option("--threads", opt.threads, "worker threads")
+      ->transform(cli::positive<std::size_t>());
+  app.add_option("--poses", opt.poses, "pose file inside DIR")->type_name("FILE");
+  app.add_option("--scans", opt.max_scans, "first N scans only (0: all)")
+      ->transform(cli::number<std::size_t>());
+  app.add_option("--sensor-height", opt.sensor_height_m, "sensor above the vehicle base, m")
+      ->transform(cli::number<double>());
+  app.add_option("--prior", opt.prior, "a tsdf.vdb from an earlier run: writes changes.npy/.png")
+      ->check(CLI::ExistingFile);
+  app.add_option("--corrections", opt.corrections,
+                 "corrected trajectories: lines 'K stamp_s' + 12 numbers of T_world_sensor (as "
+                 "poses.txt); the lines of one K form one correction, applied after scan K "
+                 "(tarmac-sim --correct-at)")
+      ->check(CLI::ExistingFile);
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
 
   config::Config cfg;
   if (!opt.config.empty()) {
@@ -535,40 +529,43 @@ int main(int argc, char** argv) {
   }
   const double ox = occ_map.window_min().x() * v, oy = occ_map.window_min().y() * v,
                oz = occ_map.window_min().z() * v;
-  {
-    std::ofstream j(out / "map.json");
-    j << "{\n  \"frame\": \"world (the dataset's pose frame)\",\n"
-      << "  \"voxel_size_m\": " << v << ",\n"
-      << "  \"origin_m\": [" << ox << ", " << oy << ", " << oz << "],\n"
-      << "  \"lattice\": \"voxel i along an axis covers [origin + i*v, origin + (i+1)*v)\",\n"
-      << "  \"axis_order\": \"arrays are C order, shape (nz, ny, nx) or (ny, nx): x varies "
-         "fastest\",\n"
-      << "  \"shape_3d\": [" << dims.z() << ", " << dims.y() << ", " << dims.x() << "],\n"
-      << "  \"shape_2d\": [" << dims.y() << ", " << dims.x() << "],\n"
-      << "  \"scans\": " << n << ",\n";
-    if (have_band) {
-      j << "  \"esdf_band\": {\"origin_m\": [" << band.min.x() * v << ", " << band.min.y() * v
-        << ", " << band.min.z() * v << "], \"shape\": [" << band.field.dims.z() << ", " << dims.y()
-        << ", " << dims.x() << "], \"obstacles\": " << core::esdf_band_obstacles(band) << "},\n";
-    }
-    j << "  \"files\": {\n"
-      << "    \"occupancy.npy\": \"float32 occupancy probability, NaN = unknown (3D window at the "
-         "end)\",\n"
-      << "    \"esdf.npy\": \"float32 m to the nearest occupied voxel, ground layer excluded, NaN "
-         "= unknown, inf = none in window\",\n"
-      << "    \"esdf_slice.npy\": \"float32 m to the nearest costmap obstacle cell (vehicle height "
-         "band), NaN = unknown\",\n"
-      << (have_band ? "    \"esdf_band.npy\": \"float32 m to the nearest obstacle voxel of the 3D "
-                      "band around the vehicle (esdf_band: costmap rules per voxel, overhangs "
-                      "included), NaN = unknown; origin and shape under esdf_band\",\n"
-                    : "")
-      << "    \"costmap.npy\": \"int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 "
-         "lethal, -1 unknown\",\n"
-      << "    \"costmap.png\": \"white free, yellow-orange inflated, dark red inscribed, black "
-         "lethal, slate unknown, magenta virtual zone; north up\",\n"
-      << "    \"esdf_slice.png\": \"red near an obstacle to blue at >= 5 m, slate unknown; north "
-         "up\"\n"
-      << "  }\n}\n";
+  nlohmann::ordered_json map_json = {
+      {"frame", "world (the dataset's pose frame)"},
+      {"voxel_size_m", v},
+      {"origin_m", {ox, oy, oz}},
+      {"lattice", "voxel i along an axis covers [origin + i*v, origin + (i+1)*v)"},
+      {"axis_order", "arrays are C order, shape (nz, ny, nx) or (ny, nx): x varies fastest"},
+      {"shape_3d", {dims.z(), dims.y(), dims.x()}},
+      {"shape_2d", {dims.y(), dims.x()}},
+      {"scans", n}};
+  if (have_band) {
+    map_json["esdf_band"] = {{"origin_m", {band.min.x() * v, band.min.y() * v, band.min.z() * v}},
+                             {"shape", {band.field.dims.z(), dims.y(), dims.x()}},
+                             {"obstacles", core::esdf_band_obstacles(band)}};
+  }
+  nlohmann::ordered_json files = {
+      {"occupancy.npy", "float32 occupancy probability, NaN = unknown (3D window at the end)"},
+      {"esdf.npy",
+       "float32 m to the nearest occupied voxel, ground layer excluded, NaN = unknown, inf = none "
+       "in window"},
+      {"esdf_slice.npy",
+       "float32 m to the nearest costmap obstacle cell (vehicle height band), NaN = unknown"}};
+  if (have_band) {
+    files["esdf_band.npy"] =
+        "float32 m to the nearest obstacle voxel of the 3D band around the vehicle (esdf_band: "
+        "costmap rules per voxel, overhangs included), NaN = unknown; origin and shape under "
+        "esdf_band";
+  }
+  files["costmap.npy"] =
+      "int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 lethal, -1 unknown";
+  files["costmap.png"] =
+      "white free, yellow-orange inflated, dark red inscribed, black lethal, slate unknown, "
+      "magenta virtual zone; north up";
+  files["esdf_slice.png"] = "red near an obstacle to blue at >= 5 m, slate unknown; north up";
+  map_json["files"] = std::move(files);
+  if (auto w = tools::write_json(out / "map.json", map_json); !w) {
+    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+    return kExitIo;
   }
 
   // ---- timing table ----
@@ -582,20 +579,22 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(dropped_close), static_cast<unsigned long long>(dropped_ego),
       static_cast<unsigned long long>(dropped_isolated), opt.threads);
   std::printf("%-16s %9s %9s %9s %9s   (ms per scan)\n", "stage", "mean", "p50", "p99", "max");
-  std::ofstream tj(out / "timing.json");
-  tj << "{\n  \"scans\": " << n << ",\n  \"threads\": " << opt.threads << ",\n  \"stages_ms\": {\n";
+  nlohmann::ordered_json timing = {{"scans", n}, {"threads", opt.threads}};
+  nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
   std::vector<const StageTimes*> stages = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
   if (params.esdf_band.enabled) stages.insert(stages.end() - 1, &t_band);
   if (params.tsdf.enabled) stages.insert(stages.begin() + 3, &t_tsdf);
-  for (std::size_t i = 0; i < stages.size(); ++i) {
-    const auto& s = *stages[i];
+  for (const StageTimes* stage : stages) {
+    const auto& s = *stage;
     const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
     std::printf("%-16s %9.2f %9.2f %9.2f %9.2f\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
                 percentile(s.ms, 0.99), mx);
-    tj << "    \"" << s.name << "\": {\"mean\": " << mean(s.ms)
-       << ", \"p50\": " << percentile(s.ms, 0.5) << ", \"p99\": " << percentile(s.ms, 0.99)
-       << ", \"max\": " << mx << "}" << (i + 1 < stages.size() ? "," : "") << "\n";
+    stages_ms[s.name] = {{"mean", mean(s.ms)},
+                         {"p50", percentile(s.ms, 0.5)},
+                         {"p99", percentile(s.ms, 0.99)},
+                         {"max", mx}};
   }
+  timing["stages_ms"] = std::move(stages_ms);
   const double pts_per_s = total_s > 0 ? static_cast<double>(points_used) / total_s : 0.0;
   std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d", esdf3d_ms,
               dims.x(), dims.y(), dims.z());
@@ -603,17 +602,19 @@ int main(int argc, char** argv) {
       "pipeline throughput: %.2f M points/s (filter+occupancy+tsdf+costmap), %.1f voxel "
       "visits/point\n",
       pts_per_s / 1e6, points_used > 0 ? static_cast<double>(voxel_visits) / points_used : 0.0);
-  tj << "  },\n  \"esdf3d_ms\": " << esdf3d_ms << ",\n  \"points_per_s\": " << pts_per_s;
+  timing["esdf3d_ms"] = esdf3d_ms;
+  timing["points_per_s"] = pts_per_s;
   if (params.tsdf.enabled) {
-    tj << ",\n  \"tsdf_mesh_ms\": " << tsdf_out.mesh_ms
-       << ",\n  \"tsdf_save_ms\": " << tsdf_out.save_ms;
-    if (prior) tj << ",\n  \"tsdf_changes_ms\": " << tsdf_out.changes_ms;
+    timing["tsdf_mesh_ms"] = tsdf_out.mesh_ms;
+    timing["tsdf_save_ms"] = tsdf_out.save_ms;
+    if (prior) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
   }
   std::printf("static layer: %zu voxels at the end (%llu promotions, %llu demotions)\n",
               occ_map.static_count(), static_cast<unsigned long long>(promotions),
               static_cast<unsigned long long>(demotions));
-  tj << ",\n  \"static_voxels\": " << occ_map.static_count()
-     << ",\n  \"static_promotions\": " << promotions << ",\n  \"static_demotions\": " << demotions;
+  timing["static_voxels"] = occ_map.static_count();
+  timing["static_promotions"] = promotions;
+  timing["static_demotions"] = demotions;
   if (clearing) {
     const tools::ClearingReport r = clearing->report();
     std::printf(
@@ -624,20 +625,27 @@ int main(int argc, char** argv) {
         "the others: p50 %.2f s, p90 %.2f s, max %.2f s\n",
         r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
         r.ghost_cells, r.blind_at_leave, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
-    tj << ",\n  \"dynamic_clearing\": {\"path_cells\": " << r.path_cells
-       << ", \"measured\": " << r.measured << ", \"cleared\": " << r.cleared
-       << ", \"not_cleared\": " << r.not_cleared << ", \"time_to_clear_p50_s\": " << r.p50_s
-       << ", \"time_to_clear_p90_s\": " << r.p90_s << ", \"time_to_clear_max_s\": " << r.max_s
-       << ", \"ghost_cells\": " << r.ghost_cells << ", \"blind_at_leave\": " << r.blind_at_leave
-       << ", \"in_view_p50_s\": " << r.in_view_p50_s << ", \"in_view_p90_s\": " << r.in_view_p90_s
-       << ", \"in_view_max_s\": " << r.in_view_max_s << "}";
+    timing["dynamic_clearing"] = {{"path_cells", r.path_cells},
+                                  {"measured", r.measured},
+                                  {"cleared", r.cleared},
+                                  {"not_cleared", r.not_cleared},
+                                  {"time_to_clear_p50_s", r.p50_s},
+                                  {"time_to_clear_p90_s", r.p90_s},
+                                  {"time_to_clear_max_s", r.max_s},
+                                  {"ghost_cells", r.ghost_cells},
+                                  {"blind_at_leave", r.blind_at_leave},
+                                  {"in_view_p50_s", r.in_view_p50_s},
+                                  {"in_view_p90_s", r.in_view_p90_s},
+                                  {"in_view_max_s", r.in_view_max_s}};
   }
   if (safety) {
     std::printf("%s\n", tools::safety_summary(safety->report()).c_str());
-    tj << ",\n  \"safety\": ";
-    tools::write_safety_json(tj, *safety);
+    timing["safety"] = tools::safety_json(*safety);
   }
-  tj << "\n}\n";
+  if (auto w = tools::write_json(out / "timing.json", timing); !w) {
+    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+    return kExitIo;
+  }
   if (params.tsdf.enabled) {
     std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
                 "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 namespace tarmac::tools {
 
 namespace {
@@ -70,6 +72,15 @@ core::Status write_png(const std::filesystem::path& file, std::span<const std::u
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
   std::fclose(fp);
+  return core::Ok{};
+}
+
+core::Status write_json(const std::filesystem::path& file, const nlohmann::ordered_json& value) {
+  std::ofstream out(file);
+  if (!out) return core::Error{"io.write", file.string() + ": cannot be written"};
+  // Text that is not UTF-8 (a path, a message) is replaced rather than stopping the write.
+  out << value.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) << '\n';
+  if (!out) return core::Error{"io.write", file.string() + ": write failed"};
   return core::Ok{};
 }
 

@@ -6,6 +6,9 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
+
+#include <nlohmann/json.hpp>
 
 namespace tarmac::tools {
 
@@ -162,27 +165,29 @@ std::string safety_summary(const SafetyReport& r) {
   return line;
 }
 
-void write_safety_json(std::ostream& out, const SafetyTracker& tracker) {
+nlohmann::ordered_json safety_json(const SafetyTracker& tracker) {
   const SafetyReport r = tracker.report();
-  out << "{\"cycles\": " << r.cycles << ", \"worst_share\": " << r.worst_share
-      << ", \"worst_scan\": " << r.worst_scan << ", \"mean_share\": " << r.mean_share
-      << ", \"read_free\": " << r.read_free << ", \"read_inflated\": " << r.read_inflated
-      << ", \"read_unknown\": " << r.read_unknown << ", \"lethal_cells\": " << r.lethal_cells
-      << ", \"false_lethal\": " << r.false_lethal
-      << ", \"worst_false_share\": " << r.worst_false_share
-      << ", \"worst_open_known\": " << r.worst_open_known
-      << ", \"mean_open_known\": " << r.mean_open_known
-      << ",\n    \"cycle_fields\": [\"scan\", \"visible\", \"lethal_near\", \"read_free\", "
-         "\"read_inflated\", \"read_unknown\", \"lethal_cells\", \"false_lethal\"],\n"
-      << "    \"per_cycle\": [";
-  const auto& cycles = tracker.cycles();
-  for (std::size_t i = 0; i < cycles.size(); ++i) {
-    const SafetyCycle& c = cycles[i];
-    out << (i == 0 ? "\n      [" : ",\n      [") << c.scan << ", " << c.visible << ", "
-        << c.lethal_near << ", " << c.read_free << ", " << c.read_inflated << ", " << c.read_unknown
-        << ", " << c.lethal_cells << ", " << c.false_lethal << "]";
+  nlohmann::ordered_json j = {{"cycles", r.cycles},
+                              {"worst_share", r.worst_share},
+                              {"worst_scan", r.worst_scan},
+                              {"mean_share", r.mean_share},
+                              {"read_free", r.read_free},
+                              {"read_inflated", r.read_inflated},
+                              {"read_unknown", r.read_unknown},
+                              {"lethal_cells", r.lethal_cells},
+                              {"false_lethal", r.false_lethal},
+                              {"worst_false_share", r.worst_false_share},
+                              {"worst_open_known", r.worst_open_known},
+                              {"mean_open_known", r.mean_open_known}};
+  j["cycle_fields"] = {"scan",          "visible",      "lethal_near",  "read_free",
+                       "read_inflated", "read_unknown", "lethal_cells", "false_lethal"};
+  nlohmann::ordered_json per_cycle = nlohmann::ordered_json::array();
+  for (const SafetyCycle& c : tracker.cycles()) {
+    per_cycle.push_back({c.scan, c.visible, c.lethal_near, c.read_free, c.read_inflated,
+                         c.read_unknown, c.lethal_cells, c.false_lethal});
   }
-  out << "]}";
+  j["per_cycle"] = std::move(per_cycle);
+  return j;
 }
 
 }  // namespace tarmac::tools

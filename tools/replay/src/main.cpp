@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <string>
 
+#include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/replay/replayer.hpp"
 #include "tarmac/tools/kitti.hpp"
@@ -17,43 +18,11 @@ namespace {
 
 using namespace tarmac;
 
-constexpr int kExitUsage = 64;
 constexpr int kExitData = 65;
 constexpr int kExitUnavailable = 69;
 constexpr int kExitConfig = 78;
 
 std::atomic<bool> g_stop{false};
-
-void usage(std::FILE* to) {
-  std::fprintf(to,
-               "usage: tarmac-replay --dataset DIR [--rate-scale X] [--config FILE] [--scans N]\n"
-               "                     [--poses FILE] [--jitter-ms MS] [--sensor ID] [--loop N]\n"
-               "                     [--no-poses] [--align-ms MS] [--identity DIR]\n"
-               "                     [--corrections FILE] [--pose-readers N]\n"
-               "  Publishes DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt\n"
-               "  T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and\n"
-               "  geometry_msgs/PoseWithCovarianceStamped on the topics of FILE (default: the\n"
-               "  built-in defaults, i.e. config/tarmac.yaml). Poses are T_world_base =\n"
-               "  T_world_sensor * T_base_sensor^-1 with the sensor's extrinsic from FILE.\n"
-               "  Stamps are re-based on this machine's clock; scan k is sent at its stamp.\n"
-               "  --rate-scale X  replay X times faster than recorded (default 1)\n"
-               "  --scans N       first N scans only\n"
-               "  --poses FILE    pose file in DIR (default poses.txt)\n"
-               "  --jitter-ms MS  publish each message up to MS late, uniformly (tests)\n"
-               "  --sensor ID     which configured sensor the scans belong to (default: first)\n"
-               "  --loop N        replay the sequence N times, stamps continuing (soak tests)\n"
-               "  --no-poses      scans only (one replay per LiDAR, one of them with poses)\n"
-               "  --align-ms MS   first stamp on a multiple of MS since the epoch, like a LiDAR\n"
-               "                  phase-locked to PTP (tarmacd ticks on the same grid)\n"
-               "  --identity DIR  DDS Security identity DIR/cert.pem, DIR/key.pem instead of\n"
-               "                  the config's (dds.security; e.g. make-dds-security.sh's\n"
-               "                  'publisher')\n"
-               "  --corrections FILE  corrected trajectories (tarmac-sim --correct-at writes\n"
-               "                  DIR/corrections.txt): each sent as nav_msgs/Path on the\n"
-               "                  config's pose.correction_topic right after its scan K\n"
-               "  --pose-readers N  wait for N matched readers of the poses before the first\n"
-               "                  message (default 1, tarmacd; 2 with tarmac-audit --score)\n");
-}
 
 }  // namespace
 
@@ -61,48 +30,52 @@ int main(int argc, char** argv) {
   std::string dataset, config_path, poses_file = "poses.txt", sensor_id, identity_dir,
                                     corrections_file;
   tools::ReplayOptions options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--dataset" && has_value) {
-      dataset = argv[++i];
-    } else if (a == "--config" && has_value) {
-      config_path = argv[++i];
-    } else if (a == "--rate-scale" && has_value) {
-      options.rate_scale = std::atof(argv[++i]);
-    } else if (a == "--scans" && has_value) {
-      options.max_scans = static_cast<std::size_t>(std::max(0, std::atoi(argv[++i])));
-    } else if (a == "--pose-readers" && has_value) {
-      options.pose_readers = static_cast<std::size_t>(std::max(1, std::atoi(argv[++i])));
-    } else if (a == "--align-ms" && has_value) {
-      options.align_ms = std::atof(argv[++i]);
-    } else if (a == "--no-poses") {
-      options.publish_poses = false;
-    } else if (a == "--loop" && has_value) {
-      options.loops = static_cast<std::size_t>(std::max(1, std::atoi(argv[++i])));
-    } else if (a == "--poses" && has_value) {
-      poses_file = argv[++i];
-    } else if (a == "--jitter-ms" && has_value) {
-      options.jitter_ms = std::atof(argv[++i]);
-    } else if (a == "--sensor" && has_value) {
-      sensor_id = argv[++i];
-    } else if (a == "--corrections" && has_value) {
-      corrections_file = argv[++i];
-    } else if (a == "--identity" && has_value) {
-      identity_dir = argv[++i];
-    } else if (a == "--help" || a == "-h") {
-      usage(stdout);
-      return 0;
-    } else {
-      std::fprintf(stderr, "tarmac-replay: unexpected argument '%s'\n", a.c_str());
-      usage(stderr);
-      return kExitUsage;
-    }
-  }
-  if (dataset.empty() || !(options.rate_scale > 0.0)) {
-    usage(stderr);
-    return kExitUsage;
-  }
+  cli::App app(
+      "tarmac-replay",
+      "Publishes --dataset DIR (KITTI layout: scans/NNNNNN.bin in the sensor frame, poses.txt "
+      "T_world_sensor, optional times.txt) as sensor_msgs/PointCloud2 and "
+      "geometry_msgs/PoseWithCovarianceStamped on the topics of the config (default: the "
+      "built-in defaults, i.e. config/tarmac.yaml). Poses are T_world_base = "
+      "T_world_sensor * T_base_sensor^-1 with the sensor's extrinsic from the config. "
+      "Stamps are re-based on this machine's clock; scan k is sent at its stamp.");
+  app.add_option("--dataset", dataset, "the sequence")->required()->check(CLI::ExistingDirectory);
+  app.add_option("--rate-scale", options.rate_scale, "replay X times faster than recorded")
+      ->transform(cli::positive<double>());
+  app.add_option("--config", config_path, "tarmacd config whose topics and sensors are used")
+      ->type_name("FILE");
+  app.add_option("--scans", options.max_scans, "first N scans only (0: all)")
+      ->transform(cli::number<std::size_t>());
+  app.add_option("--poses", poses_file, "pose file in DIR")->type_name("FILE");
+  app.add_option("--jitter-ms", options.jitter_ms,
+                 "publish each message up to MS late, uniformly (tests)")
+      ->transform(cli::non_negative<double>());
+  app.add_option("--sensor", sensor_id,
+                 "which configured sensor the scans belong to (default: the first)")
+      ->type_name("ID");
+  app.add_option("--loop", options.loops,
+                 "replay the sequence N times, stamps continuing (soak tests)")
+      ->transform(cli::positive<std::size_t>());
+  app.add_flag_callback(
+      "--no-poses", [&options] { options.publish_poses = false; },
+      "scans only (one replay per LiDAR, one of them with poses)");
+  app.add_option("--align-ms", options.align_ms,
+                 "first stamp on a multiple of MS since the epoch, like a LiDAR phase-locked to "
+                 "PTP (tarmacd ticks on the same grid; 0: no alignment)")
+      ->transform(cli::non_negative<double>());
+  app.add_option("--identity", identity_dir,
+                 "DDS Security identity DIR/cert.pem, DIR/key.pem instead of the config's "
+                 "(dds.security; e.g. make-dds-security.sh's 'publisher')")
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--corrections", corrections_file,
+                 "corrected trajectories (tarmac-sim --correct-at writes DIR/corrections.txt): "
+                 "each sent as nav_msgs/Path on the config's pose.correction_topic right after "
+                 "its scan K")
+      ->check(CLI::ExistingFile);
+  app.add_option("--pose-readers", options.pose_readers,
+                 "wait for N matched readers of the poses before the first message (1: tarmacd; "
+                 "2 with tarmac-audit --score)")
+      ->transform(cli::positive<std::size_t>());
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
   config::Config cfg;
   cfg.dds.participant.name = "tarmac-replay";
   if (!config_path.empty()) {

@@ -1,11 +1,10 @@
 // tarmac-sim: writes a synthetic airside sequence in KITTI layout (scans, poses, times) from a
 // simulated spinning LiDAR driving through an analytic scene, with the scene as ground truth.
 
-#include <charconv>
 #include <cstdio>
 #include <string>
-#include <string_view>
 
+#include "tarmac/config/cli.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
 
@@ -13,44 +12,7 @@ namespace {
 
 using namespace tarmac;
 
-constexpr int kExitUsage = 64;
 constexpr int kExitIo = 74;
-
-void usage(std::FILE* to) {
-  std::fprintf(
-      to,
-      "usage: tarmac-sim --out DIR [--scans N] [--rate-hz HZ] [--speed M/S] [--beams N]\n"
-      "                  [--azimuth-steps N] [--max-range M] [--noise-m M] [--seed N]\n"
-      "                  [--tilt-deg DEG] [--scene airside|terminal|aircraft]\n"
-      "                  [--drift-m M [--drift-ramp-s S] [--correct-at K]]\n"
-      "  Drives a vehicle along y = 0 from x = 0 to x = 60 m through a synthetic airside apron\n"
-      "  and writes DIR/scans/NNNNNN.bin (sensor frame), poses.txt (T_world_sensor), times.txt,\n"
-      "  scene.json (ground truth) and README.txt. Same arguments, same bytes.\n"
-      "  --out DIR          output directory (created; stale scans/NNNNNN.bin are removed)\n"
-      "  --scans N          number of scans (default: enough to drive the whole path)\n"
-      "  --rate-hz HZ       scan rate (default 10)\n"
-      "  --speed M/S        vehicle speed (default 3)\n"
-      "  --beams N          beams, elevations evenly spaced over -22.5 .. 22.5 deg (default 32)\n"
-      "  --azimuth-steps N  firings per revolution (default 1024)\n"
-      "  --max-range M      maximum range (default 100)\n"
-      "  --noise-m M        Gaussian range noise, 1 sigma (default 0)\n"
-      "  --seed N           noise seed (default 1)\n"
-      "  --tilt-deg DEG     rotate the poses' world frame about x (default 0)\n"
-      "  --scene NAME       airside (default), terminal (long walls beside the path) or\n"
-      "                     aircraft (a loop round a parked aircraft whose belly is in the\n"
-      "                     vehicle envelope, turns of 20 m radius, default speed 10 m/s)\n"
-      "  --drift-m M        pose drift: written poses shifted along scene y, growing to M\n"
-      "  --drift-ramp-s S   time the drift takes to reach M (default 2 s)\n"
-      "  --correct-at K     true poses again from scan K on; writes corrections.txt (the\n"
-      "                     corrected trajectory of scans 0..K-1, for tarmac-map --corrections)\n");
-}
-
-template <typename T>
-bool parse(std::string_view text, T& value) {
-  const char* end = text.data() + text.size();
-  const auto [ptr, ec] = std::from_chars(text.data(), end, value);
-  return ec == std::errc{} && ptr == end;
-}
 
 }  // namespace
 
@@ -58,67 +20,52 @@ int main(int argc, char** argv) {
   sim::SequenceParams params;
   std::string out_dir;
   std::string scene_name = "airside";
-  bool speed_given = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string_view arg = argv[i];
-    if (arg == "--help" || arg == "-h") {
-      usage(stdout);
-      return 0;
-    }
-    if (i + 1 >= argc) {
-      std::fprintf(stderr, "tarmac-sim: %s: missing value or unknown option\n", argv[i]);
-      usage(stderr);
-      return kExitUsage;
-    }
-    const std::string_view value = argv[++i];
-    bool ok = true;
-    if (arg == "--out") {
-      out_dir = value;
-      ok = !out_dir.empty();
-    } else if (arg == "--scans") {
-      ok = parse(value, params.scans) && params.scans > 0;
-    } else if (arg == "--rate-hz") {
-      ok = parse(value, params.rate_hz);
-    } else if (arg == "--speed") {
-      ok = parse(value, params.path.speed_mps);
-      speed_given = true;
-    } else if (arg == "--beams") {
-      ok = parse(value, params.lidar.beams);
-    } else if (arg == "--azimuth-steps") {
-      ok = parse(value, params.lidar.azimuth_steps);
-    } else if (arg == "--max-range") {
-      ok = parse(value, params.lidar.max_range_m);
-    } else if (arg == "--noise-m") {
-      ok = parse(value, params.lidar.range_noise_m);
-    } else if (arg == "--seed") {
-      ok = parse(value, params.seed);
-    } else if (arg == "--tilt-deg") {
-      ok = parse(value, params.tilt_deg);
-    } else if (arg == "--scene") {
-      scene_name = value;
-      ok = scene_name == "airside" || scene_name == "terminal" || scene_name == "aircraft";
-    } else if (arg == "--drift-m") {
-      ok = parse(value, params.drift_m);
-    } else if (arg == "--drift-ramp-s") {
-      ok = parse(value, params.drift_ramp_s);
-    } else if (arg == "--correct-at") {
-      ok = parse(value, params.correct_at_scan);
-    } else {
-      std::fprintf(stderr, "tarmac-sim: unknown option %s\n", argv[i - 1]);
-      usage(stderr);
-      return kExitUsage;
-    }
-    if (!ok) {
-      std::fprintf(stderr, "tarmac-sim: %s: bad value '%s'\n", argv[i - 1], argv[i]);
-      usage(stderr);
-      return kExitUsage;
-    }
-  }
-  if (out_dir.empty()) {
-    std::fprintf(stderr, "tarmac-sim: --out is required\n");
-    usage(stderr);
-    return kExitUsage;
-  }
+  cli::App app("tarmac-sim",
+               "Drives a vehicle along y = 0 from x = 0 to x = 60 m through a synthetic airside "
+               "apron and writes DIR/scans/NNNNNN.bin (sensor frame), poses.txt "
+               "(T_world_sensor), times.txt, scene.json (ground truth) and README.txt. Same "
+               "arguments, same bytes.");
+  app.add_option("--out", out_dir, "output directory (created; stale scans/NNNNNN.bin are removed)")
+      ->type_name("DIR")
+      ->required();
+  app.add_option("--scans", params.scans,
+                 "number of scans (default: enough to drive the whole path)")
+      ->default_str("")
+      ->transform(cli::positive<int>());
+  app.add_option("--rate-hz", params.rate_hz, "scan rate")->transform(cli::positive<double>());
+  auto* speed = app.add_option("--speed", params.path.speed_mps, "vehicle speed, m/s")
+                    ->transform(cli::positive<double>());
+  app.add_option("--beams", params.lidar.beams,
+                 "beams, elevations evenly spaced over -22.5 .. 22.5 deg")
+      ->transform(cli::positive<int>());
+  app.add_option("--azimuth-steps", params.lidar.azimuth_steps, "firings per revolution")
+      ->transform(cli::positive<int>());
+  app.add_option("--max-range", params.lidar.max_range_m, "maximum range, m")
+      ->transform(cli::positive<double>());
+  app.add_option("--noise-m", params.lidar.range_noise_m, "Gaussian range noise, 1 sigma, m")
+      ->transform(cli::non_negative<double>());
+  app.add_option("--seed", params.seed, "noise seed")->transform(cli::number<std::uint64_t>());
+  app.add_option("--tilt-deg", params.tilt_deg, "rotate the poses' world frame about x, deg")
+      ->transform(cli::in_range(-180.0, 180.0));
+  app.add_option("--scene", scene_name,
+                 "airside, terminal (long walls beside the path) or aircraft (a loop round a "
+                 "parked aircraft whose belly is in the vehicle envelope, turns of 20 m radius, "
+                 "default speed 10 m/s)")
+      ->check(CLI::IsMember({"airside", "terminal", "aircraft"}));
+  auto* drift = app.add_option("--drift-m", params.drift_m,
+                               "pose drift: written poses shifted along scene y, growing to M")
+                    ->transform(cli::in_range(-100.0, 100.0));
+  app.add_option("--drift-ramp-s", params.drift_ramp_s, "time the drift takes to reach M, s")
+      ->transform(cli::positive<double>())
+      ->needs(drift);
+  app.add_option("--correct-at", params.correct_at_scan,
+                 "true poses again from scan K on; writes corrections.txt (the corrected "
+                 "trajectory of scans 0..K-1, for tarmac-map --corrections)")
+      ->transform(cli::non_negative<int>())
+      ->needs(drift);
+  if (auto exit = cli::parse(app, argc, argv)) return *exit;
+  if (out_dir.empty()) return cli::usage_error(app, "--out: the directory name is empty");
+  const bool speed_given = speed->count() > 0;
   if (scene_name == "aircraft") {
     const double sensor_height_m = params.path.sensor_height_m;
     // Turns of 20 m radius: at 10 m/s the heading changes 2.9 deg per scan at 10 Hz, as a
@@ -128,9 +75,7 @@ int main(int argc, char** argv) {
     params.path.sensor_height_m = sensor_height_m;
   }
   if (const std::string error = params.validate(); !error.empty()) {
-    std::fprintf(stderr, "tarmac-sim: %s\n", error.c_str());
-    usage(stderr);
-    return kExitUsage;
+    return cli::usage_error(app, error);
   }
 
   const sim::Scene scene = scene_name == "terminal"   ? sim::Scene::terminal_walls()

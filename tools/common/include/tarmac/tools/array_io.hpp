@@ -1,10 +1,12 @@
 #pragma once
-/// @file Writing arrays for analysis: NumPy .npy v1.0 (C order) and 8-bit RGB PNG.
+/// @file Writing results for analysis: NumPy .npy v1.0 (C order), 8-bit RGB PNG and JSON.
 
 #include <cstdint>
 #include <filesystem>
 #include <span>
 #include <vector>
+
+#include <nlohmann/json_fwd.hpp>
 
 #include "tarmac/core/result.hpp"
 
@@ -19,6 +21,9 @@ core::Status write_npy(const std::filesystem::path& file, std::span<const std::i
 /// Writes an RGB image, rows top to bottom, 3 bytes per pixel.
 core::Status write_png(const std::filesystem::path& file, std::span<const std::uint8_t> rgb,
                        std::uint32_t width, std::uint32_t height);
+
+/// Writes `value` as JSON, indented by two spaces, keys in their insertion order.
+core::Status write_json(const std::filesystem::path& file, const nlohmann::ordered_json& value);
 
 /// FNV-1a 64 over bytes, as 16 hex digits (map digests for determinism checks).
 std::string digest(std::span<const std::uint8_t> bytes,

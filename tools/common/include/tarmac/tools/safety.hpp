@@ -5,13 +5,13 @@
 
 #include <cstdint>
 #include <filesystem>
-#include <ostream>
 #include <span>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
 #include <Eigen/Core>
+#include <nlohmann/json_fwd.hpp>
 
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/result.hpp"
@@ -105,6 +105,6 @@ std::string safety_summary(const SafetyReport& report);
 /// The report and every cycle as one JSON object (the value of "safety" in tarmac-map's
 /// timing.json and tarmac-audit's --json): the report's fields, "cycle_fields" naming the columns
 /// and "per_cycle", one array per cycle in observation order.
-void write_safety_json(std::ostream& out, const SafetyTracker& tracker);
+nlohmann::ordered_json safety_json(const SafetyTracker& tracker);
 
 }  // namespace tarmac::tools
