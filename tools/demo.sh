@@ -16,8 +16,8 @@ data=${TARMAC_DATA_DIR:-../shared/data}
 echo
 echo "== tarmac-map: real LiDAR (MulRan KAIST03, Ouster OS1-64) -> occupancy, costmap, ESDF, latency table =="
 # MulRan's scans are unorganised (no beams without return): the whole-envelope free rule would
-# leave everything above the sensor unknown, so this run takes free_rule: any_voxel (README,
-# "Safety argument").
+# leave everything above the sensor unknown, so this run takes free_rule: any_voxel
+# (docs/mapping.md, "Safety argument").
 mkdir -p out
 sed 's/^  free_rule: whole_envelope/  free_rule: any_voxel     /' config/tarmac.yaml > out/unorganised.yaml
 build/bin/tarmac-map --dataset "$data/mulran_kaist03" --config out/unorganised.yaml --threads 2 --out out/mulran
