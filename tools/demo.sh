@@ -13,15 +13,25 @@ echo "== tarmacd validates the shipped config =="
 build/bin/tarmacd --check-config config/tarmac.yaml
 
 data=${TARMAC_DATA_DIR:-../shared/data}
-echo
-echo "== tarmac-map: real LiDAR (MulRan KAIST03, Ouster OS1-64) -> occupancy, costmap, ESDF, latency table =="
-# MulRan's scans are unorganised (no beams without return): the whole-envelope free rule would
-# leave everything above the sensor unknown, so this run takes free_rule: any_voxel (README,
-# "Safety argument").
 mkdir -p out
-sed 's/^  free_rule: whole_envelope/  free_rule: any_voxel     /' config/tarmac.yaml > out/unorganised.yaml
-build/bin/tarmac-map --dataset "$data/mulran_kaist03" --config out/unorganised.yaml --threads 2 --out out/mulran
-echo "costmap image: out/mulran/costmap.png  (ESDF slice: out/mulran/esdf_slice.png)"
+if [ -d "$data/mulran_kaist03" ]; then
+  echo
+  echo "== tarmac-map: real LiDAR (MulRan KAIST03, Ouster OS1-64) -> occupancy, costmap, ESDF, latency table =="
+  # MulRan's scans are unorganised (no beams without return): the whole-envelope free rule would
+  # leave everything above the sensor unknown, so this run takes free_rule: any_voxel
+  # (docs/mapping.md, "Safety argument").
+  sed 's/^  free_rule: whole_envelope/  free_rule: any_voxel     /' config/tarmac.yaml > out/unorganised.yaml
+  build/bin/tarmac-map --dataset "$data/mulran_kaist03" --config out/unorganised.yaml --threads 2 --out out/mulran
+  echo "costmap image: out/mulran/costmap.png  (ESDF slice: out/mulran/esdf_slice.png)"
+else
+  # A user's machine has no ../shared/data: map the simulator's sequence instead, and say so.
+  echo
+  echo "== tarmac-map: no real data at $data/mulran_kaist03 (set TARMAC_DATA_DIR to a KITTI-layout"
+  echo "   data folder to map MulRan); mapping the simulator's 64-beam airside sequence instead =="
+  build/bin/tarmac-sim --out out/sim --beams 64
+  build/bin/tarmac-map --dataset out/sim --config config/tarmac.yaml --threads 2 --out out/sim-map
+  echo "costmap image: out/sim-map/costmap.png  (ESDF slice: out/sim-map/esdf_slice.png)"
+fi
 
 echo
 echo "== tarmacd on loopback DDS: a simulated airside sequence (64-beam LiDAR) replayed at 10 Hz =="

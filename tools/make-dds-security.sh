@@ -1,5 +1,5 @@
 #!/bin/sh
-# Creates DDS Security material for a tarmac deployment or test (README "DDS Security"):
+# Creates DDS Security material for a tarmac deployment or test (docs/operations.md "DDS Security"):
 #
 #   tools/make-dds-security.sh OUTDIR [--protection sign|encrypt|none] [--days N]
 #

@@ -411,7 +411,7 @@ std::uint64_t traverse(const WindowGeometry& w, const RayStart& start, const Eig
 /// axis crosses next, and a ray's run of steps resembles those of the
 /// rays beside it: walked one after another, the processor predicts most of them (BALM hall,
 /// whose scans interleave distant directions: in a harness walking its rays, sorted per scan,
-/// 0.83 of the time; docs/perf-occ5.md). The marks are the
+/// 0.83 of the time; docs/perf/archive/perf-occ5.md). The marks are the
 /// same whatever the order, so this changes speed only. The order: cube-map face of the
 /// direction (dominant axis and sign), band of the second minor coordinate, bin of the first.
 constexpr int kDirBands = 16;  ///< bands per cube face
@@ -714,7 +714,8 @@ __attribute__((target("avx512f,avx512dq"))) void set_up_walks(const WindowGeomet
 /// and takes the next walk from the queue without leaving the vector loop. The loop is left
 /// only for an event (ring wrap, window exit), which the scalar state handles one lane at a
 /// time, and to set up the next batch.
-/// Measurements: docs/perf-occ5.md; `tarmac-bench --narrow-walk` runs the walks one at a time.
+/// Measurements: docs/perf/archive/perf-occ5.md; `tarmac-bench --narrow-walk` runs the walks one
+/// at a time.
 /// The wide walk's lanes between vector loops, per axis where it applies: parameters, parameter
 /// steps, slot steps, event counters; slot, steps left, and `source`: the queue index of the
 /// lane's walk, or −1 once its scalar state lives in lane_axes (after an event or a new batch),
@@ -1073,7 +1074,7 @@ __attribute__((target("avx2"))) void set_up_lanes4(const WindowGeometry& w, cons
 /// moves on (the last steps may cross in another order than exact arithmetic would, by one
 /// voxel at most), clamped to the window. A superset of the voxels marked: the apply pass
 /// reads the marks inside it, so only its time changes.
-/// Measurements: docs/perf-occ8.md.
+/// Measurements: docs/perf/archive/perf-occ8.md.
 template <bool kFlagWords>
 __attribute__((target("avx2"))) std::uint64_t walk_rays_lanes4(const WindowGeometry& w,
                                                                const RayStart& start,

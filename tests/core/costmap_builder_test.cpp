@@ -226,7 +226,7 @@ TEST_F(FreeRuleApron, EnvelopeAboveTheSensorNeverObserved_Unknown) {
 }
 
 /// Nav2's StaticLayer reading of one OccupancyGrid value (nav2_costmap_2d, StaticLayer::
-/// interpretValue), with the parameters a user sets: the model the README's table is checked
+/// interpretValue), with the parameters a user sets: the model docs/ros2.md's table is checked
 /// against. `inscribed_param`: Nav2 releases with `inscribed_obstacle_cost_value` (default 99)
 /// map that value to 253; older ones (Humble) have no such parameter (pass -1).
 int nav2_static_layer(std::int8_t value, bool track_unknown_space, bool trinary_costmap,
@@ -258,7 +258,7 @@ TEST(DistanceDisplay, ShadesDistanceLinearly_UnknownStaysUnknown) {
 }
 
 TEST(Nav2Translation, TableOfTheReadme) {
-  // The values the README's "Use with ROS 2 and Nav2" table states, with the settings it gives.
+  // The values docs/ros2.md's "Nav2" table states, with the settings it gives.
   EXPECT_EQ(nav2_static_layer(kCostLethal, true, false), 254);
   EXPECT_EQ(nav2_static_layer(kCostInscribed, true, false), 253);
   EXPECT_EQ(nav2_static_layer(kCostInscribed, true, false, -1), 251);  // Humble: scaled
@@ -270,7 +270,8 @@ TEST(Nav2Translation, TableOfTheReadme) {
     EXPECT_GE(cost, 1) << v;
     EXPECT_LE(cost, 252) << v << ": an inflated cost must stay below Nav2's inscribed 253";
   }
-  // Nav2's defaults are the danger the README warns of: inflation and unknown read free.
+  // Nav2's defaults are the danger the README and docs/ros2.md warn of: inflation and unknown
+  // read free.
   EXPECT_EQ(nav2_static_layer(50, false, true), 0);
   EXPECT_EQ(nav2_static_layer(kCostUnknown, false, true), 0);
 }

@@ -271,7 +271,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "tarmac-map: note: unorganised scans carry no beams without return; with "
                  "costmap.free_rule whole_envelope the envelope above the sensor stays unknown "
-                 "where nothing above returns (README, \"Safety argument\")\n");
+                 "where nothing above returns (docs/mapping.md, \"Safety argument\")\n");
   }
   std::error_code ec;
   std::filesystem::create_directories(opt.out, ec);

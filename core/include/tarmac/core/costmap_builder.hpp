@@ -39,7 +39,7 @@ enum class FreeRule : std::uint8_t {
   kWholeEnvelope,
   /// Some voxel of the envelope observed: free space where only part of the envelope was seen
   /// (a wing above rays that passed under it reads free). For sensors that report no beams
-  /// without return, with the risk stated in the README's safety argument.
+  /// without return, with the risk stated in docs/mapping.md, "Safety argument".
   kAnyVoxel,
 };
 
