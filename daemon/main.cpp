@@ -21,6 +21,7 @@
 
 #include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
+#include "tarmac/config/schema.hpp"
 #include "tarmac/daemon/executor.hpp"
 #include "tarmac/daemon/stop_signals.hpp"
 #include "tarmac/transport/participant.hpp"
@@ -35,6 +36,7 @@ constexpr int kExitDds = 69;     // EX_UNAVAILABLE
 
 int main(int argc, char** argv) {
   std::string config_path;
+  bool print_reference = false;
   tarmac::cli::App app("tarmacd", "tarmac's real-time LiDAR mapping daemon.");
   auto* run =
       app.add_option("--config", config_path, "run the daemon with this config")->type_name("FILE");
@@ -42,14 +44,31 @@ int main(int argc, char** argv) {
       app.add_option("--check-config", config_path, "validate FILE and exit (0 valid, 78 invalid)")
           ->type_name("FILE")
           ->excludes(run);
+  auto* print = app.add_option("--print-config", config_path,
+                               "print the effective config of FILE as YAML, every default filled "
+                               "in, and exit (0 valid, 78 invalid)")
+                    ->type_name("FILE")
+                    ->excludes(run)
+                    ->excludes(check);
+  app.add_flag("--print-config-reference", print_reference,
+               "print every config key (type, default, range, unit, doc) as a "
+               "Markdown table and exit")
+      ->excludes(run)
+      ->excludes(check)
+      ->excludes(print);
   app.footer(
       "Exit status: 0 stopped by SIGTERM/SIGINT (map saved) or config valid, 64 usage, 69 DDS "
       "unavailable, 70 a tick stuck at stop (map not saved), 78 config invalid.");
   if (auto exit = tarmac::cli::parse(app, argc, argv)) return *exit;
-  if (config_path.empty()) {
-    return tarmac::cli::usage_error(app, "--config FILE or --check-config FILE is required");
+  if (print_reference) {
+    std::fputs(tarmac::config::reference_markdown().c_str(), stdout);
+    return kExitOk;
   }
-  const bool check_only = check->count() > 0;
+  if (config_path.empty()) {
+    return tarmac::cli::usage_error(
+        app, "--config FILE, --check-config FILE or --print-config FILE is required");
+  }
+  const bool check_only = check->count() > 0 || print->count() > 0;
 
   // Running (not only checking): from here a stop signal is handled, not fatal. Before any
   // thread exists, so every thread inherits the blocked mask and only StopSignals' own thread
@@ -65,6 +84,10 @@ int main(int argc, char** argv) {
     return kExitConfig;
   }
   const std::string hash = tarmac::config::config_hash(config.value());
+  if (print->count() > 0) {
+    std::printf("%s\n", tarmac::config::to_yaml(config.value()).c_str());
+    return kExitOk;
+  }
   if (check_only) {
     std::printf("%s: valid (config hash %s)\n", config_path.c_str(), hash.c_str());
     return kExitOk;

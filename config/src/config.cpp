@@ -1,5 +1,6 @@
 #include "tarmac/config/config.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -8,12 +9,17 @@
 #include <fstream>
 #include <limits>
 #include <set>
+#include <span>
 #include <sstream>
+#include <string_view>
 #include <type_traits>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include <yaml-cpp/yaml.h>
+
+#include "tarmac/config/schema.hpp"
 
 namespace tarmac::config {
 
@@ -208,197 +214,264 @@ T parse_real(const YAML::Node& node, const std::string& path, T min, T max) {
   return value;
 }
 
-/// One scalar of type T: bool, an integer type or a floating-point type.
-template <typename T>
-T parse_scalar(const YAML::Node& node, const std::string& path, T min, T max) {
-  if constexpr (std::is_same_v<T, bool>) {
-    (void)min;
-    (void)max;
-    return parse_bool(node, path);
-  } else if constexpr (std::is_integral_v<T>) {
-    return parse_integer(node, path, min, max);
-  } else {
-    return parse_real(node, path, min, max);
+/// Edit distance between two keys (optimal string alignment: insertions, deletions,
+/// substitutions and swaps of neighbours each cost 1), for "did you mean".
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::vector<std::size_t>> d(a.size() + 1, std::vector<std::size_t>(b.size() + 1));
+  for (std::size_t i = 0; i <= a.size(); ++i) d[i][0] = i;
+  for (std::size_t j = 0; j <= b.size(); ++j) d[0][j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t cost = a[i - 1] == b[j - 1] ? 0 : 1;
+      d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + cost});
+      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1]) {
+        d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+      }
+    }
+  }
+  return d[a.size()][b.size()];
+}
+
+/// " (did you mean 'inflation_radius_m'?)" for the known key nearest to `key`, when one is near
+/// enough to be a typo (a third of the key's length, 1 to 3 edits), else "".
+std::string did_you_mean(const std::string& key, const std::vector<std::string>& known) {
+  const std::size_t near = std::clamp<std::size_t>(key.size() / 3, 1, 3);
+  std::string best;
+  std::size_t best_distance = near + 1;
+  for (const auto& candidate : known) {
+    const std::size_t distance = edit_distance(key, candidate);
+    if (distance < best_distance) {
+      best = candidate;
+      best_distance = distance;
+    }
+  }
+  return best.empty() ? "" : " (did you mean '" + best + "'?)";
+}
+
+/// Why a topic key's value is refused, or "" (after mapping `/ns/name` to `rt/ns/name`).
+void read_topic(const YAML::Node& node, const std::string& path, std::string& value) {
+  const std::string given = node.Scalar();
+  value = given;
+  if (value.empty()) return;  // an output switched off, where the key allows it
+  if (value.front() == '/') value = "rt" + value;
+  const auto why = ros_topic_problem(value);
+  if (!why.empty()) {
+    fail("value", path,
+         "'" + given + "' " + why + " (give a ROS 2 name such as /tarmac/costmap, or its DDS " +
+             "form rt/tarmac/costmap)");
   }
 }
 
-/// Reads the keys of one YAML map and, at the end, rejects any key nobody asked for.
+std::string choice_list(const Key& key) {
+  std::string list;
+  for (const auto& c : key.choices) list += (list.empty() ? "" : ", ") + std::string(c);
+  return list;
+}
+
+/// Reads a YAML document into a Config by the schema: the keys of each map in schema order,
+/// then the map's unknown keys refused (with the nearest known key suggested).
 /// check_structure() has run on the whole document first: no duplicate or non-scalar keys.
-class MapReader {
+class SchemaReader {
  public:
-  MapReader(const YAML::Node& node, std::string path) : node_(node), path_(std::move(path)) {
-    if (node_ && !node_.IsNull() && !node_.IsMap()) {
-      fail("type", path_or_root(path_), "expected a map, got " + describe(node_));
-    }
-  }
+  SchemaReader(Config& config, std::string base_dir)
+      : config_(config), base_dir_(std::move(base_dir)) {}
 
-  /// A number (finite, in [min, max]), an integer (in [min, max]) or a bool, by T.
-  template <typename T>
-  void scalar(const std::string& key, T& value, T min, T max) {
-    const YAML::Node child = take(key);
-    if (!child) return;
-    value = parse_scalar<T>(child, join(key), min, max);
-  }
-
-  void string(const std::string& key, std::string& value) {
-    const YAML::Node child = take(key);
-    if (!child) return;
-    if (!child.IsScalar()) fail("type", join(key), "expected a string, got " + describe(child));
-    value = child.Scalar();
-  }
-
-  /// A DDS topic name that ROS 2 nodes can see: its wire form `rt/ns/name` as is, a ROS 2 name
-  /// `/ns/name` mapped to `rt/ns/name`; anything else is refused (ROS could not see it). Empty
-  /// stays empty (an output switched off, where the key allows it).
-  void topic(const std::string& key, std::string& value) {
-    string(key, value);
-    if (value.empty()) return;
-    const std::string given = value;
-    if (value.front() == '/') value = "rt" + value;
-    const auto why = ros_topic_problem(value);
-    if (!why.empty()) {
-      fail("value", join(key),
-           "'" + given + "' " + why + " (give a ROS 2 name such as /tarmac/costmap, or its DDS " +
-               "form rt/tarmac/costmap)");
+  /// Reads `keys` (all in the map `prefix`, schema form: "dds.qos.lidar.") from `node`, the
+  /// map at `path` ("" for the root).
+  void read_map(const YAML::Node& node, const std::string& path, const std::string& prefix,
+                std::span<const Key> keys) {
+    if (node && !node.IsNull() && !node.IsMap()) {
+      fail("type", path_or_root(path), "expected a map, got " + describe(node));
     }
-  }
-
-  /// A string that must be one of `choices`; returns the index chosen, or -1 if absent.
-  int choice(const std::string& key, const std::vector<std::string>& choices) {
-    const YAML::Node child = take(key);
-    if (!child) return -1;
-    std::string list;
-    for (const auto& c : choices) list += (list.empty() ? "" : ", ") + c;
-    if (!child.IsScalar()) {
-      fail("type", join(key), "expected a string (one of {" + list + "}), got " + describe(child));
-    }
-    const std::string& text = child.Scalar();
-    for (std::size_t i = 0; i < choices.size(); ++i) {
-      if (choices[i] == text) return static_cast<int>(i);
-    }
-    fail("value", join(key), "must be one of {" + list + "}, got '" + text + "'");
-  }
-
-  void string_list(const std::string& key, std::vector<std::string>& value) {
-    const YAML::Node child = take(key);
-    if (!child) return;
-    if (!child.IsSequence()) {
-      fail("type", join(key), "expected a list of strings, got " + describe(child));
-    }
-    value.clear();
-    for (std::size_t i = 0; i < child.size(); ++i) {
-      if (!child[i].IsScalar()) {
-        fail("type", item(key, i), "expected a string, got " + describe(child[i]));
+    std::vector<std::string> known;
+    for (std::size_t i = 0; i < keys.size();) {
+      const std::string name = next_segment(keys[i], prefix);
+      std::size_t end = i + 1;
+      while (end < keys.size() && next_segment(keys[end], prefix) == name) ++end;
+      const bool is_list = name.ends_with("[]");
+      const std::string key = is_list ? name.substr(0, name.size() - 2) : name;
+      known.push_back(key);
+      const YAML::Node child = take(node, path, key);
+      if (child) {
+        const std::string child_path = join_path(path, key);
+        present_.insert(child_path);
+        const auto group = keys.subspan(i, end - i);
+        if (is_list) {
+          read_sensors(child, child_path, group);
+        } else if (keys[i].path.size() == prefix.size() + name.size()) {
+          read_leaf(keys[i], child, child_path);
+        } else {
+          read_map(child, child_path, prefix + name + ".", group);
+        }
       }
-      value.push_back(child[i].Scalar());
+      i = end;
     }
-  }
-
-  void int_list(const std::string& key, std::vector<int>& value, int min, int max) {
-    const YAML::Node child = take(key);
-    if (!child) return;
-    if (!child.IsSequence()) {
-      fail("type", join(key), "expected a list of integers, got " + describe(child));
-    }
-    value.clear();
-    for (std::size_t i = 0; i < child.size(); ++i) {
-      value.push_back(parse_integer<int>(child[i], item(key, i), min, max));
-    }
-  }
-
-  /// True when `key` is present (and marks it as known).
-  bool has(const std::string& key) {
-    const YAML::Node child = take(key);
-    return static_cast<bool>(child);
-  }
-
-  /// A list of maps, each read by `read(MapReader&, index)`; paths are `key[i].sub`.
-  template <typename Fn>
-  void map_list(const std::string& key, Fn read) {
-    const YAML::Node child = take(key);
-    if (!child) return;
-    if (!child.IsSequence()) {
-      fail("type", join(key), "expected a list of maps, got " + describe(child));
-    }
-    for (std::size_t i = 0; i < child.size(); ++i) {
-      if (!child[i].IsMap())
-        fail("type", item(key, i), "expected a map, got " + describe(child[i]));
-      MapReader nested(child[i], item(key, i));
-      read(nested, i);
-      nested.finish();
-    }
-  }
-
-  [[nodiscard]] const std::string& path() const { return path_; }
-
-  /// A nested map, read by `read(MapReader&)`.
-  template <typename Fn>
-  void map(const std::string& key, Fn read) {
-    const YAML::Node child = take(key);
-    if (!child) return;
-    MapReader nested(child, join(key));
-    read(nested);
-    nested.finish();
-  }
-
-  /// Rejects keys that were never asked for.
-  void finish() const {
-    if (!node_ || !node_.IsMap()) return;
-    for (const auto& kv : node_) {
+    if (!node || !node.IsMap()) return;
+    for (const auto& kv : node) {
       const std::string& key = kv.first.Scalar();
-      if (seen_.count(key) == 0) fail("unknown_key", join(key), "unknown key");
+      if (std::find(known.begin(), known.end(), key) == known.end()) {
+        fail("unknown_key", join_path(path, key), "unknown key" + did_you_mean(key, known));
+      }
     }
   }
+
+  /// True when the file gives the key or map at `path` ("dds.domain_id").
+  [[nodiscard]] bool present(const std::string& path) const { return present_.count(path) > 0; }
 
  private:
-  YAML::Node take(const std::string& key) {
-    seen_.insert(key);
-    if (!node_ || !node_.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
-    YAML::Node child = node_[key];
-    if (child && child.IsNull()) fail("type", join(key), "has no value");
+  /// The key or map name that follows `prefix` in `key`'s path ("sensors[]", "rate_hz").
+  static std::string next_segment(const Key& key, const std::string& prefix) {
+    const std::string rest = key.path.substr(prefix.size());
+    return rest.substr(0, rest.find('.'));
+  }
+
+  static YAML::Node take(const YAML::Node& map, const std::string& path, const std::string& key) {
+    if (!map || !map.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
+    YAML::Node child = map[key];
+    if (child && child.IsNull()) fail("type", join_path(path, key), "has no value");
     return child;
   }
-  [[nodiscard]] std::string join(const std::string& key) const { return join_path(path_, key); }
-  [[nodiscard]] std::string item(const std::string& key, std::size_t i) const {
-    return join(key) + "[" + std::to_string(i) + "]";
-  }
 
-  YAML::Node node_;
-  std::string path_;
-  std::set<std::string> seen_;
-};
-
-const std::vector<std::string> kTransports = {"localhost", "shm", "network"};
-const std::vector<std::string> kReliability = {"best_effort", "reliable"};
-const std::vector<std::string> kDurability = {"volatile", "transient_local"};
-
-void read_qos(MapReader& r, transport::QosSpec& qos) {
-  if (const int i = r.choice("reliability", kReliability); i >= 0) {
-    qos.reliability = static_cast<transport::Reliability>(i);
-  }
-  if (const int i = r.choice("durability", kDurability); i >= 0) {
-    qos.durability = static_cast<transport::Durability>(i);
-  }
-  r.scalar<std::uint32_t>("depth", qos.history_depth, 1, 10000);
-}
-
-/// `dds.security`. Relative paths are taken relative to `base_dir` (the config file's folder)
-/// when one is given, so a config and its security material can move together.
-void read_security(MapReader& r, transport::SecurityConfig& s, const std::string& base_dir) {
-  r.scalar<bool>("enabled", s.enabled, false, true);
-  const auto path = [&](const char* key, std::string& value) {
-    r.string(key, value);
-    if (!value.empty() && !base_dir.empty() && std::filesystem::path(value).is_relative()) {
-      value = (std::filesystem::path(base_dir) / value).lexically_normal().string();
+  /// `sensors`: a list of 1..16 maps, each read by the `sensors[].` keys.
+  void read_sensors(const YAML::Node& node, const std::string& path, std::span<const Key> keys) {
+    if (!node.IsSequence()) fail("type", path, "expected a list of maps, got " + describe(node));
+    config_.sensors.clear();
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      const std::string at = path + "[" + std::to_string(i) + "]";
+      if (!node[i].IsMap()) fail("type", at, "expected a map, got " + describe(node[i]));
+      SensorEntry entry;
+      entry.sensor.id.clear();
+      sensor_ = &entry;
+      // The id first: the topic's and frame's defaults are made from it.
+      if (const YAML::Node id = take(node[i], at, "id")) read_leaf(keys.front(), id, at + ".id");
+      const std::string& id = entry.sensor.id;
+      if (id.empty()) fail("value", at + ".id", "is required and must not be empty");
+      entry.sensor.topic = "rt/tarmac/lidar/" + id + "/points";
+      entry.sensor.frame_id = "lidar_" + id;
+      read_map(node[i], at, "sensors[].", keys);
+      sensor_ = nullptr;
+      entry.sensor.T_base_sensor = extrinsic(entry, at + ".extrinsic");
+      for (const auto& other : config_.sensors) {
+        if (other.id == id) fail("value", at + ".id", "duplicate id '" + id + "'");
+        if (other.topic == entry.sensor.topic) {
+          fail("value", at + ".topic", "duplicate topic '" + entry.sensor.topic + "'");
+        }
+      }
+      config_.sensors.push_back(std::move(entry.sensor));
     }
-  };
-  path("identity_ca", s.identity_ca);
-  path("identity_certificate", s.identity_certificate);
-  path("private_key", s.private_key);
-  path("permissions_ca", s.permissions_ca);
-  path("governance", s.governance);
-  path("permissions", s.permissions);
-}
+    if (config_.sensors.empty()) fail("value", "sensors", "needs at least one sensor");
+    if (config_.sensors.size() > 16) fail("range", "sensors", "at most 16 sensors");
+  }
+
+  /// T_base_sensor from the translation and the rotation given as a unit quaternion or as
+  /// roll-pitch-yaw (ROS convention: R = Rz(yaw) · Ry(pitch) · Rx(roll)); identity if neither.
+  Eigen::Isometry3d extrinsic(const SensorEntry& e, const std::string& path) const {
+    constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+    const bool has_rpy = present(path + ".rpy_deg");
+    const bool has_quat = present(path + ".quaternion");
+    if (has_rpy && has_quat) {
+      fail("value", path + ".quaternion", "give either rpy_deg or quaternion, not both");
+    }
+    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+    if (has_rpy) {
+      R = (Eigen::AngleAxisd(e.yaw_deg * kDegToRad, Eigen::Vector3d::UnitZ()) *
+           Eigen::AngleAxisd(e.pitch_deg * kDegToRad, Eigen::Vector3d::UnitY()) *
+           Eigen::AngleAxisd(e.roll_deg * kDegToRad, Eigen::Vector3d::UnitX()))
+              .toRotationMatrix();
+    }
+    if (has_quat) {
+      if (std::abs(e.quaternion.norm() - 1.0) > 1e-3) {
+        fail("range", path + ".quaternion",
+             "must be a unit quaternion (norm " + std::to_string(e.quaternion.norm()) + ")");
+      }
+      R = e.quaternion.normalized().toRotationMatrix();
+    }
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = R;
+    T.translation() = e.translation_m;
+    return T;
+  }
+
+  /// One leaf: parsed and checked by its key's type and range, stored in its field.
+  void read_leaf(const Key& key, const YAML::Node& node, const std::string& path) {
+    const Field field = field_of(key, config_, sensor_);
+    std::visit(
+        [&](auto target) {
+          using T = std::remove_pointer_t<decltype(target)>;
+          if constexpr (std::is_same_v<T, bool>) {
+            *target = parse_bool(node, path);
+          } else if constexpr (std::is_integral_v<T>) {
+            *target =
+                parse_integer<T>(node, path, static_cast<T>(key.min), static_cast<T>(key.max));
+          } else if constexpr (std::is_floating_point_v<T>) {
+            *target = parse_real<T>(node, path, static_cast<T>(key.min), static_cast<T>(key.max));
+          } else if constexpr (std::is_same_v<T, std::string>) {
+            read_string(key, node, path, *target);
+          } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+            read_string_list(node, path, *target);
+          } else if constexpr (std::is_same_v<T, std::vector<int>>) {
+            read_integer_list(key, node, path, *target);
+          } else {
+            static_assert(std::is_same_v<decltype(target), ChoiceField>);
+            target.set(target.field, read_choice(key, node, path));
+          }
+        },
+        field);
+  }
+
+  void read_string(const Key& key, const YAML::Node& node, const std::string& path,
+                   std::string& value) const {
+    if (!node.IsScalar()) fail("type", path, "expected a string, got " + describe(node));
+    if (key.type == KeyType::kTopic) return read_topic(node, path, value);
+    value = node.Scalar();
+    // A relative file is taken relative to the config file's folder (when read from a file),
+    // so a config and its security material can move together.
+    if (key.type == KeyType::kPath && !value.empty() && !base_dir_.empty() &&
+        std::filesystem::path(value).is_relative()) {
+      value = (std::filesystem::path(base_dir_) / value).lexically_normal().string();
+    }
+  }
+
+  static void read_string_list(const YAML::Node& node, const std::string& path,
+                               std::vector<std::string>& value) {
+    if (!node.IsSequence()) fail("type", path, "expected a list of strings, got " + describe(node));
+    value.clear();
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      const std::string at = path + "[" + std::to_string(i) + "]";
+      if (!node[i].IsScalar()) fail("type", at, "expected a string, got " + describe(node[i]));
+      value.push_back(node[i].Scalar());
+    }
+  }
+
+  static void read_integer_list(const Key& key, const YAML::Node& node, const std::string& path,
+                                std::vector<int>& value) {
+    if (!node.IsSequence()) {
+      fail("type", path, "expected a list of integers, got " + describe(node));
+    }
+    value.clear();
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      value.push_back(parse_integer<int>(node[i], path + "[" + std::to_string(i) + "]",
+                                         static_cast<int>(key.min), static_cast<int>(key.max)));
+    }
+  }
+
+  /// The index of the choice named by `node`.
+  static int read_choice(const Key& key, const YAML::Node& node, const std::string& path) {
+    if (!node.IsScalar()) {
+      fail("type", path,
+           "expected a string (one of {" + choice_list(key) + "}), got " + describe(node));
+    }
+    for (std::size_t i = 0; i < key.choices.size(); ++i) {
+      if (key.choices[i] == node.Scalar()) return static_cast<int>(i);
+    }
+    fail("value", path, "must be one of {" + choice_list(key) + "}, got '" + node.Scalar() + "'");
+  }
+
+  Config& config_;
+  std::string base_dir_;
+  SensorEntry* sensor_ = nullptr;  ///< the sensor being read, for the `sensors[].` keys
+  std::set<std::string> present_;
+};
 
 /// ROS 2's convention: the domain comes from ROS_DOMAIN_ID when the config names none.
 void domain_from_environment(std::uint32_t& domain_id) {
@@ -407,274 +480,14 @@ void domain_from_environment(std::uint32_t& domain_id) {
   char* end = nullptr;
   errno = 0;
   const long value = std::strtol(env, &end, 10);
-  if (errno != 0 || *end != '\0' || value < 0 || value > 232) {
-    fail("value", "dds.domain_id",
+  const Key& key = schema_key("dds.domain_id");
+  if (errno != 0 || *end != '\0' || value < key.min || value > key.max) {
+    fail("value", key.path,
          std::string("not set in the file, and ROS_DOMAIN_ID='") + env +
-             "' in the environment is not a domain 0..232");
+             "' in the environment is not a domain " + std::to_string(std::lround(key.min)) + ".." +
+             std::to_string(std::lround(key.max)));
   }
   domain_id = static_cast<std::uint32_t>(value);
-}
-
-void read_dds(MapReader& r, DdsConfig& dds, const std::string& base_dir) {
-  auto& p = dds.participant;
-  r.scalar<std::uint32_t>("domain_id", p.domain_id, 0, 232);
-  r.string("participant_name", p.name);
-  if (const int i = r.choice("transport", kTransports); i >= 0) {
-    p.transport = static_cast<transport::TransportMode>(i);
-  }
-  r.string_list("network_interfaces", p.network_interfaces);
-  r.string_list("initial_peers", p.initial_peers);
-  r.scalar<std::uint32_t>("shm_segment_bytes", p.shm_segment_bytes, 1u << 16, 1u << 30);
-  r.scalar<std::uint32_t>("shm_max_message_bytes", p.shm_max_message_bytes, 1u << 16, 1u << 30);
-  r.scalar<std::uint32_t>("udp_receive_buffer_bytes", p.udp_receive_buffer_bytes, 1u << 16,
-                          1u << 30);
-  r.scalar<std::uint32_t>("udp_send_buffer_bytes", p.udp_send_buffer_bytes, 1u << 16, 1u << 30);
-  r.map("security", [&](MapReader& m) { read_security(m, p.security, base_dir); });
-  r.map("qos", [&](MapReader& q) {
-    q.map("lidar", [&](MapReader& m) { read_qos(m, dds.qos.lidar); });
-    q.map("pose", [&](MapReader& m) { read_qos(m, dds.qos.pose); });
-    q.map("virtual_obstacles", [&](MapReader& m) { read_qos(m, dds.qos.virtual_obstacles); });
-    q.map("costmap", [&](MapReader& m) { read_qos(m, dds.qos.costmap); });
-    q.map("esdf_slice", [&](MapReader& m) { read_qos(m, dds.qos.esdf_slice); });
-    q.map("esdf_band", [&](MapReader& m) { read_qos(m, dds.qos.esdf_band); });
-    q.map("diagnostics", [&](MapReader& m) { read_qos(m, dds.qos.diagnostics); });
-  });
-}
-
-const std::vector<std::string> kUnknownCost = {"unknown", "lethal", "free"};
-const std::vector<std::string> kFreeRule = {"whole_envelope", "any_voxel"};
-/// core::UnknownPolicy, in its order.
-const std::vector<std::string> kUnknownPolicy = {"report", "occupied"};
-
-void read_vector3(MapReader& r, const std::string& key, Eigen::Vector3d& v) {
-  r.map(key, [&](MapReader& m) {
-    m.scalar<double>("x", v.x(), -1e3, 1e3);
-    m.scalar<double>("y", v.y(), -1e3, 1e3);
-    m.scalar<double>("z", v.z(), -1e3, 1e3);
-  });
-}
-
-void read_mapping(MapReader& root, core::MapperParams& p) {
-  root.map("filters", [&](MapReader& r) {
-    r.scalar<double>("min_range_m", p.filters.min_range_m, 0.0, 100.0);
-    r.scalar<bool>("ego_box_enabled", p.filters.ego_box_enabled, false, true);
-    read_vector3(r, "ego_box_min_m", p.filters.ego_box_min_B);
-    read_vector3(r, "ego_box_max_m", p.filters.ego_box_max_B);
-    r.scalar<int>("outlier_min_neighbors", p.filters.outlier_min_neighbors, 0, 26);
-    r.scalar<double>("outlier_cell_m", p.filters.outlier_cell_m, 0.05, 5.0);
-    r.scalar<double>("outlier_max_range_m", p.filters.outlier_max_range_m, 0.0, 1000.0);
-  });
-  root.map("occupancy", [&](MapReader& r) {
-    auto& o = p.occupancy;
-    r.scalar<double>("voxel_size_m", o.voxel_size_m, 0.02, 2.0);
-    r.scalar<int>("window_x_vox", o.window_x_vox, 4, 4096);
-    r.scalar<int>("window_y_vox", o.window_y_vox, 4, 4096);
-    r.scalar<int>("window_z_vox", o.window_z_vox, 4, 4096);
-    r.scalar<double>("window_below_m", o.window_below_m, 0.0, 100.0);
-    r.scalar<float>("prob_hit", o.prob_hit, 0.5001f, 0.9999f);
-    r.scalar<float>("prob_miss", o.prob_miss, 0.0001f, 0.4999f);
-    r.scalar<float>("clamp_min", o.clamp_min, 0.0001f, 0.4999f);
-    r.scalar<float>("clamp_max", o.clamp_max, 0.5001f, 0.9999f);
-    r.scalar<double>("max_range_m", o.max_range_m, 0.1, 1000.0);
-    r.scalar<double>("clearing_range_m", o.clearing_range_m, 0.0, 1000.0);
-    r.scalar<double>("ground_radius_m", o.ground_radius_m, 0.0, 10.0);
-    r.scalar<int>("static_promote_scans", o.static_promote_scans, 0, 127);
-    r.scalar<int>("static_demote_scans", o.static_demote_scans, 1, 127);
-  });
-  root.map("costmap", [&](MapReader& r) {
-    auto& c = p.costmap;
-    r.scalar<double>("min_obstacle_height_m", c.min_obstacle_height_m, 0.0, 10.0);
-    r.scalar<double>("vehicle_height_m", c.vehicle_height_m, 0.1, 20.0);
-    r.scalar<double>("clearance_m", c.clearance_m, 0.0, 10.0);
-    r.scalar<double>("inscribed_radius_m", c.inscribed_radius_m, 0.0, 20.0);
-    r.scalar<double>("inflation_radius_m", c.inflation_radius_m, 0.0, 50.0);
-    r.scalar<double>("cost_scaling_factor", c.cost_scaling_factor, 0.01, 100.0);
-    r.scalar<double>("ground_cell_m", c.ground_cell_m, 0.05, 20.0);
-    r.scalar<double>("max_ground_step_m", c.max_ground_step_m, 0.01, 10.0);
-    r.scalar<double>("max_ground_slope", c.max_ground_slope, 0.0, 1.0);
-    r.scalar<double>("ground_tolerance_m", c.ground_tolerance_m, 0.0, 10.0);
-    if (const int i = r.choice("unknown_cost", kUnknownCost); i >= 0) {
-      c.unknown_cost = static_cast<core::UnknownCost>(i);
-    }
-    if (const int i = r.choice("free_rule", kFreeRule); i >= 0) {
-      c.free_rule = static_cast<core::FreeRule>(i);
-    }
-  });
-  root.map("esdf_band", [&](MapReader& r) {
-    auto& e = p.esdf_band;
-    r.scalar<bool>("enabled", e.enabled, false, true);
-    r.scalar<double>("below_m", e.below_m, 0.0, 1000.0);
-    r.scalar<double>("above_m", e.above_m, 0.001, 1000.0);
-    if (const int i = r.choice("unknown", kUnknownPolicy); i >= 0) {
-      e.unknown = static_cast<core::UnknownPolicy>(i);
-    }
-    r.scalar<double>("publish_radius_m", e.publish_radius_m, 0.0, 10000.0);
-  });
-  root.map("tsdf", [&](MapReader& r) {
-    auto& t = p.tsdf;
-    r.scalar<bool>("enabled", t.enabled, false, true);
-    r.scalar<float>("voxel_size_m", t.voxel_size_m, 0.01f, 2.0f);
-    r.scalar<float>("truncation_m", t.truncation_m, 0.01f, 64.0f);
-    r.scalar<float>("max_weight", t.max_weight, 1.0f, 1e6f);
-    r.scalar<float>("max_range_m", t.max_range_m, 0.1f, 1000.0f);
-    r.scalar<bool>("space_carving", t.space_carving, false, true);
-    r.scalar<std::uint32_t>("reserve_blocks", t.reserve_blocks, 0, 10'000'000);
-  });
-  root.map("corrections", [&](MapReader& r) {
-    auto& k = p.corrections;
-    r.scalar<bool>("enabled", k.enabled, false, true);
-    r.scalar<int>("retain_scans", k.retain_scans, 1, 10000);
-    r.scalar<double>("jump_threshold_m", k.jump_threshold_m, 0.01, 1000.0);
-    r.scalar<double>("jump_threshold_deg", k.jump_threshold_deg, 0.01, 180.0);
-    r.scalar<double>("max_prediction_gap_s", k.max_prediction_gap_s, 0.001, 60.0);
-    r.scalar<std::uint64_t>("rebuild_points_per_cycle", k.rebuild_points_per_cycle, 0, 100'000'000);
-  });
-}
-
-const std::vector<std::string> kPoseTypes = {"PoseWithCovarianceStamped", "Odometry"};
-
-constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
-
-void read_extrinsic(MapReader& r, Eigen::Isometry3d& T) {
-  Eigen::Vector3d t = Eigen::Vector3d::Zero();
-  read_vector3(r, "translation_m", t);
-  const bool has_rpy = r.has("rpy_deg");
-  const bool has_quat = r.has("quaternion");
-  if (has_rpy && has_quat) {
-    fail("value", r.path() + ".quaternion", "give either rpy_deg or quaternion, not both");
-  }
-  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-  if (has_rpy) {
-    double roll = 0, pitch = 0, yaw = 0;
-    r.map("rpy_deg", [&](MapReader& m) {
-      m.scalar<double>("roll", roll, -180.0, 180.0);
-      m.scalar<double>("pitch", pitch, -90.0, 90.0);
-      m.scalar<double>("yaw", yaw, -180.0, 180.0);
-    });
-    // ROS convention: R = Rz(yaw) · Ry(pitch) · Rx(roll).
-    R = (Eigen::AngleAxisd(yaw * kDegToRad, Eigen::Vector3d::UnitZ()) *
-         Eigen::AngleAxisd(pitch * kDegToRad, Eigen::Vector3d::UnitY()) *
-         Eigen::AngleAxisd(roll * kDegToRad, Eigen::Vector3d::UnitX()))
-            .toRotationMatrix();
-  }
-  if (has_quat) {
-    Eigen::Quaterniond q(1, 0, 0, 0);
-    r.map("quaternion", [&](MapReader& m) {
-      m.scalar<double>("x", q.x(), -1.0, 1.0);
-      m.scalar<double>("y", q.y(), -1.0, 1.0);
-      m.scalar<double>("z", q.z(), -1.0, 1.0);
-      m.scalar<double>("w", q.w(), -1.0, 1.0);
-    });
-    if (std::abs(q.norm() - 1.0) > 1e-3) {
-      fail("range", r.path() + ".quaternion",
-           "must be a unit quaternion (norm " + std::to_string(q.norm()) + ")");
-    }
-    R = q.normalized().toRotationMatrix();
-  }
-  T = Eigen::Isometry3d::Identity();
-  T.linear() = R;
-  T.translation() = t;
-}
-
-void read_sensors(MapReader& root, std::vector<SensorConfig>& sensors) {
-  if (!root.has("sensors")) return;
-  sensors.clear();
-  root.map_list("sensors", [&](MapReader& r, std::size_t i) {
-    SensorConfig s;
-    s.id.clear();
-    s.topic.clear();
-    s.frame_id.clear();
-    r.string("id", s.id);
-    if (s.id.empty()) fail("value", r.path() + ".id", "is required and must not be empty");
-    s.topic = "rt/tarmac/lidar/" + s.id + "/points";
-    s.frame_id = "lidar_" + s.id;
-    r.topic("topic", s.topic);
-    r.string("frame_id", s.frame_id);
-    r.map("extrinsic", [&](MapReader& m) { read_extrinsic(m, s.T_base_sensor); });
-    r.scalar<double>("max_age_ms", s.max_age_ms, 1.0, 60000.0);
-    r.scalar<bool>("deskew", s.deskew, false, true);
-    for (std::size_t j = 0; j < sensors.size(); ++j) {
-      const std::string at = "sensors[" + std::to_string(i) + "]";
-      if (sensors[j].id == s.id) fail("value", at + ".id", "duplicate id '" + s.id + "'");
-      if (sensors[j].topic == s.topic) {
-        fail("value", at + ".topic", "duplicate topic '" + s.topic + "'");
-      }
-    }
-    sensors.push_back(std::move(s));
-  });
-  if (sensors.empty()) fail("value", "sensors", "needs at least one sensor");
-  if (sensors.size() > 16) fail("range", "sensors", "at most 16 sensors");
-}
-
-void read_daemon(MapReader& root, Config& c) {
-  read_sensors(root, c.sensors);
-  root.map("pose", [&](MapReader& r) {
-    r.topic("topic", c.pose.topic);
-    if (const int i = r.choice("type", kPoseTypes); i >= 0) {
-      c.pose.type = static_cast<PoseType>(i);
-    }
-    r.string("frame_id", c.pose.frame_id);
-    r.scalar<std::uint32_t>("buffer_size", c.pose.buffer_size, 2, 100000);
-    r.scalar<double>("max_gap_ms", c.pose.max_gap_ms, 1.0, 10000.0);
-    r.scalar<double>("max_age_ms", c.pose.max_age_ms, 1.0, 60000.0);
-    r.topic("correction_topic", c.pose.correction_topic);
-  });
-  root.map("executor", [&](MapReader& r) {
-    auto& e = c.executor;
-    r.scalar<double>("rate_hz", e.rate_hz, kMinRateHz, kMaxRateHz);
-    r.scalar<double>("input_delay_ms", e.input_delay_ms, 0.0, 5000.0);
-    r.scalar<double>("pose_wait_ms", e.pose_wait_ms, 0.0, 10000.0);
-    r.scalar<double>("max_future_ms", e.max_future_ms, 0.0, 60000.0);
-    r.scalar<double>("sensor_phase_ms", e.sensor_phase_ms, 0.0, 10000.0);
-    r.scalar<std::uint32_t>("workers", e.workers, 1, 64);
-    r.int_list("cpus", e.cpus, 0, 1023);
-    r.scalar<int>("realtime_priority", e.realtime_priority, 0, 99);
-    r.scalar<bool>("lock_memory", e.lock_memory, false, true);
-    r.scalar<std::uint32_t>("queue_depth", e.queue_depth, 1, 1000);
-  });
-  root.map("budgets", [&](MapReader& r) {
-    auto& b = c.budgets;
-    r.scalar<double>("drain_ms", b.drain_ms, 0.001, 10000.0);
-    r.scalar<double>("ingest_ms", b.ingest_ms, 0.001, 10000.0);
-    r.scalar<double>("integrate_ms", b.integrate_ms, 0.001, 10000.0);
-    r.scalar<double>("tsdf_ms", b.tsdf_ms, 0.001, 10000.0);
-    r.scalar<double>("rebuild_ms", b.rebuild_ms, 0.001, 10000.0);
-    r.scalar<double>("costmap_ms", b.costmap_ms, 0.001, 10000.0);
-    r.scalar<double>("esdf_band_ms", b.esdf_band_ms, 0.001, 10000.0);
-    r.scalar<double>("publish_ms", b.publish_ms, 0.001, 10000.0);
-    r.scalar<double>("cycle_ms", b.cycle_ms, 0.001, 10000.0);
-  });
-  root.map("quotas", [&](MapReader& r) {
-    auto& q = c.quotas;
-    r.scalar<std::uint64_t>("points_per_cycle", q.points_per_cycle, 1, 100'000'000);
-    r.scalar<std::uint64_t>("points_per_scan", q.points_per_scan, 1, 100'000'000);
-    r.scalar<std::uint32_t>("max_pending_scans", q.max_pending_scans, 1, 1000);
-    r.scalar<std::uint64_t>("reserve_points_per_scan", q.reserve_points_per_scan, 0, 4'000'000);
-    r.scalar<std::uint64_t>("tsdf_points_per_cycle", q.tsdf_points_per_cycle, 0, 100'000'000);
-  });
-  root.map("outputs", [&](MapReader& r) {
-    auto& o = c.outputs;
-    r.string("frame_id", o.frame_id);
-    r.topic("costmap_topic", o.costmap_topic);
-    r.topic("esdf_slice_topic", o.esdf_slice_topic);
-    r.topic("esdf_band_topic", o.esdf_band_topic);
-    r.topic("cycle_report_topic", o.cycle_report_topic);
-    r.topic("diagnostic_array_topic", o.diagnostic_array_topic);
-    r.topic("virtual_obstacles_topic", o.virtual_obstacles_topic);
-    r.topic("obstacle_grid_topic", o.obstacle_grid_topic);
-    r.topic("esdf_slice_grid_topic", o.esdf_slice_grid_topic);
-    r.scalar<double>("esdf_slice_grid_range_m", o.esdf_slice_grid_range_m, 0.1, 1000.0);
-    r.scalar<std::uint32_t>("diagnostic_array_every", o.diagnostic_array_every, 1, 100000);
-    r.scalar<double>("costmap_max_age_ms", o.costmap_max_age_ms, 1.0, 3.6e6);
-  });
-  root.map("state", [&](MapReader& r) {
-    r.string("dir", c.state.dir);
-    r.string("map_file", c.state.map_file);
-    r.scalar<bool>("save_on_exit", c.state.save_on_exit, false, true);
-    r.string("tsdf_file", c.state.tsdf_file);
-    r.scalar<bool>("load_on_start", c.state.load_on_start, false, true);
-    r.scalar<double>("save_period_s", c.state.save_period_s, 0.0, 86400.0);
-  });
 }
 
 core::Status validate_daemon(const Config& c) {
@@ -731,17 +544,59 @@ core::Status validate_daemon(const Config& c) {
   return core::Ok{};
 }
 
-void emit_qos(YAML::Emitter& out, const char* name, const transport::QosSpec& q) {
-  out << YAML::Key << name << YAML::Value << YAML::Flow << YAML::BeginMap;
-  out << YAML::Key << "reliability" << YAML::Value << kReliability[static_cast<int>(q.reliability)];
-  out << YAML::Key << "durability" << YAML::Value << kDurability[static_cast<int>(q.durability)];
-  out << YAML::Key << "depth" << YAML::Value << q.history_depth;
-  out << YAML::EndMap;
+/// One leaf's value, as its field's type writes it (a float with float precision).
+void emit_value(YAML::Emitter& out, const Key& key, const Field& field) {
+  std::visit(
+      [&](auto value) {
+        using T = std::remove_pointer_t<decltype(value)>;
+        if constexpr (std::is_same_v<T, std::vector<std::string>> ||
+                      std::is_same_v<T, std::vector<int>>) {
+          out << YAML::Flow << *value;
+        } else if constexpr (std::is_same_v<decltype(value), ChoiceField>) {
+          out << std::string(key.choices[value.get(value.field)]);
+        } else {
+          out << *value;
+        }
+      },
+      field);
 }
 
-}  // namespace
+/// Writes `keys` (all in the map `prefix`, schema form) as entries of the map open in `out`.
+void emit_map(YAML::Emitter& out, const std::string& prefix, std::span<const Key> keys,
+              Config& config, SensorEntry* sensor) {
+  for (std::size_t i = 0; i < keys.size();) {
+    const std::string rest = keys[i].path.substr(prefix.size());
+    const std::string name = rest.substr(0, rest.find('.'));
+    std::size_t end = i + 1;
+    while (end < keys.size() &&
+           keys[end].path.compare(prefix.size(), name.size() + 1, name + ".") == 0) {
+      ++end;
+    }
+    const auto group = keys.subspan(i, end - i);
+    i = end;
+    if (std::none_of(group.begin(), group.end(), [](const Key& k) { return k.written; })) continue;
+    if (name.ends_with("[]")) {  // sensors
+      out << YAML::Key << name.substr(0, name.size() - 2) << YAML::Value << YAML::BeginSeq;
+      for (const auto& s : config.sensors) {
+        SensorEntry entry = sensor_entry(s);
+        out << YAML::BeginMap;
+        emit_map(out, prefix + name + ".", group, config, &entry);
+        out << YAML::EndMap;
+      }
+      out << YAML::EndSeq;
+    } else if (rest == name) {
+      out << YAML::Key << name << YAML::Value;
+      emit_value(out, group.front(), field_of(group.front(), config, sensor));
+    } else {
+      out << YAML::Key << name << YAML::Value;
+      if (is_flow_map(prefix + name)) out << YAML::Flow;
+      out << YAML::BeginMap;
+      emit_map(out, prefix + name + ".", group, config, sensor);
+      out << YAML::EndMap;
+    }
+  }
+}
 
-namespace {
 core::Result<Config> load_config(const std::string& yaml_text, const std::string& base_dir) {
   Config config;
   try {
@@ -749,25 +604,25 @@ core::Result<Config> load_config(const std::string& yaml_text, const std::string
     if (!root || root.IsNull()) return core::Error{"config.empty", "<root>: the file is empty"};
     std::size_t nodes = 0;
     check_structure(root, "", 0, nodes);
-    MapReader r(root, "");
-    int version = 0;
-    r.scalar<int>("version", version, std::numeric_limits<int>::min(),
-                  std::numeric_limits<int>::max());
-    if (version != kConfigVersion) {
+    if (!root.IsMap()) fail("type", "<root>", "expected a map, got " + describe(root));
+    // The version first: a file of another version is reported as such, not by its keys.
+    const Key& version = schema_key("version");
+    if (root["version"] && root["version"].IsNull()) fail("type", version.path, "has no value");
+    const int given = root["version"] ? parse_integer<int>(root["version"], version.path,
+                                                           std::numeric_limits<int>::min(),
+                                                           std::numeric_limits<int>::max())
+                                      : 0;
+    if (given < version.min || given > version.max) {
       return core::Error{"config.version",
                          "version: this build reads version " + std::to_string(kConfigVersion) +
                              ", the file says " +
                              (root["version"] ? root["version"].as<std::string>() : "nothing")};
     }
-    bool domain_given = false;
-    r.map("dds", [&](MapReader& m) {
-      domain_given = m.has("domain_id");
-      read_dds(m, config.dds, base_dir);
-    });
-    if (!domain_given) domain_from_environment(config.dds.participant.domain_id);
-    read_daemon(r, config);
-    read_mapping(r, config.mapping);
-    r.finish();
+    SchemaReader reader(config, base_dir);
+    reader.read_map(root, "", "", schema());
+    if (!reader.present("dds.domain_id")) {
+      domain_from_environment(config.dds.participant.domain_id);
+    }
   } catch (const ConfigError& e) {
     return core::Error{"config." + e.reason, e.message};
   } catch (const YAML::Exception& e) {
@@ -778,6 +633,7 @@ core::Result<Config> load_config(const std::string& yaml_text, const std::string
   if (auto valid = validate_daemon(config); !valid) return valid.error();
   return config;
 }
+
 }  // namespace
 
 core::Result<Config> load_config_string(const std::string& yaml_text) {
@@ -797,201 +653,11 @@ core::Result<Config> load_config_file(const std::string& path) {
 }
 
 std::string to_yaml(const Config& config) {
-  const auto& p = config.dds.participant;
+  Config copy = config;  // the schema's fields are reached through a mutable Config
   YAML::Emitter out;
   out << YAML::BeginMap;
-  out << YAML::Key << "version" << YAML::Value << config.version;
-  out << YAML::Key << "dds" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "domain_id" << YAML::Value << p.domain_id;
-  out << YAML::Key << "participant_name" << YAML::Value << p.name;
-  out << YAML::Key << "transport" << YAML::Value << transport::to_string(p.transport);
-  out << YAML::Key << "network_interfaces" << YAML::Value << YAML::Flow << p.network_interfaces;
-  out << YAML::Key << "initial_peers" << YAML::Value << YAML::Flow << p.initial_peers;
-  out << YAML::Key << "shm_segment_bytes" << YAML::Value << p.shm_segment_bytes;
-  out << YAML::Key << "shm_max_message_bytes" << YAML::Value << p.shm_max_message_bytes;
-  out << YAML::Key << "udp_receive_buffer_bytes" << YAML::Value << p.udp_receive_buffer_bytes;
-  out << YAML::Key << "udp_send_buffer_bytes" << YAML::Value << p.udp_send_buffer_bytes;
-  const auto& sec = p.security;
-  out << YAML::Key << "security" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "enabled" << YAML::Value << sec.enabled;
-  out << YAML::Key << "identity_ca" << YAML::Value << sec.identity_ca;
-  out << YAML::Key << "identity_certificate" << YAML::Value << sec.identity_certificate;
-  out << YAML::Key << "private_key" << YAML::Value << sec.private_key;
-  out << YAML::Key << "permissions_ca" << YAML::Value << sec.permissions_ca;
-  out << YAML::Key << "governance" << YAML::Value << sec.governance;
-  out << YAML::Key << "permissions" << YAML::Value << sec.permissions;
+  emit_map(out, "", schema(), copy, nullptr);
   out << YAML::EndMap;
-  out << YAML::Key << "qos" << YAML::Value << YAML::BeginMap;
-  emit_qos(out, "lidar", config.dds.qos.lidar);
-  emit_qos(out, "pose", config.dds.qos.pose);
-  emit_qos(out, "virtual_obstacles", config.dds.qos.virtual_obstacles);
-  emit_qos(out, "costmap", config.dds.qos.costmap);
-  emit_qos(out, "esdf_slice", config.dds.qos.esdf_slice);
-  emit_qos(out, "esdf_band", config.dds.qos.esdf_band);
-  emit_qos(out, "diagnostics", config.dds.qos.diagnostics);
-  out << YAML::EndMap << YAML::EndMap;
-  out << YAML::Key << "sensors" << YAML::Value << YAML::BeginSeq;
-  for (const auto& s : config.sensors) {
-    const Eigen::Quaterniond q(s.T_base_sensor.linear());
-    const Eigen::Vector3d t = s.T_base_sensor.translation();
-    out << YAML::BeginMap;
-    out << YAML::Key << "id" << YAML::Value << s.id;
-    out << YAML::Key << "topic" << YAML::Value << s.topic;
-    out << YAML::Key << "frame_id" << YAML::Value << s.frame_id;
-    out << YAML::Key << "extrinsic" << YAML::Value << YAML::BeginMap;
-    out << YAML::Key << "translation_m" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
-        << "x" << YAML::Value << t.x() << YAML::Key << "y" << YAML::Value << t.y() << YAML::Key
-        << "z" << YAML::Value << t.z() << YAML::EndMap;
-    out << YAML::Key << "quaternion" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
-        << "x" << YAML::Value << q.x() << YAML::Key << "y" << YAML::Value << q.y() << YAML::Key
-        << "z" << YAML::Value << q.z() << YAML::Key << "w" << YAML::Value << q.w() << YAML::EndMap;
-    out << YAML::EndMap;
-    out << YAML::Key << "max_age_ms" << YAML::Value << s.max_age_ms;
-    out << YAML::Key << "deskew" << YAML::Value << s.deskew;
-    out << YAML::EndMap;
-  }
-  out << YAML::EndSeq;
-  const auto& pi = config.pose;
-  out << YAML::Key << "pose" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "topic" << YAML::Value << pi.topic;
-  out << YAML::Key << "type" << YAML::Value << kPoseTypes[static_cast<int>(pi.type)];
-  out << YAML::Key << "frame_id" << YAML::Value << pi.frame_id;
-  out << YAML::Key << "buffer_size" << YAML::Value << pi.buffer_size;
-  out << YAML::Key << "max_gap_ms" << YAML::Value << pi.max_gap_ms;
-  out << YAML::Key << "max_age_ms" << YAML::Value << pi.max_age_ms;
-  out << YAML::Key << "correction_topic" << YAML::Value << pi.correction_topic;
-  out << YAML::EndMap;
-  const auto& e = config.executor;
-  out << YAML::Key << "executor" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "rate_hz" << YAML::Value << e.rate_hz;
-  out << YAML::Key << "input_delay_ms" << YAML::Value << e.input_delay_ms;
-  out << YAML::Key << "pose_wait_ms" << YAML::Value << e.pose_wait_ms;
-  out << YAML::Key << "max_future_ms" << YAML::Value << e.max_future_ms;
-  out << YAML::Key << "sensor_phase_ms" << YAML::Value << e.sensor_phase_ms;
-  out << YAML::Key << "workers" << YAML::Value << e.workers;
-  out << YAML::Key << "cpus" << YAML::Value << YAML::Flow << e.cpus;
-  out << YAML::Key << "realtime_priority" << YAML::Value << e.realtime_priority;
-  out << YAML::Key << "lock_memory" << YAML::Value << e.lock_memory;
-  out << YAML::Key << "queue_depth" << YAML::Value << e.queue_depth;
-  out << YAML::EndMap;
-  const auto& b = config.budgets;
-  out << YAML::Key << "budgets" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "drain_ms" << YAML::Value << b.drain_ms;
-  out << YAML::Key << "ingest_ms" << YAML::Value << b.ingest_ms;
-  out << YAML::Key << "integrate_ms" << YAML::Value << b.integrate_ms;
-  out << YAML::Key << "tsdf_ms" << YAML::Value << b.tsdf_ms;
-  out << YAML::Key << "rebuild_ms" << YAML::Value << b.rebuild_ms;
-  out << YAML::Key << "costmap_ms" << YAML::Value << b.costmap_ms;
-  out << YAML::Key << "esdf_band_ms" << YAML::Value << b.esdf_band_ms;
-  out << YAML::Key << "publish_ms" << YAML::Value << b.publish_ms;
-  out << YAML::Key << "cycle_ms" << YAML::Value << b.cycle_ms;
-  out << YAML::EndMap;
-  const auto& qu = config.quotas;
-  out << YAML::Key << "quotas" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "points_per_cycle" << YAML::Value << qu.points_per_cycle;
-  out << YAML::Key << "points_per_scan" << YAML::Value << qu.points_per_scan;
-  out << YAML::Key << "max_pending_scans" << YAML::Value << qu.max_pending_scans;
-  out << YAML::Key << "reserve_points_per_scan" << YAML::Value << qu.reserve_points_per_scan;
-  out << YAML::Key << "tsdf_points_per_cycle" << YAML::Value << qu.tsdf_points_per_cycle;
-  out << YAML::EndMap;
-  const auto& ou = config.outputs;
-  out << YAML::Key << "outputs" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "frame_id" << YAML::Value << ou.frame_id;
-  out << YAML::Key << "costmap_topic" << YAML::Value << ou.costmap_topic;
-  out << YAML::Key << "obstacle_grid_topic" << YAML::Value << ou.obstacle_grid_topic;
-  out << YAML::Key << "esdf_slice_grid_topic" << YAML::Value << ou.esdf_slice_grid_topic;
-  out << YAML::Key << "esdf_slice_grid_range_m" << YAML::Value << ou.esdf_slice_grid_range_m;
-  out << YAML::Key << "esdf_slice_topic" << YAML::Value << ou.esdf_slice_topic;
-  out << YAML::Key << "esdf_band_topic" << YAML::Value << ou.esdf_band_topic;
-  out << YAML::Key << "cycle_report_topic" << YAML::Value << ou.cycle_report_topic;
-  out << YAML::Key << "diagnostic_array_topic" << YAML::Value << ou.diagnostic_array_topic;
-  out << YAML::Key << "virtual_obstacles_topic" << YAML::Value << ou.virtual_obstacles_topic;
-  out << YAML::Key << "diagnostic_array_every" << YAML::Value << ou.diagnostic_array_every;
-  out << YAML::Key << "costmap_max_age_ms" << YAML::Value << ou.costmap_max_age_ms;
-  out << YAML::EndMap;
-  out << YAML::Key << "state" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "dir" << YAML::Value << config.state.dir;
-  out << YAML::Key << "map_file" << YAML::Value << config.state.map_file;
-  out << YAML::Key << "save_on_exit" << YAML::Value << config.state.save_on_exit;
-  out << YAML::Key << "tsdf_file" << YAML::Value << config.state.tsdf_file;
-  out << YAML::Key << "load_on_start" << YAML::Value << config.state.load_on_start;
-  out << YAML::Key << "save_period_s" << YAML::Value << config.state.save_period_s;
-  out << YAML::EndMap;
-  const auto& m = config.mapping;
-  const auto vec = [&](const char* key, const Eigen::Vector3d& v) {
-    out << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "x"
-        << YAML::Value << v.x() << YAML::Key << "y" << YAML::Value << v.y() << YAML::Key << "z"
-        << YAML::Value << v.z() << YAML::EndMap;
-  };
-  out << YAML::Key << "filters" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "min_range_m" << YAML::Value << m.filters.min_range_m;
-  out << YAML::Key << "ego_box_enabled" << YAML::Value << m.filters.ego_box_enabled;
-  vec("ego_box_min_m", m.filters.ego_box_min_B);
-  vec("ego_box_max_m", m.filters.ego_box_max_B);
-  out << YAML::Key << "outlier_min_neighbors" << YAML::Value << m.filters.outlier_min_neighbors;
-  out << YAML::Key << "outlier_cell_m" << YAML::Value << m.filters.outlier_cell_m;
-  out << YAML::Key << "outlier_max_range_m" << YAML::Value << m.filters.outlier_max_range_m;
-  out << YAML::EndMap;
-  const auto& o = m.occupancy;
-  out << YAML::Key << "occupancy" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "voxel_size_m" << YAML::Value << o.voxel_size_m;
-  out << YAML::Key << "window_x_vox" << YAML::Value << o.window_x_vox;
-  out << YAML::Key << "window_y_vox" << YAML::Value << o.window_y_vox;
-  out << YAML::Key << "window_z_vox" << YAML::Value << o.window_z_vox;
-  out << YAML::Key << "window_below_m" << YAML::Value << o.window_below_m;
-  out << YAML::Key << "prob_hit" << YAML::Value << o.prob_hit;
-  out << YAML::Key << "prob_miss" << YAML::Value << o.prob_miss;
-  out << YAML::Key << "clamp_min" << YAML::Value << o.clamp_min;
-  out << YAML::Key << "clamp_max" << YAML::Value << o.clamp_max;
-  out << YAML::Key << "max_range_m" << YAML::Value << o.max_range_m;
-  out << YAML::Key << "clearing_range_m" << YAML::Value << o.clearing_range_m;
-  out << YAML::Key << "ground_radius_m" << YAML::Value << o.ground_radius_m;
-  out << YAML::Key << "static_promote_scans" << YAML::Value << o.static_promote_scans;
-  out << YAML::Key << "static_demote_scans" << YAML::Value << o.static_demote_scans;
-  out << YAML::EndMap;
-  const auto& c = m.costmap;
-  out << YAML::Key << "costmap" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "min_obstacle_height_m" << YAML::Value << c.min_obstacle_height_m;
-  out << YAML::Key << "vehicle_height_m" << YAML::Value << c.vehicle_height_m;
-  out << YAML::Key << "clearance_m" << YAML::Value << c.clearance_m;
-  out << YAML::Key << "inscribed_radius_m" << YAML::Value << c.inscribed_radius_m;
-  out << YAML::Key << "inflation_radius_m" << YAML::Value << c.inflation_radius_m;
-  out << YAML::Key << "cost_scaling_factor" << YAML::Value << c.cost_scaling_factor;
-  out << YAML::Key << "ground_cell_m" << YAML::Value << c.ground_cell_m;
-  out << YAML::Key << "max_ground_step_m" << YAML::Value << c.max_ground_step_m;
-  out << YAML::Key << "max_ground_slope" << YAML::Value << c.max_ground_slope;
-  out << YAML::Key << "ground_tolerance_m" << YAML::Value << c.ground_tolerance_m;
-  out << YAML::Key << "unknown_cost" << YAML::Value
-      << kUnknownCost[static_cast<int>(c.unknown_cost)];
-  out << YAML::Key << "free_rule" << YAML::Value << kFreeRule[static_cast<int>(c.free_rule)];
-  out << YAML::EndMap;
-  const auto& band = m.esdf_band;
-  out << YAML::Key << "esdf_band" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "enabled" << YAML::Value << band.enabled;
-  out << YAML::Key << "below_m" << YAML::Value << band.below_m;
-  out << YAML::Key << "above_m" << YAML::Value << band.above_m;
-  out << YAML::Key << "unknown" << YAML::Value << kUnknownPolicy[static_cast<int>(band.unknown)];
-  out << YAML::Key << "publish_radius_m" << YAML::Value << band.publish_radius_m;
-  out << YAML::EndMap;
-  const auto& t = m.tsdf;
-  out << YAML::Key << "tsdf" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "enabled" << YAML::Value << t.enabled;
-  out << YAML::Key << "voxel_size_m" << YAML::Value << t.voxel_size_m;
-  out << YAML::Key << "truncation_m" << YAML::Value << t.truncation_m;
-  out << YAML::Key << "max_weight" << YAML::Value << t.max_weight;
-  out << YAML::Key << "max_range_m" << YAML::Value << t.max_range_m;
-  out << YAML::Key << "space_carving" << YAML::Value << t.space_carving;
-  out << YAML::Key << "reserve_blocks" << YAML::Value << t.reserve_blocks;
-  out << YAML::EndMap;
-  const auto& k = m.corrections;
-  out << YAML::Key << "corrections" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "enabled" << YAML::Value << k.enabled;
-  out << YAML::Key << "retain_scans" << YAML::Value << k.retain_scans;
-  out << YAML::Key << "jump_threshold_m" << YAML::Value << k.jump_threshold_m;
-  out << YAML::Key << "jump_threshold_deg" << YAML::Value << k.jump_threshold_deg;
-  out << YAML::Key << "max_prediction_gap_s" << YAML::Value << k.max_prediction_gap_s;
-  out << YAML::Key << "rebuild_points_per_cycle" << YAML::Value << k.rebuild_points_per_cycle;
-  out << YAML::EndMap << YAML::EndMap;
   return out.c_str();
 }
 

@@ -56,7 +56,7 @@ TEST(Config, ShippedFileIsValidAndEqualsDefaults) {
 
 TEST(Config, UnknownKeyNamesItsPath) {
   EXPECT_EQ(error_of("version: 1\ndds:\n  qos:\n    costmap: {depht: 3}\n"),
-            "dds.qos.costmap.depht: unknown key");
+            "dds.qos.costmap.depht: unknown key (did you mean 'depth'?)");
   EXPECT_EQ(error_of("version: 1\nmapp: {}\n"), "mapp: unknown key");
 }
 
@@ -287,7 +287,8 @@ TEST(Config, TsdfSectionAppliesAndIsValidated) {
   EXPECT_TRUE(t.space_carving);
   EXPECT_EQ(t.reserve_blocks, 4096u);
   EXPECT_NE(config_hash(config.value()), config_hash(Config{}));
-  EXPECT_EQ(error_of("version: 1\ntsdf: {trunction_m: 0.3}\n"), "tsdf.trunction_m: unknown key");
+  EXPECT_EQ(error_of("version: 1\ntsdf: {trunction_m: 0.3}\n"),
+            "tsdf.trunction_m: unknown key (did you mean 'truncation_m'?)");
   EXPECT_EQ(error_of("version: 1\ntsdf: {max_weight: 0}\n"),
             "tsdf.max_weight: must be in [1, 1e+06], got 0");
   EXPECT_EQ(error_of("version: 1\ntsdf: {voxel_size_m: 0.2, truncation_m: 0.1}\n"),
@@ -367,7 +368,7 @@ TEST(Config, SensorsListIsReadWithExtrinsicsAndDefaultsPerId) {
 
 TEST(Config, DaemonKeysNameTheirPathWhenWrong) {
   EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: front, frme_id: x}\n"),
-            "sensors[0].frme_id: unknown key");
+            "sensors[0].frme_id: unknown key (did you mean 'frame_id'?)");
   EXPECT_EQ(error_of("version: 1\nsensors:\n  - {id: a}\n  - {id: a}\n"),
             "sensors[1].id: duplicate id 'a'");
   EXPECT_EQ(error_of("version: 1\nsensors:\n  - {frame_id: x}\n"),
@@ -381,7 +382,7 @@ TEST(Config, DaemonKeysNameTheirPathWhenWrong) {
   EXPECT_EQ(error_of("version: 1\npose: {type: Twist}\n"),
             "pose.type: must be one of {PoseWithCovarianceStamped, Odometry}, got 'Twist'");
   EXPECT_EQ(error_of("version: 1\nbudgets: {integrat_ms: 3}\n"),
-            "budgets.integrat_ms: unknown key");
+            "budgets.integrat_ms: unknown key (did you mean 'integrate_ms'?)");
   EXPECT_EQ(error_of("version: 1\nexecutor: {rate_hz: 20}\n"),
             "budgets.cycle_ms: exceeds the period of executor.rate_hz (50.000000 ms)");
   EXPECT_EQ(error_of("version: 1\nexecutor: {sensor_phase_ms: 100}\n"),
@@ -393,7 +394,7 @@ TEST(Config, DaemonKeysNameTheirPathWhenWrong) {
 TEST(Config, SecurityIsOffByDefaultAndItsKeysNameTheirPath) {
   EXPECT_FALSE(Config{}.dds.participant.security.enabled);
   EXPECT_EQ(error_of("version: 1\ndds: {security: {enable: true}}\n"),
-            "dds.security.enable: unknown key");
+            "dds.security.enable: unknown key (did you mean 'enabled'?)");
   EXPECT_EQ(error_of("version: 1\ndds: {security: {enabled: 2}}\n"),
             "dds.security.enabled: expected a bool (true or false), got a number '2'");
   EXPECT_EQ(error_of("version: 1\ndds: {security: {enabled: true}}\n"),

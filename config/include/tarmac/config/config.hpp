@@ -5,7 +5,9 @@
 /// ("executor.rate_hz: duplicate key (line 3 and line 7)"), a wrong type, with the type expected
 /// and what was found ("executor.workers: expected an integer, got a number '2.5'"), a number
 /// that is not finite ("executor.rate_hz: must be a finite number, got .nan") and a value out of
-/// range ("dds.domain_id: must be in [0, 232], got 300").
+/// range ("dds.domain_id: must be in [0, 232], got 300"). An unknown key near a known one says
+/// which ("costmap.inflation_radius: unknown key (did you mean 'inflation_radius_m'?)").
+/// Each key's type, range, unit and doc are in the schema (schema.hpp); its default is here.
 
 #include <cstdint>
 #include <string>
