@@ -1,0 +1,372 @@
+/// @file build_costmap's ground estimate (steps 1–5 of costmap/steps.hpp).
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "../lanes4.hpp"
+#include "steps.hpp"
+
+namespace tarmac::core::costmap {
+namespace {
+
+/// lowest[k] = z where layer z is occupied, observed[k] = z where it is observed (called from
+/// the top layer down).
+void mark_lowest(std::int16_t* __restrict lowest, std::int16_t* __restrict observed,
+                 const float* __restrict log_odds, int count, std::int16_t z) {
+  for (int k = 0; k < count; ++k) {
+    lowest[k] = log_odds[k] > 0.0f ? z : lowest[k];
+    observed[k] = log_odds[k] != OccupancyMap::kUnknown ? z : observed[k];
+  }
+}
+
+/// A column's ground candidate: its lowest occupied layer, or, when observed free space reaches
+/// more than a layer below that (the occupied voxel hovers: an engine's underside), its lowest
+/// observed layer; −1 without an occupied layer.
+std::int16_t ground_candidate(int lowest_occupied, int lowest_observed) {
+  if (lowest_occupied < 0) return -1;
+  return static_cast<std::int16_t>(lowest_observed < lowest_occupied - 1 ? lowest_observed
+                                                                         : lowest_occupied);
+}
+
+/// sequential streams, which the prefetchers follow; all 40 at once were twice as slow).
+constexpr int kLayerGroup = 4;
+/// Columns per block of the layer-bits pass: a group's words for a block stay in L1.
+constexpr std::size_t kBitsBlock = 2048;
+
+/// Adds layers [zb, zt), from the top down, to the per-column words of layer bits (occupied:
+/// log-odds > 0; observed) of 4·kVectors columns at `offset` of every layer: each layer shifts
+/// the words up by one and adds its bit (a comparison is −1 or 0: subtracting it adds 1). The
+/// words stay in registers across the group; `first` starts them at zero.
+template <int kVectors>
+void add_layer_bits(const float* const* layers, std::size_t offset, int zb, int zt, bool first,
+                    std::uint32_t* __restrict occupied, std::uint32_t* __restrict known) {
+  // Unsigned: each layer shifts the words left, and with 32 layers the top bit overflows (signed
+  // overflow is undefined; UBSan found it). The bits are the same.
+  using UInt4 = std::uint32_t __attribute__((vector_size(16)));
+  UInt4 occ[kVectors] = {}, obs[kVectors] = {};
+  if (!first) {
+    std::memcpy(occ, occupied, sizeof occ);
+    std::memcpy(obs, known, sizeof obs);
+  }
+  const Float4 zero = {0.0f, 0.0f, 0.0f, 0.0f};
+  const Float4 unknown = zero + OccupancyMap::kUnknown;
+  for (int z = zt - 1; z >= zb; --z) {
+    const float* l = layers[z] + offset;
+    for (int j = 0; j < kVectors; ++j) {
+      Float4 v;
+      std::memcpy(&v, l + 4 * j, sizeof v);
+      occ[j] = (occ[j] + occ[j]) - reinterpret_cast<UInt4>(v > zero);
+      obs[j] = (obs[j] + obs[j]) - reinterpret_cast<UInt4>(v != unknown);
+    }
+  }
+  std::memcpy(occupied, occ, sizeof occ);
+  std::memcpy(known, obs, sizeof obs);
+}
+
+/// The words of layers [z0, z1) (bit z − z0; z1 − z0 <= 32) for a run of `count` columns at
+/// `offset` of every layer, written to occupied[0, count) and known[0, count): layer groups
+/// from the top down, each over the run in blocks of 16, then 4, then single columns.
+void layer_bits_run(const float* const* layers, std::size_t offset, int count, int z0, int z1,
+                    std::uint32_t* __restrict occupied, std::uint32_t* __restrict known) {
+  if (z0 >= z1) {
+    std::fill(occupied, occupied + count, 0u);
+    std::fill(known, known + count, 0u);
+    return;
+  }
+  for (int zt = z1; zt > z0; zt -= kLayerGroup) {
+    const int zb = std::max(z0, zt - kLayerGroup);
+    const bool first = zt == z1;
+    int k = 0;
+    for (; k + 16 <= count; k += 16) {
+      add_layer_bits<4>(layers, offset + k, zb, zt, first, occupied + k, known + k);
+    }
+    for (; k + 4 <= count; k += 4) {
+      add_layer_bits<1>(layers, offset + k, zb, zt, first, occupied + k, known + k);
+    }
+    for (; k < count; ++k) {
+      std::uint32_t occ = first ? 0u : occupied[k], obs = first ? 0u : known[k];
+      for (int z = zt - 1; z >= zb; --z) {
+        const float l = layers[z][offset + k];
+        occ = 2 * occ + (l > 0.0f ? 1u : 0u);
+        obs = 2 * obs + (l != OccupancyMap::kUnknown ? 1u : 0u);
+      }
+      occupied[k] = occ;
+      known[k] = obs;
+    }
+  }
+}
+
+}  // namespace
+
+void find_ground_candidates(const CostmapPass& pass) {
+  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
+               gy] = pass;
+  // The candidate is the lowest occupied voxel, unless observed free space reaches more than a
+  // voxel below it: rays that graze the ground clear the voxel that holds its surface, and where
+  // they have, the lowest occupied voxel is whatever hovers above (an engine's underside at
+  // 1.2 m), which must not be taken for the ground under a wing; the lowest observed voxel is
+  // then the free one just over the ground.
+  auto& lowest = out.lowest_occupied;
+  auto& occupied_bits = out.occupied_bits;
+  auto& known_bits = out.known_bits;
+  // Layers 0..31 in the first cell_count() words, 32..63 in the second; ring (storage) order.
+  occupied_bits.resize(use_bits ? 2 * cells_n : 0);
+  known_bits.resize(use_bits ? 2 * cells_n : 0);
+  if (use_bits) {
+    lowest.resize(cells_n);  // every cell is written below
+  } else {
+    lowest.assign(cells_n, -1);
+    out.ground_layer.assign(cells_n, -1);
+  }
+  // Each layer's storage, looked up once per call.
+  std::array<const float*, 64> layer_data{};
+  for (int z = 0; z < std::min(nz, 64); ++z)
+    layer_data[static_cast<std::size_t>(z)] = map.ring_layer(z);
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    const int y0 = static_cast<int>(ny * task / kRowTasks);
+    const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+    if (use_bits) {
+      // In storage (ring) order, so each layer is read as one contiguous stream per block; the
+      // words are kept in ring order too. Written, not ORed: no zeroing pass.
+      const std::size_t c0 = cells_n * task / kRowTasks, c1 = cells_n * (task + 1) / kRowTasks;
+      for (std::size_t b0 = c0; b0 < c1; b0 += kBitsBlock) {
+        const int count = static_cast<int>(std::min(kBitsBlock, c1 - b0));
+        for (const std::size_t half : {std::size_t{0}, cells_n}) {
+          layer_bits_run(layer_data.data(), b0, count, half == 0 ? 0 : 32,
+                         half == 0 ? std::min(nz, 32) : nz, &occupied_bits[half + b0],
+                         &known_bits[half + b0]);
+        }
+      }
+      return;
+    }
+    // Top down, overwriting: what stays is the lowest occupied layer. A plain select per cell,
+    // which the compiler vectorises (the "first occupied from below" test did not).
+    std::int16_t* observed = out.ground_layer.data();  // scratch until step 3
+    for (int z = nz - 1; z >= 0; --z) {
+      const float* layer = map.ring_layer(z);
+      const auto zz = static_cast<std::int16_t>(z);
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t row = static_cast<std::size_t>(y) * nx;
+        for_row_runs(map, layer, y, [&](int x0, const float* l, int count) {
+          mark_lowest(&lowest[row + x0], observed + row + x0, l, count, zz);
+        });
+      }
+    }
+    for (std::size_t i = static_cast<std::size_t>(y0) * nx; i < static_cast<std::size_t>(y1) * nx;
+         ++i) {
+      lowest[i] = ground_candidate(lowest[i], observed[i]);
+    }
+  });
+  if (use_bits) {
+    runner.parallel_for(kRowTasks, [&](std::size_t task) {
+      const int y0 = static_cast<int>(ny * task / kRowTasks);
+      const int y1 = static_cast<int>(ny * (task + 1) / kRowTasks);
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
+        std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+        for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
+          const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
+          const std::uint64_t b = occupied_bits[sl] | std::uint64_t{occupied_bits[cells_n + sl]}
+                                                          << 32;
+          const std::uint64_t k = known_bits[sl] | std::uint64_t{known_bits[cells_n + sl]} << 32;
+          low[x] = b == 0 ? std::int16_t{-1}
+                          : ground_candidate(std::countr_zero(b), std::countr_zero(k));
+        }
+      }
+    });
+  }
+}
+
+void find_coarse_ground(const CostmapPass& pass) {
+  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
+               gy] = pass;
+  const auto& lowest = out.lowest_occupied;
+  // Coarse ground buffers live in `out` and keep their capacity: no allocation after warm-up.
+  auto& coarse = out.coarse_ground;
+  coarse.assign(static_cast<std::size_t>(gx) * gy, kNoGround);
+  // Per coarse cell, the minimum over its g×g columns (an integer, so the order is irrelevant);
+  // walked in blocks of g columns so no cell needs a division; tasks own whole coarse rows.
+  runner.parallel_for(kRowTasks, [&](std::size_t task) {
+    const int cy0 = static_cast<int>(static_cast<std::size_t>(gy) * task / kRowTasks);
+    const int cy1 = static_cast<int>(static_cast<std::size_t>(gy) * (task + 1) / kRowTasks);
+    for (int y = cy0 * g, y_end = std::min(ny, cy1 * g); y < y_end; ++y) {
+      const std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+      float* coarse_row = &coarse[static_cast<std::size_t>(y / g) * gx];
+      for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
+        int m = std::numeric_limits<int>::max();
+        for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
+          const int z = low[x];
+          m = z >= 0 ? std::min(m, z) : m;
+        }
+        float& cell = coarse_row[cx];
+        if (m != std::numeric_limits<int>::max() && (std::isnan(cell) || m < cell)) {
+          cell = static_cast<float>(m);
+        }
+      }
+    }
+  });
+}
+
+GroundPlane fit_ground_plane(const CostmapPass& pass, const Eigen::Isometry3d& T_W_B) {
+  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
+               gy] = pass;
+  const Eigen::Vector3d up_W = T_W_B.linear().col(2);
+  GroundPlane plane{pass, T_W_B.translation(), up_W, std::max(up_W.z(), 0.1)};
+  // The plane's height is taken from the data, not from the base frame's origin (base_link may
+  // sit at the axle, or at the sensor when the extrinsic is identity): the median offset from
+  // the plane through the base of the coarse cells within kPriorRadiusM, most of which are ground.
+  constexpr double kPriorRadiusM = 20.0;
+  const auto& coarse = out.coarse_ground;
+  auto& offsets = out.ground_offsets;
+  offsets.clear();
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) {
+      const float z = coarse[static_cast<std::size_t>(cy) * gx + cx];
+      const Eigen::Vector2d center = plane.coarse_center(cx, cy);
+      if (std::isnan(z) || (center - plane.base_W.head<2>()).norm() > kPriorRadiusM) continue;
+      offsets.push_back(z - plane.through_base(center.x(), center.y()));
+    }
+  }
+  if (!offsets.empty()) {
+    const auto mid = offsets.begin() + static_cast<std::ptrdiff_t>(offsets.size() / 2);
+    std::nth_element(offsets.begin(), mid, offsets.end());
+    plane.offset = *mid;
+  }
+  return plane;
+}
+
+void reject_non_ground(const CostmapPass& pass, const GroundPlane& plane) {
+  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
+               gy] = pass;
+  // Far off the plane of the vehicle's own wheels (extended with the steepest slope allowed) —
+  // a wing or a fuselage seen with no ground under it — or far above their neighbours (a truck
+  // roof).
+  const auto& coarse = out.coarse_ground;
+  const float step_vox = static_cast<float>(params.max_ground_step_m / v);
+  auto& filtered = out.coarse_filtered;
+  filtered.assign(coarse.begin(), coarse.end());
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) {
+      const float z = coarse[static_cast<std::size_t>(cy) * gx + cx];
+      if (std::isnan(z)) continue;
+      const Eigen::Vector2d center = plane.coarse_center(cx, cy);
+      const double reach_m = params.ground_tolerance_m +
+                             params.max_ground_slope * (center - plane.base_W.head<2>()).norm();
+      if (std::abs(z - plane.layer(center.x(), center.y())) > reach_m / v) {
+        filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
+        continue;
+      }
+      float lowest = std::numeric_limits<float>::infinity();
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int ux = cx + dx, uy = cy + dy;
+          if ((dx == 0 && dy == 0) || ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+          const float n = coarse[static_cast<std::size_t>(uy) * gx + ux];
+          if (!std::isnan(n)) lowest = std::min(lowest, n);
+        }
+      }
+      if (z - lowest > step_vox) filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
+    }
+  }
+}
+
+void fill_ground_gaps(const CostmapPass& pass, const GroundPlane& plane) {
+  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
+               gy] = pass;
+  auto& filtered = out.coarse_filtered;
+  // Fill gaps from neighbours. Defined as passes that each give every gap cell next to a filled
+  // cell the mean of its filled neighbours (in the fixed neighbour order below). A gap cell is
+  // therefore filled in pass L − 1, L its chessboard distance to the nearest cell filled
+  // before the first pass, from its neighbours nearer than L. So L comes from a two-pass
+  // chamfer transform (exact for the chessboard metric), then the cells are filled level by
+  // level: the same values, with one neighbourhood evaluation per gap cell instead of one per
+  // gap cell and pass.
+  auto& level = out.coarse_next;  // chessboard level per coarse cell, +inf when unreachable
+  const float kUnreached = std::numeric_limits<float>::infinity();
+  level.resize(filtered.size());
+  for (std::size_t i = 0; i < filtered.size(); ++i) {
+    level[i] = std::isnan(filtered[i]) ? kUnreached : 0.0f;
+  }
+  const auto relax = [&](int cx, int cy, const int(*offsets)[2]) {
+    float& l = level[static_cast<std::size_t>(cy) * gx + cx];
+    for (int k = 0; k < 4; ++k) {
+      const int ux = cx + offsets[k][0], uy = cy + offsets[k][1];
+      if (ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+      l = std::min(l, level[static_cast<std::size_t>(uy) * gx + ux] + 1.0f);
+    }
+  };
+  constexpr int kBefore[4][2] = {{-1, 0}, {-1, -1}, {0, -1}, {1, -1}};
+  constexpr int kAfter[4][2] = {{1, 0}, {1, 1}, {0, 1}, {-1, 1}};
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) relax(cx, cy, kBefore);
+  }
+  float max_level = 0.0f;
+  for (int cy = gy - 1; cy >= 0; --cy) {
+    for (int cx = gx - 1; cx >= 0; --cx) {
+      relax(cx, cy, kAfter);
+      const float l = level[static_cast<std::size_t>(cy) * gx + cx];
+      if (l != kUnreached) max_level = std::max(max_level, l);
+    }
+  }
+  // The gap cells by level (a counting sort, row-major within a level), so each pass visits its
+  // own cells only instead of every coarse cell.
+  const auto n_levels = static_cast<std::size_t>(max_level) + 1;
+  auto& level_first = out.level_first;
+  auto& level_cells = out.level_cells;
+  // Sized for the most levels and gap cells a window can have, so no later scan grows them.
+  level_first.reserve(filtered.size() + 2);
+  out.level_next.reserve(filtered.size() + 2);
+  level_cells.reserve(filtered.size());
+  level_first.assign(n_levels + 1, 0);
+  for (const float l : level) {
+    if (l >= 1.0f && l != kUnreached) ++level_first[static_cast<std::size_t>(l) + 1];
+  }
+  for (std::size_t k = 1; k <= n_levels; ++k) level_first[k] += level_first[k - 1];
+  level_cells.resize(level_first[n_levels]);
+  {
+    auto& next = out.level_next;
+    next.assign(level_first.begin(), level_first.end() - 1);
+    for (std::size_t i = 0; i < level.size(); ++i) {
+      const float l = level[i];
+      if (l >= 1.0f && l != kUnreached) {
+        level_cells[next[static_cast<std::size_t>(l)]++] = static_cast<std::uint32_t>(i);
+      }
+    }
+  }
+  for (std::size_t pass_index = 1; pass_index < n_levels; ++pass_index) {
+    const auto pass = static_cast<float>(pass_index);
+    for (std::size_t k = level_first[pass_index]; k < level_first[pass_index + 1]; ++k) {
+      const std::size_t i = level_cells[k];
+      const int cx = static_cast<int>(i % static_cast<std::size_t>(gx));
+      const int cy = static_cast<int>(i / static_cast<std::size_t>(gx));
+      float sum = 0.0f;
+      int count = 0;
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int ux = cx + dx, uy = cy + dy;
+          if (ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+          const std::size_t u = static_cast<std::size_t>(uy) * gx + ux;
+          if (level[u] < pass) {  // filled in an earlier pass (or before the first)
+            sum += filtered[u];
+            ++count;
+          }
+        }
+      }
+      filtered[i] = sum / static_cast<float>(count);  // count >= 1: a neighbour is nearer
+    }
+  }
+  for (int cy = 0; cy < gy; ++cy) {
+    for (int cx = 0; cx < gx; ++cx) {
+      float& z = filtered[static_cast<std::size_t>(cy) * gx + cx];
+      if (!std::isnan(z)) continue;  // what stays empty gets the vehicle's plane
+      const Eigen::Vector2d center = plane.coarse_center(cx, cy);
+      z = plane.layer(center.x(), center.y());
+    }
+  }
+}
+
+}  // namespace tarmac::core::costmap

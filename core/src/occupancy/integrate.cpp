@@ -1,0 +1,553 @@
+/// @file OccupancyMap::integrate: one scan into the window. 1. the hit pass (integrate_hits):
+/// each return's voxel gets one hit; 2. the ray walks mark the voxels the rays pass through
+/// (ray_tasks.hpp); 3. the apply pass gives each marked voxel that was not hit one miss, and
+/// miss_occupied decides the misses of voxels reading occupied. The update rules are in
+/// log_odds.hpp.
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <utility>
+
+#include "../lanes4.hpp"
+#include "hit_lanes.hpp"
+#include "log_odds.hpp"
+#include "ray_order.hpp"
+#include "ray_tasks.hpp"
+#include "static_store.hpp"
+#include "tarmac/core/occupancy_map.hpp"
+#include "window.hpp"
+
+namespace tarmac::core {
+namespace {
+
+using namespace occupancy;  // NOLINT(google-build-using-namespace): this file is the occupancy pass
+
+/// Words with at least this many voxels to miss take the four-lanes path.
+constexpr int kDenseWord = 8;
+
+/// The miss update's constants, four lanes each.
+struct MissLanes {
+  Float4 miss, min, zero, unknown;
+  MissLanes(float l_miss, float l_min)
+      : miss{l_miss, l_miss, l_miss, l_miss},
+        min{l_min, l_min, l_min, l_min},
+        zero{0.0f, 0.0f, 0.0f, 0.0f},
+        unknown{OccupancyMap::kUnknown, OccupancyMap::kUnknown, OccupancyMap::kUnknown,
+                OccupancyMap::kUnknown} {}
+};
+
+/// The miss of every voxel of one mark word (64 consecutive slots at `l`, bit k of `marks`
+/// for slot k) that reads free or unknown, four lanes at a time: the same arithmetic as one at a
+/// time (kUnknown counts as 0, then max(l + miss, min)); unmarked and occupied lanes are
+/// written back unchanged. Sets in `occupied` the marked voxels reading occupied (left to the
+/// caller's static-layer logic), in `void_heights` those that reach the lower clamp now and in
+/// `at_floor` every free one that reads the lower clamp after the miss.
+void miss_free_word(float* l, std::uint64_t marks, const MissLanes& c, std::uint64_t& occupied,
+                    std::uint64_t& void_heights, std::uint64_t& at_floor) {
+  const Int4 lane = {1, 2, 4, 8};
+  for (int g = 0; g < 16; ++g) {
+    const auto nibble = static_cast<std::int32_t>((marks >> (4 * g)) & 15);
+    if (nibble == 0) continue;
+    const Int4 marked = (lane & nibble) != 0;
+    Float4 v;
+    std::memcpy(&v, l + 4 * g, sizeof v);
+    const Int4 free = marked & (v <= c.zero);
+    const Float4 known = reinterpret_cast<Float4>(reinterpret_cast<Int4>(v) & ~(v == c.unknown));
+    const Float4 sum = known + c.miss;
+    const Int4 below = sum < c.min;
+    const Float4 next = reinterpret_cast<Float4>((reinterpret_cast<Int4>(c.min) & below) |
+                                                 (reinterpret_cast<Int4>(sum) & ~below));
+    const Int4 voided = free & (next == c.min) & (v > c.min);
+    const Float4 out = reinterpret_cast<Float4>((reinterpret_cast<Int4>(next) & free) |
+                                                (reinterpret_cast<Int4>(v) & ~free));
+    std::memcpy(l + 4 * g, &out, sizeof out);
+    occupied |= std::uint64_t{lane_bits(marked & (v > c.zero))} << (4 * g);
+    void_heights |= std::uint64_t{lane_bits(voided)} << (4 * g);
+    at_floor |= std::uint64_t{lane_bits(free & (next == c.min))} << (4 * g);
+  }
+}
+
+}  // namespace
+
+void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
+                                  std::span<const Eigen::Vector3f> points_W,
+                                  const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats) {
+  const int nx = dims_.x(), ny = dims_.y();
+  const std::size_t n_points = points_W.size();
+  const double max_range = params_.max_range_m;
+  const std::array<int, 3> ring_min = ring_origin();
+  // a) Per return: its slot and window column, or none (beyond max range or outside the
+  //    window), and its height along up_W; and the scan's own ground: the lowest return
+  //    per window column (only the columns this scan touched are reset next time).
+  constexpr float kNone = std::numeric_limits<float>::infinity();
+  // A zero or non-finite up axis is taken as +z: the heights must be numbers (a column's first
+  // return is booked by its ground leaving +inf, below).
+  const double up_norm = up_W.norm();
+  const Eigen::Vector3f up = std::isfinite(up_norm) && up_norm > 0.0
+                                 ? Eigen::Vector3f((up_W / up_norm).cast<float>())
+                                 : Eigen::Vector3f::UnitZ();
+  hit_slot_.resize(n_points);
+  hit_column_.resize(n_points);
+  hit_height_.resize(n_points);
+  hit_rise_.resize(n_points);
+  const double v_m = params_.voxel_size_m;
+  for (std::size_t k = 0; k < n_ground_cols_; ++k) scan_ground_z_[scan_ground_cols_[k]] = kNone;
+  n_ground_cols_ = 0;
+  // The slot and column of each return (none: not finite, beyond max range or outside).
+  bool in_lanes = false;
+#if defined(TARMAC_WIDE_WALK)
+  const int lanes = walk_lanes();
+  in_lanes = lanes > 1;
+  const HitPass pass{points_W, origin_W,         max_range,         v_m, min_, dims_,
+                     ring_min, hit_slot_.data(), hit_column_.data()};
+  if (lanes == 8) {
+    stats.outside_window += hit_voxels_lanes8(pass);
+  } else if (lanes == 4) {
+    stats.outside_window += hit_voxels_lanes4(pass);
+  }
+#endif
+  if (!in_lanes) {
+    for (std::size_t i = 0; i < n_points; ++i) {
+      const Eigen::Vector3f& p = points_W[i];
+      hit_slot_[i] = kNoSlot;
+      if (!p.allFinite() || (p.cast<double>() - origin_W).norm() > max_range) continue;
+      std::int64_t slot = 0;
+      std::int64_t stride = 1;
+      bool inside = true;
+      int rel[3];
+      for (int a = 0; a < 3; ++a) {
+        rel[a] = static_cast<int>(floor_to_int(static_cast<double>(p[a]) / v_m)) - min_[a];
+        inside = inside && static_cast<unsigned>(rel[a]) < static_cast<unsigned>(dims_[a]);
+        int ring = ring_min[a] + rel[a];
+        if (ring >= dims_[a]) ring -= dims_[a];
+        slot += ring * stride;
+        stride *= dims_[a];
+      }
+      if (!inside) {
+        ++stats.outside_window;
+        continue;
+      }
+      hit_slot_[i] = static_cast<std::uint32_t>(slot);
+      hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
+    }
+  }
+  // Heights, and the lowest return per column, in point order. A column's first return books
+  // it without a branch (whether a column was touched before is as good as random: the branch
+  // was a fifth of integrate_hits' own time): every return writes its column at the list's
+  // end, which moves on only for a first return, so the list has room for one entry more than
+  // there can be columns.
+  const std::uint32_t* const slot_of_hit = hit_slot_.data();
+  {
+    const std::size_t columns = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
+    scan_ground_cols_.resize(std::max(scan_ground_cols_.size(), std::min(n_points, columns) + 1));
+    std::uint32_t* const touched = scan_ground_cols_.data();
+    std::size_t n_touched = 0;
+    float* const ground = scan_ground_z_.data();
+    float* const height_of_hit = hit_height_.data();
+    const std::uint32_t* const column_of_hit = hit_column_.data();
+    for (std::size_t i = 0; i < n_points; ++i) {
+      if (slot_of_hit[i] == kNoSlot) continue;
+      const std::uint32_t column = column_of_hit[i];
+      const float height = up.dot(points_W[i]);
+      height_of_hit[i] = height;
+      const float g = ground[column];
+      touched[n_touched] = column;
+      n_touched += g == kNone ? 1 : 0;
+      ground[column] = std::min(g, height);
+    }
+    n_ground_cols_ = n_touched;
+  }
+  // b) Rise above the lowest return of this scan within ground_radius_m (an object cannot
+  //    hide the ground around it).
+  //    Once per column the scan touched (returns stack up in columns: walls, poles), then
+  //    per return; a return's own column is among them, so its ground is at most its height.
+  const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+  for (std::size_t k = 0; k < n_ground_cols_; ++k) {
+    const std::uint32_t c = scan_ground_cols_[k];
+    const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
+    const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
+    float ground_z = kNone;
+    for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
+      const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
+      for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
+        ground_z = std::min(ground_z, row[x]);
+      }
+    }
+    scan_ground_near_z_[c] = ground_z;
+  }
+  // The loops that store bytes read through locals: a byte store may alias anything, and the
+  // compiler would reload every member after each.
+  std::uint8_t* const rise_of_hit = hit_rise_.data();
+  {
+    const float* const height = hit_height_.data();
+    const std::uint32_t* const column = hit_column_.data();
+    const float* const ground_near = scan_ground_near_z_.data();
+    for (std::size_t i = 0; i < n_points; ++i) {
+      if (slot_of_hit[i] == kNoSlot) continue;
+      const float ground_z = ground_near[column[i]];
+      rise_of_hit[i] = static_cast<std::uint8_t>(
+          std::clamp(static_cast<int>((height[i] - ground_z) * 100.0f), 0, 255));
+    }
+  }
+  // c) One hit per voxel, in point order (promotions enter the static layer in that order).
+  const int promote = params_.static_promote_scans;
+  hit_slots_.resize(std::max(hit_slots_.size(), n_points));
+  std::uint32_t* const first_hits = hit_slots_.data();
+  std::size_t n_first = 0;
+  float* const log_odds = log_odds_.data();
+  std::uint8_t* const state = state_.data();
+  std::uint8_t* const rise_cm = rise_cm_.data();
+  std::uint8_t* const hit_floor = hit_floor_.data();
+  std::uint64_t* const hit_bits = hit_bits_.data();
+  std::uint64_t* const floor_bits = floor_bits_.data();
+  const float l_hit = l_hit_, l_min = l_min_, l_max = l_max_;
+  std::uint64_t promotions = 0;
+  // The voxels of a scan's returns are scattered over the window: their lines are requested a
+  // few returns ahead, so that the misses overlap instead of stalling this loop one by one.
+  constexpr std::size_t kAhead = 16;
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (i + kAhead < n_points && slot_of_hit[i + kAhead] != kNoSlot) {
+      const std::uint32_t a = slot_of_hit[i + kAhead];
+      __builtin_prefetch(log_odds + a, 1);
+      __builtin_prefetch(state + a, 1);
+      __builtin_prefetch(rise_cm + a, 1);
+      __builtin_prefetch(hit_bits + (a >> 6), 1);
+      __builtin_prefetch(floor_bits + (a >> 6), 1);
+    }
+    const std::uint32_t s = slot_of_hit[i];
+    if (s == kNoSlot) continue;
+    const std::uint8_t rise = rise_of_hit[i];
+    std::uint64_t& word = hit_bits[s >> 6];
+    const std::uint64_t bit = std::uint64_t{1} << (s & 63);
+    const std::uint8_t here = sub_voxel(points_W[i].z(), v_m);
+    if ((word & bit) == 0) {
+      word |= bit;
+      floor_bits[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
+      first_hits[n_first++] = s;
+      float& l = log_odds[s];
+      // Reading free or unknown until now: its lowest return starts again from this one.
+      hit_floor[s] = l > 0.0f ? std::min(hit_floor[s], here) : here;
+      l = after_hit(l, l_hit, l_min, l_max);
+      std::uint8_t& st = state[s];
+      if ((st & kStatic) != 0) {
+        st = kStatic;  // a return: the run of free observations restarts
+      } else if (l <= 0.0f || promote == 0) {
+        st = 0;  // not reading occupied yet: no run
+      } else if ((st & kCount) + 1 >= promote) {
+        st = kStatic;
+        static_->insert(voxel_of_slot(s));
+        ++promotions;
+      } else {
+        ++st;
+      }
+      rise_cm[s] = rise;  // the latest scan's returns replace older ones
+    } else {
+      rise_cm[s] = std::max(rise_cm[s], rise);
+      hit_floor[s] = std::min(hit_floor[s], here);
+    }
+  }
+  n_hit_slots_ = n_first;
+  stats.hit_updates += n_first;
+  stats.promotions += promotions;
+}
+
+OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
+                                             std::span<const Eigen::Vector3f> points_W,
+                                             std::span<const Eigen::Vector3f> clearing_dirs_W,
+                                             TaskRunner& runner, const Eigen::Vector3d& up_W) {
+  OccupancyUpdateStats stats;
+  if (!placed_) recenter(origin_W);
+  const double max_range = params_.max_range_m;
+  const double clear_range = params_.clearing_range_m;
+
+  // 1. Hits (integrate_hits), in one task beside the ray walks of 2.: they touch disjoint data
+  //    (the hit pass the per-return arrays, the hit bits and the hit voxels' state; the walks
+  //    their own mark bit sets). Applied before any miss in 3., so that a voxel hit by any ray
+  //    of this scan is never also cleared by it.
+  const int nx = dims_.x(), ny = dims_.y();
+  const std::size_t n_points = points_W.size();
+  const std::array<int, 3> ring_min = ring_origin();
+  // 2. Free space: each ray task marks the voxels its rays pass through in its own bit set
+  //    (chunks of rays as the tasks ask for them; their union does not depend on who took
+  //    which, see TaskRays).
+  const std::size_t n_rays = n_points + clearing_dirs_W.size();
+  const WindowGeometry w{dims_, min_, params_.voxel_size_m};
+  const RayStart start(w, origin_W);
+  std::array<std::uint64_t, kRayTasks> task_visits{};
+  std::array<MarkBox, kRayTasks> task_boxes{};
+  const bool flag_words = !dirty_words_.empty();
+  // The order helps the one-at-a-time walk's branch prediction, and the four-lane walk's
+  // lockstep (neighbours in direction end near each other). The eight-lane walk refills a lane
+  // as its walk ends and needs neither, so it skips the sort (docs/mapping.md).
+  std::atomic<std::size_t> next_chunk{0};
+  const int lanes = walk_lanes();
+  const bool wide = lanes == 8;
+  if (!wide) {
+    sort_rays_by_direction(origin_W, points_W, clearing_dirs_W, ray_bucket_, ray_bucket_count_,
+                           ray_order_, runner);
+  }
+  const std::span<const std::uint32_t> order =
+      wide ? std::span<const std::uint32_t>{} : std::span<const std::uint32_t>(ray_order_);
+  has_no_returns_ = !clearing_dirs_W.empty();
+  runner.parallel_for(1 + kRayTasks, [&](std::size_t job) {
+    if (job == 0) {
+      integrate_hits(origin_W, points_W, up_W, stats);
+      scan_rays_.build(origin_W, points_W, clearing_dirs_W, max_range, clear_range);
+      return;
+    }
+    const std::size_t task = job - 1;
+    MarkBox& box = task_boxes[task];
+    const FreeMarks marks{free_bits_[task].data(),
+                          flag_words ? dirty_words_[task].data() : nullptr};
+    const std::uint64_t visits = walk_task(
+        w, start,
+        TaskRays{points_W, clearing_dirs_W, order, origin_W, max_range, clear_range, &next_chunk},
+        marks, box, lanes);
+    task_visits[task] = visits;
+  });
+
+  // 3. Apply: fixed ranges of mark words, each voxel marked by any task and not hit gets one
+  //    miss. Only the words inside the box of all marks are read (small windows) or only the
+  //    blocks a ray flagged (large ones). The marks are cleared as they are read, ready for the
+  //    next scan. Only voxels reading occupied carry static-layer state (free space costs no
+  //    extra memory access). A word may be visited twice (rows share words); the second visit
+  //    finds its marks cleared, so every marked voxel gets exactly one miss.
+  MarkBox marked_box;
+  for (const MarkBox& b : task_boxes) marked_box.add(b);
+  const std::size_t n_words = hit_bits_.size();
+  const std::size_t n_blocks = (n_words >> kBlockShift) + 1;
+  std::array<std::uint64_t*, kRayTasks> task_bits{};
+  for (std::size_t t = 0; t < kRayTasks; ++t) task_bits[t] = free_bits_[t].data();
+  std::array<std::uint64_t, kApplyTasks> task_updates{};
+  const MissLanes miss_lanes(l_miss_, l_min_);
+
+  runner.parallel_for(kApplyTasks, [&](std::size_t task) {
+    std::uint64_t updates = 0;
+    std::vector<std::uint32_t>& candidates = candidates_[task];
+    candidates.clear();
+    // Words whose marks need an update (not hit, not at the lower clamp), collected with their
+    // log-odds lines prefetched, then updated together: the voxels are scattered over the
+    // window, and waiting for them one by one was most of this pass's time.
+    constexpr std::size_t kPending = 256;
+    std::array<std::pair<std::size_t, std::uint64_t>, kPending> pending;
+    std::size_t n_pending = 0;
+    const auto flush = [&] {
+      for (std::size_t p = 0; p < n_pending; ++p) {
+        const std::size_t wi = pending[p].first;
+        std::uint64_t marks = pending[p].second;
+        std::uint64_t& at_floor = floor_bits_[wi];
+        const int count = bit_count(marks);
+        const std::size_t base = wi << 6;
+        std::uint64_t occupied = 0;  // marked voxels reading occupied: static-layer logic below
+        if (count >= kDenseWord) {
+          // Mostly free space near the sensor: the whole word's voxels four at a time.
+          std::uint64_t void_heights = 0;
+          miss_free_word(log_odds_.data() + base, marks, miss_lanes, occupied, void_heights,
+                         at_floor);
+          for (; void_heights != 0; void_heights &= void_heights - 1) {
+            rise_cm_[base + static_cast<std::size_t>(std::countr_zero(void_heights))] = 0;
+          }
+        } else {
+          for (; marks != 0; marks &= marks - 1) {
+            const std::size_t s = base + static_cast<std::size_t>(std::countr_zero(marks));
+            float& l = log_odds_[s];
+            if (l > 0.0f) {
+              occupied |= std::uint64_t{1} << (s & 63);
+              continue;
+            }
+            // Free or unknown (kUnknown < 0): no static state.
+            const float next = after_miss(l, l_miss_, l_min_);
+            // Reaching the lower clamp (observed free scan after scan): the sub-voxel heights
+            // of older returns are void too (a tug's edge hit once leaves no ghost).
+            if (next == l_min_) {
+              if (l > l_min_) rise_cm_[s] = 0;
+              at_floor |= std::uint64_t{1} << (s & 63);
+            }
+            l = next;  // a miss only lowers
+          }
+        }
+        // Voxels reading occupied: decided after this pass (see below).
+        for (; occupied != 0; occupied &= occupied - 1) {
+          candidates.push_back(static_cast<std::uint32_t>(
+              base + static_cast<std::size_t>(std::countr_zero(occupied))));
+        }
+      }
+      n_pending = 0;
+    };
+    // The marks of words [w_begin, w_end): the tasks' marks ORed, then cleared. Voxels already
+    // at the lower clamp stay there, their heights already void: a miss changes nothing, so
+    // their log-odds are not even read.
+    const auto gather = [&](std::size_t w_begin, std::size_t w_end) {
+      for (std::size_t wi = w_begin; wi < w_end; ++wi) {
+        std::uint64_t m = 0;
+        for (std::size_t t = 0; t < kRayTasks; ++t) {
+          m |= task_bits[t][wi];
+          task_bits[t][wi] = 0;
+        }
+        if (m == 0) continue;
+        m &= ~hit_bits_[wi];
+        updates += static_cast<std::uint64_t>(bit_count(m));
+        m &= ~floor_bits_[wi];
+        if (m == 0) continue;
+        for (int g = 0; g < 4; ++g) {  // 16 floats per 64-byte line
+          if (((m >> (16 * g)) & 0xffff) != 0) {
+            __builtin_prefetch(log_odds_.data() + (wi << 6) + 16 * g, 1);
+          }
+        }
+        pending[n_pending++] = {wi, m};
+        if (n_pending == kPending) flush();
+      }
+    };
+    if (flag_words) {
+      const std::size_t b_begin = n_blocks * task / kApplyTasks;
+      const std::size_t b_end = n_blocks * (task + 1) / kApplyTasks;
+      for (std::size_t b = b_begin; b < b_end; ++b) {
+        std::uint64_t flags = 0;
+        for (auto& d : dirty_words_) {
+          flags |= d[b];
+          d[b] = 0;
+        }
+        for (; flags != 0; flags &= flags - 1) {
+          const std::size_t wi =
+              (b << kBlockShift) + static_cast<std::size_t>(std::countr_zero(flags));
+          gather(wi, wi + 1);
+        }
+      }
+    } else if (!marked_box.empty()) {
+      // This task's words, row by row (a row: the voxels of one ring z and ring y): the rows
+      // of the box, each as one or two runs of x in ring order.
+      const std::size_t w_begin = n_words * task / kApplyTasks;
+      const std::size_t w_end = n_words * (task + 1) / kApplyTasks;
+      const auto row_len = static_cast<std::size_t>(nx);
+      const std::size_t r_first = (w_begin << 6) / row_len;
+      const std::size_t r_last =
+          std::min((w_end << 6) / row_len + 1, static_cast<std::size_t>(ny) * dims_.z());
+      const int x_lo = marked_box.lo[0], x_hi = marked_box.hi[0];
+      const int x0 = wrap(ring_min[0] + x_lo, nx);
+      const int x_count = x_hi - x_lo + 1;
+      const auto run = [&](std::size_t first_slot, std::size_t last_slot) {
+        const std::size_t a = std::max(w_begin, first_slot >> 6);
+        const std::size_t b = std::min(w_end, (last_slot >> 6) + 1);
+        gather(a, b);
+      };
+      // The row's ring y and z, and where they sit in the window, are stepped along with it:
+      // a division per row (tens of thousands of rows per task and scan) was most of this
+      // pass's time.
+      const int nz = dims_.z();
+      auto ring_y = static_cast<int>(r_first % static_cast<std::size_t>(ny));
+      int rel_y = wrap(ring_y - ring_min[1], ny);
+      int rel_z = wrap(static_cast<int>(r_first / static_cast<std::size_t>(ny)) - ring_min[2], nz);
+      for (std::size_t r = r_first; r < r_last; ++r) {
+        if (marked_box.holds(1, rel_y) && marked_box.holds(2, rel_z)) {
+          const std::size_t row = r * row_len;
+          if (x0 + x_count <= nx) {
+            run(row + static_cast<std::size_t>(x0),
+                row + static_cast<std::size_t>(x0 + x_count - 1));
+          } else {
+            run(row + static_cast<std::size_t>(x0), row + row_len - 1);
+            run(row, row + static_cast<std::size_t>(x0 + x_count - nx - 1));
+          }
+        }
+        rel_y = rel_y + 1 == ny ? 0 : rel_y + 1;
+        if (++ring_y == ny) {
+          ring_y = 0;
+          rel_z = rel_z + 1 == nz ? 0 : rel_z + 1;
+        }
+      }
+    }
+    flush();
+    task_updates[task] = updates;
+  });
+  for (std::size_t k = 0; k < n_hit_slots_; ++k) hit_bits_[hit_slots_[k] >> 6] = 0;
+  miss_occupied(runner, stats);
+
+  stats.rays = n_rays;
+  for (const auto v : task_visits) stats.voxel_visits += v;
+  for (const auto u : task_updates) stats.miss_updates += u;
+  return stats;
+}
+
+void OccupancyMap::miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats) {
+  // a) Decide, reading only (so that no decision sees another's write): which of the occupied
+  //    voxels a ray crossed this scan get a miss. A voxel with observed free space below it and
+  //    none above (unknown, or occupied) is the underside of something: an aircraft's belly,
+  //    an engine, a truck bed. Rays that cross such a voxel under its lowest return only pass
+  //    under the surface; they miss it only when one passes through the voxel at or above its
+  //    lowest return and goes on more than a voxel (ScanRays::any_passes). Every other
+  //    occupied voxel a ray crossed gets its miss, as any free voxel does: the top of a tug
+  //    that drove away has free space above it, and clears as fast as before.
+  const std::size_t n_tasks = candidates_.size();
+  std::array<std::size_t, kApplyTasks + 1> first{};
+  for (std::size_t t = 0; t < n_tasks; ++t) first[t + 1] = first[t] + candidates_[t].size();
+  const std::size_t n = first[n_tasks];
+  miss_decision_.resize(std::max(miss_decision_.size(), n));
+  const double v = params_.voxel_size_m;
+  const int nz = dims_.z();
+  const std::size_t layer = static_cast<std::size_t>(dims_.x()) * dims_.y();
+  const int ring_z0 = wrap(min_.z(), nz);
+  const auto reads_free = [&](std::size_t s) {
+    const float l = log_odds_[s];
+    return l != kUnknown && l <= 0.0f;
+  };
+  runner.parallel_for(n_tasks, [&](std::size_t task) {
+    const std::vector<std::uint32_t>& list = candidates_[task];
+    for (std::size_t k = 0; k < list.size(); ++k) {
+      const std::size_t s = list[k];
+      bool miss = true;
+      const std::uint8_t floor32 = hit_floor_[s];
+      const int rel_z = wrap(static_cast<int>(s / layer) - ring_z0, nz);
+      const Eigen::Vector3d corner = voxel_of_slot(s).cast<double>() * v;
+      if (floor32 != kNoHitFloor && rel_z > 0) {
+        const std::size_t below = s >= layer ? s - layer : s + layer * (nz - 1);
+        const bool above_free =
+            rel_z + 1 < nz &&
+            reads_free(s + layer < layer * nz ? s + layer : s + layer - layer * nz);
+        if (reads_free(below) && !above_free) {
+          const Eigen::Vector3d lo(corner.x(), corner.y(), corner.z() + floor32 * v / kFloorSteps);
+          miss = scan_rays_.any_passes(lo, corner + Eigen::Vector3d::Constant(v), v, true);
+        }
+      }
+      // Beams without a return never empty an occupied voxel: a black or mirror-like surface
+      // returns nothing too. Only a ray that ended at a return shows it empty.
+      if (miss && has_no_returns_) {
+        miss = scan_rays_.any_passes(corner, corner + Eigen::Vector3d::Constant(v), 0.0, true);
+      }
+      miss_decision_[first[task] + k] = miss ? 1 : 0;
+    }
+  });
+  // b) Apply, in the lists' order: the misses, and the static layer's runs of free
+  //    observations (a static voxel leaves the layer after static_demote_scans in a row).
+  const int demote = params_.static_demote_scans;
+  for (std::size_t t = 0; t < n_tasks; ++t) {
+    const std::vector<std::uint32_t>& list = candidates_[t];
+    for (std::size_t k = 0; k < list.size(); ++k) {
+      if (miss_decision_[first[t] + k] == 0) continue;
+      const std::size_t s = list[k];
+      float& l = log_odds_[s];
+      std::uint8_t& st = state_[s];
+      if ((st & kStatic) == 0) {
+        l = after_miss(l, l_miss_, l_min_);  // reads occupied: never kUnknown
+        if (l <= 0.0f) {  // reads free: the run of hits is broken, the heights are void
+          st = 0;
+          rise_cm_[s] = 0;
+        }
+      } else if ((st & kCount) + 1 >= demote) {
+        st = 0;  // strong free evidence: leaves the static layer and reads free
+        l = std::max(l_miss_, l_min_);
+        rise_cm_[s] = 0;
+        static_->erase(voxel_of_slot(s));
+        ++stats.demotions;
+      } else {
+        ++st;
+        l = std::max(l + l_miss_, l_hit_);  // a static voxel reads at least one hit
+      }
+    }
+  }
+}
+
+}  // namespace tarmac::core
