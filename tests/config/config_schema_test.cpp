@@ -11,17 +11,12 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include "load_error.hpp"
 #include "tarmac/config/config.hpp"
 #include "test_env.hpp"
 
 namespace tarmac::config {
 namespace {
-
-std::string error_of(const std::string& yaml) {
-  auto result = load_config_string(yaml);
-  EXPECT_FALSE(result.ok()) << yaml;
-  return result.ok() ? "" : result.error().message;
-}
 
 std::string read_text(const std::filesystem::path& path) {
   std::ifstream in(path);
