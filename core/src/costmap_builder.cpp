@@ -19,8 +19,10 @@ using costmap::kRowTasks;
 /// 7. Virtual zones: active, and their z range meets the vehicle's envelope at that cell.
 void add_virtual_zones(const CostmapPass& pass, std::span<const VirtualZone> zones,
                        std::int64_t stamp_ns) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  const auto& params = pass.params;
+  auto& out = pass.out;
+  const auto nx = pass.nx;
+  const auto& geometry = pass.geometry;
   const double hi_m = params.vehicle_height_m + params.clearance_m;
   for (const auto& zone : zones) {
     if (!zone.active(stamp_ns)) continue;
@@ -40,8 +42,13 @@ void add_virtual_zones(const CostmapPass& pass, std::span<const VirtualZone> zon
 /// 8. Exact distance to the nearest obstacle cell (esdf_input was set with the classes), then
 ///    Nav2 inflation.
 void inflate(const CostmapPass& pass) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  const auto& params = pass.params;
+  auto& out = pass.out;
+  auto& runner = pass.runner;
+  const auto v = pass.v;
+  const auto nx = pass.nx;
+  const auto ny = pass.ny;
+  const auto cells_n = pass.cells_n;
   const auto& classes = out.column_class.cells();
   compute_distance_field(out.esdf_input, Eigen::Vector3i(nx, ny, 1), v,
                          UnknownPolicy::kReportUnknown, out.obstacle_distance, out.scratch, runner);

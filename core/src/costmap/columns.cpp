@@ -47,8 +47,20 @@ CellState esdf_state(std::uint8_t column_class) {
 }  // namespace
 
 void classify_columns(const CostmapPass& pass) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  const auto& map = pass.map;
+  const auto& params = pass.params;
+  auto& out = pass.out;
+  auto& runner = pass.runner;
+  const auto v = pass.v;
+  const auto nx = pass.nx;
+  const auto ny = pass.ny;
+  const auto nz = pass.nz;
+  const auto& wmin = pass.wmin;
+  const auto& geometry = pass.geometry;
+  const auto cells_n = pass.cells_n;
+  const auto use_bits = pass.use_bits;
+  const auto g = pass.g;
+  const auto gx = pass.gx;
   const auto& lowest = out.lowest_occupied;
   const auto& occupied_bits = out.occupied_bits;
   const auto& known_bits = out.known_bits;

@@ -103,8 +103,14 @@ void layer_bits_run(const float* const* layers, std::size_t offset, int count, i
 }  // namespace
 
 void find_ground_candidates(const CostmapPass& pass) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  const auto& map = pass.map;
+  auto& out = pass.out;
+  auto& runner = pass.runner;
+  const auto nx = pass.nx;
+  const auto ny = pass.ny;
+  const auto nz = pass.nz;
+  const auto cells_n = pass.cells_n;
+  const auto use_bits = pass.use_bits;
   // The candidate is the lowest occupied voxel, unless observed free space reaches more than a
   // voxel below it: rays that graze the ground clear the voxel that holds its surface, and where
   // they have, the lowest occupied voxel is whatever hovers above (an engine's underside at
@@ -182,8 +188,13 @@ void find_ground_candidates(const CostmapPass& pass) {
 }
 
 void find_coarse_ground(const CostmapPass& pass) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  auto& out = pass.out;
+  auto& runner = pass.runner;
+  const auto nx = pass.nx;
+  const auto ny = pass.ny;
+  const auto g = pass.g;
+  const auto gx = pass.gx;
+  const auto gy = pass.gy;
   const auto& lowest = out.lowest_occupied;
   // Coarse ground buffers live in `out` and keep their capacity: no allocation after warm-up.
   auto& coarse = out.coarse_ground;
@@ -212,8 +223,9 @@ void find_coarse_ground(const CostmapPass& pass) {
 }
 
 GroundPlane fit_ground_plane(const CostmapPass& pass, const Eigen::Isometry3d& T_W_B) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  auto& out = pass.out;
+  const auto gx = pass.gx;
+  const auto gy = pass.gy;
   const Eigen::Vector3d up_W = T_W_B.linear().col(2);
   GroundPlane plane{pass, T_W_B.translation(), up_W, std::max(up_W.z(), 0.1)};
   // The plane's height is taken from the data, not from the base frame's origin (base_link may
@@ -240,8 +252,11 @@ GroundPlane fit_ground_plane(const CostmapPass& pass, const Eigen::Isometry3d& T
 }
 
 void reject_non_ground(const CostmapPass& pass, const GroundPlane& plane) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  const auto& params = pass.params;
+  auto& out = pass.out;
+  const auto v = pass.v;
+  const auto gx = pass.gx;
+  const auto gy = pass.gy;
   // Far off the plane of the vehicle's own wheels (extended with the steepest slope allowed) —
   // a wing or a fuselage seen with no ground under it — or far above their neighbours (a truck
   // roof).
@@ -275,8 +290,9 @@ void reject_non_ground(const CostmapPass& pass, const GroundPlane& plane) {
 }
 
 void fill_ground_gaps(const CostmapPass& pass, const GroundPlane& plane) {
-  const auto& [map, params, out, runner, v, nx, ny, nz, wmin, geometry, cells_n, use_bits, g, gx,
-               gy] = pass;
+  auto& out = pass.out;
+  const auto gx = pass.gx;
+  const auto gy = pass.gy;
   auto& filtered = out.coarse_filtered;
   // Fill gaps from neighbours. Defined as passes that each give every gap cell next to a filled
   // cell the mean of its filled neighbours (in the fixed neighbour order below). A gap cell is
