@@ -350,6 +350,15 @@ class SchemaReader {
       entry.sensor.frame_id = "lidar_" + id;
       read_map(node[i], at, "sensors[].", keys);
       sensor_ = nullptr;
+      // A default topic is checked as a given one is: an id that makes it one ROS 2 cannot see
+      // is refused here, not at the first reload of the written config (found by fuzzing).
+      if (!present(at + ".topic")) {
+        if (const auto why = ros_topic_problem(entry.sensor.topic); !why.empty()) {
+          fail("value", at + ".id",
+               "'" + id + "' makes the default topic '" + entry.sensor.topic + "', which " + why +
+                   " (give " + at + ".topic, or an id of letters, digits and '_')");
+        }
+      }
       entry.sensor.T_base_sensor = extrinsic(entry, at + ".extrinsic");
       for (const auto& other : config_.sensors) {
         if (other.id == id) fail("value", at + ".id", "duplicate id '" + id + "'");

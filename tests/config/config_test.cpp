@@ -494,6 +494,25 @@ TEST(Config, RosTopicNamesAreMappedToTheirDdsForm_OthersRefused) {
             std::string::npos);
 }
 
+// Found by fuzzing (tests/fuzz/config_fuzz.cpp): an id such as "front-left" made the default
+// topic rt/tarmac/lidar/front-left/points, which was accepted unchecked, written by to_yaml and
+// refused when that output was loaded again. The default is checked as a given topic is.
+TEST(Config, SensorIdThatMakesAnInvalidDefaultTopic_IsRefused_AGivenTopicIsNot) {
+  const std::string why = error_of("version: 1\nsensors: [{id: front-left}]\n");
+  EXPECT_NE(why.find("sensors[0].id: 'front-left' makes the default topic "
+                     "'rt/tarmac/lidar/front-left/points', which has a character ROS 2 names "
+                     "refuse: '-'"),
+            std::string::npos)
+      << why;
+  EXPECT_EQ(code_of("version: 1\nsensors: [{id: front-left}]\n"), "config.value");
+  auto given = load_config_string(
+      "version: 1\nsensors: [{id: front-left, topic: /lidar/front_left/points}]\n");
+  ASSERT_TRUE(given.ok()) << given.error().message;
+  EXPECT_EQ(given.value().sensors[0].id, "front-left");
+  // What to_yaml writes of an accepted config loads again.
+  EXPECT_TRUE(load_config_string(to_yaml(given.value())).ok());
+}
+
 /// Sets an environment variable for one scope.
 class ScopedEnv {
  public:
