@@ -91,13 +91,13 @@ Mapper::Mapper(const MapperParams& params)
   }
 }
 
-FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                             const Eigen::Isometry3d& T_B_S, const ScanMotion* motion) {
   SerialRunner serial;
   return ingest(cloud, T_W_B, T_B_S, serial, motion);
 }
 
-FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                             const Eigen::Isometry3d& T_B_S, TaskRunner& runner,
                             const ScanMotion* motion) {
   const Eigen::Isometry3d T_W_S = T_W_B * T_B_S;
@@ -137,7 +137,13 @@ FilterCounts Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
     slot.tsdf_blocks.clear();
     ++next_seq_;
   }
-  return counts;
+  return FilteredScan{cloud.stamp_ns, T_W_B, sensor_W_, points_W_, clearing_W_, counts};
+}
+
+bool Mapper::is_last_ingested(const FilteredScan& scan) const {
+  return scan.points_W.data() == points_W_.data() && scan.points_W.size() == points_W_.size() &&
+         scan.clearing_W.data() == clearing_W_.data() &&
+         scan.clearing_W.size() == clearing_W_.size();
 }
 
 void Mapper::reserve_retained(std::size_t points_per_scan) {
@@ -147,21 +153,26 @@ void Mapper::reserve_retained(std::size_t points_per_scan) {
   }
 }
 
-OccupancyUpdateStats Mapper::integrate(TaskRunner& runner) {
-  map_.recenter(T_W_B_.translation(), runner);
-  return map_.integrate(sensor_W_, points_W_, clearing_W_, runner, T_W_B_.linear().col(2));
+OccupancyUpdateStats Mapper::integrate(const FilteredScan& scan, TaskRunner& runner) {
+  TARMAC_ASSERT(is_last_ingested(scan), "Mapper::integrate takes the last ingest()'s scan");
+  map_.recenter(scan.T_W_B.translation(), runner);
+  return map_.integrate(scan.sensor_W, scan.points_W, scan.clearing_W, runner,
+                        scan.T_W_B.linear().col(2));
 }
 
-const TsdfUpdate& Mapper::integrate_tsdf(TaskRunner& runner) {
+const TsdfUpdate& Mapper::integrate_tsdf(const FilteredScan& scan, TaskRunner& runner) {
   if (!params_.tsdf.enabled) return no_tsdf_update_;
+  // The retained slot marked below is the last ingested scan's.
+  TARMAC_ASSERT(is_last_ingested(scan), "Mapper::integrate_tsdf takes the last ingest()'s scan");
   if (retained_.empty() || next_seq_ == 0) {
-    return tsdf_integrator_.integrate(sensor_W_, points_W_, tsdf_, runner);
+    return tsdf_integrator_.integrate(scan.sensor_W, scan.points_W, tsdf_, runner);
   }
   RetainedScan& slot = retained(next_seq_ - 1);
   slot.tsdf_wanted = true;
   // During a rebuild the TSDF is integrated by rebuild_step(), in stamp order.
   if (rebuilding_) return no_tsdf_update_;
-  const TsdfUpdate& update = tsdf_integrator_.integrate(sensor_W_, points_W_, tsdf_, runner);
+  const TsdfUpdate& update =
+      tsdf_integrator_.integrate(scan.sensor_W, scan.points_W, tsdf_, runner);
   record_tsdf(slot, update);
   return update;
 }
@@ -171,16 +182,19 @@ void Mapper::record_tsdf(RetainedScan& scan, const TsdfUpdate& update) {
   scan.tsdf_done = true;
 }
 
-void Mapper::update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
-                            TaskRunner& runner) {
+const CostmapLayers& Mapper::update_costmap(std::span<const VirtualZone> zones,
+                                            std::int64_t stamp_ns, TaskRunner& runner) {
   build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner);
+  return layers_;
 }
 
-void Mapper::update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
-                              TaskRunner& runner) {
-  if (!params_.esdf_band.enabled) return;
-  build_esdf_band(map_, layers_, params_.costmap, params_.esdf_band, T_W_B_, zones, stamp_ns, band_,
-                  runner);
+const EsdfBand& Mapper::update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                                         TaskRunner& runner) {
+  if (params_.esdf_band.enabled) {
+    build_esdf_band(map_, layers_, params_.costmap, params_.esdf_band, T_W_B_, zones, stamp_ns,
+                    band_, runner);
+  }
+  return band_;
 }
 
 std::size_t Mapper::retained_scans() const {

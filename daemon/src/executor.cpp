@@ -200,20 +200,21 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
     if (corrections.pending()) corrections.apply_before(cloud.stamp_ns);
     const auto t0 = Clock::now();
-    const core::FilterCounts counts = mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], *pool,
-                                                    sel.deskew ? &sel.motion : nullptr);
+    const core::FilteredScan scan = mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], *pool,
+                                                  sel.deskew ? &sel.motion : nullptr);
+    const core::FilterCounts& counts = scan.counts;
     const auto t1 = Clock::now();
-    mapper.integrate(*pool);
+    mapper.integrate(scan, *pool);
     const auto t2 = Clock::now();
     stage_ms[kIngest] += ms_between(t0, t1);
     stage_ms[kIntegrate] += ms_between(t1, t2);
     if (tsdf_enabled) {
       // Shed first (DESIGN.md §3), by the points quota only: the same scans skip the TSDF
       // whatever the machine's speed.
-      const std::uint64_t n = mapper.points_W().size();
+      const std::uint64_t n = scan.points_W.size();
       if (tsdf_points + n <= config.quotas.tsdf_points_per_cycle) {
         tsdf_points += n;
-        mapper.integrate_tsdf(*pool);
+        mapper.integrate_tsdf(scan, *pool);
         ++tsdf_scans;
         stage_ms[kTsdf] += ms_between(t2, Clock::now());
       } else {

@@ -99,13 +99,15 @@ TEST(Deskew, MapperIngest_UsesTheMotionOnlyWhenGiven) {
   const Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
   const PointCloud cloud = sweep_of_wall(T_B_S);
   ScanMotion motion{0.0, 0.1, base_at(0.0), base_at(0.1)};
-  mapper.ingest(cloud, base_at(0.0), T_B_S, &motion);
   double worst = 0.0;
-  for (const auto& p : mapper.points_W()) worst = std::max(worst, std::abs(p.x() - 20.0));
+  for (const auto& p : mapper.ingest(cloud, base_at(0.0), T_B_S, &motion).points_W) {
+    worst = std::max(worst, std::abs(p.x() - 20.0));
+  }
   EXPECT_LT(worst, 0.002);
-  mapper.ingest(cloud, base_at(0.0), T_B_S);
   worst = 0.0;
-  for (const auto& p : mapper.points_W()) worst = std::max(worst, std::abs(p.x() - 20.0));
+  for (const auto& p : mapper.ingest(cloud, base_at(0.0), T_B_S).points_W) {
+    worst = std::max(worst, std::abs(p.x() - 20.0));
+  }
   EXPECT_GT(worst, 0.9);
 }
 

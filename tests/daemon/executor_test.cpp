@@ -65,9 +65,9 @@ void run_offline(core::Mapper& mapper, const config::Config& cfg, std::size_t sc
   core::OrganisedScratch scratch;
   for (std::size_t k = 0; k < scans; ++k) {
     EXPECT_TRUE(tools::read_sequence_scan(seq, k, cloud, scratch).ok());
-    mapper.ingest(cloud, wire_pose(0, seq.T_W_S[k], T_B_S).T_W_B, T_B_S);
-    mapper.integrate(runner);
-    if (tsdf) mapper.integrate_tsdf(runner);
+    const auto scan = mapper.ingest(cloud, wire_pose(0, seq.T_W_S[k], T_B_S).T_W_B, T_B_S);
+    mapper.integrate(scan, runner);
+    if (tsdf) mapper.integrate_tsdf(scan, runner);
   }
 }
 
@@ -337,9 +337,9 @@ OfflineCorrected offline_corrected(const config::Config& cfg,
       ++out.jumps;
     }
     cloud.stamp_ns = wire.stamp_ns;
-    mapper.ingest(cloud, wire.T_W_B, T_B_S);
-    mapper.integrate(runner);
-    mapper.integrate_tsdf(runner);
+    const auto scan = mapper.ingest(cloud, wire.T_W_B, T_B_S);
+    mapper.integrate(scan, runner);
+    mapper.integrate_tsdf(scan, runner);
     if (mapper.rebuilding()) mapper.rebuild_step(runner);
     if (correction == nullptr || k != correction->after_scan) continue;
     std::vector<core::StampedPose> trajectory;

@@ -34,8 +34,8 @@ RunResult run(const std::filesystem::path& dir, std::size_t threads) {
   for (std::size_t k = 0; k < seq.value().scans.size(); ++k) {
     EXPECT_TRUE(tools::read_kitti_scan(seq.value().scans[k], cloud).ok());
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
-    mapper.ingest(cloud, T_W_B, T_B_S);
-    mapper.integrate(pool);
+    const auto scan = mapper.ingest(cloud, T_W_B, T_B_S);
+    mapper.integrate(scan, pool);
     mapper.update_costmap({}, 0, pool);
     result.path_W.push_back(T_W_B.translation());
   }

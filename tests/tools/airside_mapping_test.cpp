@@ -73,8 +73,8 @@ Drive drive(double tilt_deg, double stop_x_m, bool base_at_sensor = false) {
     lidar.scan(scene, seq.path.T_W_S(t_s), t_s, nullptr, returns);
     to_cloud(returns, seq.lidar, cloud, scratch);
     const Eigen::Isometry3d T_W_B = base_at_sensor ? seq.path.T_W_S(t_s) : seq.path.T_W_base(t_s);
-    mapper.ingest(cloud, out.T_O_W * T_W_B, T_B_S);
-    mapper.integrate(pool);
+    const auto scan = mapper.ingest(cloud, out.T_O_W * T_W_B, T_B_S);
+    mapper.integrate(scan, pool);
     mapper.update_costmap({}, 0, pool);
   }
   const auto& l = mapper.costmap();
@@ -168,8 +168,8 @@ void drive_sequence(int scans, const core::MapperParams& params,
     lidar.scan(scene, seq.path.T_W_S(t_s), t_s, nullptr, returns);
     if (perturb) perturb(returns);
     to_cloud(returns, seq.lidar, cloud, scratch);
-    mapper.ingest(cloud, seq.path.T_W_base(t_s), T_B_S);
-    mapper.integrate(pool);
+    const auto scan = mapper.ingest(cloud, seq.path.T_W_base(t_s), T_B_S);
+    mapper.integrate(scan, pool);
     mapper.update_costmap({}, 0, pool);
     after(i, t_s, mapper);
   }
@@ -289,8 +289,8 @@ TEST(AirsideMapping, AircraftLoop_EveryCycleShowsWhatWasSeen_NoneFree_FewFalse) 
   for (std::size_t k = 0; k < seq.value().scans.size(); ++k) {
     ASSERT_TRUE(tools::read_organised_scan(s.organised[k], s.rows, s.cols, cloud, scratch).ok());
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
-    mapper.ingest(cloud, T_W_B, T_B_S);
-    mapper.integrate(pool);
+    const auto scan = mapper.ingest(cloud, T_W_B, T_B_S);
+    mapper.integrate(scan, pool);
     mapper.update_costmap({}, 0, pool);
     tracker.observe(mapper.costmap().costmap, static_cast<int>(k), T_W_B.translation().head<2>());
   }

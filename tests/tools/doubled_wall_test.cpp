@@ -101,9 +101,10 @@ MapRun map(const Sequence& s, const core::MapperParams& mp, Handling handling,
         mapper.correct_rigid(*jump, stamp);
       }
     }
-    mapper.ingest(s.clouds[static_cast<std::size_t>(i)], W_B[static_cast<std::size_t>(i)], s.T_B_S);
-    mapper.integrate(pool);
-    mapper.integrate_tsdf(pool);
+    const auto scan = mapper.ingest(s.clouds[static_cast<std::size_t>(i)],
+                                    W_B[static_cast<std::size_t>(i)], s.T_B_S);
+    mapper.integrate(scan, pool);
+    mapper.integrate_tsdf(scan, pool);
     if (handling == Handling::kTrajectory && i == kCorrectAt - 1) {
       // The pose source publishes the corrected trajectory with its fix.
       std::vector<core::StampedPose> traj;

@@ -239,16 +239,16 @@ int main(int argc, char** argv) {
       while (Clock::now() < until) {
       }
     }
-    core::FilterCounts counts;
-    const double f = timed_ms([&] {
-      staged(ph_filter, [&] { counts = mapper.ingest(clouds[k], T_W_B, T_B_S, runner); });
-    });
+    core::FilteredScan scan;
+    const double f = timed_ms(
+        [&] { staged(ph_filter, [&] { scan = mapper.ingest(clouds[k], T_W_B, T_B_S, runner); }); });
     const double o =
-        opt.tsdf_only ? 0.0 : timed_ms([&] { staged(ph_occ, [&] { mapper.integrate(runner); }); });
+        opt.tsdf_only ? 0.0
+                      : timed_ms([&] { staged(ph_occ, [&] { mapper.integrate(scan, runner); }); });
     const double faults0 = process_minor_faults();
     const double cpu0 = process_cpu_ms();
     const double ts = timed_ms([&] {
-      const core::TsdfUpdate& up = mapper.integrate_tsdf(pool);
+      const core::TsdfUpdate& up = mapper.integrate_tsdf(scan, pool);
       tsdf_samples += up.samples;
       tsdf_updates += up.voxel_updates;
     });
@@ -256,8 +256,8 @@ int main(int argc, char** argv) {
     t_tsdf_faults.push_back(process_minor_faults() - faults0);
     t_tsdf.push_back(ts);
     const double cpu1 = process_cpu_ms();
-    t_vdbfusion.push_back(timed_ms(
-        [&] { vdbfusion.integrate(mapper.sensor_W(), mapper.points_W(), opt.max_range_m); }));
+    t_vdbfusion.push_back(
+        timed_ms([&] { vdbfusion.integrate(scan.sensor_W, scan.points_W, opt.max_range_m); }));
     t_vdbfusion_cpu.push_back(process_cpu_ms() - cpu1);
     const double c = opt.tsdf_only ? 0.0 : timed_ms([&] {
       staged(ph_cost, [&] { mapper.update_costmap({}, 0, runner); });
@@ -286,16 +286,16 @@ int main(int argc, char** argv) {
     // one-off cost was this row's p99 (p99 of 21 scans is their maximum).
     if (k == 0) esdf2d();
     t_esdf2d.push_back(timed_ms(esdf2d));
-    points += counts.kept;
+    points += scan.counts.kept;
     if (opt.tsdf_only) {
       std::fprintf(stderr, "\rtarmac-bench: scan %zu/%zu", k + 1, n);
       continue;
     }
     // OctoMap on exactly the points tarmac kept, in the world frame, from the same origin.
     octomap::Pointcloud cloud;
-    cloud.reserve(mapper.points_W().size());
-    for (const auto& p : mapper.points_W()) cloud.push_back(p.x(), p.y(), p.z());
-    const Eigen::Vector3d o_W = mapper.sensor_W();
+    cloud.reserve(scan.points_W.size());
+    for (const auto& p : scan.points_W) cloud.push_back(p.x(), p.y(), p.z());
+    const Eigen::Vector3d& o_W = scan.sensor_W;
     t_octomap.push_back(timed_ms([&] {
       octree.insertPointCloud(
           cloud,

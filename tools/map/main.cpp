@@ -384,12 +384,13 @@ int main(int argc, char** argv) {
         if (mapper.correct_rigid(*jump, cloud.stamp_ns) > 0) ++jump_corrections;
       }
     }
-    core::FilterCounts counts;
+    core::FilteredScan scan;
     core::OccupancyUpdateStats occ;
-    const double f_ms = timed_ms([&] { counts = mapper.ingest(cloud, T_W_B, T_B_S, pool); });
-    const double o_ms = timed_ms([&] { occ = mapper.integrate(pool); });
+    const double f_ms = timed_ms([&] { scan = mapper.ingest(cloud, T_W_B, T_B_S, pool); });
+    const core::FilterCounts& counts = scan.counts;
+    const double o_ms = timed_ms([&] { occ = mapper.integrate(scan, pool); });
     const double tsdf_ms = timed_ms([&] {
-      const core::TsdfUpdate& up = mapper.integrate_tsdf(pool);
+      const core::TsdfUpdate& up = mapper.integrate_tsdf(scan, pool);
       tsdf_samples += up.samples;
       tsdf_updates += up.voxel_updates;
     });
@@ -414,7 +415,7 @@ int main(int argc, char** argv) {
       const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
       clearing->observe(
           static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
-          tools::blind_radius_from_ground(sensor_W, mapper.points_W(), T_W_B.translation().z()));
+          tools::blind_radius_from_ground(sensor_W, scan.points_W, T_W_B.translation().z()));
     }
     if (safety) {
       moving_now.clear();

@@ -1,7 +1,9 @@
 #pragma once
 /// @file The per-scan mapping pipeline as the daemon and the offline tools run it:
-/// filter → integrate occupancy → costmap + 2D ESDF. Each stage is a separate call so the caller
-/// can time it and give it a budget (the core has no clock).
+/// ingest (filters) → integrate (occupancy) → integrate_tsdf → rebuild_step → update_costmap
+/// (costmap + 2D ESDF) → update_esdf_band. Each stage is a separate call so the caller can time
+/// it and give it a budget (the core has no clock). ingest() returns the filtered scan; the
+/// stages after it take that scan and return what they changed.
 
 #include <memory>
 #include <span>
@@ -44,6 +46,18 @@ struct CorrectionStats {
   std::uint64_t tsdf_blocks_erased = 0;  ///< TSDF blocks cleared for re-integration
 };
 
+/// A scan as ingest() leaves it for the stages that follow: where it was taken, its surviving
+/// returns and its beams without return in the world frame, and what the filters did. A view
+/// into the mapper's buffers, valid until the next ingest().
+struct FilteredScan {
+  std::int64_t stamp_ns = 0;
+  Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();  ///< vehicle base pose at the stamp
+  Eigen::Vector3d sensor_W = Eigen::Vector3d::Zero();       ///< the sensor's origin
+  std::span<const Eigen::Vector3f> points_W;                ///< filtered returns
+  std::span<const Eigen::Vector3f> clearing_W;  ///< beams without return, unit directions
+  FilterCounts counts;
+};
+
 /// What one rebuild_step() did.
 struct RebuildStep {
   std::uint64_t scans = 0;   ///< retained scans re-integrated
@@ -63,28 +77,31 @@ class Mapper {
   /// The filters run on `runner` (same result for any runner). The cloud's beams without return
   /// (no_return_S) clear free space in integrate(): finite directions of length 0.5..2 are
   /// normalised and kept, others refused (FilterCounts::no_returns_refused).
-  FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+  FilteredScan ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                       const Eigen::Isometry3d& T_B_S, TaskRunner& runner,
                       const ScanMotion* motion = nullptr);
   /// The same on the calling thread.
-  FilterCounts ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+  FilteredScan ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                       const Eigen::Isometry3d& T_B_S, const ScanMotion* motion = nullptr);
   /// Reserves `points_per_scan` points in every retained-scan slot (corrections.enabled), so the
   /// retention ring does not grow in the cycle while it first fills (the daemon passes
   /// quotas.reserve_points_per_scan; a larger scan grows its slot once).
   void reserve_retained(std::size_t points_per_scan);
-  /// Stage 2: moves the window with the vehicle and integrates the ingested scan.
-  OccupancyUpdateStats integrate(TaskRunner& runner);
-  /// Stage 3: rebuilds the costmap and the 2D distance map from the window.
-  void update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
-                      TaskRunner& runner);
+  /// Stage 2: moves the window with the vehicle and integrates `scan`; returns the voxels it
+  /// updated (counts). @pre `scan` is what the last ingest() returned.
+  OccupancyUpdateStats integrate(const FilteredScan& scan, TaskRunner& runner);
+  /// Stage 2b: integrates `scan` into the TSDF (sparse, whole site); returns the blocks it
+  /// updated. Empty when tsdf.enabled is false, or during a rebuild (rebuild_step() then
+  /// integrates the scan in stamp order). @pre `scan` is what the last ingest() returned.
+  const TsdfUpdate& integrate_tsdf(const FilteredScan& scan, TaskRunner& runner);
+  /// Stage 3: rebuilds the costmap and the 2D distance map from the window, around the vehicle
+  /// pose of the last ingested scan; returns them.
+  const CostmapLayers& update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                                      TaskRunner& runner);
   /// Stage 3b: the 3D ESDF band (esdf_band.hpp) from the window and the costmap of the last
-  /// update_costmap() call. Does nothing when esdf_band.enabled is false.
-  void update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
-                        TaskRunner& runner);
-  /// Stage 2b: integrates the ingested scan into the TSDF (sparse, whole site). Does nothing
-  /// (and returns an empty update) when tsdf.enabled is false.
-  const TsdfUpdate& integrate_tsdf(TaskRunner& runner);
+  /// update_costmap() call; returns it (unchanged when esdf_band.enabled is false).
+  const EsdfBand& update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                                   TaskRunner& runner);
 
   /// Pose corrections (pose_correction.hpp). With corrections.enabled the mapper retains the
   /// last corrections.retain_scans filtered scans (sensor-frame points, stamp, T_W_B, T_B_S)
@@ -127,11 +144,6 @@ class Mapper {
   /// The poses of the retained scans, oldest first (for tests and tools).
   void retained_poses(std::vector<StampedPose>& out) const;
 
-  /// The last ingested scan's beams without return (unit directions, world frame).
-  [[nodiscard]] const std::vector<Eigen::Vector3f>& clearing_W() const { return clearing_W_; }
-  /// The last ingested scan's surviving points, world frame, and the sensor origin.
-  [[nodiscard]] const std::vector<Eigen::Vector3f>& points_W() const { return points_W_; }
-  [[nodiscard]] const Eigen::Vector3d& sensor_W() const { return sensor_W_; }
   /// The vehicle base pose of the last ingested scan (revised by a correction).
   [[nodiscard]] const Eigen::Isometry3d& vehicle_pose() const { return T_W_B_; }
   [[nodiscard]] const OccupancyMap& occupancy() const { return map_; }
@@ -160,6 +172,8 @@ class Mapper {
   void schedule_rebuild(std::int64_t from_stamp_ns);
   void start_rebuild();
   void record_tsdf(RetainedScan& scan, const TsdfUpdate& update);
+  /// `scan` views this mapper's buffers as the last ingest() left them.
+  [[nodiscard]] bool is_last_ingested(const FilteredScan& scan) const;
 
   MapperParams params_;
   OccupancyMap map_;
