@@ -98,9 +98,17 @@ Summary summarize(const std::vector<double>& v) {
           tools::percentile(v, 1.0)};
 }
 
+/// The header of print_row's rows.
+void print_header() {
+  std::printf("  %-26s %9s %9s %9s %9s %7s   (ms per scan; worst: the max's scan index)\n", "",
+              "mean", "p50", "p99", "max", "worst");
+}
+
+/// A row of per-scan values: mean, p50, p99, max, and the scan index of the max.
 void print_row(const char* name, const std::vector<double>& ms) {
   const auto s = summarize(ms);
-  std::printf("  %-26s %9.2f %9.2f %9.2f %9.2f\n", name, s.mean, s.p50, s.p99, s.max);
+  std::printf("  %-26s %9.2f %9.2f %9.2f %9.2f %7zu\n", name, s.mean, s.p50, s.p99, s.max,
+              tools::index_of_max(ms));
 }
 
 }  // namespace
@@ -338,7 +346,7 @@ int main(int argc, char** argv) {
         "scans, %.0f points/scan\n",
         vox, static_cast<double>(tsdf.truncation_m()), opt.max_range_m, opt.threads, n,
         static_cast<double>(points) / static_cast<double>(n));
-    std::printf("  %-26s %9s %9s %9s %9s   (ms per scan)\n", "", "mean", "p50", "p99", "max");
+    print_header();
     print_row("tsdf integrate (wall)", t_tsdf);
     print_row("tsdf integrate (CPU, sum)", t_tsdf_cpu);
     print_row("tsdf minor faults (count)", t_tsdf_faults);
@@ -404,7 +412,7 @@ int main(int argc, char** argv) {
       mapper.occupancy().walk_lanes() == 8   ? "8 at a time (AVX-512)"
       : mapper.occupancy().walk_lanes() == 4 ? "4 at a time (AVX2)"
                                              : "one at a time");
-  std::printf("  %-26s %9s %9s %9s %9s   (ms per scan)\n", "", "mean", "p50", "p99", "max");
+  print_header();
   print_row("OctoMap insertPointCloud", t_octomap);
   print_row("tarmac filter+occupancy", t_occ_only);
   std::printf("  speed ratio (OctoMap / tarmac): mean %.1fx, p50 %.1fx\n", oct.mean / occ.mean,

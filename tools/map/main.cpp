@@ -579,7 +579,8 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(dropped_nonfinite),
       static_cast<unsigned long long>(dropped_close), static_cast<unsigned long long>(dropped_ego),
       static_cast<unsigned long long>(dropped_isolated), opt.threads);
-  std::printf("%-16s %9s %9s %9s %9s   (ms per scan)\n", "stage", "mean", "p50", "p99", "max");
+  std::printf("%-16s %9s %9s %9s %9s %7s   (ms per scan; worst: the max's scan index)\n", "stage",
+              "mean", "p50", "p99", "max", "worst");
   nlohmann::ordered_json timing = {{"scans", n}, {"threads", opt.threads}};
   nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
   std::vector<const StageTimes*> stages = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
@@ -588,12 +589,14 @@ int main(int argc, char** argv) {
   for (const StageTimes* stage : stages) {
     const auto& s = *stage;
     const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
-    std::printf("%-16s %9.2f %9.2f %9.2f %9.2f\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
-                percentile(s.ms, 0.99), mx);
+    const std::size_t worst = tools::index_of_max(s.ms);
+    std::printf("%-16s %9.2f %9.2f %9.2f %9.2f %7zu\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
+                percentile(s.ms, 0.99), mx, worst);
     stages_ms[s.name] = {{"mean", mean(s.ms)},
                          {"p50", percentile(s.ms, 0.5)},
                          {"p99", percentile(s.ms, 0.99)},
-                         {"max", mx}};
+                         {"max", mx},
+                         {"max_scan", worst}};
   }
   timing["stages_ms"] = std::move(stages_ms);
   const double pts_per_s = total_s > 0 ? static_cast<double>(points_used) / total_s : 0.0;
