@@ -588,8 +588,8 @@ int main(int argc, char** argv) {
   if (params.tsdf.enabled) stages.insert(stages.begin() + 3, &t_tsdf);
   for (const StageTimes* stage : stages) {
     const auto& s = *stage;
-    const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
     const std::size_t worst = tools::index_of_max(s.ms);
+    const double mx = s.ms.empty() ? 0.0 : s.ms[worst];
     std::printf("%-16s %9.2f %9.2f %9.2f %9.2f %7zu\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
                 percentile(s.ms, 0.99), mx, worst);
     stages_ms[s.name] = {{"mean", mean(s.ms)},
