@@ -12,6 +12,7 @@ packages=(
   libcli11-dev nlohmann-json3-dev                # command lines (CLI11), JSON outputs
   libsystemd-dev openssl libssl-dev cyclonedds-dev cyclonedds-tools liboctomap-dev libdynamicedt3d-dev
   libpng-dev iproute2 systemd clang-format
+  stress-ng                                      # other load on the cores (tools/load-test.sh)
   rosidl-tools python3-catkin-pkg python3-empy   # ROS 2's msg -> IDL translator (msg_idl_agreement test)
   clang libclang-rt-14-dev                       # libFuzzer and its sanitizers (tools/fuzz.sh)
 )

@@ -146,7 +146,8 @@ bool Mapper::is_last_ingested(const FilteredScan& scan) const {
          scan.clearing_W.size() == clearing_W_.size();
 }
 
-void Mapper::reserve_retained(std::size_t points_per_scan) {
+void Mapper::reserve_scans(std::size_t points_per_scan) {
+  if (params_.tsdf.enabled) tsdf_integrator_.reserve_scan(points_per_scan);
   for (auto& r : retained_) {
     r.points_S.reserve(points_per_scan);
     r.no_return_S.reserve(points_per_scan);  // an organised sweep: returns + beams without

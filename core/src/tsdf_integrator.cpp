@@ -51,6 +51,23 @@ std::size_t partition_of(std::uint64_t key) {
 }
 static_assert(kPartitions == 16, "partition_of takes the top 4 bits");
 
+/// Samples each bin has room for when a scan starts: a 16th of its chunk's bound on samples
+/// (3·(L/v + 1) + 1 per ray, L <= 2·trunc without carving), ~3.5x a bin's mean share on MulRan,
+/// so that bins stop growing (allocating) instead of whenever one meets a new maximum. Carving
+/// has no bound (the segment starts at the sensor): bins grow as they fill.
+std::size_t bin_share(const TsdfParams& params, std::size_t rays_per_chunk) {
+  if (params.space_carving) return 0;
+  const auto voxels_per_ray =
+      3 * static_cast<std::size_t>(2.0 * params.truncation_m / params.voxel_size_m) + 7;
+  return rays_per_chunk * voxels_per_ray / kPartitions;
+}
+
+/// Writes every page of [p, p + n): the first-touch page faults are taken now, not in a scan.
+template <typename T>
+void prefault(T* p, std::size_t n) {
+  std::memset(static_cast<void*>(p), 0, n * sizeof(T));
+}
+
 /// One (ray, voxel) pair inside the band; its block is that of the run holding it.
 struct Sample {
   std::uint32_t offset;  // voxel inside the block, OpenVDB leaf order
@@ -315,14 +332,94 @@ TsdfIntegrator& TsdfIntegrator::operator=(TsdfIntegrator&&) noexcept = default;
 
 void TsdfIntegrator::reserve_blocks(std::size_t blocks) {
   const std::size_t per_partition = (blocks + kPartitions - 1) / kPartitions;
-  // Built with the background value, as integrate builds a new leaf: the buffer is touched here.
-  const Value background(params_.truncation_m, 0.0f);
+  std::size_t missing = 0;
   for (auto& spares : scratch_->spares) {
-    spares.reserve(per_partition);
-    while (spares.size() < per_partition) {
-      spares.push_back(std::make_unique<Leaf>(openvdb::Coord(0, 0, 0), background, false));
-    }
+    // Room for top-ups too (add_spares then only moves pointers).
+    spares.reserve(2 * per_partition);
+    missing += per_partition - std::min(per_partition, spares.size());
   }
+  add_spares(TsdfSpareBlocks::build(params_, missing));
+}
+
+void TsdfIntegrator::reserve_scan(std::size_t rays) {
+  Scratch& s = *scratch_;
+  const std::size_t per_chunk = (rays + kRayChunks - 1) / kRayChunks;
+  const std::size_t share = bin_share(params_, per_chunk);
+  // Room for the bound; touched up to half of it (a bin fills to ~0.3 of its share on average:
+  // the rest is headroom a scan rarely reaches, not worth faulting in at start).
+  for (SampleBin& bin : s.bins) {
+    if (bin.capacity < share) bin.grow(share);
+    prefault(bin.samples.get(), std::min(bin.capacity, share / 2));
+    prefault(bin.runs.get(), std::min(bin.capacity, share / 2));
+  }
+  // A partition receives a 16th of the scan's samples: on average 0.3 of its bins' bound.
+  const std::size_t samples = share * kRayChunks / 2;
+  // Blocks per partition and scan: a ray's band crosses one or two blocks, and neighbouring rays
+  // share them; one block per 16 rays of the partition is ample on 64-beam scans.
+  const std::size_t slots = std::max<std::size_t>(64, rays / kPartitions / 16);
+  for (Partition& part : s.partitions) {
+    const auto touch = [](auto& v, std::size_t n) {
+      if (v.size() < n) v.resize(n);  // written: faulted now
+      v.clear();                      // capacity kept
+    };
+    touch(part.grouped, samples);
+    touch(part.run_slot, samples);
+    touch(part.slot_keys, slots);
+    touch(part.slot_hash_pos, slots);
+    touch(part.slot_count, slots);
+    touch(part.slot_start, slots + 1);
+    touch(part.slot_lines, slots);
+    touch(part.slot_entry, slots);
+    part.new_leaves.reserve(slots);
+    while (part.table_keys.size() < 2 * slots) part.grow();
+  }
+}
+
+struct TsdfSpareBlocks::Impl {
+  float background_distance_m = 0.0f;
+  std::vector<std::unique_ptr<Leaf>> leaves;
+};
+
+TsdfSpareBlocks::TsdfSpareBlocks() : impl_(std::make_unique<Impl>()) {}
+TsdfSpareBlocks::~TsdfSpareBlocks() = default;
+TsdfSpareBlocks::TsdfSpareBlocks(TsdfSpareBlocks&&) noexcept = default;
+TsdfSpareBlocks& TsdfSpareBlocks::operator=(TsdfSpareBlocks&&) noexcept = default;
+
+TsdfSpareBlocks TsdfSpareBlocks::build(const TsdfParams& params, std::size_t blocks) {
+  TsdfSpareBlocks out;
+  out.impl_->background_distance_m = params.truncation_m;
+  out.impl_->leaves.reserve(blocks);
+  // Built with the background value, as integrate builds a new leaf: the buffer is touched here.
+  const Value background(params.truncation_m, 0.0f);
+  for (std::size_t i = 0; i < blocks; ++i) {
+    out.impl_->leaves.push_back(std::make_unique<Leaf>(openvdb::Coord(0, 0, 0), background, false));
+  }
+  return out;
+}
+
+std::size_t TsdfSpareBlocks::size() const {
+  return impl_ ? impl_->leaves.size() : 0;
+}
+
+void TsdfIntegrator::add_spares(TsdfSpareBlocks&& spares) {
+  if (!spares.impl_) return;
+  auto& leaves = spares.impl_->leaves;
+  TARMAC_ASSERT(leaves.empty() || spares.impl_->background_distance_m == params_.truncation_m,
+                "spare TSDF blocks must have the layer's background value");
+  auto& pools = scratch_->spares;
+  while (!leaves.empty()) {
+    // The shortest pool first, so the partitions that have used the most are refilled first.
+    auto& pool = *std::min_element(pools.begin(), pools.end(), [](const auto& a, const auto& b) {
+      return a.size() < b.size();
+    });
+    pool.push_back(std::move(leaves.back()));
+    leaves.pop_back();
+  }
+}
+
+std::size_t TsdfIntegrator::spare_shortfall() const {
+  const std::size_t have = spare_blocks();
+  return have >= params_.reserve_blocks ? 0 : params_.reserve_blocks - have;
 }
 
 std::size_t TsdfIntegrator::spare_blocks() const {
@@ -473,11 +570,7 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
   // 1. Band samples per ray chunk, binned by the partition owning their block.
   const std::size_t n = points_W.size();
   const std::size_t per_chunk = (n + kRayChunks - 1) / kRayChunks;
-  // Each bin starts with room for a 16th of the chunk's bound on samples (3·(L/v + 1) + 1 per
-  // ray, L <= 2·trunc without carving): ~3.5x a bin's mean share on MulRan, so that bins stop
-  // growing (allocating) within the first scans instead of whenever one meets a new maximum.
-  const std::size_t share =
-      carve ? 0 : per_chunk * (3 * static_cast<std::size_t>(2.0 * trunc / v) + 7) / kPartitions;
+  const std::size_t share = bin_share(params_, per_chunk);
   runner.parallel_for(kRayChunks, [&](std::size_t c) {
     ChunkBins out{&s.bins[c * kPartitions]};
     out.begin(share);

@@ -97,7 +97,7 @@ class Executor::Impl {
         trajectory_sink(*this),
         reports(cfg, hash),
         max_future_ns(ms_to_ns(cfg.executor.max_future_ms)) {
-    mapper.reserve_retained(cfg.quotas.reserve_points_per_scan);
+    mapper.reserve_scans(cfg.quotas.reserve_points_per_scan);
     TickReport::declare_reasons(drops, rejections);
     selected.reserve(cfg.quotas.max_pending_scans + 1);
     sinks.reserve(cfg.sensors.size());
@@ -121,6 +121,22 @@ class Executor::Impl {
     p.max_pending = cfg.quotas.max_pending_scans;
     p.reserve_points = cfg.quotas.reserve_points_per_scan;
     return p;
+  }
+
+  /// Between ticks: rebuilds some of the TSDF spare blocks the last scans took (at most a 16th
+  /// of tsdf.reserve_blocks a tick, a few ms), so a growing map's new blocks cost integrate
+  /// neither allocation nor page faults. On this thread, not a helper: a helper at a lower
+  /// priority would hold its malloc arena's lock while preempted, and a tick freeing one of its
+  /// blocks (a rebuild erasing blocks) would wait for it.
+  void top_up_tsdf_spares() {
+    const std::size_t shortfall = mapper.tsdf_spare_shortfall();
+    if (shortfall == 0) return;
+    const std::size_t per_tick = std::max<std::size_t>(64, config.mapping.tsdf.reserve_blocks / 16);
+    const auto t0 = Clock::now();
+    mapper.add_tsdf_spares(
+        core::TsdfSpareBlocks::build(config.mapping.tsdf, std::min(shortfall, per_tick)));
+    spares_built += std::min(shortfall, per_tick);
+    spares_max_ms = std::max(spares_max_ms, ms_between(t0, Clock::now()));
   }
 
   /// One tick at `tick_time_ns` (stamp clock); `clock_step_ns` != 0: the stamp clock stepped by
@@ -151,6 +167,8 @@ class Executor::Impl {
   core::Mapper mapper;
   PoseCorrections corrections;
   MapStore store;
+  std::uint64_t spares_built = 0;  // TSDF spare blocks rebuilt between ticks
+  double spares_max_ms = 0.0;
   PoseSinkImpl pose_sink;
   TrajectorySinkImpl trajectory_sink;
   std::unique_ptr<ThreadPool> pool;
@@ -498,6 +516,7 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
     if (hooks.on_tick_end) hooks.on_tick_end(d.cycle_index - 1);
     if (periodic_save && d.cycle_index % save_every == 0)
       d.store.snapshot(d.mapper, d.newest_stamp_ns);
+    d.top_up_tsdf_spares();
     // The systemd watchdog is pinged here and nowhere else: after a tick completed, on the
     // thread that runs the ticks. Not from another thread and not from the sleep above, so a
     // loop that stops ticking (a stuck stage, a schedule that never comes due) stops the pings,
@@ -513,6 +532,10 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
   }
   if (hooks.on_loop_end) hooks.on_loop_end();
   if (periodic_save) d.store.stop_saver();  // an in-flight save completes before run() returns
+  if (d.spares_built > 0) {
+    spdlog::info("executor: {} TSDF spare blocks rebuilt between ticks (at most {:.1f} ms a tick)",
+                 d.spares_built, d.spares_max_ms);
+  }
   const auto t = totals();
   spdlog::info("executor: stopped after {} ticks ({} skipped, {} over budget), {} scans integrated",
                t.ticks, t.skipped_ticks, t.overruns, t.scans_integrated);

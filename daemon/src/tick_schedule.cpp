@@ -89,7 +89,10 @@ std::unique_ptr<ThreadPool> real_time_setup(const config::ExecutorConfig& e,
     }
   }
   if (e.lock_memory) {
-    if (auto why = lock_all_memory(); !why.empty()) {
+    // Heap faulted in for the first cycles: a queue of deserialised 64-beam scans (~1.3 MB
+    // each) and the outgoing grids fit several times over.
+    constexpr std::size_t kHeapReserveBytes = std::size_t{32} << 20;
+    if (auto why = lock_all_memory(kHeapReserveBytes); !why.empty()) {
       spdlog::warn("executor: memory lock refused ({}); pages may fault in the cycle", why);
     } else {
       spdlog::info("executor: all memory locked (mlockall)");

@@ -345,6 +345,44 @@ TEST(TsdfIntegrator, ReserveBlocks_SameMapAndSparesTakenFirst) {
   EXPECT_EQ(reserved.spare_blocks(), 32u);  // 2 per partition
 }
 
+// The daemon's top-up (SpareBlocksFiller): spares built elsewhere between scans, handed over
+// while the map grows, and the per-scan scratch reserved up front: the same map, and each
+// scan after the first takes spares rather than allocating its new blocks.
+TEST(TsdfIntegrator, SparesToppedUpBetweenScansAndScratchReserved_SameMap) {
+  const auto scans = synthetic_scans();
+  SerialRunner runner;
+  TsdfIntegrator plain(params_01());
+  TsdfLayer plain_layer = plain.make_layer();
+  TsdfParams topped_params = params_01();
+  topped_params.reserve_blocks = 160;
+  TsdfIntegrator topped(topped_params);
+  topped.reserve_scan(4096);
+  TsdfLayer topped_layer = topped.make_layer();
+  EXPECT_EQ(topped.spare_shortfall(), 0u);
+  std::size_t created = 0;
+  for (const auto& [o, pts] : scans) {
+    plain.integrate(o, pts, plain_layer, runner);
+    const std::size_t before = topped.spare_blocks();
+    const std::size_t made = topped.integrate(o, pts, topped_layer, runner).blocks_created;
+    created += made;
+    // New blocks come out of the spares first (a partition whose spares ran out allocates).
+    EXPECT_LE(topped.spare_blocks(), before);
+    EXPECT_GE(topped.spare_blocks() + made, before);
+    if (made > 0) {
+      EXPECT_LT(topped.spare_blocks(), before);
+    }
+    const std::size_t shortfall = topped.spare_shortfall();
+    EXPECT_EQ(shortfall, 160u - topped.spare_blocks());
+    TsdfSpareBlocks batch = TsdfSpareBlocks::build(topped_params, shortfall);
+    EXPECT_EQ(batch.size(), shortfall);
+    topped.add_spares(std::move(batch));
+    EXPECT_EQ(topped.spare_shortfall(), 0u);
+  }
+  ASSERT_GT(created, 160u);  // more blocks than one reserve: the top-ups were used
+  EXPECT_EQ(plain_layer.digest(), topped_layer.digest());
+  EXPECT_EQ(plain_layer.block_count(), topped_layer.block_count());
+}
+
 TEST(TsdfIntegrator, Update_ReportsEveryChangedBlockOnce) {
   const auto scans = synthetic_scans();
   TsdfIntegrator integrator(params_01());

@@ -59,8 +59,15 @@ using tools::percentile;
 
 struct Series {
   std::vector<double> ms;
+  std::vector<std::uint64_t> cycle;  // the CycleReport's cycle_index of each duration
   double budget_ms = 0.0;
   std::uint64_t overruns = 0;
+
+  [[nodiscard]] double max() const { return ms.empty() ? 0.0 : ms[tools::index_of_max(ms)]; }
+  /// The cycle of the longest duration: the first cycles from an empty map are 0, 1, ...
+  [[nodiscard]] std::uint64_t worst_cycle() const {
+    return cycle.empty() ? 0 : cycle[tools::index_of_max(ms)];
+  }
 };
 
 std::vector<std::uint8_t> render(const transport::OccupancyGridMsg& grid) {
@@ -308,10 +315,12 @@ int main(int argc, char** argv) {
         auto [it, fresh] = stages.try_emplace(s.name);
         if (fresh) stage_order.push_back(s.name);
         it->second.ms.push_back(s.duration_ms);
+        it->second.cycle.push_back(last.cycle_index);
         it->second.budget_ms = s.budget_ms;
         it->second.overruns += s.overrun ? 1 : 0;
       }
       cycle.ms.push_back(last.cycle_duration_ms);
+      cycle.cycle.push_back(last.cycle_index);
       cycle.budget_ms = last.cycle_budget_ms;
       cycle.overruns += last.overrun ? 1 : 0;
     }
@@ -344,13 +353,13 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(skipped), percentile(jitter_ms, 0.5),
       percentile(jitter_ms, 0.99), static_cast<unsigned long long>(points_in),
       static_cast<unsigned long long>(points_used));
-  std::printf("%-22s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "last", "p50", "p99", "max",
-              "budget", "overruns");
+  std::printf("%-22s %9s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "last", "p50", "p99", "max",
+              "worst", "budget", "overruns");
   const auto row = [](const std::string& name, const Series& s) {
-    const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
-    std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9.3f %9llu\n", name.c_str(),
-                s.ms.empty() ? 0.0 : s.ms.back(), percentile(s.ms, 0.5), percentile(s.ms, 0.99), mx,
-                s.budget_ms, static_cast<unsigned long long>(s.overruns));
+    std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9llu %9.3f %9llu\n", name.c_str(),
+                s.ms.empty() ? 0.0 : s.ms.back(), percentile(s.ms, 0.5), percentile(s.ms, 0.99),
+                s.max(), static_cast<unsigned long long>(s.worst_cycle()), s.budget_ms,
+                static_cast<unsigned long long>(s.overruns));
   };
   for (const auto& name : stage_order) row(name, stages[name]);
   row("cycle", cycle);
@@ -385,11 +394,11 @@ int main(int argc, char** argv) {
 
   if (!json_path.empty()) {
     const auto stats = [](const Series& s) {
-      const double mx = s.ms.empty() ? 0.0 : *std::max_element(s.ms.begin(), s.ms.end());
       return nlohmann::ordered_json{{"last", s.ms.empty() ? 0.0 : s.ms.back()},
                                     {"p50", percentile(s.ms, 0.5)},
                                     {"p99", percentile(s.ms, 0.99)},
-                                    {"max", mx},
+                                    {"max", s.max()},
+                                    {"worst_cycle", s.worst_cycle()},
                                     {"budget", s.budget_ms},
                                     {"overruns", s.overruns}};
     };

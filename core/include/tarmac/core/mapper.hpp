@@ -7,6 +7,7 @@
 
 #include <memory>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -83,10 +84,21 @@ class Mapper {
   /// The same on the calling thread.
   FilteredScan ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                       const Eigen::Isometry3d& T_B_S, const ScanMotion* motion = nullptr);
-  /// Reserves `points_per_scan` points in every retained-scan slot (corrections.enabled), so the
-  /// retention ring does not grow in the cycle while it first fills (the daemon passes
-  /// quotas.reserve_points_per_scan; a larger scan grows its slot once).
-  void reserve_retained(std::size_t points_per_scan);
+  /// Sizes, for scans of up to `points_per_scan` points, what would otherwise grow in the first
+  /// cycles: every retained-scan slot (corrections.enabled), so the retention ring does not grow
+  /// while it first fills, and the TSDF integrator's per-scan scratch (touched, so its page
+  /// faults are taken here). The daemon passes quotas.reserve_points_per_scan; a larger scan
+  /// grows what it needs once. Not RT-safe (allocates): for start-up.
+  void reserve_scans(std::size_t points_per_scan);
+  /// TSDF blocks missing from the spares to tsdf.reserve_blocks (0 when the TSDF is off): new
+  /// blocks take spares, and a top-up between scans (add_tsdf_spares) keeps the allocation of
+  /// the blocks a growing map needs out of integrate_tsdf.
+  [[nodiscard]] std::size_t tsdf_spare_shortfall() const {
+    return params_.tsdf.enabled ? tsdf_integrator_.spare_shortfall() : 0;
+  }
+  /// Hands blocks built elsewhere (TsdfSpareBlocks::build with params().tsdf, on any thread) to
+  /// the TSDF integrator. Moves pointers only.
+  void add_tsdf_spares(TsdfSpareBlocks&& spares) { tsdf_integrator_.add_spares(std::move(spares)); }
   /// Stage 2: moves the window with the vehicle and integrates `scan`; returns the voxels it
   /// updated (counts). @pre `scan` is what the last ingest() returned.
   OccupancyUpdateStats integrate(const FilteredScan& scan, TaskRunner& runner);

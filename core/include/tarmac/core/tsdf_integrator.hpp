@@ -150,6 +150,31 @@ struct TsdfUpdate {
   std::vector<BlockIndex> blocks;
 };
 
+/// Blocks built ahead of integration (background value, every page touched), on any thread, to
+/// be handed to an integrator between scans (TsdfIntegrator::add_spares): the map keeps growing
+/// without the cycle paying for the allocation and first-touch page faults of its new blocks.
+/// Move-only.
+class TsdfSpareBlocks {
+ public:
+  TsdfSpareBlocks();
+  ~TsdfSpareBlocks();
+  TsdfSpareBlocks(TsdfSpareBlocks&&) noexcept;
+  TsdfSpareBlocks& operator=(TsdfSpareBlocks&&) noexcept;
+  TsdfSpareBlocks(const TsdfSpareBlocks&) = delete;
+  TsdfSpareBlocks& operator=(const TsdfSpareBlocks&) = delete;
+
+  /// `blocks` blocks for a TSDF with these params (their background value). Allocates: call it
+  /// where the time does not matter (tarmacd: a background thread; the tools: between scans).
+  static TsdfSpareBlocks build(const TsdfParams& params, std::size_t blocks);
+
+  [[nodiscard]] std::size_t size() const;
+
+ private:
+  friend class TsdfIntegrator;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 /// Integrates scans into a TsdfLayer. Holds only scratch buffers, reused across scans (after
 /// warm-up nothing it owns allocates; OpenVDB allocates new blocks).
 ///
@@ -183,8 +208,19 @@ class TsdfIntegrator {
   /// for start-up or a moment the cycle has slack. Spares are not part of any layer's
   /// memory_bytes().
   void reserve_blocks(std::size_t blocks);
+  /// Sizes and touches the per-scan scratch (band samples, grouping, block tables) for scans of
+  /// up to `rays` returns, so that the first scans cost what later ones do: without it the
+  /// scratch grows and takes its first-touch page faults in the first scan. A larger scan grows
+  /// it once. Not RT-safe (allocates); for start-up.
+  void reserve_scan(std::size_t rays);
   /// Spare blocks left.
   [[nodiscard]] std::size_t spare_blocks() const;
+  /// Spares missing to the params' reserve_blocks: what a top-up should build.
+  [[nodiscard]] std::size_t spare_shortfall() const;
+  /// Takes `spares` (moves pointers: RT-safe once the spare lists have grown to reserve_blocks,
+  /// which the constructor does), topping up the partitions that are shortest first.
+  /// @pre the spares were built for params with the same truncation_m.
+  void add_spares(TsdfSpareBlocks&& spares);
 
   /// A layer matching the params.
   [[nodiscard]] TsdfLayer make_layer() const;

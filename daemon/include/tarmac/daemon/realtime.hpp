@@ -3,6 +3,7 @@
 /// (DESIGN.md §6): CPU affinity, SCHED_FIFO, mlockall. Threads created afterwards inherit the
 /// scheduling policy and priority (glibc's default PTHREAD_INHERIT_SCHED).
 
+#include <cstddef>
 #include <string>
 
 namespace tarmac::daemon {
@@ -10,6 +11,8 @@ namespace tarmac::daemon {
 /// Empty on success, else why it failed ("sched_setscheduler: Operation not permitted").
 std::string pin_current_thread(int cpu);
 std::string set_fifo_priority(int priority);
-std::string lock_all_memory();
+/// mlockall(MCL_CURRENT | MCL_FUTURE); then malloc keeps what it has faulted in (no trimming,
+/// no per-block mmap) and its heap is grown by `heap_bytes`, faulted in, for the first cycles.
+std::string lock_all_memory(std::size_t heap_bytes = 0);
 
 }  // namespace tarmac::daemon
