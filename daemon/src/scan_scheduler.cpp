@@ -9,9 +9,18 @@ namespace tarmac::daemon {
 ScanScheduler::ScanScheduler(const SchedulerParams& params)
     : params_(params), slots_(params.max_pending + 1), newest_(params.max_age_ns.size(), 0) {
   order_.reserve(slots_.size());
+  // Every channel a parsed cloud may carry, written once so its pages are faulted in now: the
+  // slots rotate, so without this each of the first max_pending + 1 scans grows its own.
+  const auto touch = [n = params.reserve_points](auto& v) {
+    v.resize(n);
+    v.clear();  // capacity kept
+  };
   for (auto& s : slots_) {
-    s.cloud.points_S.reserve(params.reserve_points);
-    s.cloud.intensity.reserve(params.reserve_points);
+    touch(s.cloud.points_S);
+    touch(s.cloud.intensity);
+    touch(s.cloud.ring);
+    touch(s.cloud.time_offset_s);
+    touch(s.cloud.no_return_S);
   }
 }
 

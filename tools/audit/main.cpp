@@ -269,6 +269,7 @@ int main(int argc, char** argv) {
   Series cycle;
   std::vector<double> e2e_ms, jitter_ms;
   std::uint64_t n_reports = 0, skipped = 0, points_in = 0, points_used = 0;
+  std::vector<std::uint64_t> skipped_before;  // cycles that came after skipped ticks
   std::int64_t last_costmap_stamp = 0;
   transport::CycleReport last;
   transport::OccupancyGridMsg last_grid;
@@ -308,6 +309,7 @@ int main(int argc, char** argv) {
       last = transport::from_cycle_report(m);
       ++n_reports;
       skipped += last.skipped_ticks;
+      if (last.skipped_ticks > 0) skipped_before.push_back(last.cycle_index);
       points_in += last.points_in;
       points_used += last.points_used;
       jitter_ms.push_back(last.wake_jitter_ms);
@@ -353,6 +355,11 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(skipped), percentile(jitter_ms, 0.5),
       percentile(jitter_ms, 0.99), static_cast<unsigned long long>(points_in),
       static_cast<unsigned long long>(points_used));
+  if (!skipped_before.empty()) {
+    std::string at;
+    for (const std::uint64_t c : skipped_before) at += " " + std::to_string(c);
+    std::printf("skipped ticks came before cycles:%s\n", at.c_str());
+  }
   std::printf("%-22s %9s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "last", "p50", "p99", "max",
               "worst", "budget", "overruns");
   const auto row = [](const std::string& name, const Series& s) {
@@ -408,6 +415,7 @@ int main(int argc, char** argv) {
     nlohmann::ordered_json j = {
         {"cycles", n_reports},
         {"skipped_ticks", skipped},
+        {"skipped_before_cycles", skipped_before},
         {"config_hash", last.config_hash},
         {"stages_ms", std::move(stages_ms)},
         {"e2e_latency_ms",

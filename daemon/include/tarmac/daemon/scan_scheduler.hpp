@@ -34,7 +34,8 @@ struct SchedulerParams {
   std::uint64_t points_per_cycle = 500'000;
   std::uint64_t points_per_scan = 262'144;
   std::uint32_t max_pending = 8;
-  std::uint64_t reserve_points = 0;  ///< reserved per slot (points, intensity) at construction
+  std::uint64_t reserve_points =
+      0;  ///< reserved and touched per slot (every channel) at construction
 };
 
 class ScanScheduler {
