@@ -17,6 +17,7 @@
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/daemon/clock.hpp"
 #include "tarmac/daemon/pose_buffer.hpp"
+#include "tarmac/daemon/realtime.hpp"
 #include "tarmac/daemon/reason_counters.hpp"
 #include "tarmac/daemon/scan_scheduler.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
@@ -167,6 +168,7 @@ class Executor::Impl {
   core::Mapper mapper;
   PoseCorrections corrections;
   MapStore store;
+  std::vector<int> dds_threads;    // created by Fast DDS for this executor's participant
   std::uint64_t spares_built = 0;  // TSDF spare blocks rebuilt between ticks
   double spares_max_ms = 0.0;
   PoseSinkImpl pose_sink;
@@ -421,6 +423,7 @@ void Executor::Impl::on_clock_step(std::int64_t step_ns, std::int64_t tick_time_
 
 core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& cfg) {
   if (auto schedule = check_schedule(cfg.executor); !schedule) return schedule.error();
+  const std::vector<int> threads_before = thread_ids();
   auto participant = transport::Participant::create(cfg.dds.participant);
   if (!participant) return participant.error();
   auto impl = std::make_unique<Impl>(cfg, std::move(participant).value());
@@ -443,6 +446,7 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
   auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
   if (!outputs) return outputs.error();
   impl->outputs = std::move(outputs).value();
+  impl->dds_threads = threads_since(threads_before);
   return std::unique_ptr<Executor>(new Executor(std::move(impl)));
 }
 
@@ -455,6 +459,7 @@ void Executor::prepare(const RunHooks& hooks) {
   if (hooks.on_thread_start) hooks.on_thread_start();
   if (d.store.periodic()) d.store.start_saver();  // before real_time_setup: not pinned, not FIFO
   d.pool = real_time_setup(d.config.executor, hooks.on_thread_start);
+  raise_dds_threads(d.config.executor, d.dds_threads);
 }
 
 void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& hooks) {

@@ -5,9 +5,13 @@
 #include <sched.h>
 #include <sys/mman.h>
 
+#include <dirent.h>
+
+#include <algorithm>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <iterator>
 
 namespace tarmac::daemon {
 
@@ -30,6 +34,34 @@ std::string set_fifo_priority(int priority) {
   param.sched_priority = priority;
   const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
   return rc == 0 ? std::string() : failure("pthread_setschedparam(SCHED_FIFO)", rc);
+}
+
+std::vector<int> thread_ids() {
+  std::vector<int> ids;
+  DIR* dir = opendir("/proc/self/task");
+  if (dir == nullptr) return ids;
+  while (const dirent* e = readdir(dir)) {
+    char* end = nullptr;
+    const long id = std::strtol(e->d_name, &end, 10);
+    if (end != e->d_name && *end == '\0' && id > 0) ids.push_back(static_cast<int>(id));
+  }
+  closedir(dir);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+std::vector<int> threads_since(const std::vector<int>& before) {
+  std::vector<int> now = thread_ids(), created;
+  std::set_difference(now.begin(), now.end(), before.begin(), before.end(),
+                      std::back_inserter(created));
+  return created;
+}
+
+std::string set_thread_fifo_priority(int tid, int priority) {
+  sched_param param{};
+  param.sched_priority = priority;
+  if (sched_setscheduler(tid, SCHED_FIFO, &param) == 0) return {};
+  return failure("sched_setscheduler(SCHED_FIFO)", errno);
 }
 
 std::string lock_all_memory(std::size_t heap_bytes) {

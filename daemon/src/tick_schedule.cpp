@@ -73,6 +73,30 @@ void warn_if_watchdog_too_short(std::int64_t period_ns) {
   }
 }
 
+void raise_dds_threads(const config::ExecutorConfig& e, const std::vector<int>& dds_threads) {
+  if (e.realtime_priority < 2 || dds_threads.empty()) return;
+  const int priority = e.realtime_priority - 1;
+  std::size_t raised = 0;
+  std::string why;
+  for (const int tid : dds_threads) {
+    // A thread that has ended since (ESRCH) is no failure.
+    if (auto failed = set_thread_fifo_priority(tid, priority); failed.empty()) {
+      ++raised;
+    } else if (failed.find("No such process") == std::string::npos) {
+      why = failed;
+    }
+  }
+  if (why.empty()) {
+    spdlog::info("executor: {} DDS thread(s) at SCHED_FIFO priority {} (below the cycle's {})",
+                 raised, priority, e.realtime_priority);
+  } else {
+    spdlog::warn(
+        "executor: DDS threads left at their priority ({}); under load they may delay "
+        "ticks",
+        why);
+  }
+}
+
 std::unique_ptr<ThreadPool> real_time_setup(const config::ExecutorConfig& e,
                                             const std::function<void()>& on_thread_start) {
   if (!e.cpus.empty()) {

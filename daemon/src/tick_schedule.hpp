@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <vector>
 
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/result.hpp"
@@ -50,6 +51,12 @@ void warn_if_watchdog_too_short(std::int64_t period_ns);
 
 /// Pins the calling thread to `e.cpus[0]`, asks for SCHED_FIFO and mlockall as configured (each
 /// refusal logged, never fatal), then starts the worker pool, which inherits the policy.
+/// With executor.realtime_priority >= 2, SCHED_FIFO at realtime_priority - 1 for `dds_threads`
+/// (Fast DDS's receive, event and discovery threads): above every normal-priority process, below
+/// the cycle. Otherwise a busy computer starves them while they hold a lock the cycle's next DDS
+/// call needs (a write while a new peer is being matched) and a tick is late. Logged once.
+void raise_dds_threads(const config::ExecutorConfig& e, const std::vector<int>& dds_threads);
+
 std::unique_ptr<ThreadPool> real_time_setup(const config::ExecutorConfig& e,
                                             const std::function<void()>& on_thread_start);
 

@@ -92,7 +92,7 @@ struct ExecutorConfig {
 
 /// Per-stage budgets (YAML `budgets`), ms of wall time per tick.
 struct BudgetConfig {
-  double drain_ms = 5.0;       ///< take queued samples, parse, select
+  double drain_ms = 10.0;      ///< take queued samples, parse, select
   double ingest_ms = 15.0;     ///< filters, all scans of the tick
   double integrate_ms = 50.0;  ///< occupancy raycasting, all scans of the tick
   double tsdf_ms = 30.0;       ///< TSDF integration, all scans of the tick that run it

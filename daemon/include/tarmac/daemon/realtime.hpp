@@ -5,12 +5,19 @@
 
 #include <cstddef>
 #include <string>
+#include <vector>
 
 namespace tarmac::daemon {
 
 /// Empty on success, else why it failed ("sched_setscheduler: Operation not permitted").
 std::string pin_current_thread(int cpu);
 std::string set_fifo_priority(int priority);
+/// The process's threads (Linux thread ids, ascending), from /proc/self/task.
+std::vector<int> thread_ids();
+/// The threads created since `before` (a thread_ids() result): e.g. a library's.
+std::vector<int> threads_since(const std::vector<int>& before);
+/// SCHED_FIFO at `priority` for another thread of this process.
+std::string set_thread_fifo_priority(int tid, int priority);
 /// mlockall(MCL_CURRENT | MCL_FUTURE); then malloc keeps what it has faulted in (no trimming,
 /// no per-block mmap) and its heap is grown by `heap_bytes`, faulted in, for the first cycles.
 std::string lock_all_memory(std::size_t heap_bytes = 0);
