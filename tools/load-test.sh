@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Load test: tarmacd's cycle while other processes keep every core busy (issue 22).
 #
-#   tools/load-test.sh [--modes "rt nort"] [--load N] [--runs N] [--beams N] [--scans N]
+#   tools/load-test.sh [--modes "quiet rt nort"] [--load N] [--runs N] [--beams N] [--scans N]
 #                      [--dataset DIR] [--out DIR]
 #
 # For each mode and run: tarmacd starts from an empty map with the shipped config (state in DIR),
@@ -38,6 +38,10 @@ while [ $# -gt 0 ]; do
     *) echo "load-test: unknown option $1" >&2; exit 64 ;;
   esac
 done
+# Each mode once (its runs are --runs): a mode named twice would overwrite its own runs' files.
+if [ "$(tr ' ' '\n' <<< "$modes" | grep -v '^$' | sort | uniq -d)" != "" ]; then
+  echo "load-test: a mode is named twice in --modes \"$modes\"; use --runs N" >&2; exit 64
+fi
 bin=${TARMAC_BIN:-build/bin}
 for b in tarmacd tarmac-replay tarmac-audit tarmac-sim; do
   [ -x "$bin/$b" ] || { echo "load-test: $bin/$b missing: build first (tools/test.sh)" >&2; exit 1; }

@@ -139,6 +139,12 @@ TEST_F(Faults, OneOfTwoLidarsStops_TheOtherKeepsMapping_ReportAndDiagnosticsName
                                   cfg.dds.qos.diagnostics, 400);
   ASSERT_TRUE(diags.ok());
 
+  // The two participants have found each other (a report arrived) before the replays' clock
+  // starts: on a loaded machine discovery can take longer than the 2 s lead below, and rear's
+  // six scans would then be sent after their stamps had gone stale.
+  const auto first =
+      wait_for_report(*reports.value(), [](const transport::CycleReport&) { return true; });
+  ASSERT_GT(first.tick_ns, 0) << "no CycleReport from the executor";
   // Both LiDARs on the same stamps (a shared start): front for 3 s with the poses, rear for
   // its first 6 scans (0.3 s) only (times kTimeScale, as every duration below).
   const std::int64_t start = clock_now_ns(CLOCK_REALTIME) + 2'000'000'000LL * kTimeScale;

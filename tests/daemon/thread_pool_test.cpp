@@ -1,11 +1,18 @@
 #include "tarmac/daemon/thread_pool.hpp"
 
+#include <sched.h>
+
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
+#include <mutex>
 #include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "tarmac/daemon/realtime.hpp"
 
 namespace tarmac::daemon {
 namespace {
@@ -67,6 +74,39 @@ TEST(ThreadPool, StopsWhetherWorkersPollOrSleep) {
     if (i % 2 == 0) pool.parallel_for(4, [](std::size_t) {});
   }
   SUCCEED();
+}
+
+// How tarmacd finds Fast DDS's threads (those created while its DDS entities are made) and
+// raises them below the cycle: a thread started between two listings is found, and only it.
+TEST(Realtime, ThreadsSince_FindsTheThreadsStartedInBetween_AndTheyCanBeRaised) {
+  const std::vector<int> before = thread_ids();
+  ASSERT_FALSE(before.empty());
+  EXPECT_TRUE(std::is_sorted(before.begin(), before.end()));
+  std::mutex m;
+  std::condition_variable cv;
+  bool done = false;
+  std::thread t([&] {
+    std::unique_lock lock(m);
+    cv.wait(lock, [&] { return done; });
+  });
+  const std::vector<int> created = threads_since(before);
+  ASSERT_EQ(created.size(), 1u);
+  EXPECT_EQ(std::count(before.begin(), before.end(), created[0]), 0);
+  const std::string why = set_thread_fifo_priority(created[0], 1);
+  if (why.empty()) {
+    EXPECT_EQ(sched_getscheduler(created[0]), SCHED_FIFO);
+  } else {
+    // Unprivileged: refused with a reason, and the thread keeps its policy.
+    EXPECT_NE(why.find("sched_setscheduler"), std::string::npos) << why;
+    EXPECT_NE(sched_getscheduler(created[0]), SCHED_FIFO);
+  }
+  {
+    std::lock_guard lock(m);
+    done = true;
+  }
+  cv.notify_one();
+  t.join();
+  EXPECT_TRUE(threads_since(before).empty());
 }
 
 }  // namespace
