@@ -154,6 +154,12 @@ void Mapper::reserve_scans(std::size_t points_per_scan) {
   }
 }
 
+std::size_t Mapper::top_up_tsdf_spares(std::size_t max_blocks) {
+  const std::size_t n = std::min(tsdf_spare_shortfall(), max_blocks);
+  if (n > 0) tsdf_integrator_.add_spares(TsdfSpareBlocks::build(params_.tsdf, n));
+  return n;
+}
+
 OccupancyUpdateStats Mapper::integrate(const FilteredScan& scan, TaskRunner& runner) {
   TARMAC_ASSERT(is_last_ingested(scan), "Mapper::integrate takes the last ingest()'s scan");
   map_.recenter(scan.T_W_B.translation(), runner);

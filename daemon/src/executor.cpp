@@ -130,13 +130,11 @@ class Executor::Impl {
   /// priority would hold its malloc arena's lock while preempted, and a tick freeing one of its
   /// blocks (a rebuild erasing blocks) would wait for it.
   void top_up_tsdf_spares() {
-    const std::size_t shortfall = mapper.tsdf_spare_shortfall();
-    if (shortfall == 0) return;
     const std::size_t per_tick = std::max<std::size_t>(64, config.mapping.tsdf.reserve_blocks / 16);
     const auto t0 = Clock::now();
-    mapper.add_tsdf_spares(
-        core::TsdfSpareBlocks::build(config.mapping.tsdf, std::min(shortfall, per_tick)));
-    spares_built += std::min(shortfall, per_tick);
+    const std::size_t built = mapper.top_up_tsdf_spares(per_tick);
+    if (built == 0) return;
+    spares_built += built;
     spares_max_ms = std::max(spares_max_ms, ms_between(t0, Clock::now()));
   }
 
