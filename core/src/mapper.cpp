@@ -147,7 +147,10 @@ bool Mapper::is_last_ingested(const FilteredScan& scan) const {
 }
 
 void Mapper::reserve_scans(std::size_t points_per_scan) {
-  if (params_.tsdf.enabled) tsdf_integrator_.reserve_scan(points_per_scan);
+  if (params_.tsdf.enabled) {
+    tsdf_integrator_.reserve_scan(points_per_scan);
+    tsdf_integrator_.reserve_layer(tsdf_);
+  }
   for (auto& r : retained_) {
     r.points_S.reserve(points_per_scan);
     r.no_return_S.reserve(points_per_scan);  // an organised sweep: returns + beams without
@@ -155,9 +158,17 @@ void Mapper::reserve_scans(std::size_t points_per_scan) {
 }
 
 std::size_t Mapper::top_up_tsdf_spares(std::size_t max_blocks) {
-  const std::size_t n = std::min(tsdf_spare_shortfall(), max_blocks);
-  if (n > 0) tsdf_integrator_.add_spares(TsdfSpareBlocks::build(params_.tsdf, n));
-  return n;
+  // Nodes first: a missing node costs a new block's scan eight times a missing block.
+  const TsdfSpareCount missing = tsdf_spare_shortfall();
+  TsdfSpareCount n;
+  std::size_t budget = max_blocks;
+  n.top_nodes = std::min(missing.top_nodes, budget / 64);
+  budget -= 64 * n.top_nodes;
+  n.nodes = std::min(missing.nodes, budget / 8);
+  budget -= 8 * n.nodes;
+  n.blocks = std::min(missing.blocks, budget);
+  if (!n.empty()) tsdf_integrator_.add_spares(TsdfSpareBlocks::build(params_.tsdf, n));
+  return n.block_equivalents();
 }
 
 OccupancyUpdateStats Mapper::integrate(const FilteredScan& scan, TaskRunner& runner) {

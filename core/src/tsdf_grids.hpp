@@ -2,6 +2,9 @@
 /// @file The OpenVDB side of TsdfLayer, for the core's own TSDF .cpp files only (never include it
 /// from a public header: an OpenVDB translation unit costs ~12 s and ~650 MB to compile).
 
+#include <algorithm>
+#include <vector>
+
 #include <openvdb/openvdb.h>
 
 #include "tarmac/core/tsdf_integrator.hpp"
@@ -18,7 +21,7 @@ using TsdfGrid = openvdb::Grid<TsdfTree>;
 /// Leaf pointers by packed block key (open addressing, at most half full), so that integration
 /// finds a block's leaf without walking the tree. One table per integration partition: the task
 /// of partition p is the only user of table p. Emptied whenever the tree may change outside the
-/// integrator (TsdfLayer::grids(), clear()).
+/// integrator (TsdfLayer::grids(), clear()), keeping their memory.
 struct TsdfLeafCache {
   struct Entry {
     std::uint64_t key;  // ~0: empty
@@ -27,6 +30,13 @@ struct TsdfLeafCache {
   };
   std::vector<Entry> table;
   std::size_t size = 0;
+
+  /// Empties the table, keeping its memory (a table is sized for the map and faulted in once).
+  void drop() {
+    if (size == 0) return;
+    std::fill(table.begin(), table.end(), Entry{~std::uint64_t{0}, nullptr, nullptr});
+    size = 0;
+  }
 };
 
 struct TsdfLayer::Grids {

@@ -15,7 +15,9 @@ namespace {
 
 using Tree = TsdfTree;
 using Leaf = Tree::LeafNodeType;
-using Value = Tree::ValueType;  // (distance, weight)
+using Value = Tree::ValueType;                      // (distance, weight)
+using TopNode = Tree::RootNodeType::ChildNodeType;  // 32³ nodes
+using Node = TopNode::ChildNodeType;                // 16³ leaves
 /// Unregistered accessor: used only within one integration phase, during which the tree's
 /// structure does not change.
 using FastAccessor = openvdb::tree::ValueAccessor<Tree, false>;
@@ -182,7 +184,41 @@ struct TsdfIntegrator::Scratch {
   /// Spare leaves per partition (taken in slot order by that partition's task only).
   std::vector<std::vector<std::unique_ptr<Leaf>>> spares =
       std::vector<std::vector<std::unique_ptr<Leaf>>>(kPartitions);
+  /// Blocks per partition a scan of the reserved size touches (reserve_scan).
+  std::size_t reserved_slots = 0;
+  /// Spare nodes, taken by the serial hand-over of new leaves (graft_nodes).
+  std::vector<std::unique_ptr<Node>> spare_nodes;
+  std::vector<std::unique_ptr<TopNode>> spare_top_nodes;
 };
+
+namespace {
+
+/// Puts spare nodes on the path from the root to the leaf at `xyz` where the tree has none, so
+/// that adding the leaf builds no node. A spare goes only where the parent holds the background,
+/// inactive (what OpenVDB would build the node from); elsewhere, or without spares, the tree
+/// builds its node as usual. The result is the same tree either way.
+void graft_nodes(Tree& tree, const openvdb::Coord& xyz, const Value& background,
+                 std::vector<std::unique_ptr<Node>>& nodes,
+                 std::vector<std::unique_ptr<TopNode>>& top_nodes) {
+  auto& root = tree.root();
+  TopNode* top = root.probeNode<TopNode>(xyz);
+  if (top == nullptr) {
+    if (top_nodes.empty() || root.isValueOn(xyz) || root.getValue(xyz) != background) return;
+    top = top_nodes.back().release();
+    top_nodes.pop_back();
+    top->setOrigin(xyz & ~(TopNode::DIM - 1));
+    root.addChild(top);
+  }
+  const openvdb::Index n = TopNode::coordToOffset(xyz);
+  if (top->isChildMaskOn(n) || nodes.empty()) return;
+  if (top->isValueMaskOn(n) || top->getValue(xyz) != background) return;
+  Node* node = nodes.back().release();
+  nodes.pop_back();
+  node->setOrigin(xyz & ~(Node::DIM - 1));
+  top->addChild(node);
+}
+
+}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // Params and layer
@@ -289,7 +325,7 @@ std::uint64_t TsdfLayer::digest() const {
 
 void TsdfLayer::clear() {
   make_tsdf_grids(voxel_size_m_, truncation_m_, *grids_);
-  grids_->leaf_cache.clear();
+  for (auto& cache : grids_->leaf_cache) cache.drop();
 }
 
 std::size_t TsdfLayer::erase_blocks(std::span<const BlockIndex> blocks) {
@@ -314,7 +350,7 @@ TsdfLayer TsdfLayer::clone() const {
 }
 
 TsdfLayer::Grids& TsdfLayer::grids() {
-  grids_->leaf_cache.clear();
+  for (auto& cache : grids_->leaf_cache) cache.drop();
   return *grids_;
 }
 
@@ -330,14 +366,25 @@ TsdfIntegrator::~TsdfIntegrator() = default;
 TsdfIntegrator::TsdfIntegrator(TsdfIntegrator&&) noexcept = default;
 TsdfIntegrator& TsdfIntegrator::operator=(TsdfIntegrator&&) noexcept = default;
 
+TsdfSpareCount TsdfIntegrator::spare_target(std::size_t blocks) {
+  if (blocks == 0) return {};
+  return TsdfSpareCount{blocks, (blocks + 63) / 64, 8};
+}
+
 void TsdfIntegrator::reserve_blocks(std::size_t blocks) {
   const std::size_t per_partition = (blocks + kPartitions - 1) / kPartitions;
-  std::size_t missing = 0;
-  for (auto& spares : scratch_->spares) {
+  const TsdfSpareCount target = spare_target(blocks);
+  Scratch& s = *scratch_;
+  TsdfSpareCount missing;
+  for (auto& spares : s.spares) {
     // Room for top-ups too (add_spares then only moves pointers).
     spares.reserve(2 * per_partition);
-    missing += per_partition - std::min(per_partition, spares.size());
+    missing.blocks += per_partition - std::min(per_partition, spares.size());
   }
+  s.spare_nodes.reserve(2 * target.nodes);
+  s.spare_top_nodes.reserve(2 * target.top_nodes);
+  missing.nodes = target.nodes - std::min(target.nodes, s.spare_nodes.size());
+  missing.top_nodes = target.top_nodes - std::min(target.top_nodes, s.spare_top_nodes.size());
   add_spares(TsdfSpareBlocks::build(params_, missing));
 }
 
@@ -355,8 +402,9 @@ void TsdfIntegrator::reserve_scan(std::size_t rays) {
   // A partition receives a 16th of the scan's samples: on average 0.3 of its bins' bound.
   const std::size_t samples = share * kRayChunks / 2;
   // Blocks per partition and scan: a ray's band crosses one or two blocks, and neighbouring rays
-  // share them; one block per 16 rays of the partition is ample on 64-beam scans.
-  const std::size_t slots = std::max<std::size_t>(64, rays / kPartitions / 16);
+  // share them; the first scan of a 64-beam street at 0.1 m touches one block per ~4 rays.
+  const std::size_t slots = std::max<std::size_t>(64, rays / kPartitions / 4);
+  s.reserved_slots = std::max(s.reserved_slots, slots);
   for (Partition& part : s.partitions) {
     const auto touch = [](auto& v, std::size_t n) {
       if (v.size() < n) v.resize(n);  // written: faulted now
@@ -378,6 +426,8 @@ void TsdfIntegrator::reserve_scan(std::size_t rays) {
 struct TsdfSpareBlocks::Impl {
   float background_distance_m = 0.0f;
   std::vector<std::unique_ptr<Leaf>> leaves;
+  std::vector<std::unique_ptr<Node>> nodes;
+  std::vector<std::unique_ptr<TopNode>> top_nodes;
 };
 
 TsdfSpareBlocks::TsdfSpareBlocks() : impl_(std::make_unique<Impl>()) {}
@@ -385,28 +435,46 @@ TsdfSpareBlocks::~TsdfSpareBlocks() = default;
 TsdfSpareBlocks::TsdfSpareBlocks(TsdfSpareBlocks&&) noexcept = default;
 TsdfSpareBlocks& TsdfSpareBlocks::operator=(TsdfSpareBlocks&&) noexcept = default;
 
-TsdfSpareBlocks TsdfSpareBlocks::build(const TsdfParams& params, std::size_t blocks) {
+TsdfSpareBlocks TsdfSpareBlocks::build(const TsdfParams& params, const TsdfSpareCount& count) {
   TsdfSpareBlocks out;
-  out.impl_->background_distance_m = params.truncation_m;
-  out.impl_->leaves.reserve(blocks);
-  // Built with the background value, as integrate builds a new leaf: the buffer is touched here.
+  Impl& impl = *out.impl_;
+  impl.background_distance_m = params.truncation_m;
+  // Built with the background value, inactive, as the tree builds a new leaf or node: every
+  // page is written here. Their origins are set where they are used.
   const Value background(params.truncation_m, 0.0f);
-  for (std::size_t i = 0; i < blocks; ++i) {
-    out.impl_->leaves.push_back(std::make_unique<Leaf>(openvdb::Coord(0, 0, 0), background, false));
+  const openvdb::Coord zero(0, 0, 0);
+  impl.leaves.reserve(count.blocks);
+  for (std::size_t i = 0; i < count.blocks; ++i) {
+    impl.leaves.push_back(std::make_unique<Leaf>(zero, background, false));
+  }
+  impl.nodes.reserve(count.nodes);
+  for (std::size_t i = 0; i < count.nodes; ++i) {
+    impl.nodes.push_back(std::make_unique<Node>(zero, background, false));
+  }
+  impl.top_nodes.reserve(count.top_nodes);
+  for (std::size_t i = 0; i < count.top_nodes; ++i) {
+    impl.top_nodes.push_back(std::make_unique<TopNode>(zero, background, false));
   }
   return out;
 }
 
-std::size_t TsdfSpareBlocks::size() const {
-  return impl_ ? impl_->leaves.size() : 0;
+TsdfSpareCount TsdfSpareBlocks::size() const {
+  if (!impl_) return {};
+  return TsdfSpareCount{impl_->leaves.size(), impl_->nodes.size(), impl_->top_nodes.size()};
 }
 
 void TsdfIntegrator::add_spares(TsdfSpareBlocks&& spares) {
   if (!spares.impl_) return;
   auto& leaves = spares.impl_->leaves;
-  TARMAC_ASSERT(leaves.empty() || spares.impl_->background_distance_m == params_.truncation_m,
-                "spare TSDF blocks must have the layer's background value");
-  auto& pools = scratch_->spares;
+  TARMAC_ASSERT(
+      spares.size().empty() || spares.impl_->background_distance_m == params_.truncation_m,
+      "spare TSDF blocks must have the layer's background value");
+  Scratch& s = *scratch_;
+  for (auto& node : spares.impl_->nodes) s.spare_nodes.push_back(std::move(node));
+  for (auto& top : spares.impl_->top_nodes) s.spare_top_nodes.push_back(std::move(top));
+  spares.impl_->nodes.clear();
+  spares.impl_->top_nodes.clear();
+  auto& pools = s.spares;
   while (!leaves.empty()) {
     // The shortest pool first, so the partitions that have used the most are refilled first.
     auto& pool = *std::min_element(pools.begin(), pools.end(), [](const auto& a, const auto& b) {
@@ -417,19 +485,38 @@ void TsdfIntegrator::add_spares(TsdfSpareBlocks&& spares) {
   }
 }
 
-std::size_t TsdfIntegrator::spare_shortfall() const {
-  const std::size_t have = spare_blocks();
-  return have >= params_.reserve_blocks ? 0 : params_.reserve_blocks - have;
+TsdfSpareCount TsdfIntegrator::spare_shortfall() const {
+  const TsdfSpareCount have = spares();
+  const TsdfSpareCount want = spare_target(params_.reserve_blocks);
+  const auto missing = [](std::size_t w, std::size_t h) { return w > h ? w - h : 0; };
+  return TsdfSpareCount{missing(want.blocks, have.blocks), missing(want.nodes, have.nodes),
+                        missing(want.top_nodes, have.top_nodes)};
 }
 
-std::size_t TsdfIntegrator::spare_blocks() const {
-  std::size_t n = 0;
-  for (const auto& spares : scratch_->spares) n += spares.size();
+TsdfSpareCount TsdfIntegrator::spares() const {
+  const Scratch& s = *scratch_;
+  TsdfSpareCount n{0, s.spare_nodes.size(), s.spare_top_nodes.size()};
+  for (const auto& spares : s.spares) n.blocks += spares.size();
   return n;
 }
 
 TsdfLayer TsdfIntegrator::make_layer() const {
   return TsdfLayer(params_.voxel_size_m, params_.truncation_m);
+}
+
+void TsdfIntegrator::reserve_layer(TsdfLayer& layer) const {
+  const Scratch& s = *scratch_;
+  std::size_t spares = 0;
+  for (const auto& pool : s.spares) spares = std::max(spares, pool.size());
+  // As integrate sizes a table: at most half full with this partition's blocks and a scan's.
+  std::size_t cap = 1024;
+  while (cap < 2 * (spares + s.reserved_slots)) cap *= 2;
+  auto& caches = layer.grids_->leaf_cache;
+  caches.resize(kPartitions);
+  for (TsdfLeafCache& cache : caches) {
+    if (cache.table.size() >= cap || cache.size > 0) continue;
+    cache.table.assign(cap, TsdfLeafCache::Entry{kEmptyKey, nullptr, nullptr});
+  }
 }
 
 namespace {
@@ -770,11 +857,18 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     }
   });
 
-  // 3. Serial: hand the new leaves to the tree, collect the changed blocks in partition order.
+  // 3. Serial: hand the new leaves to the tree (on spare nodes where it has none), collect the
+  //    changed blocks in partition order.
   FastAccessor acc_tree(tree);
   for (std::size_t p = 0; p < kPartitions; ++p) {
     Partition& part = s.partitions[p];
-    for (auto& leaf : part.new_leaves) acc_tree.addLeaf(leaf.release());
+    for (auto& leaf : part.new_leaves) {
+      if (acc_tree.probeConstNode<Node>(leaf->origin()) == nullptr) {
+        graft_nodes(tree, leaf->origin(), background, s.spare_nodes, s.spare_top_nodes);
+        acc_tree.clear();  // the tree's structure changed above the accessor's cached nodes
+      }
+      acc_tree.addLeaf(leaf.release());
+    }
     update_.blocks_created += part.new_leaves.size();
     update_.voxel_updates += part.voxel_updates;
     for (const std::uint64_t key : part.slot_keys) update_.blocks.push_back(unpack_block(key));

@@ -358,7 +358,8 @@ TEST(TsdfIntegrator, SparesToppedUpBetweenScansAndScratchReserved_SameMap) {
   TsdfIntegrator topped(topped_params);
   topped.reserve_scan(4096);
   TsdfLayer topped_layer = topped.make_layer();
-  EXPECT_EQ(topped.spare_shortfall(), 0u);
+  EXPECT_TRUE(topped.spare_shortfall().empty());
+  EXPECT_EQ(topped.spares(), TsdfIntegrator::spare_target(160));
   std::size_t created = 0;
   for (const auto& [o, pts] : scans) {
     plain.integrate(o, pts, plain_layer, runner);
@@ -371,16 +372,57 @@ TEST(TsdfIntegrator, SparesToppedUpBetweenScansAndScratchReserved_SameMap) {
     if (made > 0) {
       EXPECT_LT(topped.spare_blocks(), before);
     }
-    const std::size_t shortfall = topped.spare_shortfall();
-    EXPECT_EQ(shortfall, 160u - topped.spare_blocks());
+    const TsdfSpareCount shortfall = topped.spare_shortfall();
+    EXPECT_EQ(shortfall.blocks, 160u - topped.spare_blocks());
     TsdfSpareBlocks batch = TsdfSpareBlocks::build(topped_params, shortfall);
     EXPECT_EQ(batch.size(), shortfall);
     topped.add_spares(std::move(batch));
-    EXPECT_EQ(topped.spare_shortfall(), 0u);
+    EXPECT_TRUE(topped.spare_shortfall().empty());
   }
   ASSERT_GT(created, 160u);  // more blocks than one reserve: the top-ups were used
   EXPECT_EQ(plain_layer.digest(), topped_layer.digest());
+  // The same tree, nodes included: spare nodes went exactly where the tree would build its own.
+  EXPECT_EQ(plain_layer.memory_bytes(), topped_layer.memory_bytes());
   EXPECT_EQ(plain_layer.block_count(), topped_layer.block_count());
+}
+
+// The first scan into an empty map builds the tree's nodes too (the scans sit around the origin:
+// all 8 top nodes): with a reserve, it takes spare nodes rather than building them, and the
+// tree is the one built without spares.
+TEST(TsdfIntegrator, ReserveBlocks_FirstScanTakesSpareNodes_SameTree) {
+  const auto scans = synthetic_scans();
+  SerialRunner runner;
+  TsdfIntegrator plain(params_01());
+  TsdfLayer plain_layer = plain.make_layer();
+  TsdfParams reserved_params = params_01();
+  reserved_params.reserve_blocks = 4096;
+  TsdfIntegrator reserved(reserved_params);
+  TsdfLayer reserved_layer = reserved.make_layer();
+  const TsdfSpareCount target = TsdfIntegrator::spare_target(4096);
+  ASSERT_EQ(reserved.spares(), target);
+  EXPECT_EQ(target.nodes, 64u);
+  EXPECT_EQ(target.top_nodes, 8u);
+  EXPECT_EQ(plain.spares(), TsdfSpareCount{});
+
+  plain.integrate(scans[0].first, scans[0].second, plain_layer, runner);
+  reserved.integrate(scans[0].first, scans[0].second, reserved_layer, runner);
+  EXPECT_EQ(reserved.spares().top_nodes, 0u);  // one per octant around the origin
+  EXPECT_LT(reserved.spares().nodes, target.nodes);
+  EXPECT_EQ(plain_layer.digest(), reserved_layer.digest());
+  EXPECT_EQ(plain_layer.memory_bytes(), reserved_layer.memory_bytes());
+  // Without top nodes left, nodes still go under the top nodes the tree has; later scans build
+  // what the spares do not cover, as without a reserve.
+  const std::size_t nodes_left = reserved.spares().nodes;
+  for (std::size_t k = 1; k < scans.size(); ++k) {
+    plain.integrate(scans[k].first, scans[k].second, plain_layer, runner);
+    reserved.integrate(scans[k].first, scans[k].second, reserved_layer, runner);
+  }
+  EXPECT_LE(reserved.spares().nodes, nodes_left);
+  EXPECT_EQ(plain_layer.digest(), reserved_layer.digest());
+  EXPECT_EQ(plain_layer.memory_bytes(), reserved_layer.memory_bytes());
+  // A reserve tops the spares up again.
+  reserved.reserve_blocks(4096);
+  EXPECT_EQ(reserved.spares(), target);
 }
 
 TEST(TsdfIntegrator, Update_ReportsEveryChangedBlockOnce) {

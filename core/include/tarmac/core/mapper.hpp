@@ -90,14 +90,15 @@ class Mapper {
   /// faults are taken here). The daemon passes quotas.reserve_points_per_scan; a larger scan
   /// grows what it needs once. Not RT-safe (allocates): for start-up.
   void reserve_scans(std::size_t points_per_scan);
-  /// TSDF blocks missing from the spares to tsdf.reserve_blocks (0 when the TSDF is off): new
-  /// blocks take spares, and a top-up between scans (top_up_tsdf_spares) keeps the allocation of
-  /// the blocks a growing map needs out of integrate_tsdf.
-  [[nodiscard]] std::size_t tsdf_spare_shortfall() const {
-    return params_.tsdf.enabled ? tsdf_integrator_.spare_shortfall() : 0;
+  /// TSDF blocks and nodes missing from the spares for tsdf.reserve_blocks (none when the TSDF
+  /// is off): new blocks and nodes take spares, and a top-up between scans (top_up_tsdf_spares)
+  /// keeps the allocation of what a growing map needs out of integrate_tsdf.
+  [[nodiscard]] TsdfSpareCount tsdf_spare_shortfall() const {
+    return params_.tsdf.enabled ? tsdf_integrator_.spare_shortfall() : TsdfSpareCount{};
   }
-  /// Rebuilds up to `max_blocks` of the spares missing (TsdfSpareBlocks::build, then pointer
-  /// moves); returns how many. Allocates: between ticks or scans, never inside a stage.
+  /// Rebuilds spares missing, up to `max_blocks` block equivalents (TsdfSpareCount), nodes
+  /// first (TsdfSpareBlocks::build, then pointer moves); returns the block equivalents built.
+  /// Allocates: between ticks or scans, never inside a stage.
   std::size_t top_up_tsdf_spares(std::size_t max_blocks);
   /// Stage 2: moves the window with the vehicle and integrates `scan`; returns the voxels it
   /// updated (counts). @pre `scan` is what the last ingest() returned.

@@ -16,6 +16,7 @@
 ///
 /// OpenVDB stays inside core/src (pimpl): this header is cheap to include.
 
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -150,10 +151,28 @@ struct TsdfUpdate {
   std::vector<BlockIndex> blocks;
 };
 
-/// Blocks built ahead of integration (background value, every page touched), on any thread, to
-/// be handed to an integrator between scans (TsdfIntegrator::add_spares): the map keeps growing
-/// without the cycle paying for the allocation and first-touch page faults of its new blocks.
-/// Move-only.
+/// A count of spare TSDF tree parts: blocks (leaves, 8³ voxels, 4 KB) and the tree nodes above
+/// them (a node holds 16³ blocks, 32 KB; a top node 32³ nodes, 256 KB). A map that grows into
+/// new ground needs new nodes too: 77 nodes and 8 top nodes for the first scan of an urban
+/// street around the origin (every octant of the top level), whose page faults, built in the
+/// scan, cost more than its thousands of new blocks.
+struct TsdfSpareCount {
+  std::size_t blocks = 0;
+  std::size_t nodes = 0;
+  std::size_t top_nodes = 0;
+
+  /// Memory in blocks (4 KB): a node counts 8, a top node 64. The top-up budget's unit.
+  [[nodiscard]] std::size_t block_equivalents() const {
+    return blocks + 8 * nodes + 64 * top_nodes;
+  }
+  [[nodiscard]] bool empty() const { return blocks == 0 && nodes == 0 && top_nodes == 0; }
+  friend bool operator==(const TsdfSpareCount&, const TsdfSpareCount&) = default;
+};
+
+/// Tree parts built ahead of integration (background value, every page touched), on any thread,
+/// to be handed to an integrator between scans (TsdfIntegrator::add_spares): the map keeps
+/// growing without the cycle paying for the allocation and first-touch page faults of its new
+/// blocks and nodes. Move-only.
 class TsdfSpareBlocks {
  public:
   TsdfSpareBlocks();
@@ -163,11 +182,12 @@ class TsdfSpareBlocks {
   TsdfSpareBlocks(const TsdfSpareBlocks&) = delete;
   TsdfSpareBlocks& operator=(const TsdfSpareBlocks&) = delete;
 
-  /// `blocks` blocks for a TSDF with these params (their background value). Allocates: call it
-  /// where the time does not matter (tarmacd: a background thread; the tools: between scans).
-  static TsdfSpareBlocks build(const TsdfParams& params, std::size_t blocks);
+  /// `count` blocks and nodes for a TSDF with these params (their background value).
+  /// Allocates: call it where the time does not matter (tarmacd: between ticks; the tools:
+  /// between scans).
+  static TsdfSpareBlocks build(const TsdfParams& params, const TsdfSpareCount& count);
 
-  [[nodiscard]] std::size_t size() const;
+  [[nodiscard]] TsdfSpareCount size() const;
 
  private:
   friend class TsdfIntegrator;
@@ -203,20 +223,26 @@ class TsdfIntegrator {
 
   [[nodiscard]] const TsdfParams& params() const { return params_; }
 
-  /// Tops the spare blocks up to at least `blocks` (rounded up to a multiple of 16): built and
-  /// touched now, so that integrate takes them instead of allocating. Not RT-safe (allocates);
-  /// for start-up or a moment the cycle has slack. Spares are not part of any layer's
-  /// memory_bytes().
+  /// Tops the spare blocks up to at least `blocks` (rounded up to a multiple of 16), and the
+  /// spare nodes to their share of it (spare_target): built and touched now, so that integrate
+  /// takes them instead of allocating. Not RT-safe (allocates); for start-up or a moment the
+  /// cycle has slack. Spares are not part of any layer's memory_bytes().
   void reserve_blocks(std::size_t blocks);
+  /// The spares kept for a reserve of `blocks` blocks: the blocks, a node per 64 of them (a
+  /// first scan builds one per ~110 new blocks) and 8 top nodes (the 8 around a corner of the
+  /// top level, where a map that starts at the origin sits); none when `blocks` is 0.
+  [[nodiscard]] static TsdfSpareCount spare_target(std::size_t blocks);
   /// Sizes and touches the per-scan scratch (band samples, grouping, block tables) for scans of
   /// up to `rays` returns, so that the first scans cost what later ones do: without it the
   /// scratch grows and takes its first-touch page faults in the first scan. A larger scan grows
   /// it once. Not RT-safe (allocates); for start-up.
   void reserve_scan(std::size_t rays);
   /// Spare blocks left.
-  [[nodiscard]] std::size_t spare_blocks() const;
-  /// Spares missing to the params' reserve_blocks: what a top-up should build.
-  [[nodiscard]] std::size_t spare_shortfall() const;
+  [[nodiscard]] std::size_t spare_blocks() const { return spares().blocks; }
+  /// Spare blocks and nodes left.
+  [[nodiscard]] TsdfSpareCount spares() const;
+  /// Spares missing to spare_target(params.reserve_blocks): what a top-up should build.
+  [[nodiscard]] TsdfSpareCount spare_shortfall() const;
   /// Takes `spares` (moves pointers: RT-safe once the spare lists have grown to reserve_blocks,
   /// which the constructor does), topping up the partitions that are shortest first.
   /// @pre the spares were built for params with the same truncation_m.
@@ -224,6 +250,10 @@ class TsdfIntegrator {
 
   /// A layer matching the params.
   [[nodiscard]] TsdfLayer make_layer() const;
+  /// Sizes (and touches) the layer's block lookup tables for the spare blocks and a scan of the
+  /// reserved size (reserve_scan), which the first scans would otherwise grow. Not RT-safe
+  /// (allocates); for start-up, after reserve_scan.
+  void reserve_layer(TsdfLayer& layer) const;
 
  private:
   struct Scratch;
