@@ -16,6 +16,7 @@
 #include "tarmac/core/assert.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/daemon/clock.hpp"
+#include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/pose_buffer.hpp"
 #include "tarmac/daemon/realtime.hpp"
 #include "tarmac/daemon/reason_counters.hpp"
@@ -124,11 +125,11 @@ class Executor::Impl {
     return p;
   }
 
-  /// Between ticks: rebuilds some of the TSDF spare blocks the last scans took (at most a 16th
-  /// of tsdf.reserve_blocks a tick, a few ms), so a growing map's new blocks cost integrate
-  /// neither allocation nor page faults. On this thread, not a helper: a helper at a lower
-  /// priority would hold its malloc arena's lock while preempted, and a tick freeing one of its
-  /// blocks (a rebuild erasing blocks) would wait for it.
+  /// Between ticks: rebuilds some of the TSDF spare blocks and nodes the last scans took (at most
+  /// a 16th of tsdf.reserve_blocks' worth a tick, a few ms), so a growing map's new blocks cost
+  /// integrate neither allocation nor page faults. On this thread, not a helper: a helper at a
+  /// lower priority would hold its malloc arena's lock while preempted, and a tick freeing one of
+  /// its blocks (a rebuild erasing blocks) would wait for it.
   void top_up_tsdf_spares() {
     const std::size_t per_tick = std::max<std::size_t>(64, config.mapping.tsdf.reserve_blocks / 16);
     const auto t0 = Clock::now();
@@ -172,6 +173,7 @@ class Executor::Impl {
   PoseSinkImpl pose_sink;
   TrajectorySinkImpl trajectory_sink;
   std::unique_ptr<ThreadPool> pool;
+  std::unique_ptr<Cycle> cycle;  // the mapping stages, on `pool`
   std::vector<core::VirtualZone> zones;
   core::Costmap obstacle_grid;    // outputs.obstacle_grid_topic: the costmap without inflation
   core::Costmap esdf_slice_grid;  // outputs.esdf_slice_grid_topic: the 2D ESDF for display
@@ -209,57 +211,30 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   const auto t_drained = Clock::now();
   stage_ms[kDrain] = ms_between(t_start, t_drained);
 
-  // ---- ingest + integrate, scan by scan in (stamp, sensor) order ----
-  std::uint64_t points_in = 0, points_used = 0, tsdf_points = 0, tsdf_scans = 0;
-  std::uint64_t reintegrated = 0, rebuilds_completed = 0;
-  bool rebuilt = false;
-  const bool tsdf_enabled = config.mapping.tsdf.enabled;
+  // ---- the mapping stages, scan by scan in (stamp, sensor) order (Cycle) ----
+  cycle->begin();
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
+    // A correction stamped before this scan applies before it (and after every earlier scan).
     if (corrections.pending()) corrections.apply_before(cloud.stamp_ns);
-    const auto t0 = Clock::now();
-    const core::FilteredScan scan = mapper.ingest(cloud, sel.T_W_B, T_B_S[sel.sensor], *pool,
-                                                  sel.deskew ? &sel.motion : nullptr);
-    const core::FilterCounts& counts = scan.counts;
-    const auto t1 = Clock::now();
-    mapper.integrate(scan, *pool);
-    const auto t2 = Clock::now();
-    stage_ms[kIngest] += ms_between(t0, t1);
-    stage_ms[kIntegrate] += ms_between(t1, t2);
-    if (tsdf_enabled) {
-      // Shed first (DESIGN.md §3), by the points quota only: the same scans skip the TSDF
-      // whatever the machine's speed.
-      const std::uint64_t n = scan.points_W.size();
-      if (tsdf_points + n <= config.quotas.tsdf_points_per_cycle) {
-        tsdf_points += n;
-        mapper.integrate_tsdf(scan, *pool);
-        ++tsdf_scans;
-        stage_ms[kTsdf] += ms_between(t2, Clock::now());
-      } else {
-        ++shed[kTsdf];
-        drops.add("scan.tsdf_shed_quota");
-      }
-    }
-    points_in += counts.input;
-    points_used += counts.kept;
-    drops.add("points.non_finite", counts.non_finite);
-    drops.add("points.too_close", counts.too_close);
-    drops.add("points.ego_vehicle", counts.ego_vehicle);
-    drops.add("points.isolated", counts.isolated);
-    drops.add("points.no_return_refused", counts.no_returns_refused);
+    const Cycle::ScanResult& r =
+        cycle->scan(cloud, sel.T_W_B, T_B_S[sel.sensor], sel.deskew ? &sel.motion : nullptr);
+    if (r.tsdf_shed) drops.add("scan.tsdf_shed_quota");
+    drops.add("points.non_finite", r.filtered.counts.non_finite);
+    drops.add("points.too_close", r.filtered.counts.too_close);
+    drops.add("points.ego_vehicle", r.filtered.counts.ego_vehicle);
+    drops.add("points.isolated", r.filtered.counts.isolated);
+    drops.add("points.no_return_refused", r.filtered.counts.no_returns_refused);
     newest_stamp_ns = std::max(newest_stamp_ns, cloud.stamp_ns);
     scheduler.release(sel.slot);
-    // ---- rebuild after a pose correction: a points quota of retained scans per scan, so
-    // its progress is a function of the scan sequence, not of how scans fall into ticks ----
-    if (mapper.rebuilding()) {
-      const auto t3 = Clock::now();
-      const core::RebuildStep step = mapper.rebuild_step(*pool);
-      stage_ms[kRebuild] += ms_between(t3, Clock::now());
-      rebuilt = rebuilt || step.completed;
-      reintegrated += step.scans;
-      rebuilds_completed += step.completed ? 1 : 0;
-    }
   }
+  const Cycle::Tick& done = cycle->tick();
+  stage_ms[kIngest] = done.ingest_ms;
+  stage_ms[kIntegrate] = done.integrate_ms;
+  stage_ms[kTsdf] = done.tsdf_ms;
+  stage_ms[kRebuild] = done.rebuild_ms;
+  shed[kTsdf] = done.tsdf_shed;
+  const bool rebuilt = done.rebuilds_completed > 0;
 
   // Corrections stamped up to the input horizon (no scan up to their stamp is still pending):
   // every scan before them is in, every later one is to come.
@@ -271,11 +246,11 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
 
   {
     std::lock_guard lock(totals_mutex);  // before the costmap goes out (tests read both)
-    totals.scans_integrated += selected.size();
-    totals.tsdf_scans += tsdf_scans;
-    totals.tsdf_shed_scans += shed[kTsdf];
-    totals.scans_reintegrated += reintegrated;
-    totals.rebuilds_completed += rebuilds_completed;
+    totals.scans_integrated += done.scans;
+    totals.tsdf_scans += done.tsdf_scans;
+    totals.tsdf_shed_scans += done.tsdf_shed;
+    totals.scans_reintegrated += done.scans_reintegrated;
+    totals.rebuilds_completed += done.rebuilds_completed;
     totals.newest_stamp_ns = newest_stamp_ns;
   }
 
@@ -290,13 +265,12 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
 
   // ---- costmap + 2D ESDF, once per tick (when something changed) ----
   const bool update = !selected.empty() || zones_changed || rebuilt;
-  const auto t_costmap0 = Clock::now();
   if (update) {
-    mapper.update_costmap(zones, newest_stamp_ns, *pool);
+    cycle->update_costmap(zones, newest_stamp_ns);
     have_costmap = true;
   }
+  stage_ms[kCostmap] = done.costmap_ms;
   const auto t_costmap1 = Clock::now();
-  stage_ms[kCostmap] = ms_between(t_costmap0, t_costmap1);
 
   // ---- publish the costmap and the ESDF slice: the planner and the safety filter do not wait
   // for the 3D band ----
@@ -323,10 +297,9 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   }
 
   // ---- 3D ESDF band (esdf_band.enabled), from the costmap's ground, then its box out ----
-  const bool band = update && config.mapping.esdf_band.enabled;
-  if (band) mapper.update_esdf_band(zones, newest_stamp_ns, *pool);
+  const bool band = update && cycle->update_esdf_band(zones, newest_stamp_ns);
   const auto t_band1 = Clock::now();
-  stage_ms[kEsdfBand] = ms_between(t_costmap_out, t_band1);
+  stage_ms[kEsdfBand] = done.esdf_band_ms;
   if (band) {
     const auto& p = config.mapping.esdf_band;
     outputs->publish_band(mapper.esdf_band(), mapper.vehicle_pose().translation().head<2>(),
@@ -360,8 +333,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     age.age_ms = newest ? static_cast<double>(tick_ns - *newest) / kNsPerMs : -1.0;
     age.stale = !newest || tick_ns - *newest > ms_to_ns(config.pose.max_age_ms);
   }
-  report.points_in = points_in;
-  report.points_used = points_used;
+  report.points_in = done.points_in;
+  report.points_used = done.points_used;
   report.map_memory_bytes = mapper.occupancy().memory_bytes();
   {
     // Before the report goes out, so whoever reads the report and then the totals agrees.
@@ -457,6 +430,8 @@ void Executor::prepare(const RunHooks& hooks) {
   if (hooks.on_thread_start) hooks.on_thread_start();
   if (d.store.periodic()) d.store.start_saver();  // before real_time_setup: not pinned, not FIFO
   d.pool = real_time_setup(d.config.executor, hooks.on_thread_start);
+  d.cycle = std::make_unique<Cycle>(d.mapper, *d.pool,
+                                    Cycle::Quotas{d.config.quotas.tsdf_points_per_cycle});
   raise_dds_threads(d.config.executor, d.dds_threads);
 }
 
@@ -536,8 +511,10 @@ void Executor::run(const std::function<bool()>& stop_requested, const RunHooks& 
   if (hooks.on_loop_end) hooks.on_loop_end();
   if (periodic_save) d.store.stop_saver();  // an in-flight save completes before run() returns
   if (d.spares_built > 0) {
-    spdlog::info("executor: {} TSDF spare blocks rebuilt between ticks (at most {:.1f} ms a tick)",
-                 d.spares_built, d.spares_max_ms);
+    spdlog::info(
+        "executor: TSDF spares rebuilt between ticks: {} blocks' worth of blocks and nodes "
+        "(at most {:.1f} ms a tick)",
+        d.spares_built, d.spares_max_ms);
   }
   const auto t = totals();
   spdlog::info("executor: stopped after {} ticks ({} skipped, {} over budget), {} scans integrated",

@@ -23,6 +23,7 @@
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/tsdf_io.hpp"
+#include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/executor.hpp"
 #include "tarmac/replay/replayer.hpp"
 #include "tarmac/sim/lidar.hpp"
@@ -312,8 +313,9 @@ struct OfflineCorrected {
 
 /// The core offline on the drift sequence with the daemon's correction logic: jump detection on
 /// the wire poses (a rigid correction of the retained scans), the corrected trajectory
-/// `correction` (if any) applied right after its scan as `tarmac-map --corrections` does, a
-/// rebuild step after each scan. `stamps`: the scans' stamps (the replay's; empty: 100 ms apart,
+/// `correction` (if any) applied right after its scan (after the scan's rebuild step: before the
+/// next scan, as `tarmac-map --corrections` does), the daemon's stages (daemon::Cycle) a scan a
+/// tick. `stamps`: the scans' stamps (the replay's; empty: 100 ms apart,
 /// times kTimeScale as the replay spaces them).
 OfflineCorrected offline_corrected(const config::Config& cfg,
                                    const std::vector<std::int64_t>& stamps = {},
@@ -321,6 +323,7 @@ OfflineCorrected offline_corrected(const config::Config& cfg,
   core::Mapper mapper(cfg.mapping);
   core::PoseJumpDetector detector(cfg.mapping.corrections);
   core::SerialRunner runner;
+  daemon::Cycle cycle(mapper, runner, {});
   const auto& seq = drift_sequence();
   const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
   const auto stamp_of = [&](std::size_t k) {
@@ -337,10 +340,8 @@ OfflineCorrected offline_corrected(const config::Config& cfg,
       ++out.jumps;
     }
     cloud.stamp_ns = wire.stamp_ns;
-    const auto scan = mapper.ingest(cloud, wire.T_W_B, T_B_S);
-    mapper.integrate(scan, runner);
-    mapper.integrate_tsdf(scan, runner);
-    if (mapper.rebuilding()) mapper.rebuild_step(runner);
+    cycle.begin();
+    cycle.scan(cloud, wire.T_W_B, T_B_S);  // with its rebuild step
     if (correction == nullptr || k != correction->after_scan) continue;
     std::vector<core::StampedPose> trajectory;
     for (const auto& p : correction->trajectory_W_S) {

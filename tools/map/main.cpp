@@ -22,6 +22,7 @@
 #include "tarmac/core/tsdf_changes.hpp"
 #include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/core/tsdf_mesh.hpp"
+#include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/array_io.hpp"
 #include "tarmac/tools/clearing.hpp"
@@ -350,12 +351,23 @@ int main(int argc, char** argv) {
   daemon::ThreadPool pool(opt.threads);
   core::Mapper mapper(params);
   mapper.reserve_scans(cfg.quotas.reserve_points_per_scan);  // as tarmacd before READY=1
+  daemon::Cycle cycle(mapper, pool, daemon::Cycle::Quotas{cfg.quotas.tsdf_points_per_cycle});
   core::PoseJumpDetector jumps(params.corrections);
   std::size_t next_correction = 0;
   std::uint64_t jump_corrections = 0;
   std::vector<double> rebuild_ms;  // per rebuild step
   Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
   T_B_S.translation().z() = opt.sensor_height_m;
+  // The corrected trajectories published after the scans before scan `k`.
+  const auto apply_corrections_before = [&](std::size_t k) {
+    while (next_correction < corrections.size() && corrections[next_correction].after_scan < k) {
+      std::vector<core::StampedPose> traj = corrections[next_correction].trajectory_W_S;
+      for (auto& p : traj) p.T_W_B = p.T_W_B * T_B_S.inverse();
+      mapper.correct_trajectory(traj);
+      jumps.reset(traj);  // the next live poses are predicted from the corrected ones
+      ++next_correction;
+    }
+  };
   const std::size_t n = opt.max_scans == 0 ? seq.value().scans.size()
                                            : std::min(opt.max_scans, seq.value().scans.size());
   StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
@@ -380,38 +392,31 @@ int main(int argc, char** argv) {
     }));
     cloud.stamp_ns = static_cast<std::int64_t>(std::llround(s.times_s[k] * 1e9));
     const Eigen::Isometry3d T_W_B = s.T_W_S[k] * T_B_S.inverse();
+    // One scan a tick, through the daemon's stages (daemon::Cycle); corrections first, as
+    // tarmacd applies a correction before the first scan stamped after it.
+    cycle.begin();
+    // (a) a corrected trajectory published after the previous scan.
+    apply_corrections_before(k);
     // (b) a jump in the pose stream: a rigid correction of every retained scan before this one.
     if (params.corrections.enabled) {
       if (const auto jump = jumps.feed({cloud.stamp_ns, T_W_B})) {
         if (mapper.correct_rigid(*jump, cloud.stamp_ns) > 0) ++jump_corrections;
       }
     }
-    core::FilteredScan scan;
-    core::OccupancyUpdateStats occ;
-    const double f_ms = timed_ms([&] { scan = mapper.ingest(cloud, T_W_B, T_B_S, pool); });
+    const daemon::Cycle::ScanResult& r = cycle.scan(cloud, T_W_B, T_B_S);
+    const core::FilteredScan& scan = r.filtered;
     const core::FilterCounts& counts = scan.counts;
-    const double o_ms = timed_ms([&] { occ = mapper.integrate(scan, pool); });
-    const double tsdf_ms = timed_ms([&] {
-      const core::TsdfUpdate& up = mapper.integrate_tsdf(scan, pool);
-      tsdf_samples += up.samples;
-      tsdf_updates += up.voxel_updates;
-    });
-    // (a) a corrected trajectory published after this scan.
-    while (next_correction < corrections.size() && corrections[next_correction].after_scan <= k) {
-      std::vector<core::StampedPose> traj = corrections[next_correction].trajectory_W_S;
-      for (auto& p : traj) p.T_W_B = p.T_W_B * T_B_S.inverse();
-      mapper.correct_trajectory(traj);
-      jumps.reset(traj);  // the next live poses are predicted from the corrected ones
-      ++next_correction;
+    const core::OccupancyUpdateStats& occ = r.occupancy;
+    if (r.tsdf != nullptr) {
+      tsdf_samples += r.tsdf->samples;
+      tsdf_updates += r.tsdf->voxel_updates;
     }
-    if (mapper.rebuilding()) {
-      core::RebuildStep step;
-      const double ms = timed_ms([&] { step = mapper.rebuild_step(pool); });
-      if (step.scans > 0) rebuild_ms.push_back(ms);  // not the calls waiting for the start
-    }
-    const double c_ms = timed_ms([&] { mapper.update_costmap({}, cloud.stamp_ns, pool); });
+    if (r.rebuild.scans > 0) rebuild_ms.push_back(r.rebuild_ms);  // not the steps waiting to start
+    cycle.update_costmap({}, cloud.stamp_ns);
     // The 3D band (esdf_band.enabled), every scan as the daemon does every cycle.
-    const double b_ms = timed_ms([&] { mapper.update_esdf_band({}, cloud.stamp_ns, pool); });
+    cycle.update_esdf_band({}, cloud.stamp_ns);
+    const double f_ms = r.ingest_ms, o_ms = r.integrate_ms, tsdf_ms = r.tsdf_ms;
+    const double c_ms = cycle.tick().costmap_ms, b_ms = cycle.tick().esdf_band_ms;
     if (clearing) {
       // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
       const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
@@ -453,8 +458,10 @@ int main(int argc, char** argv) {
     if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
   }
   if (tty) std::fprintf(stderr, "\n");
-  // Offline there is no next scan to wait for: a rebuild still running at the end is finished
-  // (steps of the same quota), so the written maps are the corrected ones.
+  // Offline there is no next scan to wait for: corrections after the last scan are applied and
+  // a rebuild still running at the end is finished (steps of the same quota), so the written
+  // maps are the corrected ones.
+  apply_corrections_before(n);
   std::size_t rebuild_steps_after_end = 0;
   while (mapper.rebuilding()) {
     core::RebuildStep step;
