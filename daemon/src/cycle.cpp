@@ -13,10 +13,11 @@ using Clock = std::chrono::steady_clock;
 Cycle::Cycle(core::Mapper& mapper, core::TaskRunner& runner, Quotas quotas)
     : mapper_(mapper), runner_(runner), quotas_(quotas) {}
 
-void Cycle::begin() { tick_ = Tick{}; }
+void Cycle::begin() {
+  tick_ = Tick{};
+}
 
-const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud,
-                                     const Eigen::Isometry3d& T_W_B,
+const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                                      const Eigen::Isometry3d& T_B_S,
                                      const core::ScanMotion* motion) {
   ScanResult& r = last_;

@@ -47,11 +47,11 @@ class Cycle {
   /// The tick so far (since begin()).
   struct Tick {
     std::size_t scans = 0;
-    std::size_t tsdf_scans = 0;       ///< integrated into the TSDF
-    std::size_t tsdf_shed = 0;        ///< shed from the TSDF by the points quota
-    std::uint64_t tsdf_points = 0;    ///< counted against the quota
-    std::uint64_t points_in = 0;      ///< returns received
-    std::uint64_t points_used = 0;    ///< kept by the filters
+    std::size_t tsdf_scans = 0;     ///< integrated into the TSDF
+    std::size_t tsdf_shed = 0;      ///< shed from the TSDF by the points quota
+    std::uint64_t tsdf_points = 0;  ///< counted against the quota
+    std::uint64_t points_in = 0;    ///< returns received
+    std::uint64_t points_used = 0;  ///< kept by the filters
     std::uint64_t scans_reintegrated = 0;
     std::uint64_t rebuilds_completed = 0;  ///< rebuilt windows swapped in
     double ingest_ms = 0.0, integrate_ms = 0.0, tsdf_ms = 0.0, rebuild_ms = 0.0;
@@ -66,8 +66,7 @@ class Cycle {
   /// One scan through the per-scan stages (see the file comment). `T_W_B`: the vehicle base's
   /// pose at the scan's stamp; `motion`: for deskewing (null: none).
   const ScanResult& scan(const core::PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
-                         const Eigen::Isometry3d& T_B_S,
-                         const core::ScanMotion* motion = nullptr);
+                         const Eigen::Isometry3d& T_B_S, const core::ScanMotion* motion = nullptr);
   /// The costmap and the 2D ESDF from the window, once per tick (when something changed).
   const core::CostmapLayers& update_costmap(std::span<const core::VirtualZone> zones,
                                             std::int64_t stamp_ns);
