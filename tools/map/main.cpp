@@ -4,7 +4,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -16,18 +15,16 @@
 
 #include <nlohmann/json.hpp>
 
+#include "outputs.hpp"
 #include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
-#include "tarmac/core/tsdf_changes.hpp"
 #include "tarmac/core/tsdf_io.hpp"
-#include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/tools/array_io.hpp"
 #include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/kitti.hpp"
-#include "tarmac/tools/mesh_io.hpp"
 #include "tarmac/tools/safety.hpp"
 #include "tarmac/tools/stats.hpp"
 
@@ -60,160 +57,6 @@ double timed_ms(Fn&& fn) {
   const auto t0 = Clock::now();
   fn();
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-std::vector<std::uint8_t> render_costmap(const core::CostmapLayers& layers) {
-  const auto& cm = layers.costmap;
-  const std::uint32_t w = cm.width(), h = cm.height();
-  std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
-  for (std::uint32_t y = 0; y < h; ++y) {
-    for (std::uint32_t x = 0; x < w; ++x) {
-      std::uint8_t* px = &rgb[(std::size_t{h - 1 - y} * w + x) * 3];  // north up
-      const auto cls = static_cast<core::ColumnClass>(layers.column_class.at(x, y));
-      const int c = cm.at(x, y);
-      std::uint8_t r, g, b;
-      if (cls == core::ColumnClass::kVirtual) {
-        r = 200, g = 0, b = 200;  // virtual zone: magenta
-      } else if (c == core::kCostUnknown) {
-        r = 70, g = 80, b = 110;  // unknown: slate blue
-      } else if (c == core::kCostLethal) {
-        r = 0, g = 0, b = 0;  // lethal: black
-      } else if (c == core::kCostInscribed) {
-        r = 180, g = 0, b = 0;  // inscribed: dark red
-      } else if (c > 0) {
-        r = 255, g = static_cast<std::uint8_t>(230 - 2 * c), b = 60;  // inflated: yellow → orange
-      } else {
-        r = g = b = 245;  // free: white
-      }
-      px[0] = r, px[1] = g, px[2] = b;
-    }
-  }
-  return rgb;
-}
-
-std::vector<std::uint8_t> render_distance(const core::DistanceField& field, double max_m) {
-  const int w = field.dims.x(), h = field.dims.y();
-  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      std::uint8_t* px = &rgb[(static_cast<std::size_t>(h - 1 - y) * w + x) * 3];
-      const float d = field.distance_m[static_cast<std::size_t>(y) * w + x];
-      if (std::isnan(d)) {
-        px[0] = 70, px[1] = 80, px[2] = 110;
-        continue;
-      }
-      const double t = std::min(1.0, static_cast<double>(d) / max_m);
-      px[0] = static_cast<std::uint8_t>(255 * (1.0 - t));
-      px[1] = static_cast<std::uint8_t>(255 * t * (1.0 - t) * 4 * 0.8);
-      px[2] = static_cast<std::uint8_t>(255 * t);
-    }
-  }
-  return rgb;
-}
-
-/// Frame of the TSDF lattice written by this tool: the dataset's pose frame.
-constexpr const char* kTsdfFrame = "world";
-
-/// A float for JSON: the double of its shortest decimal (0.1f is written 0.1, not
-/// 0.10000000149011612).
-double decimal(float value) {
-  char text[32];
-  const auto written = std::to_chars(text, text + sizeof text, value);
-  double d = 0.0;
-  std::from_chars(text, written.ptr, d);
-  return d;
-}
-
-std::vector<std::uint8_t> render_changes(const core::ChangeMap& m) {
-  const std::uint32_t w = m.geometry.width, h = m.geometry.height;
-  std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
-  for (std::uint32_t y = 0; y < h; ++y) {
-    for (std::uint32_t x = 0; x < w; ++x) {
-      std::uint8_t* px = &rgb[(std::size_t{h - 1 - y} * w + x) * 3];  // north up
-      const float c = m.change[std::size_t{y} * w + x];
-      const auto fade = [&](int full) {  // from white at confidence 0 to `full` at 1
-        return static_cast<std::uint8_t>(245 - (245 - full) * std::min(1.0f, std::abs(c)));
-      };
-      if (std::isnan(c)) {
-        px[0] = 70, px[1] = 80, px[2] = 110;  // not observed in both: slate
-      } else if (c > 0) {
-        px[0] = 230, px[1] = fade(0), px[2] = fade(0);  // new: red
-      } else if (c < 0) {
-        px[0] = fade(0), px[1] = fade(90), px[2] = 230;  // removed: blue
-      } else {
-        px[0] = px[1] = px[2] = 245;  // unchanged: white
-      }
-    }
-  }
-  return rgb;
-}
-
-struct TsdfOutputs {
-  double mesh_ms = 0.0, save_ms = 0.0, changes_ms = 0.0;
-  std::size_t vertices = 0, triangles = 0;
-  core::ChangeMap changes;
-};
-
-/// tsdf.vdb, tsdf.json, mesh.ply and, with a prior, changes.npy + changes.png.
-core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::TsdfLayer& tsdf,
-                                const std::string& config_hash, std::int64_t stamp_ns,
-                                const core::TsdfLayer* prior, TsdfOutputs& result) {
-  core::TsdfMapInfo info;
-  info.frame_id = kTsdfFrame;
-  info.config_hash = config_hash;
-  info.stamp_ns = stamp_ns;
-  core::Status saved = core::Ok{};
-  result.save_ms = timed_ms([&] { saved = core::save_tsdf(out / "tsdf.vdb", tsdf, info); });
-  if (!saved) return saved;
-  core::TriangleMesh mesh;
-  core::Status meshed = core::Ok{};
-  result.mesh_ms = timed_ms([&] { meshed = core::extract_mesh(tsdf, 1.0f, mesh); });
-  if (!meshed) return meshed;
-  result.vertices = mesh.vertices_W.size();
-  result.triangles = mesh.triangles.size();
-  if (auto w = tools::write_ply(out / "mesh.ply", mesh); !w) return w;
-  nlohmann::ordered_json j = {{"frame", kTsdfFrame},
-                              {"voxel_size_m", decimal(tsdf.voxel_size_m())},
-                              {"truncation_m", decimal(tsdf.truncation_m())},
-                              {"blocks", tsdf.block_count()},
-                              {"voxels", tsdf.voxel_count()},
-                              {"memory_bytes", tsdf.memory_bytes()},
-                              {"config_hash", config_hash},
-                              {"stamp_ns", stamp_ns}};
-  nlohmann::ordered_json files = {
-      {"tsdf.vdb",
-       "OpenVDB float grids 'tsdf' (signed distance, m, + in front) and 'weight' (scans, "
-       "capped), + tarmac trailer; index i = voxel centre (i + 0.5) * v"},
-      {"mesh.ply", "binary PLY of the zero level set, world frame, m"}};
-  if (prior != nullptr) {
-    core::Status detected = core::Ok{};
-    result.changes_ms = timed_ms([&] {
-      detected = core::detect_changes(*prior, tsdf, core::ChangeParams{}, result.changes);
-    });
-    if (!detected) return detected;
-    const auto& g = result.changes.geometry;
-    const std::vector<std::size_t> shape{g.height, g.width};
-    if (auto w = tools::write_npy(out / "changes.npy", result.changes.change, shape); !w) return w;
-    if (auto w = tools::write_png(out / "changes.png", render_changes(result.changes), g.width,
-                                  g.height);
-        !w) {
-      return w;
-    }
-    j["changes"] = {{"origin_m", {g.origin_x_m, g.origin_y_m}},
-                    {"resolution_m", g.resolution_m},
-                    {"shape", {g.height, g.width}},
-                    {"compared_voxels", result.changes.compared_voxels},
-                    {"new_voxels", result.changes.new_voxels},
-                    {"removed_voxels", result.changes.removed_voxels}};
-    files["changes.npy"] =
-        "float32 (ny, nx) per voxel column: +c new surface, -c removed, confidence c in (0, 1]; "
-        "0 unchanged; NaN not observed in both maps";
-    files["changes.png"] =
-        "red new, blue removed (fainter = less confident), white unchanged, slate unknown; north "
-        "up";
-  }
-  j["files"] = std::move(files);
-  return tools::write_json(out / "tsdf.json", j);
 }
 
 }  // namespace
@@ -287,7 +130,7 @@ int main(int argc, char** argv) {
   if (!opt.prior.empty()) {
     auto loaded = core::load_tsdf(opt.prior);
     if (loaded.ok()) {
-      if (auto m = core::check_tsdf_matches(loaded.value().info, kTsdfFrame,
+      if (auto m = core::check_tsdf_matches(loaded.value().info, map_tool::kTsdfFrame,
                                             params.tsdf.voxel_size_m, params.tsdf.truncation_m);
           !m) {
         loaded = core::Error{m.error().code, opt.prior + ": " + m.error().message};
@@ -476,114 +319,22 @@ int main(int argc, char** argv) {
   }
 
   // ---- outputs ----
-  const auto& occ_map = mapper.occupancy();
-  const auto& layers = mapper.costmap();
-  const Eigen::Vector3i dims = occ_map.window_size();
-  const double v = occ_map.params().voxel_size_m;
   const std::filesystem::path out = opt.out;
-  std::vector<float> log_odds;
-  occ_map.export_log_odds(log_odds);
-  std::vector<float> probability(log_odds.size());
-  std::vector<core::CellState> states3d(log_odds.size());
-  const auto& ground = layers.ground_z_m;
-  for (std::size_t i = 0; i < log_odds.size(); ++i) {
-    const float l = log_odds[i];
-    probability[i] = l == core::OccupancyMap::kUnknown ? std::nanf("") : core::probability_of(l);
-    const int x = static_cast<int>(i % dims.x());
-    const int y = static_cast<int>((i / dims.x()) % dims.y());
-    const int z = static_cast<int>(i / (static_cast<std::size_t>(dims.x()) * dims.y()));
-    const double bottom_m = (occ_map.window_min().z() + z) * v;
-    // Ground excluded: the voxel layer holding the local ground is not an obstacle.
-    const bool is_ground = bottom_m < ground.at(x, y) + v * 0.5;
-    states3d[i] = l == core::OccupancyMap::kUnknown ? core::CellState::kUnknown
-                  : (l > 0.0f && !is_ground)        ? core::CellState::kOccupied
-                                                    : core::CellState::kFree;
+  map_tool::WindowOutputs window_out;
+  if (auto w = map_tool::write_window_outputs(out, mapper, n, pool, window_out); !w) {
+    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+    return kExitIo;
   }
-  core::DistanceField esdf3d;
-  core::DistanceFieldScratch scratch3d;
-  const double esdf3d_ms = timed_ms([&] {
-    core::compute_distance_field(states3d, dims, v, core::UnknownPolicy::kReportUnknown, esdf3d,
-                                 scratch3d, pool);
-  });
-  const std::vector<std::size_t> shape3{static_cast<std::size_t>(dims.z()),
-                                        static_cast<std::size_t>(dims.y()),
-                                        static_cast<std::size_t>(dims.x())};
-  const std::vector<std::size_t> shape2{static_cast<std::size_t>(dims.y()),
-                                        static_cast<std::size_t>(dims.x())};
-  const auto& slice = layers.obstacle_distance;
-  std::vector<core::Status> writes;
-  writes.push_back(tools::write_npy(out / "occupancy.npy", probability, shape3));
-  writes.push_back(tools::write_npy(out / "esdf.npy", esdf3d.distance_m, shape3));
-  writes.push_back(tools::write_npy(out / "esdf_slice.npy", slice.distance_m, shape2));
-  const core::EsdfBand& band = mapper.esdf_band();
-  const bool have_band = params.esdf_band.enabled && band.field.dims.z() > 0;
-  if (have_band) {
-    const std::vector<std::size_t> shape_band{static_cast<std::size_t>(band.field.dims.z()),
-                                              static_cast<std::size_t>(dims.y()),
-                                              static_cast<std::size_t>(dims.x())};
-    writes.push_back(tools::write_npy(out / "esdf_band.npy", band.field.distance_m, shape_band));
-  }
-  writes.push_back(tools::write_npy(out / "costmap.npy", layers.costmap.cells(), shape2));
-  writes.push_back(
-      tools::write_png(out / "costmap.png", render_costmap(layers), dims.x(), dims.y()));
-  writes.push_back(
-      tools::write_png(out / "esdf_slice.png", render_distance(slice, 5.0), dims.x(), dims.y()));
-  for (const auto& w : writes) {
-    if (!w) {
-      std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
-      return kExitIo;
-    }
-  }
-  TsdfOutputs tsdf_out;
+  map_tool::TsdfOutputs tsdf_out;
   if (params.tsdf.enabled) {
-    if (auto w = write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(cfg), cloud.stamp_ns,
-                                    prior ? &prior->layer : nullptr, tsdf_out);
+    if (auto w =
+            map_tool::write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(cfg),
+                                         cloud.stamp_ns, prior ? &prior->layer : nullptr, tsdf_out);
         !w) {
       std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
       return kExitIo;
     }
   }
-  const double ox = occ_map.window_min().x() * v, oy = occ_map.window_min().y() * v,
-               oz = occ_map.window_min().z() * v;
-  nlohmann::ordered_json map_json = {
-      {"frame", "world (the dataset's pose frame)"},
-      {"voxel_size_m", v},
-      {"origin_m", {ox, oy, oz}},
-      {"lattice", "voxel i along an axis covers [origin + i*v, origin + (i+1)*v)"},
-      {"axis_order", "arrays are C order, shape (nz, ny, nx) or (ny, nx): x varies fastest"},
-      {"shape_3d", {dims.z(), dims.y(), dims.x()}},
-      {"shape_2d", {dims.y(), dims.x()}},
-      {"scans", n}};
-  if (have_band) {
-    map_json["esdf_band"] = {{"origin_m", {band.min.x() * v, band.min.y() * v, band.min.z() * v}},
-                             {"shape", {band.field.dims.z(), dims.y(), dims.x()}},
-                             {"obstacles", core::esdf_band_obstacles(band)}};
-  }
-  nlohmann::ordered_json files = {
-      {"occupancy.npy", "float32 occupancy probability, NaN = unknown (3D window at the end)"},
-      {"esdf.npy",
-       "float32 m to the nearest occupied voxel, ground layer excluded, NaN = unknown, inf = none "
-       "in window"},
-      {"esdf_slice.npy",
-       "float32 m to the nearest costmap obstacle cell (vehicle height band), NaN = unknown"}};
-  if (have_band) {
-    files["esdf_band.npy"] =
-        "float32 m to the nearest obstacle voxel of the 3D band around the vehicle (esdf_band: "
-        "costmap rules per voxel, overhangs included), NaN = unknown; origin and shape under "
-        "esdf_band";
-  }
-  files["costmap.npy"] =
-      "int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 lethal, -1 unknown";
-  files["costmap.png"] =
-      "white free, yellow-orange inflated, dark red inscribed, black lethal, slate unknown, "
-      "magenta virtual zone; north up";
-  files["esdf_slice.png"] = "red near an obstacle to blue at >= 5 m, slate unknown; north up";
-  map_json["files"] = std::move(files);
-  if (auto w = tools::write_json(out / "map.json", map_json); !w) {
-    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
-    return kExitIo;
-  }
-
   // ---- timing table ----
   double total_s = 0.0;
   for (const double ms : t_total.ms) total_s += ms / 1000.0;
@@ -618,13 +369,14 @@ int main(int argc, char** argv) {
   }
   timing["stages_ms"] = std::move(stages_ms);
   const double pts_per_s = total_s > 0 ? static_cast<double>(points_used) / total_s : 0.0;
-  std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d", esdf3d_ms,
-              dims.x(), dims.y(), dims.z());
+  std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d",
+              window_out.esdf3d_ms, window_out.esdf3d.dims.x(), window_out.esdf3d.dims.y(),
+              window_out.esdf3d.dims.z());
   std::printf(
       "pipeline throughput: %.2f M points/s (filter+occupancy+tsdf+costmap), %.1f voxel "
       "visits/point\n",
       pts_per_s / 1e6, points_used > 0 ? static_cast<double>(voxel_visits) / points_used : 0.0);
-  timing["esdf3d_ms"] = esdf3d_ms;
+  timing["esdf3d_ms"] = window_out.esdf3d_ms;
   timing["points_per_s"] = pts_per_s;
   if (params.tsdf.enabled) {
     timing["tsdf_mesh_ms"] = tsdf_out.mesh_ms;
@@ -632,9 +384,9 @@ int main(int argc, char** argv) {
     if (prior) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
   }
   std::printf("static layer: %zu voxels at the end (%llu promotions, %llu demotions)\n",
-              occ_map.static_count(), static_cast<unsigned long long>(promotions),
+              mapper.occupancy().static_count(), static_cast<unsigned long long>(promotions),
               static_cast<unsigned long long>(demotions));
-  timing["static_voxels"] = occ_map.static_count();
+  timing["static_voxels"] = mapper.occupancy().static_count();
   timing["static_promotions"] = promotions;
   timing["static_demotions"] = demotions;
   if (clearing) {
@@ -715,20 +467,21 @@ int main(int argc, char** argv) {
                                          vec.size() * sizeof(vec[0]));
   };
   std::printf("digest: occupancy %s costmap %s esdf_slice %s esdf %s tsdf %016llx\n",
-              tools::digest(bytes(log_odds)).c_str(),
-              tools::digest(bytes(layers.costmap.cells())).c_str(),
-              tools::digest(bytes(slice.distance_m)).c_str(),
-              tools::digest(bytes(esdf3d.distance_m)).c_str(),
+              tools::digest(bytes(window_out.log_odds)).c_str(),
+              tools::digest(bytes(mapper.costmap().costmap.cells())).c_str(),
+              tools::digest(bytes(mapper.costmap().obstacle_distance.distance_m)).c_str(),
+              tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
               static_cast<unsigned long long>(mapper.tsdf().digest()));
-  if (have_band) {
-    std::printf("digest: esdf_band %s\n", tools::digest(bytes(band.field.distance_m)).c_str());
+  if (window_out.have_band) {
+    std::printf("digest: esdf_band %s\n",
+                tools::digest(bytes(mapper.esdf_band().field.distance_m)).c_str());
   }
   std::printf(
       "wrote "
       "%s/"
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
       "timing.json%s%s}\n",
-      opt.out.c_str(), have_band ? ",esdf_band.npy" : "",
+      opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
       params.tsdf.enabled ? (prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
                                    : ",tsdf.vdb,tsdf.json,mesh.ply")
                           : "");
