@@ -576,7 +576,12 @@ core::Status Executor::save_tsdf() const {
 }
 
 TsdfLoadResult Executor::load_tsdf() {
-  return impl_->store.load_tsdf(impl_->mapper);
+  TsdfLoadResult result = impl_->store.load_tsdf(impl_->mapper);
+  // The loaded layer replaced the one sized at construction: its block lookup tables again.
+  if (result.kind == TsdfLoadResult::Kind::kLoaded) {
+    impl_->mapper.reserve_scans(impl_->config.quotas.reserve_points_per_scan);
+  }
+  return result;
 }
 
 const core::TsdfLayer& Executor::tsdf() const {

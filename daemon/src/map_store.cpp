@@ -1,14 +1,15 @@
 #include "map_store.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <exception>
-#include <fstream>
 #include <utility>
 #include <vector>
 
+#include <fcntl.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -62,26 +63,42 @@ core::Status MapStore::save_window(const core::OccupancyMap& map, std::int64_t s
   map.export_log_odds(log_odds);
   const std::filesystem::path file = dir / state_.map_file;
   const std::filesystem::path tmp = file.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return core::Error{"state.io", tmp.string() + ": cannot be written"};
-    // A self-describing header line, then float32 log-odds in window order (x fastest).
-    const auto dims = map.window_size();
-    const auto& min = map.window_min();
-    char header[256];
-    const int n =
-        std::snprintf(header, sizeof header,
-                      "tarmac occupancy window v1 voxel_size_m %.6f min_vox %d %d %d dims %d %d %d "
-                      "stamp_ns %lld float32-log-odds unknown=-1e9\n",
-                      map.params().voxel_size_m, min.x(), min.y(), min.z(), dims.x(), dims.y(),
-                      dims.z(), static_cast<long long>(stamp_ns));
-    out.write(header, n);
-    out.write(reinterpret_cast<const char*>(log_odds.data()),
-              static_cast<std::streamsize>(log_odds.size() * sizeof(float)));
-    if (!out) return core::Error{"state.io", tmp.string() + ": write failed"};
-  }
+  // A self-describing header line, then float32 log-odds in window order (x fastest).
+  const auto dims = map.window_size();
+  const auto& min = map.window_min();
+  char header[256];
+  const int n =
+      std::snprintf(header, sizeof header,
+                    "tarmac occupancy window v1 voxel_size_m %.6f min_vox %d %d %d dims %d %d %d "
+                    "stamp_ns %lld float32-log-odds unknown=-1e9\n",
+                    map.params().voxel_size_m, min.x(), min.y(), min.z(), dims.x(), dims.y(),
+                    dims.z(), static_cast<long long>(stamp_ns));
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return core::Error{"state.io", tmp.string() + ": cannot be written"};
+  const auto write_all = [fd](const void* data, std::size_t size) {
+    const auto* p = static_cast<const char*>(data);
+    while (size > 0) {
+      const ssize_t w = ::write(fd, p, size);
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) return false;
+      p += w;
+      size -= static_cast<std::size_t>(w);
+    }
+    return true;
+  };
+  // On the device before the rename: after a power cut the file is the old save or the new
+  // one, never a new name over unwritten blocks.
+  const bool written = write_all(header, static_cast<std::size_t>(n)) &&
+                       write_all(log_odds.data(), log_odds.size() * sizeof(float)) &&
+                       ::fsync(fd) == 0;
+  ::close(fd);
+  if (!written) return core::Error{"state.io", tmp.string() + ": write failed"};
   std::filesystem::rename(tmp, file, ec);
   if (ec) return core::Error{"state.io", file.string() + ": " + ec.message()};
+  if (const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC); dfd >= 0) {
+    ::fsync(dfd);  // the rename itself; best effort, it is atomic either way
+    ::close(dfd);
+  }
   return core::Ok{};
 }
 

@@ -38,7 +38,8 @@ class MapStore {
   MapStore& operator=(const MapStore&) = delete;
 
   /// Writes the window to state.dir/state.map_file: a one-line text header, then float32
-  /// log-odds in window order (x fastest); written to <file>.tmp and renamed over the file.
+  /// log-odds in window order (x fastest); written to <file>.tmp, flushed to the device and
+  /// renamed over the file.
   /// `stamp_ns`: the newest scan in it. Not for the cycle.
   core::Status save_window(const core::OccupancyMap& window, std::int64_t stamp_ns) const;
 
