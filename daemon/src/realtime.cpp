@@ -57,11 +57,10 @@ std::vector<int> threads_since(const std::vector<int>& before) {
   return created;
 }
 
-std::string set_thread_fifo_priority(int tid, int priority) {
+int set_thread_fifo_priority(int tid, int priority) {
   sched_param param{};
   param.sched_priority = priority;
-  if (sched_setscheduler(tid, SCHED_FIFO, &param) == 0) return {};
-  return failure("sched_setscheduler(SCHED_FIFO)", errno);
+  return sched_setscheduler(tid, SCHED_FIFO, &param) == 0 ? 0 : errno;
 }
 
 std::string lock_all_memory(std::size_t heap_bytes) {

@@ -1,9 +1,12 @@
 #include "tick_schedule.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -79,11 +82,11 @@ void raise_dds_threads(const config::ExecutorConfig& e, const std::vector<int>& 
   std::size_t raised = 0;
   std::string why;
   for (const int tid : dds_threads) {
-    // A thread that has ended since (ESRCH) is no failure.
-    if (auto failed = set_thread_fifo_priority(tid, priority); failed.empty()) {
+    const int err = set_thread_fifo_priority(tid, priority);
+    if (err == 0) {
       ++raised;
-    } else if (failed.find("No such process") == std::string::npos) {
-      why = failed;
+    } else if (err != ESRCH) {  // a thread that has ended since is no failure
+      why = std::string("sched_setscheduler(SCHED_FIFO): ") + std::strerror(err);
     }
   }
   if (why.empty()) {

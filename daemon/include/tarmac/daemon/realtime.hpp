@@ -16,8 +16,9 @@ std::string set_fifo_priority(int priority);
 std::vector<int> thread_ids();
 /// The threads created since `before` (a thread_ids() result): e.g. a library's.
 std::vector<int> threads_since(const std::vector<int>& before);
-/// SCHED_FIFO at `priority` for another thread of this process.
-std::string set_thread_fifo_priority(int tid, int priority);
+/// SCHED_FIFO at `priority` for another thread of this process: 0, or the errno of
+/// sched_setscheduler (ESRCH: the thread has ended; EPERM: not allowed).
+int set_thread_fifo_priority(int tid, int priority);
 /// mlockall(MCL_CURRENT | MCL_FUTURE); then malloc keeps what it has faulted in (no trimming,
 /// no per-block mmap) and its heap is grown by `heap_bytes`, faulted in, for the first cycles.
 std::string lock_all_memory(std::size_t heap_bytes = 0);
