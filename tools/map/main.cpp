@@ -59,6 +59,430 @@ double timed_ms(Fn&& fn) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+/// Everything the run reads, checked before any work is done.
+struct Inputs {
+  config::Config cfg;
+  tools::KittiSequence seq;
+  std::optional<core::LoadedTsdf> prior;           ///< --prior
+  std::optional<tools::ClearingTracker> clearing;  ///< tarmac-sim's dynamic_boxes.txt
+  std::optional<tools::SafetyTracker> safety;      ///< tarmac-sim's obstacle_columns.txt
+  std::vector<tools::Correction> corrections;      ///< --corrections
+};
+
+/// What the run measured and counted.
+struct Run {
+  std::size_t scans = 0;           ///< scans mapped (--scans, or all)
+  std::int64_t last_stamp_ns = 0;  ///< the last scan's stamp
+  StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
+      t_cost{"costmap+esdf2d", {}}, t_tsdf{"tsdf", {}}, t_band{"esdf_band", {}},
+      t_total{"pipeline", {}}, t_spares{"tsdf spares", {}};
+  std::uint64_t tsdf_samples = 0, tsdf_updates = 0;
+  std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
+                dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0, promotions = 0,
+                demotions = 0;
+  std::vector<double> rebuild_ms;  ///< per rebuild step that re-integrated scans
+  std::uint64_t jump_corrections = 0;
+  std::size_t next_correction = 0;  ///< --corrections applied so far
+  std::size_t rebuild_steps_after_end = 0;
+};
+
+/// Reads and checks everything the run needs before any work is done: the config, the sequence,
+/// the prior TSDF, the ground truths of tarmac-sim's sequences, the corrections. 0, or the exit
+/// code after saying why on stderr.
+int load_inputs(const Options& opt, Inputs& in) {
+  config::Config& cfg = in.cfg;
+  if (!opt.config.empty()) {
+    auto loaded = config::load_config_file(opt.config);
+    if (!loaded) {
+      std::fprintf(stderr, "tarmac-map: invalid config: %s\n", loaded.error().message.c_str());
+      return kExitConfig;
+    }
+    cfg = std::move(loaded).value();
+  }
+  const core::MapperParams& params = cfg.mapping;
+  if (auto valid = params.validate(); !valid) {
+    std::fprintf(stderr, "tarmac-map: invalid config: %s\n", valid.error().message.c_str());
+    return kExitConfig;
+  }
+  auto seq = tools::open_kitti(opt.dataset, opt.poses);
+  if (!seq) {
+    std::fprintf(stderr, "tarmac-map: %s\n", seq.error().message.c_str());
+    return kExitData;
+  }
+  in.seq = std::move(seq).value();
+  if (!in.seq.organised.empty()) {
+    std::fprintf(
+        stderr, "tarmac-map: organised sweeps (%zu x %zu): beams without return clear free space\n",
+        in.seq.rows, in.seq.cols);
+  } else if (params.costmap.free_rule == core::FreeRule::kWholeEnvelope) {
+    std::fprintf(stderr,
+                 "tarmac-map: note: unorganised scans carry no beams without return; with "
+                 "costmap.free_rule whole_envelope the envelope above the sensor stays unknown "
+                 "where nothing above returns (docs/mapping.md, \"Safety argument\")\n");
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(opt.out, ec);
+  if (ec) {
+    std::fprintf(stderr, "tarmac-map: %s: %s\n", opt.out.c_str(), ec.message().c_str());
+    return kExitIo;
+  }
+
+  // The prior map for change detection, checked before any work is done.
+  if (!opt.prior.empty()) {
+    auto loaded = core::load_tsdf(opt.prior);
+    if (loaded.ok()) {
+      if (auto m = core::check_tsdf_matches(loaded.value().info, map_tool::kTsdfFrame,
+                                            params.tsdf.voxel_size_m, params.tsdf.truncation_m);
+          !m) {
+        loaded = core::Error{m.error().code, opt.prior + ": " + m.error().message};
+      }
+    }
+    if (!loaded) {
+      std::fprintf(stderr, "tarmac-map: prior refused: %s [%s]\n", loaded.error().message.c_str(),
+                   loaded.error().code.c_str());
+      return kExitData;
+    }
+    in.prior.emplace(std::move(loaded).value());
+  }
+
+  // Moving objects' ground truth (tarmac-sim's dynamic_boxes.txt): dynamic-clearing figures.
+  if (const auto truth_file = std::filesystem::path(opt.dataset) / "dynamic_boxes.txt";
+      std::filesystem::exists(truth_file)) {
+    auto truth = tools::read_dynamic_truth(truth_file);
+    if (!truth) {
+      std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
+      return kExitData;
+    }
+    in.clearing.emplace(std::move(truth).value());
+  }
+
+  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt): safety figures per cycle.
+  if (const auto truth_file = std::filesystem::path(opt.dataset) / "obstacle_columns.txt";
+      std::filesystem::exists(truth_file)) {
+    auto truth = tools::read_obstacle_truth(truth_file);
+    if (!truth) {
+      std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
+      return kExitData;
+    }
+    if (std::abs(truth.value().cell_m - params.occupancy.voxel_size_m) > 1e-9) {
+      std::fprintf(stderr,
+                   "tarmac-map: safety figures skipped: the truth's cells are %g m, the "
+                   "costmap's %g m\n",
+                   truth.value().cell_m, params.occupancy.voxel_size_m);
+    } else {
+      in.safety.emplace(std::move(truth).value());
+    }
+  }
+
+  if (!opt.corrections.empty()) {
+    auto read = tools::read_corrections(opt.corrections);
+    if (!read) {
+      std::fprintf(stderr, "tarmac-map: %s [%s]\n", read.error().message.c_str(),
+                   read.error().code.c_str());
+      return kExitData;
+    }
+    in.corrections = std::move(read).value();
+    if (!params.corrections.enabled) {
+      std::fprintf(stderr, "tarmac-map: --corrections needs corrections.enabled: true\n");
+      return kExitConfig;
+    }
+  }
+
+  return 0;
+}
+
+/// Maps the sequence scan by scan through the daemon's stages (daemon::Cycle), applying the
+/// corrections and feeding the ground-truth trackers; a rebuild still running after the last
+/// scan is finished. Exits with kExitData on a scan it cannot read.
+void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::ThreadPool& pool,
+                  Run& run) {
+  const core::MapperParams& params = in.cfg.mapping;
+  const config::Config& cfg = in.cfg;
+  std::vector<tools::DynamicBox> moving_now;  // the moving objects' boxes at the current scan
+  daemon::Cycle cycle(mapper, pool, daemon::Cycle::Quotas{cfg.quotas.tsdf_points_per_cycle});
+  core::PoseJumpDetector jumps(params.corrections);
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.translation().z() = opt.sensor_height_m;
+  // The corrected trajectories published after the scans before scan `k`.
+  const auto apply_corrections_before = [&](std::size_t k) {
+    while (run.next_correction < in.corrections.size() &&
+           in.corrections[run.next_correction].after_scan < k) {
+      std::vector<core::StampedPose> traj = in.corrections[run.next_correction].trajectory_W_S;
+      for (auto& p : traj) p.T_W_B = p.T_W_B * T_B_S.inverse();
+      mapper.correct_trajectory(traj);
+      jumps.reset(traj);  // the next live poses are predicted from the corrected ones
+      ++run.next_correction;
+    }
+  };
+  const std::size_t n =
+      opt.max_scans == 0 ? in.seq.scans.size() : std::min(opt.max_scans, in.seq.scans.size());
+  run.scans = n;
+  const bool tty = isatty(STDERR_FILENO) != 0;
+  core::PointCloud cloud;
+  core::OrganisedScratch organised_scratch;
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto& s = in.seq;
+    run.t_read.ms.push_back(timed_ms([&] {
+      // Organised sweeps when the sequence has them (tarmac-sim): their beams without return
+      // clear free space, as tarmacd derives them from an organised PointCloud2.
+      if (auto r = tools::read_sequence_scan(s, k, cloud, organised_scratch); !r) {
+        std::fprintf(stderr, "tarmac-map: %s\n", r.error().message.c_str());
+        std::exit(kExitData);
+      }
+    }));
+    cloud.stamp_ns = static_cast<std::int64_t>(std::llround(s.times_s[k] * 1e9));
+    const Eigen::Isometry3d T_W_B = s.T_W_S[k] * T_B_S.inverse();
+    // One scan a tick, through the daemon's stages (daemon::Cycle); corrections first, as
+    // tarmacd applies a correction before the first scan stamped after it.
+    cycle.begin();
+    // (a) a corrected trajectory published after the previous scan.
+    apply_corrections_before(k);
+    // (b) a jump in the pose stream: a rigid correction of every retained scan before this one.
+    if (params.corrections.enabled) {
+      if (const auto jump = jumps.feed({cloud.stamp_ns, T_W_B})) {
+        if (mapper.correct_rigid(*jump, cloud.stamp_ns) > 0) ++run.jump_corrections;
+      }
+    }
+    const daemon::Cycle::ScanResult& r = cycle.scan(cloud, T_W_B, T_B_S);
+    const core::FilteredScan& scan = r.filtered;
+    const core::FilterCounts& counts = scan.counts;
+    const core::OccupancyUpdateStats& occ = r.occupancy;
+    if (r.tsdf != nullptr) {
+      run.tsdf_samples += r.tsdf->samples;
+      run.tsdf_updates += r.tsdf->voxel_updates;
+    }
+    if (r.rebuild.scans > 0)
+      run.rebuild_ms.push_back(r.rebuild_ms);  // not the steps waiting to start
+    cycle.update_costmap({}, cloud.stamp_ns);
+    // The 3D band (esdf_band.enabled), every scan as the daemon does every cycle.
+    cycle.update_esdf_band({}, cloud.stamp_ns);
+    const double f_ms = r.ingest_ms, o_ms = r.integrate_ms, tsdf_ms = r.tsdf_ms;
+    const double c_ms = cycle.tick().costmap_ms, b_ms = cycle.tick().esdf_band_ms;
+    if (in.clearing) {
+      // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
+      const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
+      in.clearing->observe(
+          static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
+          tools::blind_radius_from_ground(sensor_W, scan.points_W, T_W_B.translation().z()));
+    }
+    if (in.safety) {
+      moving_now.clear();
+      if (in.clearing) {
+        for (const auto& b : in.clearing->truth().boxes) {
+          if (b.scan == static_cast<int>(k)) moving_now.push_back(b);
+        }
+      }
+      in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
+                         T_W_B.translation().head<2>(), 20.0, moving_now);
+    }
+    run.promotions += occ.promotions;
+    run.demotions += occ.demotions;
+    run.t_filter.ms.push_back(f_ms);
+    run.t_occ.ms.push_back(o_ms);
+    run.t_cost.ms.push_back(c_ms);
+    if (params.tsdf.enabled) {
+      run.t_tsdf.ms.push_back(tsdf_ms);
+      // The spare blocks this scan took, rebuilt between scans as tarmacd rebuilds them between
+      // ticks (all of them here, at most a 16th of reserve_blocks a tick there): timed on its own.
+      run.t_spares.ms.push_back(
+          timed_ms([&] { mapper.top_up_tsdf_spares(std::numeric_limits<std::size_t>::max()); }));
+    }
+    if (params.esdf_band.enabled) run.t_band.ms.push_back(b_ms);
+    run.t_total.ms.push_back(f_ms + o_ms + tsdf_ms + c_ms + b_ms);
+    run.points_in += counts.input;
+    run.points_used += counts.kept;
+    run.dropped_nonfinite += counts.non_finite;
+    run.dropped_close += counts.too_close;
+    run.dropped_ego += counts.ego_vehicle;
+    run.dropped_isolated += counts.isolated;
+    run.voxel_visits += occ.voxel_visits;
+    if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
+  }
+  if (tty) std::fprintf(stderr, "\n");
+  // Offline there is no next scan to wait for: corrections after the last scan are applied and
+  // a rebuild still running at the end is finished (steps of the same quota), so the written
+  // maps are the corrected ones.
+  apply_corrections_before(n);
+  while (mapper.rebuilding()) {
+    core::RebuildStep step;
+    const double ms = timed_ms([&] { step = mapper.rebuild_step(pool); });
+    if (step.scans == 0) break;  // scheduled after the last scan's stamp: never starts
+    run.rebuild_ms.push_back(ms);
+    ++run.rebuild_steps_after_end;
+  }
+  if (run.rebuild_steps_after_end > 0) {
+    mapper.update_costmap({}, cloud.stamp_ns, pool);
+    mapper.update_esdf_band({}, cloud.stamp_ns, pool);
+  }
+  run.last_stamp_ns = cloud.stamp_ns;
+}
+
+/// Prints the stage table, the run's summaries and the digests; writes timing.json. 0 or
+/// kExitIo.
+int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, const Run& run,
+           const map_tool::WindowOutputs& window_out, const map_tool::TsdfOutputs& tsdf_out) {
+  const core::MapperParams& params = in.cfg.mapping;
+  // ---- timing table ----
+  double total_s = 0.0;
+  for (const double ms : run.t_total.ms) total_s += ms / 1000.0;
+  std::printf(
+      "tarmac-map: %zu scans, %llu points in, %llu used (dropped: %llu non-finite, %llu too close, "
+      "%llu ego vehicle, %llu isolated), %zu threads\n",
+      run.scans, static_cast<unsigned long long>(run.points_in),
+      static_cast<unsigned long long>(run.points_used),
+      static_cast<unsigned long long>(run.dropped_nonfinite),
+      static_cast<unsigned long long>(run.dropped_close),
+      static_cast<unsigned long long>(run.dropped_ego),
+      static_cast<unsigned long long>(run.dropped_isolated), opt.threads);
+  std::printf("%-16s %9s %9s %9s %9s %7s   (ms per scan; worst: the max's scan index)\n", "stage",
+              "mean", "p50", "p99", "max", "worst");
+  nlohmann::ordered_json timing = {{"scans", run.scans}, {"threads", opt.threads}};
+  nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
+  std::vector<const StageTimes*> stages = {&run.t_read, &run.t_filter, &run.t_occ, &run.t_cost,
+                                           &run.t_total};
+  if (params.esdf_band.enabled) stages.insert(stages.end() - 1, &run.t_band);
+  if (params.tsdf.enabled) {
+    stages.insert(stages.begin() + 3, &run.t_tsdf);
+    stages.push_back(&run.t_spares);  // off the cycle: after the pipeline's row
+  }
+  for (const StageTimes* stage : stages) {
+    const auto& s = *stage;
+    const std::size_t worst = tools::index_of_max(s.ms);
+    const double mx = s.ms.empty() ? 0.0 : s.ms[worst];
+    std::printf("%-16s %9.2f %9.2f %9.2f %9.2f %7zu\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
+                percentile(s.ms, 0.99), mx, worst);
+    stages_ms[s.name] = {{"mean", mean(s.ms)},
+                         {"p50", percentile(s.ms, 0.5)},
+                         {"p99", percentile(s.ms, 0.99)},
+                         {"max", mx},
+                         {"max_scan", worst}};
+  }
+  timing["stages_ms"] = std::move(stages_ms);
+  const double pts_per_s = total_s > 0 ? static_cast<double>(run.points_used) / total_s : 0.0;
+  std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d",
+              window_out.esdf3d_ms, window_out.esdf3d.dims.x(), window_out.esdf3d.dims.y(),
+              window_out.esdf3d.dims.z());
+  std::printf(
+      "pipeline throughput: %.2f M points/s (filter+occupancy+tsdf+costmap), %.1f voxel "
+      "visits/point\n",
+      pts_per_s / 1e6,
+      run.points_used > 0 ? static_cast<double>(run.voxel_visits) / run.points_used : 0.0);
+  timing["esdf3d_ms"] = window_out.esdf3d_ms;
+  timing["points_per_s"] = pts_per_s;
+  if (params.tsdf.enabled) {
+    timing["tsdf_mesh_ms"] = tsdf_out.mesh_ms;
+    timing["tsdf_save_ms"] = tsdf_out.save_ms;
+    if (in.prior) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
+  }
+  std::printf("static layer: %zu voxels at the end (%llu promotions, %llu demotions)\n",
+              mapper.occupancy().static_count(), static_cast<unsigned long long>(run.promotions),
+              static_cast<unsigned long long>(run.demotions));
+  timing["static_voxels"] = mapper.occupancy().static_count();
+  timing["static_promotions"] = run.promotions;
+  timing["static_demotions"] = run.demotions;
+  if (in.clearing) {
+    const tools::ClearingReport r = in.clearing->report();
+    std::printf(
+        "dynamic clearing: %zu path cells, %zu measured, %zu cleared, %zu not cleared; "
+        "time-to-clear p50 %.2f s, p90 %.2f s, max %.2f s; ghost cells at the end %zu\n"
+        "  of those, %zu left inside the blind zone (nearer than the scan's nearest ground "
+        "return); "
+        "the others: p50 %.2f s, p90 %.2f s, max %.2f s\n",
+        r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
+        r.ghost_cells, r.blind_at_leave, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
+    timing["dynamic_clearing"] = {{"path_cells", r.path_cells},
+                                  {"measured", r.measured},
+                                  {"cleared", r.cleared},
+                                  {"not_cleared", r.not_cleared},
+                                  {"time_to_clear_p50_s", r.p50_s},
+                                  {"time_to_clear_p90_s", r.p90_s},
+                                  {"time_to_clear_max_s", r.max_s},
+                                  {"ghost_cells", r.ghost_cells},
+                                  {"blind_at_leave", r.blind_at_leave},
+                                  {"in_view_p50_s", r.in_view_p50_s},
+                                  {"in_view_p90_s", r.in_view_p90_s},
+                                  {"in_view_max_s", r.in_view_max_s}};
+  }
+  if (in.safety) {
+    std::printf("%s\n", tools::safety_summary(in.safety->report()).c_str());
+    timing["safety"] = tools::safety_json(*in.safety);
+  }
+  if (auto w = tools::write_json(std::filesystem::path(opt.out) / "timing.json", timing); !w) {
+    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+    return kExitIo;
+  }
+  if (params.tsdf.enabled) {
+    std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
+                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
+                tsdf_out.save_ms);
+    std::printf(
+        "tsdf: %zu blocks, %zu voxels, %.1f MiB, %.1f voxel samples/point, %.1f voxel "
+        "updates/point\n",
+        mapper.tsdf().block_count(), mapper.tsdf().voxel_count(),
+        static_cast<double>(mapper.tsdf().memory_bytes()) / (1024.0 * 1024.0),
+        run.points_used > 0
+            ? static_cast<double>(run.tsdf_samples) / static_cast<double>(run.points_used)
+            : 0.0,
+        run.points_used > 0
+            ? static_cast<double>(run.tsdf_updates) / static_cast<double>(run.points_used)
+            : 0.0);
+    if (in.prior) {
+      std::printf(
+          "changes vs %s: %llu voxels compared, %llu new, %llu removed (%.1f ms)\n",
+          opt.prior.c_str(), static_cast<unsigned long long>(tsdf_out.changes.compared_voxels),
+          static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
+          static_cast<unsigned long long>(tsdf_out.changes.removed_voxels), tsdf_out.changes_ms);
+    }
+  }
+
+  if (params.corrections.enabled) {
+    const core::CorrectionStats& cs = mapper.correction_stats();
+    double rebuild_total = 0.0;
+    for (const double ms : run.rebuild_ms) rebuild_total += ms;
+    std::printf(
+        "corrections: %llu applied (%llu from pose jumps, %llu from --corrections), %llu "
+        "ignored; %llu rebuilds completed, %llu scans re-integrated in %zu steps, %.1f ms in "
+        "total (max step %.1f ms; %zu steps after the last scan), %llu scans rolled out, %llu "
+        "TSDF blocks erased\n",
+        static_cast<unsigned long long>(cs.corrections),
+        static_cast<unsigned long long>(run.jump_corrections),
+        static_cast<unsigned long long>(run.next_correction),
+        static_cast<unsigned long long>(cs.corrections_empty),
+        static_cast<unsigned long long>(cs.rebuilds_completed),
+        static_cast<unsigned long long>(cs.scans_reintegrated), run.rebuild_ms.size(),
+        rebuild_total,
+        run.rebuild_ms.empty() ? 0.0
+                               : *std::max_element(run.rebuild_ms.begin(), run.rebuild_ms.end()),
+        run.rebuild_steps_after_end, static_cast<unsigned long long>(cs.scans_rolled_out),
+        static_cast<unsigned long long>(cs.tsdf_blocks_erased));
+  }
+
+  const auto bytes = [](const auto& vec) {
+    return std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(vec.data()),
+                                         vec.size() * sizeof(vec[0]));
+  };
+  std::printf("digest: occupancy %s costmap %s esdf_slice %s esdf %s tsdf %016llx\n",
+              tools::digest(bytes(window_out.log_odds)).c_str(),
+              tools::digest(bytes(mapper.costmap().costmap.cells())).c_str(),
+              tools::digest(bytes(mapper.costmap().obstacle_distance.distance_m)).c_str(),
+              tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
+              static_cast<unsigned long long>(mapper.tsdf().digest()));
+  if (window_out.have_band) {
+    std::printf("digest: esdf_band %s\n",
+                tools::digest(bytes(mapper.esdf_band().field.distance_m)).c_str());
+  }
+  std::printf(
+      "wrote "
+      "%s/"
+      "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
+      "timing.json%s%s}\n",
+      opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
+      params.tsdf.enabled ? (in.prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
+                                      : ",tsdf.vdb,tsdf.json,mesh.ply")
+                          : "");
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -89,401 +513,30 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
 
-  config::Config cfg;
-  if (!opt.config.empty()) {
-    auto loaded = config::load_config_file(opt.config);
-    if (!loaded) {
-      std::fprintf(stderr, "tarmac-map: invalid config: %s\n", loaded.error().message.c_str());
-      return kExitConfig;
-    }
-    cfg = std::move(loaded).value();
-  }
-  const core::MapperParams& params = cfg.mapping;
-  if (auto valid = params.validate(); !valid) {
-    std::fprintf(stderr, "tarmac-map: invalid config: %s\n", valid.error().message.c_str());
-    return kExitConfig;
-  }
-  auto seq = tools::open_kitti(opt.dataset, opt.poses);
-  if (!seq) {
-    std::fprintf(stderr, "tarmac-map: %s\n", seq.error().message.c_str());
-    return kExitData;
-  }
-  if (!seq.value().organised.empty()) {
-    std::fprintf(
-        stderr, "tarmac-map: organised sweeps (%zu x %zu): beams without return clear free space\n",
-        seq.value().rows, seq.value().cols);
-  } else if (params.costmap.free_rule == core::FreeRule::kWholeEnvelope) {
-    std::fprintf(stderr,
-                 "tarmac-map: note: unorganised scans carry no beams without return; with "
-                 "costmap.free_rule whole_envelope the envelope above the sensor stays unknown "
-                 "where nothing above returns (docs/mapping.md, \"Safety argument\")\n");
-  }
-  std::error_code ec;
-  std::filesystem::create_directories(opt.out, ec);
-  if (ec) {
-    std::fprintf(stderr, "tarmac-map: %s: %s\n", opt.out.c_str(), ec.message().c_str());
-    return kExitIo;
-  }
-
-  // The prior map for change detection, checked before any work is done.
-  std::optional<core::LoadedTsdf> prior;
-  if (!opt.prior.empty()) {
-    auto loaded = core::load_tsdf(opt.prior);
-    if (loaded.ok()) {
-      if (auto m = core::check_tsdf_matches(loaded.value().info, map_tool::kTsdfFrame,
-                                            params.tsdf.voxel_size_m, params.tsdf.truncation_m);
-          !m) {
-        loaded = core::Error{m.error().code, opt.prior + ": " + m.error().message};
-      }
-    }
-    if (!loaded) {
-      std::fprintf(stderr, "tarmac-map: prior refused: %s [%s]\n", loaded.error().message.c_str(),
-                   loaded.error().code.c_str());
-      return kExitData;
-    }
-    prior.emplace(std::move(loaded).value());
-  }
-
-  // Moving objects' ground truth (tarmac-sim's dynamic_boxes.txt): dynamic-clearing figures.
-  std::optional<tools::ClearingTracker> clearing;
-  if (const auto truth_file = std::filesystem::path(opt.dataset) / "dynamic_boxes.txt";
-      std::filesystem::exists(truth_file)) {
-    auto truth = tools::read_dynamic_truth(truth_file);
-    if (!truth) {
-      std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
-      return kExitData;
-    }
-    clearing.emplace(std::move(truth).value());
-  }
-
-  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt): safety figures per cycle.
-  std::optional<tools::SafetyTracker> safety;
-  std::vector<tools::DynamicBox> moving_now;  // the moving objects' boxes at the current scan
-  if (const auto truth_file = std::filesystem::path(opt.dataset) / "obstacle_columns.txt";
-      std::filesystem::exists(truth_file)) {
-    auto truth = tools::read_obstacle_truth(truth_file);
-    if (!truth) {
-      std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
-      return kExitData;
-    }
-    if (std::abs(truth.value().cell_m - params.occupancy.voxel_size_m) > 1e-9) {
-      std::fprintf(stderr,
-                   "tarmac-map: safety figures skipped: the truth's cells are %g m, the "
-                   "costmap's %g m\n",
-                   truth.value().cell_m, params.occupancy.voxel_size_m);
-    } else {
-      safety.emplace(std::move(truth).value());
-    }
-  }
-
-  std::vector<tools::Correction> corrections;
-  if (!opt.corrections.empty()) {
-    auto read = tools::read_corrections(opt.corrections);
-    if (!read) {
-      std::fprintf(stderr, "tarmac-map: %s [%s]\n", read.error().message.c_str(),
-                   read.error().code.c_str());
-      return kExitData;
-    }
-    corrections = std::move(read).value();
-    if (!params.corrections.enabled) {
-      std::fprintf(stderr, "tarmac-map: --corrections needs corrections.enabled: true\n");
-      return kExitConfig;
-    }
-  }
-
+  Inputs in;
+  if (const int exit = load_inputs(opt, in); exit != 0) return exit;
   daemon::ThreadPool pool(opt.threads);
-  core::Mapper mapper(params);
-  mapper.reserve_scans(cfg.quotas.reserve_points_per_scan);  // as tarmacd before READY=1
-  daemon::Cycle cycle(mapper, pool, daemon::Cycle::Quotas{cfg.quotas.tsdf_points_per_cycle});
-  core::PoseJumpDetector jumps(params.corrections);
-  std::size_t next_correction = 0;
-  std::uint64_t jump_corrections = 0;
-  std::vector<double> rebuild_ms;  // per rebuild step
-  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
-  T_B_S.translation().z() = opt.sensor_height_m;
-  // The corrected trajectories published after the scans before scan `k`.
-  const auto apply_corrections_before = [&](std::size_t k) {
-    while (next_correction < corrections.size() && corrections[next_correction].after_scan < k) {
-      std::vector<core::StampedPose> traj = corrections[next_correction].trajectory_W_S;
-      for (auto& p : traj) p.T_W_B = p.T_W_B * T_B_S.inverse();
-      mapper.correct_trajectory(traj);
-      jumps.reset(traj);  // the next live poses are predicted from the corrected ones
-      ++next_correction;
-    }
-  };
-  const std::size_t n = opt.max_scans == 0 ? seq.value().scans.size()
-                                           : std::min(opt.max_scans, seq.value().scans.size());
-  StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
-      t_cost{"costmap+esdf2d", {}}, t_tsdf{"tsdf", {}}, t_band{"esdf_band", {}},
-      t_total{"pipeline", {}}, t_spares{"tsdf spares", {}};
-  std::uint64_t tsdf_samples = 0, tsdf_updates = 0;
-  std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
-                dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0, promotions = 0,
-                demotions = 0;
-  const bool tty = isatty(STDERR_FILENO) != 0;
-  core::PointCloud cloud;
-  core::OrganisedScratch organised_scratch;
-  for (std::size_t k = 0; k < n; ++k) {
-    const auto& s = seq.value();
-    t_read.ms.push_back(timed_ms([&] {
-      // Organised sweeps when the sequence has them (tarmac-sim): their beams without return
-      // clear free space, as tarmacd derives them from an organised PointCloud2.
-      if (auto r = tools::read_sequence_scan(s, k, cloud, organised_scratch); !r) {
-        std::fprintf(stderr, "tarmac-map: %s\n", r.error().message.c_str());
-        std::exit(kExitData);
-      }
-    }));
-    cloud.stamp_ns = static_cast<std::int64_t>(std::llround(s.times_s[k] * 1e9));
-    const Eigen::Isometry3d T_W_B = s.T_W_S[k] * T_B_S.inverse();
-    // One scan a tick, through the daemon's stages (daemon::Cycle); corrections first, as
-    // tarmacd applies a correction before the first scan stamped after it.
-    cycle.begin();
-    // (a) a corrected trajectory published after the previous scan.
-    apply_corrections_before(k);
-    // (b) a jump in the pose stream: a rigid correction of every retained scan before this one.
-    if (params.corrections.enabled) {
-      if (const auto jump = jumps.feed({cloud.stamp_ns, T_W_B})) {
-        if (mapper.correct_rigid(*jump, cloud.stamp_ns) > 0) ++jump_corrections;
-      }
-    }
-    const daemon::Cycle::ScanResult& r = cycle.scan(cloud, T_W_B, T_B_S);
-    const core::FilteredScan& scan = r.filtered;
-    const core::FilterCounts& counts = scan.counts;
-    const core::OccupancyUpdateStats& occ = r.occupancy;
-    if (r.tsdf != nullptr) {
-      tsdf_samples += r.tsdf->samples;
-      tsdf_updates += r.tsdf->voxel_updates;
-    }
-    if (r.rebuild.scans > 0) rebuild_ms.push_back(r.rebuild_ms);  // not the steps waiting to start
-    cycle.update_costmap({}, cloud.stamp_ns);
-    // The 3D band (esdf_band.enabled), every scan as the daemon does every cycle.
-    cycle.update_esdf_band({}, cloud.stamp_ns);
-    const double f_ms = r.ingest_ms, o_ms = r.integrate_ms, tsdf_ms = r.tsdf_ms;
-    const double c_ms = cycle.tick().costmap_ms, b_ms = cycle.tick().esdf_band_ms;
-    if (clearing) {
-      // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
-      const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
-      clearing->observe(
-          static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
-          tools::blind_radius_from_ground(sensor_W, scan.points_W, T_W_B.translation().z()));
-    }
-    if (safety) {
-      moving_now.clear();
-      if (clearing) {
-        for (const auto& b : clearing->truth().boxes) {
-          if (b.scan == static_cast<int>(k)) moving_now.push_back(b);
-        }
-      }
-      safety->observe(mapper.costmap().costmap, static_cast<int>(k), T_W_B.translation().head<2>(),
-                      20.0, moving_now);
-    }
-    promotions += occ.promotions;
-    demotions += occ.demotions;
-    t_filter.ms.push_back(f_ms);
-    t_occ.ms.push_back(o_ms);
-    t_cost.ms.push_back(c_ms);
-    if (params.tsdf.enabled) {
-      t_tsdf.ms.push_back(tsdf_ms);
-      // The spare blocks this scan took, rebuilt between scans as tarmacd rebuilds them between
-      // ticks (all of them here, at most a 16th of reserve_blocks a tick there): timed on its own.
-      t_spares.ms.push_back(
-          timed_ms([&] { mapper.top_up_tsdf_spares(std::numeric_limits<std::size_t>::max()); }));
-    }
-    if (params.esdf_band.enabled) t_band.ms.push_back(b_ms);
-    t_total.ms.push_back(f_ms + o_ms + tsdf_ms + c_ms + b_ms);
-    points_in += counts.input;
-    points_used += counts.kept;
-    dropped_nonfinite += counts.non_finite;
-    dropped_close += counts.too_close;
-    dropped_ego += counts.ego_vehicle;
-    dropped_isolated += counts.isolated;
-    voxel_visits += occ.voxel_visits;
-    if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
-  }
-  if (tty) std::fprintf(stderr, "\n");
-  // Offline there is no next scan to wait for: corrections after the last scan are applied and
-  // a rebuild still running at the end is finished (steps of the same quota), so the written
-  // maps are the corrected ones.
-  apply_corrections_before(n);
-  std::size_t rebuild_steps_after_end = 0;
-  while (mapper.rebuilding()) {
-    core::RebuildStep step;
-    const double ms = timed_ms([&] { step = mapper.rebuild_step(pool); });
-    if (step.scans == 0) break;  // scheduled after the last scan's stamp: never starts
-    rebuild_ms.push_back(ms);
-    ++rebuild_steps_after_end;
-  }
-  if (rebuild_steps_after_end > 0) {
-    mapper.update_costmap({}, cloud.stamp_ns, pool);
-    mapper.update_esdf_band({}, cloud.stamp_ns, pool);
-  }
+  core::Mapper mapper(in.cfg.mapping);
+  mapper.reserve_scans(in.cfg.quotas.reserve_points_per_scan);  // as tarmacd before READY=1
+  Run run;
+  run_sequence(opt, in, mapper, pool, run);
 
   // ---- outputs ----
   const std::filesystem::path out = opt.out;
   map_tool::WindowOutputs window_out;
-  if (auto w = map_tool::write_window_outputs(out, mapper, n, pool, window_out); !w) {
+  if (auto w = map_tool::write_window_outputs(out, mapper, run.scans, pool, window_out); !w) {
     std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
     return kExitIo;
   }
   map_tool::TsdfOutputs tsdf_out;
-  if (params.tsdf.enabled) {
-    if (auto w =
-            map_tool::write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(cfg),
-                                         cloud.stamp_ns, prior ? &prior->layer : nullptr, tsdf_out);
+  if (in.cfg.mapping.tsdf.enabled) {
+    if (auto w = map_tool::write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(in.cfg),
+                                              run.last_stamp_ns,
+                                              in.prior ? &in.prior->layer : nullptr, tsdf_out);
         !w) {
       std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
       return kExitIo;
     }
   }
-  // ---- timing table ----
-  double total_s = 0.0;
-  for (const double ms : t_total.ms) total_s += ms / 1000.0;
-  std::printf(
-      "tarmac-map: %zu scans, %llu points in, %llu used (dropped: %llu non-finite, %llu too close, "
-      "%llu ego vehicle, %llu isolated), %zu threads\n",
-      n, static_cast<unsigned long long>(points_in), static_cast<unsigned long long>(points_used),
-      static_cast<unsigned long long>(dropped_nonfinite),
-      static_cast<unsigned long long>(dropped_close), static_cast<unsigned long long>(dropped_ego),
-      static_cast<unsigned long long>(dropped_isolated), opt.threads);
-  std::printf("%-16s %9s %9s %9s %9s %7s   (ms per scan; worst: the max's scan index)\n", "stage",
-              "mean", "p50", "p99", "max", "worst");
-  nlohmann::ordered_json timing = {{"scans", n}, {"threads", opt.threads}};
-  nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
-  std::vector<const StageTimes*> stages = {&t_read, &t_filter, &t_occ, &t_cost, &t_total};
-  if (params.esdf_band.enabled) stages.insert(stages.end() - 1, &t_band);
-  if (params.tsdf.enabled) {
-    stages.insert(stages.begin() + 3, &t_tsdf);
-    stages.push_back(&t_spares);  // off the cycle: after the pipeline's row
-  }
-  for (const StageTimes* stage : stages) {
-    const auto& s = *stage;
-    const std::size_t worst = tools::index_of_max(s.ms);
-    const double mx = s.ms.empty() ? 0.0 : s.ms[worst];
-    std::printf("%-16s %9.2f %9.2f %9.2f %9.2f %7zu\n", s.name, mean(s.ms), percentile(s.ms, 0.5),
-                percentile(s.ms, 0.99), mx, worst);
-    stages_ms[s.name] = {{"mean", mean(s.ms)},
-                         {"p50", percentile(s.ms, 0.5)},
-                         {"p99", percentile(s.ms, 0.99)},
-                         {"max", mx},
-                         {"max_scan", worst}};
-  }
-  timing["stages_ms"] = std::move(stages_ms);
-  const double pts_per_s = total_s > 0 ? static_cast<double>(points_used) / total_s : 0.0;
-  std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d",
-              window_out.esdf3d_ms, window_out.esdf3d.dims.x(), window_out.esdf3d.dims.y(),
-              window_out.esdf3d.dims.z());
-  std::printf(
-      "pipeline throughput: %.2f M points/s (filter+occupancy+tsdf+costmap), %.1f voxel "
-      "visits/point\n",
-      pts_per_s / 1e6, points_used > 0 ? static_cast<double>(voxel_visits) / points_used : 0.0);
-  timing["esdf3d_ms"] = window_out.esdf3d_ms;
-  timing["points_per_s"] = pts_per_s;
-  if (params.tsdf.enabled) {
-    timing["tsdf_mesh_ms"] = tsdf_out.mesh_ms;
-    timing["tsdf_save_ms"] = tsdf_out.save_ms;
-    if (prior) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
-  }
-  std::printf("static layer: %zu voxels at the end (%llu promotions, %llu demotions)\n",
-              mapper.occupancy().static_count(), static_cast<unsigned long long>(promotions),
-              static_cast<unsigned long long>(demotions));
-  timing["static_voxels"] = mapper.occupancy().static_count();
-  timing["static_promotions"] = promotions;
-  timing["static_demotions"] = demotions;
-  if (clearing) {
-    const tools::ClearingReport r = clearing->report();
-    std::printf(
-        "dynamic clearing: %zu path cells, %zu measured, %zu cleared, %zu not cleared; "
-        "time-to-clear p50 %.2f s, p90 %.2f s, max %.2f s; ghost cells at the end %zu\n"
-        "  of those, %zu left inside the blind zone (nearer than the scan's nearest ground "
-        "return); "
-        "the others: p50 %.2f s, p90 %.2f s, max %.2f s\n",
-        r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
-        r.ghost_cells, r.blind_at_leave, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
-    timing["dynamic_clearing"] = {{"path_cells", r.path_cells},
-                                  {"measured", r.measured},
-                                  {"cleared", r.cleared},
-                                  {"not_cleared", r.not_cleared},
-                                  {"time_to_clear_p50_s", r.p50_s},
-                                  {"time_to_clear_p90_s", r.p90_s},
-                                  {"time_to_clear_max_s", r.max_s},
-                                  {"ghost_cells", r.ghost_cells},
-                                  {"blind_at_leave", r.blind_at_leave},
-                                  {"in_view_p50_s", r.in_view_p50_s},
-                                  {"in_view_p90_s", r.in_view_p90_s},
-                                  {"in_view_max_s", r.in_view_max_s}};
-  }
-  if (safety) {
-    std::printf("%s\n", tools::safety_summary(safety->report()).c_str());
-    timing["safety"] = tools::safety_json(*safety);
-  }
-  if (auto w = tools::write_json(out / "timing.json", timing); !w) {
-    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
-    return kExitIo;
-  }
-  if (params.tsdf.enabled) {
-    std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
-                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
-                tsdf_out.save_ms);
-    std::printf(
-        "tsdf: %zu blocks, %zu voxels, %.1f MiB, %.1f voxel samples/point, %.1f voxel "
-        "updates/point\n",
-        mapper.tsdf().block_count(), mapper.tsdf().voxel_count(),
-        static_cast<double>(mapper.tsdf().memory_bytes()) / (1024.0 * 1024.0),
-        points_used > 0 ? static_cast<double>(tsdf_samples) / static_cast<double>(points_used)
-                        : 0.0,
-        points_used > 0 ? static_cast<double>(tsdf_updates) / static_cast<double>(points_used)
-                        : 0.0);
-    if (prior) {
-      std::printf(
-          "changes vs %s: %llu voxels compared, %llu new, %llu removed (%.1f ms)\n",
-          opt.prior.c_str(), static_cast<unsigned long long>(tsdf_out.changes.compared_voxels),
-          static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
-          static_cast<unsigned long long>(tsdf_out.changes.removed_voxels), tsdf_out.changes_ms);
-    }
-  }
-
-  if (params.corrections.enabled) {
-    const core::CorrectionStats& cs = mapper.correction_stats();
-    double rebuild_total = 0.0;
-    for (const double ms : rebuild_ms) rebuild_total += ms;
-    std::printf(
-        "corrections: %llu applied (%llu from pose jumps, %llu from --corrections), %llu "
-        "ignored; %llu rebuilds completed, %llu scans re-integrated in %zu steps, %.1f ms in "
-        "total (max step %.1f ms; %zu steps after the last scan), %llu scans rolled out, %llu "
-        "TSDF blocks erased\n",
-        static_cast<unsigned long long>(cs.corrections),
-        static_cast<unsigned long long>(jump_corrections),
-        static_cast<unsigned long long>(next_correction),
-        static_cast<unsigned long long>(cs.corrections_empty),
-        static_cast<unsigned long long>(cs.rebuilds_completed),
-        static_cast<unsigned long long>(cs.scans_reintegrated), rebuild_ms.size(), rebuild_total,
-        rebuild_ms.empty() ? 0.0 : *std::max_element(rebuild_ms.begin(), rebuild_ms.end()),
-        rebuild_steps_after_end, static_cast<unsigned long long>(cs.scans_rolled_out),
-        static_cast<unsigned long long>(cs.tsdf_blocks_erased));
-  }
-
-  const auto bytes = [](const auto& vec) {
-    return std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(vec.data()),
-                                         vec.size() * sizeof(vec[0]));
-  };
-  std::printf("digest: occupancy %s costmap %s esdf_slice %s esdf %s tsdf %016llx\n",
-              tools::digest(bytes(window_out.log_odds)).c_str(),
-              tools::digest(bytes(mapper.costmap().costmap.cells())).c_str(),
-              tools::digest(bytes(mapper.costmap().obstacle_distance.distance_m)).c_str(),
-              tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
-              static_cast<unsigned long long>(mapper.tsdf().digest()));
-  if (window_out.have_band) {
-    std::printf("digest: esdf_band %s\n",
-                tools::digest(bytes(mapper.esdf_band().field.distance_m)).c_str());
-  }
-  std::printf(
-      "wrote "
-      "%s/"
-      "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
-      "timing.json%s%s}\n",
-      opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
-      params.tsdf.enabled ? (prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
-                                   : ",tsdf.vdb,tsdf.json,mesh.ply")
-                          : "");
-  return 0;
+  return report(opt, in, mapper, run, window_out, tsdf_out);
 }
