@@ -113,6 +113,38 @@ TEST_F(Envelope, LowObjectBlocks_WhateverTheFreeRuleSaysOfTheEnvelopeAbove) {
   EXPECT_EQ(cost_at(-6.0, 6.0), kCostFree);
 }
 
+// Windows of more than 64 layers classify columns layer by layer, the others with per-column
+// bit sets (costmap/columns.cpp): on the same scene, all of it well inside both windows, the two
+// give the same ground, classes and costs, under both free rules.
+TEST(ColumnClasses, TallWindowLayerByLayerEqualsTheBitSets) {
+  for (const FreeRule rule : {FreeRule::kAnyVoxel, FreeRule::kWholeEnvelope}) {
+    std::vector<CostmapLayers> layers;
+    for (const int nz : {40, 70}) {
+      OccupancyParams p = test::apron_window_params();
+      p.window_z_vox = nz;
+      OccupancyMap map(p);
+      map.recenter(Eigen::Vector3d::Zero());
+      std::vector<Eigen::Vector3f> extra;
+      test::add_box(extra, {4.0f, -3.0f, 4.0f}, {8.0f, 3.0f, 4.4f});         // wing, 4 m up
+      test::add_box(extra, {-6.1f, 2.9f, 0.05f}, {-5.9f, 3.1f, 0.55f});      // cone
+      test::add_box(extra, {2.95f, -4.05f, 0.15f}, {3.05f, -3.95f, 0.15f});  // debris
+      test::add_box(extra, {4.0f, -1.0f, 2.0f}, {5.0f, 1.0f, 2.2f});         // beam at 2 m
+      test::scan_apron(map, extra, 3);
+      CostmapParams cp;
+      cp.free_rule = rule;
+      SerialRunner runner;
+      layers.emplace_back();
+      build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers.back(), runner);
+    }
+    EXPECT_EQ(layers[0].ground_z_m.cells(), layers[1].ground_z_m.cells());
+    EXPECT_EQ(layers[0].column_class.cells(), layers[1].column_class.cells());
+    EXPECT_EQ(layers[0].costmap.cells(), layers[1].costmap.cells());
+    EXPECT_GT(
+        std::count(layers[1].costmap.cells().begin(), layers[1].costmap.cells().end(), kCostLethal),
+        0);
+  }
+}
+
 TEST_F(Envelope, UnknownPolicyAndVirtualZones) {
   scan({});
   CostmapParams cp = params();
