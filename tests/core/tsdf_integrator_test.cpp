@@ -323,15 +323,29 @@ TEST(TsdfIntegrator, Determinism_DigestIdenticalFor1To4Threads) {
   EXPECT_EQ(counts[0], counts[2]);
 }
 
+/// An integrator without spares and one with a reserve of `reserve_blocks`, each with its layer:
+/// the two must build the same map.
+struct PlainAndReserved {
+  static TsdfParams with_reserve(std::uint32_t reserve_blocks) {
+    TsdfParams p = params_01();
+    p.reserve_blocks = reserve_blocks;
+    return p;
+  }
+  explicit PlainAndReserved(std::uint32_t reserve_blocks)
+      : reserved_params(with_reserve(reserve_blocks)), reserved(reserved_params) {}
+
+  TsdfIntegrator plain{params_01()};
+  TsdfLayer plain_layer = plain.make_layer();
+  TsdfParams reserved_params;
+  TsdfIntegrator reserved;
+  TsdfLayer reserved_layer = reserved.make_layer();
+};
+
 TEST(TsdfIntegrator, ReserveBlocks_SameMapAndSparesTakenFirst) {
   const auto scans = synthetic_scans();
   SerialRunner runner;
-  TsdfIntegrator plain(params_01());
-  TsdfLayer plain_layer = plain.make_layer();
-  TsdfParams reserved_params = params_01();
-  reserved_params.reserve_blocks = 100;  // fewer than the scans create: spares run out
-  TsdfIntegrator reserved(reserved_params);
-  TsdfLayer reserved_layer = reserved.make_layer();
+  PlainAndReserved maps(100);  // fewer than the scans create: spares run out
+  auto& [plain, plain_layer, reserved_params, reserved, reserved_layer] = maps;
   ASSERT_EQ(reserved.spare_blocks(), 112u);  // 7 per partition
   std::size_t created = 0;
   for (const auto& [o, pts] : scans) {
@@ -351,13 +365,9 @@ TEST(TsdfIntegrator, ReserveBlocks_SameMapAndSparesTakenFirst) {
 TEST(TsdfIntegrator, SparesToppedUpBetweenScansAndScratchReserved_SameMap) {
   const auto scans = synthetic_scans();
   SerialRunner runner;
-  TsdfIntegrator plain(params_01());
-  TsdfLayer plain_layer = plain.make_layer();
-  TsdfParams topped_params = params_01();
-  topped_params.reserve_blocks = 160;
-  TsdfIntegrator topped(topped_params);
+  PlainAndReserved maps(160);
+  auto& [plain, plain_layer, topped_params, topped, topped_layer] = maps;
   topped.reserve_scan(4096);
-  TsdfLayer topped_layer = topped.make_layer();
   EXPECT_TRUE(topped.spare_shortfall().empty());
   EXPECT_EQ(topped.spares(), TsdfIntegrator::spare_target(160));
   std::size_t created = 0;
@@ -392,12 +402,8 @@ TEST(TsdfIntegrator, SparesToppedUpBetweenScansAndScratchReserved_SameMap) {
 TEST(TsdfIntegrator, ReserveBlocks_FirstScanTakesSpareNodes_SameTree) {
   const auto scans = synthetic_scans();
   SerialRunner runner;
-  TsdfIntegrator plain(params_01());
-  TsdfLayer plain_layer = plain.make_layer();
-  TsdfParams reserved_params = params_01();
-  reserved_params.reserve_blocks = 4096;
-  TsdfIntegrator reserved(reserved_params);
-  TsdfLayer reserved_layer = reserved.make_layer();
+  PlainAndReserved maps(4096);
+  auto& [plain, plain_layer, reserved_params, reserved, reserved_layer] = maps;
   const TsdfSpareCount target = TsdfIntegrator::spare_target(4096);
   ASSERT_EQ(reserved.spares(), target);
   EXPECT_EQ(target.nodes, 64u);
