@@ -1,3 +1,7 @@
+// The config schema (schema.hpp): every key once, with its type, bounds, default, unit and doc.
+// Over 600 lines because make_schema() is that table, one entry per key; reading, validation,
+// --print-config, the documented config/tarmac.yaml and docs/configuration.md all derive from it.
+
 #include "tarmac/config/schema.hpp"
 
 #include <algorithm>
