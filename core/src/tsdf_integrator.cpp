@@ -500,6 +500,188 @@ std::size_t band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, d
 
 }  // namespace
 
+namespace {
+
+/// Step 2a of integrate: partition `p`'s samples, from the bins of every ray chunk, grouped by
+/// block (blocks in first-touch order, each block's samples in ray order): part.grouped, with
+/// part.slot_start / slot_lines per block (slot).
+void group_by_block(Partition& part, const std::vector<SampleBin>& bins, std::size_t p) {
+  std::size_t total = 0, total_runs = 0;
+  for (std::size_t c = 0; c < kRayChunks; ++c) {
+    total += bins[c * kPartitions + p].size();
+    total_runs += bins[c * kPartitions + p].run_count;
+  }
+  if (part.table_keys.empty()) part.grow();
+  part.run_slot.resize(total_runs);
+  part.grouped.resize(total);
+  // Count the samples of each block, run by run (the samples themselves are not read here).
+  std::size_t runs = 0;
+  for (std::size_t c = 0; c < kRayChunks; ++c) {
+    const SampleBin& bin = bins[c * kPartitions + p];
+    for (std::size_t r = 0; r < bin.run_count; ++r) {
+      const Run& run = bin.runs[r];
+      const std::uint32_t slot = part.slot_for(run.block_key);
+      part.slot_count[slot] += bin.run_end(r) - run.begin;
+      part.run_slot[runs++] = slot;
+    }
+  }
+  const std::size_t slots = part.slot_keys.size();
+  part.slot_start.resize(slots + 1);
+  std::uint32_t acc = 0;
+  for (std::size_t sl = 0; sl < slots; ++sl) {
+    part.slot_start[sl] = acc;
+    acc += part.slot_count[sl];
+  }
+  part.slot_start[slots] = acc;
+  // Scatter (stable: ray order within each block), run by run in the order counted.
+  for (std::size_t sl = 0; sl < slots; ++sl) part.slot_count[sl] = part.slot_start[sl];
+  {
+    std::size_t k = 0;
+    for (std::size_t c = 0; c < kRayChunks; ++c) {
+      const SampleBin& bin = bins[c * kPartitions + p];
+      for (std::size_t r = 0; r < bin.run_count; ++r) {
+        const std::uint32_t slot = part.run_slot[k++];
+        const std::uint32_t begin = bin.runs[r].begin, len = bin.run_end(r) - begin;
+        Sample* dst = &part.grouped[part.slot_count[slot]];
+        std::uint64_t lines = 0;
+        for (std::uint32_t i = begin; i < begin + len; ++i) {
+          *dst++ = bin.samples[i];
+          lines |= std::uint64_t{1} << (bin.samples[i].offset >> 3);
+        }
+        part.slot_count[slot] += len;
+        part.slot_lines[slot] |= lines;
+      }
+    }
+  }
+}
+
+/// Step 2b: the leaf of every block of the partition: from the leaf cache, else found in the
+/// tree read-only (its structure does not change in this step), else a spare or a new leaf built
+/// aside and handed to the tree in step 3 (part.new_leaves). The cache spares a walk down the
+/// tree (several dependent cache misses) per block.
+void find_leaves(Partition& part, TsdfLeafCache& cache, Tree& tree,
+                 std::vector<std::unique_ptr<Leaf>>& spares, const Value& background) {
+  const std::size_t slots = part.slot_keys.size();
+  // The leaf of every block: from the leaf cache, else found in the tree read-only (its
+  // structure does not change in this step), else built aside and handed to the tree in
+  // step 3. The cache spares a walk down the tree (several dependent cache misses) per block.
+  part.slot_entry.resize(slots);
+  {
+    if (cache.table.size() < 2 * (cache.size + slots)) {
+      std::size_t cap = std::max<std::size_t>(1024, cache.table.size());
+      while (cap < 2 * (cache.size + slots)) cap *= 2;
+      std::vector<TsdfLeafCache::Entry> old = std::move(cache.table);
+      cache.table.assign(cap, TsdfLeafCache::Entry{kEmptyKey, nullptr, nullptr});
+      for (const auto& e : old) {
+        if (e.key == kEmptyKey) continue;
+        std::size_t h = static_cast<std::size_t>(mix(e.key) >> 24) & (cap - 1);
+        while (cache.table[h].key != kEmptyKey) h = (h + 1) & (cap - 1);
+        cache.table[h] = e;
+      }
+    }
+    const std::size_t mask = cache.table.size() - 1;
+    FastAccessor acc_tree(tree);
+    // The table is larger than the L2 cache and probed at random: prefetch a few slots ahead.
+    constexpr std::size_t kProbeAhead = 8;
+    const auto home = [&](std::size_t sl) {
+      return static_cast<std::size_t>(mix(part.slot_keys[sl]) >> 24) & mask;
+    };
+    for (std::size_t sl = 0; sl < std::min(slots, kProbeAhead); ++sl) {
+      __builtin_prefetch(&cache.table[home(sl)]);
+    }
+    for (std::size_t sl = 0; sl < slots; ++sl) {
+      if (sl + kProbeAhead < slots) __builtin_prefetch(&cache.table[home(sl + kProbeAhead)]);
+      const std::uint64_t key = part.slot_keys[sl];
+      std::size_t h = home(sl);
+      while (cache.table[h].key != key && cache.table[h].key != kEmptyKey) h = (h + 1) & mask;
+      if (cache.table[h].key != key) {
+        const BlockIndex b = unpack_block(key);
+        const openvdb::Coord origin(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge,
+                                    b.z() * kTsdfBlockEdge);
+        Leaf* leaf = acc_tree.probeLeaf(origin);
+        if (leaf == nullptr) {
+          // A spare (all background, inactive, as a new leaf) when there is one.
+          if (spares.empty()) {
+            part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
+          } else {
+            part.new_leaves.push_back(std::move(spares.back()));
+            spares.pop_back();
+            part.new_leaves.back()->setOrigin(origin);
+          }
+          leaf = part.new_leaves.back().get();
+        }
+        cache.table[h] = TsdfLeafCache::Entry{key, leaf, leaf->buffer().data()};
+        ++cache.size;
+      }
+      part.slot_entry[sl] = cache.table[h];
+    }
+  }
+}
+
+/// Step 2c: each touched voxel of the partition updated once, with the mean of the scan's
+/// samples of it (weighted running average, weight capped at `max_w`).
+void apply_samples(Partition& part, float max_w) {
+  const std::size_t slots = part.slot_keys.size();
+  // Apply, prefetching the touched cache lines of the blocks ahead: leaves are scattered in
+  // memory, so this step is bound by cache misses, not arithmetic. The prefetch runs a fixed
+  // number of cache lines ahead (not slots: a slot touches 1 to 64 lines, and prefetching
+  // more lines than the core can keep in flight drops them).
+  constexpr std::size_t kLinesAhead = 24;
+  std::size_t pf_slot = 0, issued = 0, consumed = 0;
+  std::uint64_t pf_lines = 0;
+  if (slots > 0) {
+    pf_lines = part.slot_lines[0];
+    __builtin_prefetch(&part.slot_entry[0].leaf->getValueMask(), 1);
+  }
+  const auto prefetch_until = [&](std::size_t target) {
+    while (issued < target) {
+      if (pf_lines == 0) {
+        if (++pf_slot >= slots) return;
+        pf_lines = part.slot_lines[pf_slot];
+        __builtin_prefetch(&part.slot_entry[pf_slot].leaf->getValueMask(), 1);
+        continue;
+      }
+      const int l = __builtin_ctzll(pf_lines);
+      pf_lines &= pf_lines - 1;
+      __builtin_prefetch(part.slot_entry[pf_slot].values + 8 * l, 1);
+      ++issued;
+    }
+  };
+  std::uint32_t* touched = part.touched.data();
+  for (std::size_t sl = 0; sl < slots; ++sl) {
+    consumed += static_cast<std::size_t>(__builtin_popcountll(part.slot_lines[sl]));
+    prefetch_until(consumed + kLinesAhead);
+    Leaf* leaf = part.slot_entry[sl].leaf;
+    Value* values = part.slot_entry[sl].values;
+    std::size_t nt = 0;
+    // The voxels of the block, each once in first-touch order (branch-free: whether a sample
+    // is a voxel's first is unpredictable).
+    for (std::uint32_t g = part.slot_start[sl]; g < part.slot_start[sl + 1]; ++g) {
+      const Sample gs = part.grouped[g];
+      const std::uint32_t c = part.count[gs.offset];
+      touched[nt] = gs.offset;
+      nt += c == 0;
+      part.sum[gs.offset] += gs.sdf_m;
+      part.count[gs.offset] = c + 1;
+    }
+    for (std::size_t t = 0; t < nt; ++t) {
+      const std::uint32_t off = touched[t];
+      const float obs = part.sum[off] / static_cast<float>(part.count[off]);
+      Value& x = values[off];
+      const float w = x[1];
+      // Weighted running average; the cap lets an old surface be re-learnt.
+      x[0] = (x[0] * w + obs) / (w + 1.0f);
+      x[1] = std::min(w + 1.0f, max_w);
+      leaf->setActiveState(off, true);
+      part.sum[off] = 0.0f;
+      part.count[off] = 0;
+    }
+    part.voxel_updates += nt;
+  }
+}
+
+}  // namespace
+
 const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
                                             std::span<const Eigen::Vector3f> points_W,
                                             TsdfLayer& layer, TaskRunner& runner) {
@@ -560,167 +742,11 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
   grids.leaf_cache.resize(kPartitions);
   runner.parallel_for(kPartitions, [&](std::size_t p) {
     Partition& part = s.partitions[p];
-    std::size_t total = 0, total_runs = 0;
-    for (std::size_t c = 0; c < kRayChunks; ++c) {
-      total += s.bins[c * kPartitions + p].size();
-      total_runs += s.bins[c * kPartitions + p].run_count;
-    }
-    if (part.table_keys.empty()) part.grow();
-    part.run_slot.resize(total_runs);
-    part.grouped.resize(total);
     part.new_leaves.clear();
     part.voxel_updates = 0;
-    // Count the samples of each block, run by run (the samples themselves are not read here).
-    std::size_t runs = 0;
-    for (std::size_t c = 0; c < kRayChunks; ++c) {
-      const SampleBin& bin = s.bins[c * kPartitions + p];
-      for (std::size_t r = 0; r < bin.run_count; ++r) {
-        const Run& run = bin.runs[r];
-        const std::uint32_t slot = part.slot_for(run.block_key);
-        part.slot_count[slot] += bin.run_end(r) - run.begin;
-        part.run_slot[runs++] = slot;
-      }
-    }
-    const std::size_t slots = part.slot_keys.size();
-    part.slot_start.resize(slots + 1);
-    std::uint32_t acc = 0;
-    for (std::size_t sl = 0; sl < slots; ++sl) {
-      part.slot_start[sl] = acc;
-      acc += part.slot_count[sl];
-    }
-    part.slot_start[slots] = acc;
-    // Scatter (stable: ray order within each block), run by run in the order counted.
-    for (std::size_t sl = 0; sl < slots; ++sl) part.slot_count[sl] = part.slot_start[sl];
-    {
-      std::size_t k = 0;
-      for (std::size_t c = 0; c < kRayChunks; ++c) {
-        const SampleBin& bin = s.bins[c * kPartitions + p];
-        for (std::size_t r = 0; r < bin.run_count; ++r) {
-          const std::uint32_t slot = part.run_slot[k++];
-          const std::uint32_t begin = bin.runs[r].begin, len = bin.run_end(r) - begin;
-          Sample* dst = &part.grouped[part.slot_count[slot]];
-          std::uint64_t lines = 0;
-          for (std::uint32_t i = begin; i < begin + len; ++i) {
-            *dst++ = bin.samples[i];
-            lines |= std::uint64_t{1} << (bin.samples[i].offset >> 3);
-          }
-          part.slot_count[slot] += len;
-          part.slot_lines[slot] |= lines;
-        }
-      }
-    }
-    // The leaf of every block: from the leaf cache, else found in the tree read-only (its
-    // structure does not change in this step), else built aside and handed to the tree in
-    // step 3. The cache spares a walk down the tree (several dependent cache misses) per block.
-    part.slot_entry.resize(slots);
-    {
-      TsdfLeafCache& cache = grids.leaf_cache[p];
-      if (cache.table.size() < 2 * (cache.size + slots)) {
-        std::size_t cap = std::max<std::size_t>(1024, cache.table.size());
-        while (cap < 2 * (cache.size + slots)) cap *= 2;
-        std::vector<TsdfLeafCache::Entry> old = std::move(cache.table);
-        cache.table.assign(cap, TsdfLeafCache::Entry{kEmptyKey, nullptr, nullptr});
-        for (const auto& e : old) {
-          if (e.key == kEmptyKey) continue;
-          std::size_t h = static_cast<std::size_t>(mix(e.key) >> 24) & (cap - 1);
-          while (cache.table[h].key != kEmptyKey) h = (h + 1) & (cap - 1);
-          cache.table[h] = e;
-        }
-      }
-      const std::size_t mask = cache.table.size() - 1;
-      FastAccessor acc_tree(tree);
-      // The table is larger than the L2 cache and probed at random: prefetch a few slots ahead.
-      constexpr std::size_t kProbeAhead = 8;
-      const auto home = [&](std::size_t sl) {
-        return static_cast<std::size_t>(mix(part.slot_keys[sl]) >> 24) & mask;
-      };
-      for (std::size_t sl = 0; sl < std::min(slots, kProbeAhead); ++sl) {
-        __builtin_prefetch(&cache.table[home(sl)]);
-      }
-      for (std::size_t sl = 0; sl < slots; ++sl) {
-        if (sl + kProbeAhead < slots) __builtin_prefetch(&cache.table[home(sl + kProbeAhead)]);
-        const std::uint64_t key = part.slot_keys[sl];
-        std::size_t h = home(sl);
-        while (cache.table[h].key != key && cache.table[h].key != kEmptyKey) h = (h + 1) & mask;
-        if (cache.table[h].key != key) {
-          const BlockIndex b = unpack_block(key);
-          const openvdb::Coord origin(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge,
-                                      b.z() * kTsdfBlockEdge);
-          Leaf* leaf = acc_tree.probeLeaf(origin);
-          if (leaf == nullptr) {
-            // A spare (all background, inactive, as a new leaf) when there is one.
-            auto& spares = s.spares[p];
-            if (spares.empty()) {
-              part.new_leaves.push_back(std::make_unique<Leaf>(origin, background, false));
-            } else {
-              part.new_leaves.push_back(std::move(spares.back()));
-              spares.pop_back();
-              part.new_leaves.back()->setOrigin(origin);
-            }
-            leaf = part.new_leaves.back().get();
-          }
-          cache.table[h] = TsdfLeafCache::Entry{key, leaf, leaf->buffer().data()};
-          ++cache.size;
-        }
-        part.slot_entry[sl] = cache.table[h];
-      }
-    }
-    // Apply, prefetching the touched cache lines of the blocks ahead: leaves are scattered in
-    // memory, so this step is bound by cache misses, not arithmetic. The prefetch runs a fixed
-    // number of cache lines ahead (not slots: a slot touches 1 to 64 lines, and prefetching
-    // more lines than the core can keep in flight drops them).
-    constexpr std::size_t kLinesAhead = 24;
-    std::size_t pf_slot = 0, issued = 0, consumed = 0;
-    std::uint64_t pf_lines = 0;
-    if (slots > 0) {
-      pf_lines = part.slot_lines[0];
-      __builtin_prefetch(&part.slot_entry[0].leaf->getValueMask(), 1);
-    }
-    const auto prefetch_until = [&](std::size_t target) {
-      while (issued < target) {
-        if (pf_lines == 0) {
-          if (++pf_slot >= slots) return;
-          pf_lines = part.slot_lines[pf_slot];
-          __builtin_prefetch(&part.slot_entry[pf_slot].leaf->getValueMask(), 1);
-          continue;
-        }
-        const int l = __builtin_ctzll(pf_lines);
-        pf_lines &= pf_lines - 1;
-        __builtin_prefetch(part.slot_entry[pf_slot].values + 8 * l, 1);
-        ++issued;
-      }
-    };
-    std::uint32_t* touched = part.touched.data();
-    for (std::size_t sl = 0; sl < slots; ++sl) {
-      consumed += static_cast<std::size_t>(__builtin_popcountll(part.slot_lines[sl]));
-      prefetch_until(consumed + kLinesAhead);
-      Leaf* leaf = part.slot_entry[sl].leaf;
-      Value* values = part.slot_entry[sl].values;
-      std::size_t nt = 0;
-      // The voxels of the block, each once in first-touch order (branch-free: whether a sample
-      // is a voxel's first is unpredictable).
-      for (std::uint32_t g = part.slot_start[sl]; g < part.slot_start[sl + 1]; ++g) {
-        const Sample gs = part.grouped[g];
-        const std::uint32_t c = part.count[gs.offset];
-        touched[nt] = gs.offset;
-        nt += c == 0;
-        part.sum[gs.offset] += gs.sdf_m;
-        part.count[gs.offset] = c + 1;
-      }
-      for (std::size_t t = 0; t < nt; ++t) {
-        const std::uint32_t off = touched[t];
-        const float obs = part.sum[off] / static_cast<float>(part.count[off]);
-        Value& x = values[off];
-        const float w = x[1];
-        // Weighted running average; the cap lets an old surface be re-learnt.
-        x[0] = (x[0] * w + obs) / (w + 1.0f);
-        x[1] = std::min(w + 1.0f, max_w);
-        leaf->setActiveState(off, true);
-        part.sum[off] = 0.0f;
-        part.count[off] = 0;
-      }
-      part.voxel_updates += nt;
-    }
+    group_by_block(part, s.bins, p);
+    find_leaves(part, grids.leaf_cache[p], tree, s.spares[p], background);
+    apply_samples(part, max_w);
   });
 
   // 3. Serial: hand the new leaves to the tree (on spare nodes where it has none), collect the
