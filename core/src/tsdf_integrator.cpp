@@ -1,3 +1,9 @@
+// TsdfIntegrator (tsdf_integrator.hpp): one scan into the TSDF, in three steps (band samples
+// binned by ray chunk and partition; per partition, group by block, find leaves, apply; hand the
+// new leaves to the tree) and the spare blocks and nodes they take. Over 600 lines because the
+// steps' scratch (sample bins, per-partition block tables) lives with them; the layer is in
+// tsdf_layer.cpp.
+
 #include "tarmac/core/tsdf_integrator.hpp"
 
 #include <algorithm>
