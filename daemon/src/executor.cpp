@@ -149,6 +149,10 @@ class Executor::Impl {
   /// "scan.stale"), poses ("pose.clock_step"), queued corrections ("correction.clock_step"),
   /// the scan order and the costmap's stamp — so scans stamped by the new clock are taken.
   void on_clock_step(std::int64_t step_ns, std::int64_t tick_time_ns);
+  /// The report's input ages at this tick: each sensor's newest scan, then the pose stream.
+  void fill_input_ages(transport::CycleReport& report) const;
+  /// The DiagnosticArray from this tick's facts (every outputs.diagnostic_array_every ticks).
+  void publish_diagnostics(const double* stage_ms, double jitter_ms, bool overrun);
   /// The stamp clock (RunHooks::stamp_clock_ns, else CLOCK_REALTIME).
   [[nodiscard]] std::int64_t stamp_now() const {
     return stamp_clock ? stamp_clock() : realtime_ns();
@@ -321,18 +325,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   std::copy(drops.entries().begin(), drops.entries().end(), report.drops.begin());
   report.rejections.resize(rejections.entries().size());
   std::copy(rejections.entries().begin(), rejections.entries().end(), report.rejections.begin());
-  for (std::size_t i = 0; i < config.sensors.size(); ++i) {
-    const std::int64_t newest = scheduler.newest_stamp(static_cast<std::uint32_t>(i));
-    auto& age = report.input_ages[i];
-    age.age_ms = newest == 0 ? -1.0 : static_cast<double>(tick_ns - newest) / kNsPerMs;
-    age.stale = newest == 0 || tick_ns - newest > ms_to_ns(config.sensors[i].max_age_ms);
-  }
-  {
-    const auto newest = poses.newest_stamp();
-    auto& age = report.input_ages.back();
-    age.age_ms = newest ? static_cast<double>(tick_ns - *newest) / kNsPerMs : -1.0;
-    age.stale = !newest || tick_ns - *newest > ms_to_ns(config.pose.max_age_ms);
-  }
+  fill_input_ages(report);
   report.points_in = done.points_in;
   report.points_used = done.points_used;
   report.map_memory_bytes = mapper.occupancy().memory_bytes();
@@ -349,23 +342,42 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   outputs->publish_report(report);
 
   if (cycle_index % config.outputs.diagnostic_array_every == 0) {
-    DiagnosticFacts facts;
-    facts.stage_ms = stage_ms;
-    facts.jitter_ms = jitter_ms;
-    facts.overrun = overrun;
-    facts.have_costmap = have_costmap;
-    facts.newest_stamp_ns = newest_stamp_ns;
-    facts.scans_integrated = totals.scans_integrated;
-    facts.drops = drops.total_sum();
-    facts.rejections = rejections.total_sum();
-    facts.skipped_ticks = totals.skipped_ticks;
-    facts.stamp_to_publish_p99_ms = stamp_to_publish.percentile(0.99);
-    facts.pending_scans = scheduler.pending();
-    facts.pose_samples = poses.size();
-    facts.clock_steps = totals.clock_steps;
-    outputs->publish_diagnostics(reports.diagnostics(facts));
+    publish_diagnostics(stage_ms, jitter_ms, overrun);
   }
   ++cycle_index;
+}
+
+void Executor::Impl::fill_input_ages(transport::CycleReport& report) const {
+  for (std::size_t i = 0; i < config.sensors.size(); ++i) {
+    const std::int64_t newest = scheduler.newest_stamp(static_cast<std::uint32_t>(i));
+    auto& age = report.input_ages[i];
+    age.age_ms = newest == 0 ? -1.0 : static_cast<double>(tick_ns - newest) / kNsPerMs;
+    age.stale = newest == 0 || tick_ns - newest > ms_to_ns(config.sensors[i].max_age_ms);
+  }
+  {
+    const auto newest = poses.newest_stamp();
+    auto& age = report.input_ages.back();
+    age.age_ms = newest ? static_cast<double>(tick_ns - *newest) / kNsPerMs : -1.0;
+    age.stale = !newest || tick_ns - *newest > ms_to_ns(config.pose.max_age_ms);
+  }
+}
+
+void Executor::Impl::publish_diagnostics(const double* stage_ms, double jitter_ms, bool overrun) {
+  DiagnosticFacts facts;
+  facts.stage_ms = stage_ms;
+  facts.jitter_ms = jitter_ms;
+  facts.overrun = overrun;
+  facts.have_costmap = have_costmap;
+  facts.newest_stamp_ns = newest_stamp_ns;
+  facts.scans_integrated = totals.scans_integrated;
+  facts.drops = drops.total_sum();
+  facts.rejections = rejections.total_sum();
+  facts.skipped_ticks = totals.skipped_ticks;
+  facts.stamp_to_publish_p99_ms = stamp_to_publish.percentile(0.99);
+  facts.pending_scans = scheduler.pending();
+  facts.pose_samples = poses.size();
+  facts.clock_steps = totals.clock_steps;
+  outputs->publish_diagnostics(reports.diagnostics(facts));
 }
 
 void Executor::Impl::on_clock_step(std::int64_t step_ns, std::int64_t tick_time_ns) {
