@@ -162,10 +162,10 @@ std::size_t Mapper::top_up_tsdf_spares(std::size_t max_blocks) {
   const TsdfSpareCount missing = tsdf_spare_shortfall();
   TsdfSpareCount n;
   std::size_t budget = max_blocks;
-  n.top_nodes = std::min(missing.top_nodes, budget / 64);
-  budget -= 64 * n.top_nodes;
-  n.nodes = std::min(missing.nodes, budget / 8);
-  budget -= 8 * n.nodes;
+  n.top_nodes = std::min(missing.top_nodes, budget / TsdfSpareCount::kTopNodeBlocks);
+  budget -= TsdfSpareCount::kTopNodeBlocks * n.top_nodes;
+  n.nodes = std::min(missing.nodes, budget / TsdfSpareCount::kNodeBlocks);
+  budget -= TsdfSpareCount::kNodeBlocks * n.nodes;
   n.blocks = std::min(missing.blocks, budget);
   if (!n.empty()) tsdf_integrator_.add_spares(TsdfSpareBlocks::build(params_.tsdf, n));
   return n.block_equivalents();

@@ -56,13 +56,7 @@ struct Options {
   std::array<int, 3> window{0, 0, 0};
 };
 
-template <typename Fn>
-double timed_ms(Fn&& fn) {
-  const auto t0 = Clock::now();
-  fn();
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
+using tools::timed_ms;
 /// CPU time of the whole process (all threads), ms: robust to other load on the machine.
 double process_cpu_ms() {
   timespec ts{};

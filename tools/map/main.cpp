@@ -31,7 +31,6 @@
 namespace {
 
 using namespace tarmac;
-using Clock = std::chrono::steady_clock;
 
 constexpr int kExitData = 65;
 constexpr int kExitIo = 74;
@@ -52,13 +51,7 @@ struct StageTimes {
 using tools::mean;
 using tools::percentile;
 
-template <typename Fn>
-double timed_ms(Fn&& fn) {
-  const auto t0 = Clock::now();
-  fn();
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
+using tools::timed_ms;
 /// Everything the run reads, checked before any work is done.
 struct Inputs {
   config::Config cfg;

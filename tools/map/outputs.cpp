@@ -14,17 +14,13 @@
 #include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/tools/array_io.hpp"
 #include "tarmac/tools/mesh_io.hpp"
+#include "tarmac/tools/stats.hpp"
 
 namespace tarmac::map_tool {
 
 namespace {
 
-template <typename Fn>
-double timed_ms(Fn&& fn) {
-  const auto t0 = std::chrono::steady_clock::now();
-  fn();
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
+using tools::timed_ms;
 
 std::vector<std::uint8_t> render_costmap(const core::CostmapLayers& layers) {
   const auto& cm = layers.costmap;

@@ -161,9 +161,10 @@ struct TsdfSpareCount {
   std::size_t nodes = 0;
   std::size_t top_nodes = 0;
 
-  /// Memory in blocks (4 KB): a node counts 8, a top node 64. The top-up budget's unit.
+  /// Memory in blocks (4 KB) of a node and of a top node: the top-up budget's unit.
+  static constexpr std::size_t kNodeBlocks = 8, kTopNodeBlocks = 64;
   [[nodiscard]] std::size_t block_equivalents() const {
-    return blocks + 8 * nodes + 64 * top_nodes;
+    return blocks + kNodeBlocks * nodes + kTopNodeBlocks * top_nodes;
   }
   [[nodiscard]] bool empty() const { return blocks == 0 && nodes == 0 && top_nodes == 0; }
   friend bool operator==(const TsdfSpareCount&, const TsdfSpareCount&) = default;
