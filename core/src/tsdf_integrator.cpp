@@ -13,6 +13,7 @@
 #include <limits>
 #include <string>
 
+#include "tsdf_band_walk.hpp"
 #include "tsdf_grids.hpp"
 
 namespace tarmac::core {
@@ -421,87 +422,31 @@ struct ChunkBins {
   }
 };
 
-/// Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", Eurographics 1987:
-/// every voxel the segment origin + t·dir, t in [t0, t1], passes through, in order. For each,
-/// the projective signed distance r − |c − o| of its centre c; kept when within the band
-/// (carving: in front of the band clamped to +truncation). The centre offset c − o is kept per
-/// axis and moved by ±v on each step (one add instead of a convert, multiply and two adds).
+/// The band samples of one ray (tsdf_band_walk.hpp), binned by the partition of their block.
 /// @return the samples written.
 /// kCarve: the segment may be long (sensor to band), so each sample checks its bin's capacity;
 /// otherwise the caller has reserved room for the whole segment.
 template <bool kCarve>
 std::size_t band_samples(const Eigen::Vector3d& o, const Eigen::Vector3d& dir, double range,
                          double t0, double t1, double v, double trunc, ChunkBins& out) {
-  const Eigen::Vector3d q0 = (o + t0 * dir) / v;  // voxel units
-  // floor() inline (without SSE4.1 std::floor is a libm call); exact: |q0| < 2^23 here.
-  Eigen::Vector3i idx;
-  for (int a = 0; a < 3; ++a) {
-    idx[a] = static_cast<int>(q0[a]);
-    idx[a] -= q0[a] < static_cast<double>(idx[a]) ? 1 : 0;
-  }
-  int step[3];
-  double t_max[3], t_delta[3];
-  // A huge finite value for axes the ray does not cross (0 · kNever must stay 0 below).
-  constexpr double kNever = 1e300;
-  for (int a = 0; a < 3; ++a) {
-    if (dir[a] > 0.0) {
-      step[a] = 1;
-      t_delta[a] = v / dir[a];
-      t_max[a] = t0 + (idx[a] + 1 - q0[a]) * t_delta[a];
-    } else if (dir[a] < 0.0) {
-      step[a] = -1;
-      t_delta[a] = -v / dir[a];
-      t_max[a] = t0 + (q0[a] - idx[a]) * t_delta[a];
-    } else {
-      step[a] = 0;
-      t_delta[a] = 0.0;
-      t_max[a] = kNever;
-    }
-  }
-  // Traversal state in registers; the axis of the nearest boundary is chosen without branches
-  // (a branch there mispredicts about half of the time).
-  int ix = idx.x(), iy = idx.y(), iz = idx.z();
-  double tx = t_max[0], ty = t_max[1], tz = t_max[2];
-  const double half = 0.5 * v;
-  double cx = ix * v + half - o.x(), cy = iy * v + half - o.y(), cz = iz * v + half - o.z();
-  const double vx = step[0] * v, vy = step[1] * v, vz = step[2] * v;
-  std::uint64_t last_key = kEmptyKey;
-  SampleBin* bin = nullptr;
-  std::size_t written = 0;
-  while (true) {
-    double sdf = range - std::sqrt(cx * cx + cy * cy + cz * cz);
-    if (kCarve && sdf > trunc) sdf = trunc;
-    if (sdf <= trunc && sdf >= -trunc) {
-      const std::uint64_t key = pack_block(ix >> 3, iy >> 3, iz >> 3);
-      if (key != last_key) {
-        last_key = key;
-        bin = &out.bins[partition_of(key)];
-        if (kCarve && bin->count == bin->capacity) bin->grow(bin->count + 1);
-        // Room: run_count <= count < capacity (every run holds a sample).
-        if (bin->run_count == 0 || bin->runs[bin->run_count - 1].block_key != key) {
-          bin->runs[bin->run_count++] = Run{key, static_cast<std::uint32_t>(bin->count)};
-        }
-      }
+  // The block of the last sample and its bin, state of the walk's loop (kept in registers).
+  auto bin_sample = [&out, last_key = kEmptyKey, bin = static_cast<SampleBin*>(nullptr)](
+                        int ix, int iy, int iz, float sdf) mutable {
+    const std::uint64_t key = pack_block(ix >> 3, iy >> 3, iz >> 3);
+    if (key != last_key) {
+      last_key = key;
+      bin = &out.bins[partition_of(key)];
       if (kCarve && bin->count == bin->capacity) bin->grow(bin->count + 1);
-      const auto offset = static_cast<std::uint32_t>(tsdf_voxel_offset(ix & 7, iy & 7, iz & 7));
-      bin->samples[bin->count++] = Sample{offset, static_cast<float>(sdf)};
-      ++written;
+      // Room: run_count <= count < capacity (every run holds a sample).
+      if (bin->run_count == 0 || bin->runs[bin->run_count - 1].block_key != key) {
+        bin->runs[bin->run_count++] = Run{key, static_cast<std::uint32_t>(bin->count)};
+      }
     }
-    const bool xy = tx < ty, xz = tx < tz, yz = ty < tz;
-    const bool bx = xy & xz, by = !xy & yz, bz = !bx & !by;
-    const double t_next = bx ? tx : (by ? ty : tz);
-    if (t_next > t1) break;
-    ix += bx ? step[0] : 0;
-    iy += by ? step[1] : 0;
-    iz += bz ? step[2] : 0;
-    tx += bx ? t_delta[0] : 0.0;
-    ty += by ? t_delta[1] : 0.0;
-    tz += bz ? t_delta[2] : 0.0;
-    cx += bx ? vx : 0.0;
-    cy += by ? vy : 0.0;
-    cz += bz ? vz : 0.0;
-  }
-  return written;
+    if (kCarve && bin->count == bin->capacity) bin->grow(bin->count + 1);
+    const auto offset = static_cast<std::uint32_t>(tsdf_voxel_offset(ix & 7, iy & 7, iz & 7));
+    bin->samples[bin->count++] = Sample{offset, sdf};
+  };
+  return walk_band<kCarve>(o, dir, range, t0, t1, v, trunc, std::move(bin_sample));
 }
 
 }  // namespace
