@@ -125,7 +125,10 @@ class SchemaReader {
                    " (give " + at + ".topic, or an id of letters, digits and '_')");
         }
       }
-      entry.sensor.T_base_sensor = extrinsic(entry, at + ".extrinsic");
+      entry.sensor.q_base_sensor = rotation(entry, at + ".extrinsic");
+      entry.sensor.T_base_sensor = Eigen::Isometry3d::Identity();
+      entry.sensor.T_base_sensor.linear() = entry.sensor.q_base_sensor.toRotationMatrix();
+      entry.sensor.T_base_sensor.translation() = entry.translation_m;
       for (const auto& other : config_.sensors) {
         if (other.id == id) fail("value", at + ".id", "duplicate id '" + id + "'");
         if (other.topic == entry.sensor.topic) {
@@ -138,33 +141,29 @@ class SchemaReader {
     if (config_.sensors.size() > 16) fail("range", "sensors", "at most 16 sensors");
   }
 
-  /// T_base_sensor from the translation and the rotation given as a unit quaternion or as
-  /// roll-pitch-yaw (ROS convention: R = Rz(yaw) · Ry(pitch) · Rx(roll)); identity if neither.
-  Eigen::Isometry3d extrinsic(const SensorEntry& e, const std::string& path) const {
+  /// T_base_sensor's rotation as a unit quaternion, given as one or as roll-pitch-yaw (ROS
+  /// convention: R = Rz(yaw) · Ry(pitch) · Rx(roll)); identity if neither. A quaternion already
+  /// of unit norm to 1e-12 is kept as given (normalising it again may move its last bits: a
+  /// printed config must reload to the same values).
+  Eigen::Quaterniond rotation(const SensorEntry& e, const std::string& path) const {
     constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
     const bool has_rpy = present(path + ".rpy_deg");
     const bool has_quat = present(path + ".quaternion");
     if (has_rpy && has_quat) {
       fail("value", path + ".quaternion", "give either rpy_deg or quaternion, not both");
     }
-    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
     if (has_rpy) {
-      R = (Eigen::AngleAxisd(e.yaw_deg * kDegToRad, Eigen::Vector3d::UnitZ()) *
-           Eigen::AngleAxisd(e.pitch_deg * kDegToRad, Eigen::Vector3d::UnitY()) *
-           Eigen::AngleAxisd(e.roll_deg * kDegToRad, Eigen::Vector3d::UnitX()))
-              .toRotationMatrix();
+      return Eigen::AngleAxisd(e.yaw_deg * kDegToRad, Eigen::Vector3d::UnitZ()) *
+             Eigen::AngleAxisd(e.pitch_deg * kDegToRad, Eigen::Vector3d::UnitY()) *
+             Eigen::AngleAxisd(e.roll_deg * kDegToRad, Eigen::Vector3d::UnitX());
     }
-    if (has_quat) {
-      if (std::abs(e.quaternion.norm() - 1.0) > 1e-3) {
-        fail("range", path + ".quaternion",
-             "must be a unit quaternion (norm " + std::to_string(e.quaternion.norm()) + ")");
-      }
-      R = e.quaternion.normalized().toRotationMatrix();
+    if (!has_quat) return Eigen::Quaterniond::Identity();
+    const double norm = e.quaternion.norm();
+    if (std::abs(norm - 1.0) > 1e-3) {
+      fail("range", path + ".quaternion",
+           "must be a unit quaternion (norm " + std::to_string(norm) + ")");
     }
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    T.linear() = R;
-    T.translation() = e.translation_m;
-    return T;
+    return std::abs(norm - 1.0) > 1e-12 ? e.quaternion.normalized() : e.quaternion;
   }
 
   /// One leaf: parsed and checked by its key's type and range, stored in its field.

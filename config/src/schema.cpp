@@ -501,7 +501,9 @@ SensorEntry sensor_entry(const SensorConfig& sensor) {
   SensorEntry entry;
   entry.sensor = sensor;
   entry.translation_m = sensor.T_base_sensor.translation();
-  entry.quaternion = Eigen::Quaterniond(sensor.T_base_sensor.linear());
+  const Eigen::Matrix3d R = sensor.T_base_sensor.linear();
+  entry.quaternion =
+      sensor.q_base_sensor.toRotationMatrix() == R ? sensor.q_base_sensor : Eigen::Quaterniond(R);
   return entry;
 }
 

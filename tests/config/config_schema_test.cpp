@@ -4,6 +4,7 @@
 #include "tarmac/config/schema.hpp"
 
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
 #include <string>
@@ -106,6 +107,29 @@ TEST(ConfigSchema, EveryDefaultIsInItsRange) {
   }
 }
 
+/// A config file that sets `key` to `value` and leaves every other key at its default: the path
+/// "a.b.c" as flow maps around the value, {a: {b: {c: V}}}, a sensor's key in a sensor with an id.
+std::string yaml_setting(const Key& key, double value) {
+  std::string open;
+  std::string close;
+  std::string rest = key.path;
+  for (auto dot = rest.find('.'); dot != std::string::npos; dot = rest.find('.')) {
+    std::string map = rest.substr(0, dot);
+    if (map == "sensors[]") {
+      open += "sensors: [{id: a, ";
+      close = "}]" + close;
+    } else {
+      open += map + ": {";
+      close = "}" + close;
+    }
+    rest = rest.substr(dot + 1);
+  }
+  std::ostringstream text;
+  text.precision(17);
+  text << value;
+  return "version: 1\n" + open + rest + ": " + text.str() + close + "\n";
+}
+
 TEST(ConfigSchema, EveryNumericKey_RefusesAValueBeyondItsRangeWithItsPath) {
   // The reader takes each key's range from the table: one past the top is refused, naming
   // the key (sensor keys as sensors[0].…).
@@ -114,32 +138,81 @@ TEST(ConfigSchema, EveryNumericKey_RefusesAValueBeyondItsRangeWithItsPath) {
     if (key.path == "version") continue;  // another version is config.version, not a range
     std::string path = key.path;
     if (path.rfind("sensors[].", 0) == 0) path = "sensors[0]." + path.substr(10);
-    // "a.b.c" as flow maps around the value: {a: {b: {c: V}}}, with an id for a sensor.
-    std::string yaml = "version: 1\n";
-    std::string open;
-    std::string close;
-    std::string rest = key.path;
-    for (auto dot = rest.find('.'); dot != std::string::npos; dot = rest.find('.')) {
-      std::string map = rest.substr(0, dot);
-      if (map == "sensors[]") {
-        open += "sensors: [{id: a, ";
-        close = "}]" + close;
-      } else {
-        open += map + ": {";
-        close = "}" + close;
-      }
-      rest = rest.substr(dot + 1);
-    }
-    std::ostringstream beyond;
-    beyond.precision(17);
-    beyond << key.max + 1.0;
-    yaml += open + rest + ": " + beyond.str() + close + "\n";
+    const std::string yaml = yaml_setting(key, key.max + 1.0);
     const auto result = load_config_string(yaml);
     ASSERT_FALSE(result.ok()) << yaml;
     EXPECT_EQ(result.error().code, "config.range") << yaml << result.error().message;
     EXPECT_EQ(result.error().message.rfind(path + ": must be in [", 0), 0u)
         << yaml << result.error().message;
   }
+}
+
+TEST(ConfigSchema, EveryNumericKey_AtEitherEndOfItsRange_PassesTheLibrariesValidation) {
+  // The table's ranges are what a user reads; the core and transport libraries validate their
+  // parameters again (for callers without a config file). A value the table accepts must not be
+  // refused there, except by a rule between keys, listed here with the reason.
+  // "<key> min|max" -> the start of the message of the rule between keys that refuses it (the
+  // other keys at their defaults). Exact: each entry must be refused so, and nothing else.
+  const std::string ego = "filters.ego_box: min must be < max on every axis";
+  const std::string unit_q = "sensors[0].extrinsic.quaternion: must be a unit quaternion";
+  const std::string below = "occupancy.window_below_m: must be within the window height";
+  const std::string trunc = "tsdf.truncation_m: must be in [voxel_size_m, 32 * voxel_size_m]";
+  const std::string shm = "dds.shm_segment_bytes: must be >= dds.shm_max_message_bytes";
+  const std::string inflation = "costmap.inflation_radius_m: must be >= inscribed_radius_m";
+  const std::string points = "quotas.points_per_scan: must be <= quotas.points_per_cycle";
+  const std::map<std::string, std::string> cross_key = {
+      {"dds.shm_segment_bytes min", shm},
+      {"dds.shm_max_message_bytes max", shm},
+      // One component at ±1 beside the default w = 1: norm √2.
+      {"sensors[].extrinsic.quaternion.x min", unit_q},
+      {"sensors[].extrinsic.quaternion.x max", unit_q},
+      {"sensors[].extrinsic.quaternion.y min", unit_q},
+      {"sensors[].extrinsic.quaternion.y max", unit_q},
+      {"sensors[].extrinsic.quaternion.z min", unit_q},
+      {"sensors[].extrinsic.quaternion.z max", unit_q},
+      {"executor.rate_hz max", "budgets.cycle_ms: exceeds the period of executor.rate_hz"},
+      {"executor.sensor_phase_ms max",
+       "executor.sensor_phase_ms: must be below the period of executor.rate_hz"},
+      {"budgets.cycle_ms max", "budgets.cycle_ms: exceeds the period of executor.rate_hz"},
+      {"quotas.points_per_cycle min", points},
+      {"quotas.points_per_scan max", points},
+      {"filters.ego_box_min_m.x max", ego},
+      {"filters.ego_box_min_m.y max", ego},
+      {"filters.ego_box_min_m.z max", ego},
+      {"filters.ego_box_max_m.x min", ego},
+      {"filters.ego_box_max_m.y min", ego},
+      {"filters.ego_box_max_m.z min", ego},
+      {"occupancy.voxel_size_m min", below},  // 40 voxels of 2 cm: lower than the 3 m below
+      {"occupancy.window_z_vox min", below},
+      {"occupancy.window_below_m max", below},
+      {"occupancy.window_z_vox max", "occupancy.window_*_vox: window larger than 512 M voxels"},
+      {"costmap.min_obstacle_height_m max",
+       "costmap.vehicle_height_m: must be > min_obstacle_height_m"},
+      {"costmap.inscribed_radius_m max", inflation},
+      {"costmap.inflation_radius_m min", inflation},
+      {"tsdf.voxel_size_m max", trunc},
+      {"tsdf.truncation_m min", trunc},
+      {"tsdf.truncation_m max", trunc},
+  };
+  std::size_t refused = 0;
+  for (const Key& key : schema()) {
+    if (key.type != KeyType::kInteger && key.type != KeyType::kReal) continue;
+    if (key.path == "version") continue;
+    for (const double value : {key.min, key.max}) {
+      const std::string yaml = yaml_setting(key, value);
+      const auto result = load_config_string(yaml);
+      const auto rule = cross_key.find(key.path + (value == key.min ? " min" : " max"));
+      if (rule == cross_key.end()) {
+        EXPECT_TRUE(result.ok()) << yaml << result.error().code << ": " << result.error().message;
+        continue;
+      }
+      ++refused;
+      ASSERT_FALSE(result.ok()) << yaml << "is no longer refused: update the list";
+      EXPECT_EQ(result.error().message.rfind(rule->second, 0), 0u)
+          << yaml << result.error().message;
+    }
+  }
+  EXPECT_EQ(refused, cross_key.size()) << "an entry names no key of the schema";
 }
 
 TEST(ConfigSchema, UnknownKeys_SuggestTheNearestKnownKey) {

@@ -48,6 +48,11 @@ struct SensorConfig {
   std::string frame_id = "lidar_front";  ///< the only header.frame_id accepted on `topic`
   /// Extrinsic: maps sensor-frame points into the vehicle base frame.
   Eigen::Isometry3d T_base_sensor = Eigen::Isometry3d::Identity();
+  /// T_base_sensor's rotation as the loader built it, and as to_yaml writes it: a matrix turned
+  /// back into a quaternion can differ in the last digit, so a printed config would not reload
+  /// to the same bits. to_yaml uses T_base_sensor's own rotation when the two disagree (code
+  /// that set T_base_sensor alone).
+  Eigen::Quaterniond q_base_sensor = Eigen::Quaterniond::Identity();
   double max_age_ms = 500.0;  ///< a scan older than this at tick time is rejected as stale
   /// Motion-compensate scans with per-point times (PointCloud2 field time / t / timestamp)
   /// using the poses at their first and last point; such scans also wait for those poses.
