@@ -27,6 +27,9 @@ namespace {
 
 using namespace occupancy;  // NOLINT(google-build-using-namespace): this file is the occupancy pass
 
+/// A window column the scan has no return in: its lowest return is +inf.
+constexpr float kNoGround = std::numeric_limits<float>::infinity();
+
 /// Words with at least this many voxels to miss take the four-lanes path.
 constexpr int kDenseWord = 8;
 
@@ -222,28 +225,34 @@ struct ApplyPass {
 void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
                                   std::span<const Eigen::Vector3f> points_W,
                                   const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats) {
-  const int nx = dims_.x(), ny = dims_.y();
-  const std::size_t n_points = points_W.size();
-  const double max_range = params_.max_range_m;
-  const std::array<int, 3> ring_min = ring_origin();
   // a) Per return: its slot and window column, or none (beyond max range or outside the
   //    window), and its height along up_W; and the scan's own ground: the lowest return
   //    per window column (only the columns this scan touched are reset next time).
-  constexpr float kNone = std::numeric_limits<float>::infinity();
   // A zero or non-finite up axis is taken as +z: the heights must be numbers (a column's first
-  // return is booked by its ground leaving +inf, below).
+  // return is booked by its ground leaving +inf, in hit_heights).
   const double up_norm = up_W.norm();
   const Eigen::Vector3f up = std::isfinite(up_norm) && up_norm > 0.0
                                  ? Eigen::Vector3f((up_W / up_norm).cast<float>())
                                  : Eigen::Vector3f::UnitZ();
-  hit_slot_.resize(n_points);
-  hit_column_.resize(n_points);
-  hit_height_.resize(n_points);
-  hit_rise_.resize(n_points);
+  hit_slot_.resize(points_W.size());
+  hit_column_.resize(points_W.size());
+  hit_height_.resize(points_W.size());
+  hit_rise_.resize(points_W.size());
+  stats.outside_window += hit_voxels(origin_W, points_W);
+  hit_heights(points_W, up);
+  // b) Each return's rise above the scan's ground near it; c) one hit per voxel.
+  hit_rises(points_W.size());
+  apply_hits(points_W, stats);
+}
+
+std::uint64_t OccupancyMap::hit_voxels(const Eigen::Vector3d& origin_W,
+                                       std::span<const Eigen::Vector3f> points_W) {
+  const int nx = dims_.x();
+  const std::size_t n_points = points_W.size();
+  const double max_range = params_.max_range_m;
   const double v_m = params_.voxel_size_m;
-  for (std::size_t k = 0; k < n_ground_cols_; ++k) scan_ground_z_[scan_ground_cols_[k]] = kNone;
-  n_ground_cols_ = 0;
-  // The slot and column of each return (none: not finite, beyond max range or outside).
+  const std::array<int, 3> ring_min = ring_origin();
+  std::uint64_t outside = 0;
   bool in_lanes = false;
 #if defined(TARMAC_WIDE_WALK)
   const int lanes = walk_lanes();
@@ -251,9 +260,9 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   const HitPass pass{points_W, origin_W,         max_range,         v_m, min_, dims_,
                      ring_min, hit_slot_.data(), hit_column_.data()};
   if (lanes == 8) {
-    stats.outside_window += hit_voxels_lanes8(pass);
+    outside += hit_voxels_lanes8(pass);
   } else if (lanes == 4) {
-    stats.outside_window += hit_voxels_lanes4(pass);
+    outside += hit_voxels_lanes4(pass);
   }
 #endif
   if (!in_lanes) {
@@ -274,49 +283,63 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
         stride *= dims_[a];
       }
       if (!inside) {
-        ++stats.outside_window;
+        ++outside;
         continue;
       }
       hit_slot_[i] = static_cast<std::uint32_t>(slot);
       hit_column_[i] = static_cast<std::uint32_t>(rel[1] * nx + rel[0]);
     }
   }
+  return outside;
+}
+
+void OccupancyMap::hit_heights(std::span<const Eigen::Vector3f> points_W,
+                               const Eigen::Vector3f& up) {
+  const int nx = dims_.x(), ny = dims_.y();
+  const std::size_t n_points = points_W.size();
+  for (std::size_t k = 0; k < n_ground_cols_; ++k) {
+    scan_ground_z_[scan_ground_cols_[k]] = kNoGround;
+  }
+  n_ground_cols_ = 0;
   // Heights, and the lowest return per column, in point order. A column's first return books
   // it without a branch (whether a column was touched before is as good as random: the branch
   // was a fifth of integrate_hits' own time): every return writes its column at the list's
   // end, which moves on only for a first return, so the list has room for one entry more than
   // there can be columns.
   const std::uint32_t* const slot_of_hit = hit_slot_.data();
-  {
-    const std::size_t columns = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
-    scan_ground_cols_.resize(std::max(scan_ground_cols_.size(), std::min(n_points, columns) + 1));
-    std::uint32_t* const touched = scan_ground_cols_.data();
-    std::size_t n_touched = 0;
-    float* const ground = scan_ground_z_.data();
-    float* const height_of_hit = hit_height_.data();
-    const std::uint32_t* const column_of_hit = hit_column_.data();
-    for (std::size_t i = 0; i < n_points; ++i) {
-      if (slot_of_hit[i] == kNoSlot) continue;
-      const std::uint32_t column = column_of_hit[i];
-      const float height = up.dot(points_W[i]);
-      height_of_hit[i] = height;
-      const float g = ground[column];
-      touched[n_touched] = column;
-      n_touched += g == kNone ? 1 : 0;
-      ground[column] = std::min(g, height);
-    }
-    n_ground_cols_ = n_touched;
+  const std::size_t columns = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
+  scan_ground_cols_.resize(std::max(scan_ground_cols_.size(), std::min(n_points, columns) + 1));
+  std::uint32_t* const touched = scan_ground_cols_.data();
+  std::size_t n_touched = 0;
+  float* const ground = scan_ground_z_.data();
+  float* const height_of_hit = hit_height_.data();
+  const std::uint32_t* const column_of_hit = hit_column_.data();
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (slot_of_hit[i] == kNoSlot) continue;
+    const std::uint32_t column = column_of_hit[i];
+    const float height = up.dot(points_W[i]);
+    height_of_hit[i] = height;
+    const float g = ground[column];
+    touched[n_touched] = column;
+    n_touched += g == kNoGround ? 1 : 0;
+    ground[column] = std::min(g, height);
   }
-  // b) Rise above the lowest return of this scan within ground_radius_m (an object cannot
-  //    hide the ground around it).
-  //    Once per column the scan touched (returns stack up in columns: walls, poles), then
-  //    per return; a return's own column is among them, so its ground is at most its height.
+  n_ground_cols_ = n_touched;
+}
+
+void OccupancyMap::hit_rises(std::size_t n_points) {
+  const int nx = dims_.x(), ny = dims_.y();
+  const std::uint32_t* const slot_of_hit = hit_slot_.data();
+  // Rise above the lowest return of this scan within ground_radius_m (an object cannot hide
+  // the ground around it). Once per column the scan touched (returns stack up in columns:
+  // walls, poles), then per return; a return's own column is among them, so its ground is at
+  // most its height.
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
   for (std::size_t k = 0; k < n_ground_cols_; ++k) {
     const std::uint32_t c = scan_ground_cols_[k];
     const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
     const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
-    float ground_z = kNone;
+    float ground_z = kNoGround;
     for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
       const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
       for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
@@ -328,18 +351,24 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   // The loops that store bytes read through locals: a byte store may alias anything, and the
   // compiler would reload every member after each.
   std::uint8_t* const rise_of_hit = hit_rise_.data();
-  {
-    const float* const height = hit_height_.data();
-    const std::uint32_t* const column = hit_column_.data();
-    const float* const ground_near = scan_ground_near_z_.data();
-    for (std::size_t i = 0; i < n_points; ++i) {
-      if (slot_of_hit[i] == kNoSlot) continue;
-      const float ground_z = ground_near[column[i]];
-      rise_of_hit[i] = static_cast<std::uint8_t>(
-          std::clamp(static_cast<int>((height[i] - ground_z) * 100.0f), 0, 255));
-    }
+  const float* const height = hit_height_.data();
+  const std::uint32_t* const column = hit_column_.data();
+  const float* const ground_near = scan_ground_near_z_.data();
+  for (std::size_t i = 0; i < n_points; ++i) {
+    if (slot_of_hit[i] == kNoSlot) continue;
+    const float ground_z = ground_near[column[i]];
+    rise_of_hit[i] = static_cast<std::uint8_t>(
+        std::clamp(static_cast<int>((height[i] - ground_z) * 100.0f), 0, 255));
   }
-  // c) One hit per voxel, in point order (promotions enter the static layer in that order).
+}
+
+void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
+                              OccupancyUpdateStats& stats) {
+  const std::size_t n_points = points_W.size();
+  const double v_m = params_.voxel_size_m;
+  const std::uint32_t* const slot_of_hit = hit_slot_.data();
+  const std::uint8_t* const rise_of_hit = hit_rise_.data();
+  // One hit per voxel, in point order (promotions enter the static layer in that order).
   const int promote = params_.static_promote_scans;
   hit_slots_.resize(std::max(hit_slots_.size(), n_points));
   std::uint32_t* const first_hits = hit_slots_.data();

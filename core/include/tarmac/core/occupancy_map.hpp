@@ -205,6 +205,16 @@ class OccupancyMap {
   /// then one hit per voxel in point order (the static layer's promotions too).
   void integrate_hits(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vector3f> points_W,
                       const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats);
+  /// integrate_hits' steps. Each return's slot and window column (hit_slot_, kNoSlot for none:
+  /// not finite, beyond max range or outside the window); returns those outside the window.
+  std::uint64_t hit_voxels(const Eigen::Vector3d& origin_W,
+                           std::span<const Eigen::Vector3f> points_W);
+  /// Each return's height along `up` and the scan's lowest return per window column.
+  void hit_heights(std::span<const Eigen::Vector3f> points_W, const Eigen::Vector3f& up);
+  /// Each return's rise (cm) above the scan's lowest return within ground_radius_m.
+  void hit_rises(std::size_t n_points);
+  /// One hit per voxel in point order, its static-layer state and its sub-voxel heights.
+  void apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdateStats& stats);
   /// integrate()'s last step: the misses of the occupied voxels a ray crossed (candidates_),
   /// decided against the map as the free-space misses left it, then applied.
   void miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats);
