@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <thread>
@@ -160,35 +161,38 @@ void on_costmap(Scoring& s, const transport::OccupancyGridMsg& m) {
   }
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  std::string config_path, json_path, png_path, identity_dir, score_dir;
-  std::uint64_t max_cycles = 0;
+/// The command line.
+struct Options {
+  std::string config, json, png, identity, score;
+  std::uint64_t max_cycles = 0;  // 0: no limit
   double idle_s = 0.0, timeout_s = 600.0;
+};
+
+/// Parses the command line into `opt`. Empty: go on; otherwise main returns the value.
+std::optional<int> parse_options(int argc, char** argv, Options& opt) {
   cli::App app("tarmac-audit",
                "Listens on the CycleReport and costmap topics of the config and, at the end, "
                "prints a per-stage table (last, p50, p99, max vs budget, overruns) and the "
                "end-to-end latency scan stamp -> costmap received.");
-  app.add_option("--config", config_path, "tarmacd config (default: the built-in defaults)")
+  app.add_option("--config", opt.config, "tarmacd config (default: the built-in defaults)")
       ->type_name("FILE");
-  app.add_option("--cycles", max_cycles, "stop after N cycle reports (0: no limit)")
+  app.add_option("--cycles", opt.max_cycles, "stop after N cycle reports (0: no limit)")
       ->transform(cli::number<std::uint64_t>());
-  app.add_option("--idle-s", idle_s,
+  app.add_option("--idle-s", opt.idle_s,
                  "stop S seconds after the last costmap, once one arrived (0: never)")
       ->transform(cli::non_negative<double>());
-  app.add_option("--timeout-s", timeout_s, "stop after S seconds in any case")
+  app.add_option("--timeout-s", opt.timeout_s, "stop after S seconds in any case")
       ->transform(cli::positive<double>());
-  app.add_option("--json", json_path, "write the table as JSON")->type_name("FILE");
-  app.add_option("--png", png_path,
+  app.add_option("--json", opt.json, "write the table as JSON")->type_name("FILE");
+  app.add_option("--png", opt.png,
                  "write the last costmap as PNG (white free, black lethal, yellow to dark red "
                  "inflated, slate unknown; north up)")
       ->type_name("FILE");
-  app.add_option("--identity", identity_dir,
+  app.add_option("--identity", opt.identity,
                  "DDS Security identity DIR/cert.pem, DIR/key.pem instead of the config's "
                  "(dds.security; e.g. the 'monitor' of make-dds-security.sh)")
       ->check(CLI::ExistingDirectory);
-  app.add_option("--score", score_dir,
+  app.add_option("--score", opt.score,
                  "score every costmap against the ground truth of DIR, a tarmac-sim dataset "
                  "(obstacle_columns.txt, dynamic_boxes.txt, poses.txt) being replayed with "
                  "tarmac-replay: each costmap as the map of the latest scan stamped at or before "
@@ -197,61 +201,90 @@ int main(int argc, char** argv) {
                  "tarmac-map, --json adds it under \"safety\"")
       ->check(CLI::ExistingDirectory);
   app.footer("Stops on SIGINT/SIGTERM too. Exit 0 when at least one report arrived.");
-  if (auto exit = cli::parse(app, argc, argv)) return *exit;
-  config::Config cfg;
-  if (!config_path.empty()) {
-    auto loaded = config::load_config_file(config_path);
+  return cli::parse(app, argc, argv);
+}
+
+/// Reads the config and, with --score, the dataset's ground truth. 0, or the exit code after
+/// saying why on stderr.
+int load_inputs(const Options& opt, config::Config& cfg, std::optional<Scoring>& scoring) {
+  if (!opt.config.empty()) {
+    auto loaded = config::load_config_file(opt.config);
     if (!loaded) {
       std::fprintf(stderr, "tarmac-audit: invalid config: %s\n", loaded.error().message.c_str());
       return kExitConfig;
     }
     cfg = std::move(loaded).value();
   }
-  std::optional<Scoring> scoring;
-  if (!score_dir.empty()) {
+  if (!opt.score.empty()) {
     if (cfg.pose.type != config::PoseType::kPoseWithCovarianceStamped) {
       std::fprintf(stderr, "tarmac-audit: --score reads PoseWithCovarianceStamped poses only\n");
       return kExitConfig;
     }
-    auto opened = open_scoring(score_dir, cfg.sensors.front().T_base_sensor);
+    auto opened = open_scoring(opt.score, cfg.sensors.front().T_base_sensor);
     if (!opened) {
       std::fprintf(stderr, "tarmac-audit: --score: %s\n", opened.error().message.c_str());
       return kExitData;
     }
     scoring.emplace(std::move(opened).value());
   }
+  return 0;
+}
+
+using ReportReader = transport::Reader<tarmac_msgs::msg::dds_::CycleReport_PubSubType>;
+using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
+using PoseReader =
+    transport::Reader<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType>;
+
+/// The DDS participant and the readers of the audit.
+struct Readers {
+  std::optional<transport::Participant> participant;
+  std::unique_ptr<ReportReader> reports;
+  std::unique_ptr<GridReader> grids;
+  std::unique_ptr<PoseReader> poses;  ///< with --score only
+};
+
+/// Creates the participant (named tarmac-audit, with --identity's identity) and the readers of
+/// the CycleReport and costmap topics and, when `with_poses`, of the pose topic. 0, or the exit
+/// code after saying why on stderr.
+int open_readers(const Options& opt, config::Config& cfg, bool with_poses, Readers& readers) {
   cfg.dds.participant.name = "tarmac-audit";
-  if (!identity_dir.empty()) cfg.dds.participant.security.use_identity_dir(identity_dir);
+  if (!opt.identity.empty()) cfg.dds.participant.security.use_identity_dir(opt.identity);
   auto participant = transport::Participant::create(cfg.dds.participant);
   if (!participant) {
     std::fprintf(stderr, "tarmac-audit: %s\n", participant.error().message.c_str());
     return kExitUnavailable;
   }
-  using ReportReader = transport::Reader<tarmac_msgs::msg::dds_::CycleReport_PubSubType>;
-  using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
-  auto reports = ReportReader::create(participant.value(), cfg.outputs.cycle_report_topic,
-                                      cfg.dds.qos.diagnostics, 1000);
-  auto grids =
-      GridReader::create(participant.value(), cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 16);
-  using PoseReader =
-      transport::Reader<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType>;
-  std::unique_ptr<PoseReader> poses;
-  if (scoring) {
-    auto created = PoseReader::create(participant.value(), cfg.pose.topic, cfg.dds.qos.pose, 1000);
-    if (created) poses = std::move(created).value();
+  const transport::Participant& p = readers.participant.emplace(std::move(participant).value());
+  auto reports =
+      ReportReader::create(p, cfg.outputs.cycle_report_topic, cfg.dds.qos.diagnostics, 1000);
+  auto grids = GridReader::create(p, cfg.outputs.costmap_topic, cfg.dds.qos.costmap, 16);
+  if (with_poses) {
+    auto created = PoseReader::create(p, cfg.pose.topic, cfg.dds.qos.pose, 1000);
+    if (created) readers.poses = std::move(created).value();
   }
-  if (!reports || !grids || (scoring && !poses)) {
+  if (!reports || !grids || (with_poses && !readers.poses)) {
     std::fprintf(stderr, "tarmac-audit: cannot create readers\n");
     return kExitUnavailable;
   }
+  readers.reports = std::move(reports).value();
+  readers.grids = std::move(grids).value();
+  return 0;
+}
+
+/// SIGINT and SIGTERM end the collection (and the wait for a match) instead of the process.
+void install_stop_handlers() {
   struct sigaction sa {};
   sa.sa_handler = [](int) { g_stop = true; };
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+}
+
+/// Waits (at most `timeout_s`) until both readers have matched tarmacd's writers, and says so.
+void wait_for_match(const Readers& readers, const config::Config& cfg, double timeout_s) {
   // Say when both readers have matched tarmacd's writers: a script starts its publisher after
   // this line, so the first costmaps (the cold start) are in the figures, not lost to discovery.
   const auto matched = [&] {
-    return reports.value()->matched_writers() > 0 && grids.value()->matched_writers() > 0;
+    return readers.reports->matched_writers() > 0 && readers.grids->matched_writers() > 0;
   };
   const auto t_wait = std::chrono::steady_clock::now();
   while (!g_stop && !matched() &&
@@ -263,9 +296,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tarmac-audit: matched (%s, %s)\n", cfg.outputs.costmap_topic.c_str(),
                  cfg.outputs.cycle_report_topic.c_str());
   }
+}
 
+/// What the audit accumulates from the reports and costmaps it receives.
+struct Tally {
   std::map<std::string, Series> stages;
-  std::vector<std::string> stage_order;
+  std::vector<std::string> stage_order;  ///< the stages as they first appeared
   Series cycle;
   std::vector<double> e2e_ms, jitter_ms;
   std::uint64_t n_reports = 0, skipped = 0, points_in = 0, points_used = 0;
@@ -274,38 +310,24 @@ int main(int argc, char** argv) {
   transport::CycleReport last;
   transport::OccupancyGridMsg last_grid;
   bool have_grid = false;
-  std::vector<transport::CycleReportMsg> report_batch;
-  std::vector<transport::OccupancyGridMsg> grid_batch;
-  std::vector<transport::PoseStampedMsg> pose_batch;
-  const auto t_start = std::chrono::steady_clock::now();
-  auto t_last_grid = t_start;
-  const bool tty = isatty(STDERR_FILENO) != 0;
-  while (!g_stop) {
-    // Woken by the costmap listener, so the reception time is taken within a few µs of arrival.
-    grids.value()->wait_for_sample(10ms);
-    const std::int64_t now = realtime_ns();
-    grid_batch.clear();
-    grids.value()->take_all(grid_batch);
-    if (scoring) {
-      // The poses first: a costmap's scan has normally been stamped by then.
-      pose_batch.clear();
-      poses->take_all(pose_batch);
-      for (const auto& p : pose_batch) on_pose(*scoring, p);
-      for (const auto& g : grid_batch) on_costmap(*scoring, g);
-    }
-    for (auto& g : grid_batch) {
+
+  /// Costmaps received at `now_ns` (realtime), moved from `batch`: one end-to-end latency per
+  /// new stamp.
+  void add_grids(std::vector<transport::OccupancyGridMsg>& batch, std::int64_t now_ns) {
+    for (auto& g : batch) {
       const std::int64_t stamp = transport::from_time_msg(g.header().stamp());
       if (stamp != last_costmap_stamp) {
-        e2e_ms.push_back(static_cast<double>(now - stamp) / 1e6);
+        e2e_ms.push_back(static_cast<double>(now_ns - stamp) / 1e6);
         last_costmap_stamp = stamp;
       }
       last_grid = std::move(g);
       have_grid = true;
-      t_last_grid = std::chrono::steady_clock::now();
     }
-    report_batch.clear();
-    reports.value()->take_all(report_batch);
-    for (const auto& m : report_batch) {
+  }
+
+  /// Cycle reports, oldest first: the counters and each stage's and the cycle's durations.
+  void add_reports(const std::vector<transport::CycleReportMsg>& batch) {
+    for (const auto& m : batch) {
       last = transport::from_cycle_report(m);
       ++n_reports;
       skipped += last.skipped_ticks;
@@ -326,135 +348,186 @@ int main(int argc, char** argv) {
       cycle.budget_ms = last.cycle_budget_ms;
       cycle.overruns += last.overrun ? 1 : 0;
     }
+  }
+
+  [[nodiscard]] double e2e_max() const {
+    return e2e_ms.empty() ? 0.0 : *std::max_element(e2e_ms.begin(), e2e_ms.end());
+  }
+};
+
+/// Takes the costmaps, reports (and, with --score, poses) until SIGINT/SIGTERM, --cycles,
+/// --idle-s or --timeout-s, with a progress line when stderr is a terminal.
+void collect(const Options& opt, Readers& readers, std::optional<Scoring>& scoring, Tally& tally) {
+  std::vector<transport::CycleReportMsg> report_batch;
+  std::vector<transport::OccupancyGridMsg> grid_batch;
+  std::vector<transport::PoseStampedMsg> pose_batch;
+  const auto t_start = std::chrono::steady_clock::now();
+  auto t_last_grid = t_start;
+  const bool tty = isatty(STDERR_FILENO) != 0;
+  while (!g_stop) {
+    // Woken by the costmap listener, so the reception time is taken within a few µs of arrival.
+    readers.grids->wait_for_sample(10ms);
+    const std::int64_t now = realtime_ns();
+    grid_batch.clear();
+    readers.grids->take_all(grid_batch);
+    if (scoring) {
+      // The poses first: a costmap's scan has normally been stamped by then.
+      pose_batch.clear();
+      readers.poses->take_all(pose_batch);
+      for (const auto& p : pose_batch) on_pose(*scoring, p);
+      for (const auto& g : grid_batch) on_costmap(*scoring, g);
+    }
+    tally.add_grids(grid_batch, now);
+    if (!grid_batch.empty()) t_last_grid = std::chrono::steady_clock::now();
+    report_batch.clear();
+    readers.reports->take_all(report_batch);
+    tally.add_reports(report_batch);
     if (tty && !report_batch.empty()) {
       std::fprintf(stderr,
                    "\rtarmac-audit: %llu cycles, cycle last %.2f ms p99 %.2f ms, e2e p99 %.1f ms "
                    "(%zu costmaps)   ",
-                   static_cast<unsigned long long>(n_reports), last.cycle_duration_ms,
-                   percentile(cycle.ms, 0.99), percentile(e2e_ms, 0.99), e2e_ms.size());
+                   static_cast<unsigned long long>(tally.n_reports), tally.last.cycle_duration_ms,
+                   percentile(tally.cycle.ms, 0.99), percentile(tally.e2e_ms, 0.99),
+                   tally.e2e_ms.size());
     }
     const auto now_steady = std::chrono::steady_clock::now();
-    if (max_cycles > 0 && n_reports >= max_cycles) break;
-    if (idle_s > 0 && have_grid &&
-        std::chrono::duration<double>(now_steady - t_last_grid).count() > idle_s) {
+    if (opt.max_cycles > 0 && tally.n_reports >= opt.max_cycles) break;
+    if (opt.idle_s > 0 && tally.have_grid &&
+        std::chrono::duration<double>(now_steady - t_last_grid).count() > opt.idle_s) {
       break;
     }
-    if (std::chrono::duration<double>(now_steady - t_start).count() > timeout_s) break;
+    if (std::chrono::duration<double>(now_steady - t_start).count() > opt.timeout_s) break;
   }
   if (tty) std::fprintf(stderr, "\n");
-  if (n_reports == 0) {
-    std::fprintf(stderr, "tarmac-audit: no CycleReport received on %s (domain %u)\n",
-                 cfg.outputs.cycle_report_topic.c_str(), cfg.dds.participant.domain_id);
-    return kExitUnavailable;
-  }
+}
 
+void print_row(const std::string& name, const Series& s) {
+  std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9llu %9.3f %9llu\n", name.c_str(),
+              s.ms.empty() ? 0.0 : s.ms.back(), percentile(s.ms, 0.5), percentile(s.ms, 0.99),
+              s.max(), static_cast<unsigned long long>(s.worst_cycle()), s.budget_ms,
+              static_cast<unsigned long long>(s.overruns));
+}
+
+/// The summary on stdout: the counters, the per-stage table, the end-to-end latency, the last
+/// report's drop and rejection totals and the last costmap.
+void print_table(const Tally& t) {
   std::printf(
       "tarmac-audit: %llu cycles (config %s), %llu skipped ticks, wake jitter p50 %.3f "
       "ms p99 %.3f ms, %llu points in, %llu used\n",
-      static_cast<unsigned long long>(n_reports), last.config_hash.c_str(),
-      static_cast<unsigned long long>(skipped), percentile(jitter_ms, 0.5),
-      percentile(jitter_ms, 0.99), static_cast<unsigned long long>(points_in),
-      static_cast<unsigned long long>(points_used));
-  if (!skipped_before.empty()) {
+      static_cast<unsigned long long>(t.n_reports), t.last.config_hash.c_str(),
+      static_cast<unsigned long long>(t.skipped), percentile(t.jitter_ms, 0.5),
+      percentile(t.jitter_ms, 0.99), static_cast<unsigned long long>(t.points_in),
+      static_cast<unsigned long long>(t.points_used));
+  if (!t.skipped_before.empty()) {
     std::string at;
-    for (const std::uint64_t c : skipped_before) at += " " + std::to_string(c);
+    for (const std::uint64_t c : t.skipped_before) at += " " + std::to_string(c);
     std::printf("skipped ticks came before cycles:%s\n", at.c_str());
   }
   std::printf("%-22s %9s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "last", "p50", "p99", "max",
               "worst", "budget", "overruns");
-  const auto row = [](const std::string& name, const Series& s) {
-    std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9llu %9.3f %9llu\n", name.c_str(),
-                s.ms.empty() ? 0.0 : s.ms.back(), percentile(s.ms, 0.5), percentile(s.ms, 0.99),
-                s.max(), static_cast<unsigned long long>(s.worst_cycle()), s.budget_ms,
-                static_cast<unsigned long long>(s.overruns));
-  };
-  for (const auto& name : stage_order) row(name, stages[name]);
-  row("cycle", cycle);
-  const double e2e_max = e2e_ms.empty() ? 0.0 : *std::max_element(e2e_ms.begin(), e2e_ms.end());
+  for (const auto& name : t.stage_order) print_row(name, t.stages.at(name));
+  print_row("cycle", t.cycle);
   std::printf("%-22s %9.3f %9.3f %9.3f %9.3f   (%zu costmaps)\n", "scan stamp -> costmap",
-              e2e_ms.empty() ? 0.0 : e2e_ms.back(), percentile(e2e_ms, 0.5),
-              percentile(e2e_ms, 0.99), e2e_max, e2e_ms.size());
-  for (const auto* list : {&last.drops, &last.rejections}) {
+              t.e2e_ms.empty() ? 0.0 : t.e2e_ms.back(), percentile(t.e2e_ms, 0.5),
+              percentile(t.e2e_ms, 0.99), t.e2e_max(), t.e2e_ms.size());
+  for (const auto* list : {&t.last.drops, &t.last.rejections}) {
     std::string text;
     for (const auto& r : *list) {
       if (r.total > 0) text += " " + r.reason + "=" + std::to_string(r.total);
     }
-    std::printf("%s (totals):%s\n", list == &last.drops ? "drops" : "rejections",
+    std::printf("%s (totals):%s\n", list == &t.last.drops ? "drops" : "rejections",
                 text.empty() ? " none" : text.c_str());
   }
-  if (have_grid) {
-    const auto& d = last_grid.data();
-    std::printf("last costmap: %ux%u cells, stamp %.3f s, digest %s\n", last_grid.info().width(),
-                last_grid.info().height(), static_cast<double>(last_costmap_stamp) / 1e9,
+  if (t.have_grid) {
+    const auto& d = t.last_grid.data();
+    std::printf("last costmap: %ux%u cells, stamp %.3f s, digest %s\n", t.last_grid.info().width(),
+                t.last_grid.info().height(), static_cast<double>(t.last_costmap_stamp) / 1e9,
                 tools::digest({reinterpret_cast<const std::uint8_t*>(d.data()), d.size()}).c_str());
   }
-  if (scoring) {
-    scoring->scorer->finish();
-    const tools::StampedSafetyScorer& sc = *scoring->scorer;
-    std::printf("%s\n", tools::safety_summary(sc.tracker().report()).c_str());
-    std::printf(
-        "scored %zu costmaps against %zu of the %zu scans stamped on the pose topic (%s); %zu "
-        "costmaps stamped between scans, %zu before the first\n",
-        sc.costmaps(), sc.scans_with_costmap(), sc.scans_stamped(), scoring->dir.c_str(),
-        sc.stamp_not_a_scan(), sc.before_first_scan());
-  }
+}
 
-  if (!json_path.empty()) {
-    const auto stats = [](const Series& s) {
-      return nlohmann::ordered_json{{"last", s.ms.empty() ? 0.0 : s.ms.back()},
-                                    {"p50", percentile(s.ms, 0.5)},
-                                    {"p99", percentile(s.ms, 0.99)},
-                                    {"max", s.max()},
-                                    {"worst_cycle", s.worst_cycle()},
-                                    {"budget", s.budget_ms},
-                                    {"overruns", s.overruns}};
-    };
-    nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
-    for (const auto& name : stage_order) stages_ms[name] = stats(stages[name]);
-    stages_ms["cycle"] = stats(cycle);
-    nlohmann::ordered_json j = {
-        {"cycles", n_reports},
-        {"skipped_ticks", skipped},
-        {"skipped_before_cycles", skipped_before},
-        {"config_hash", last.config_hash},
-        {"stages_ms", std::move(stages_ms)},
-        {"e2e_latency_ms",
-         {{"samples", e2e_ms.size()},
-          {"p50", percentile(e2e_ms, 0.5)},
-          {"p99", percentile(e2e_ms, 0.99)},
-          {"max", e2e_max}}},
-        {"wake_jitter_ms",
-         {{"p50", percentile(jitter_ms, 0.5)}, {"p99", percentile(jitter_ms, 0.99)}}}};
-    if (scoring) {
-      const tools::StampedSafetyScorer& sc = *scoring->scorer;
-      j["scored"] = {{"dataset", scoring->dir},
-                     {"scans_stamped", sc.scans_stamped()},
-                     {"costmaps", sc.costmaps()},
-                     {"scans_with_costmap", sc.scans_with_costmap()},
-                     {"stamp_not_a_scan", sc.stamp_not_a_scan()},
-                     {"before_first_scan", sc.before_first_scan()},
-                     {"error", scoring->error}};
-      j["safety"] = tools::safety_json(sc.tracker());
-    }
-    if (auto w = tools::write_json(json_path, j); !w) {
+/// Ends the scoring (the scans still waiting for a costmap) and prints tarmac-map's 'safety
+/// (...)' line and what was scored.
+void finish_scoring(Scoring& scoring) {
+  scoring.scorer->finish();
+  const tools::StampedSafetyScorer& sc = *scoring.scorer;
+  std::printf("%s\n", tools::safety_summary(sc.tracker().report()).c_str());
+  std::printf(
+      "scored %zu costmaps against %zu of the %zu scans stamped on the pose topic (%s); %zu "
+      "costmaps stamped between scans, %zu before the first\n",
+      sc.costmaps(), sc.scans_with_costmap(), sc.scans_stamped(), scoring.dir.c_str(),
+      sc.stamp_not_a_scan(), sc.before_first_scan());
+}
+
+nlohmann::ordered_json series_json(const Series& s) {
+  return nlohmann::ordered_json{{"last", s.ms.empty() ? 0.0 : s.ms.back()},
+                                {"p50", percentile(s.ms, 0.5)},
+                                {"p99", percentile(s.ms, 0.99)},
+                                {"max", s.max()},
+                                {"worst_cycle", s.worst_cycle()},
+                                {"budget", s.budget_ms},
+                                {"overruns", s.overruns}};
+}
+
+/// The table as --json writes it; with --score, "scored" and "safety" too.
+nlohmann::ordered_json summary_json(const Tally& t, const std::optional<Scoring>& scoring) {
+  nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
+  for (const auto& name : t.stage_order) stages_ms[name] = series_json(t.stages.at(name));
+  stages_ms["cycle"] = series_json(t.cycle);
+  nlohmann::ordered_json j = {
+      {"cycles", t.n_reports},
+      {"skipped_ticks", t.skipped},
+      {"skipped_before_cycles", t.skipped_before},
+      {"config_hash", t.last.config_hash},
+      {"stages_ms", std::move(stages_ms)},
+      {"e2e_latency_ms",
+       {{"samples", t.e2e_ms.size()},
+        {"p50", percentile(t.e2e_ms, 0.5)},
+        {"p99", percentile(t.e2e_ms, 0.99)},
+        {"max", t.e2e_max()}}},
+      {"wake_jitter_ms",
+       {{"p50", percentile(t.jitter_ms, 0.5)}, {"p99", percentile(t.jitter_ms, 0.99)}}}};
+  if (scoring) {
+    const tools::StampedSafetyScorer& sc = *scoring->scorer;
+    j["scored"] = {{"dataset", scoring->dir},
+                   {"scans_stamped", sc.scans_stamped()},
+                   {"costmaps", sc.costmaps()},
+                   {"scans_with_costmap", sc.scans_with_costmap()},
+                   {"stamp_not_a_scan", sc.stamp_not_a_scan()},
+                   {"before_first_scan", sc.before_first_scan()},
+                   {"error", scoring->error}};
+    j["safety"] = tools::safety_json(sc.tracker());
+  }
+  return j;
+}
+
+/// Writes --json and --png. 0, or the exit code after saying why on stderr.
+int write_outputs(const Options& opt, const Tally& t, const std::optional<Scoring>& scoring) {
+  if (!opt.json.empty()) {
+    if (auto w = tools::write_json(opt.json, summary_json(t, scoring)); !w) {
       std::fprintf(stderr, "tarmac-audit: %s\n", w.error().message.c_str());
       return kExitIo;
     }
-    std::printf("wrote %s\n", json_path.c_str());
+    std::printf("wrote %s\n", opt.json.c_str());
   }
-  if (!png_path.empty()) {
-    if (!have_grid) {
+  if (!opt.png.empty()) {
+    if (!t.have_grid) {
       std::fprintf(stderr, "tarmac-audit: no costmap received, no PNG written\n");
       return kExitUnavailable;
     }
-    if (auto w = tools::write_png(png_path, render(last_grid), last_grid.info().width(),
-                                  last_grid.info().height());
+    if (auto w = tools::write_png(opt.png, render(t.last_grid), t.last_grid.info().width(),
+                                  t.last_grid.info().height());
         !w) {
       std::fprintf(stderr, "tarmac-audit: %s\n", w.error().message.c_str());
       return kExitIo;
     }
-    std::printf("wrote %s\n", png_path.c_str());
+    std::printf("wrote %s\n", opt.png.c_str());
   }
+  return 0;
+}
+
+/// With --score: kExitData, after saying why, when the scoring stopped or scored nothing.
+int scoring_exit(const std::optional<Scoring>& scoring) {
   if (scoring && !scoring->error.empty()) {
     std::fprintf(stderr, "tarmac-audit: --score stopped: %s\n", scoring->error.c_str());
     return kExitData;
@@ -464,4 +537,32 @@ int main(int argc, char** argv) {
     return kExitData;
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  if (auto exit = parse_options(argc, argv, opt)) return *exit;
+  config::Config cfg;
+  std::optional<Scoring> scoring;
+  if (const int exit = load_inputs(opt, cfg, scoring); exit != 0) return exit;
+  Readers readers;
+  if (const int exit = open_readers(opt, cfg, scoring.has_value(), readers); exit != 0) {
+    return exit;
+  }
+  install_stop_handlers();
+  wait_for_match(readers, cfg, opt.timeout_s);
+
+  Tally tally;
+  collect(opt, readers, scoring, tally);
+  if (tally.n_reports == 0) {
+    std::fprintf(stderr, "tarmac-audit: no CycleReport received on %s (domain %u)\n",
+                 cfg.outputs.cycle_report_topic.c_str(), cfg.dds.participant.domain_id);
+    return kExitUnavailable;
+  }
+  print_table(tally);
+  if (scoring) finish_scoring(*scoring);
+  if (const int exit = write_outputs(opt, tally, scoring); exit != 0) return exit;
+  return scoring_exit(scoring);
 }
