@@ -1,0 +1,166 @@
+#pragma once
+/// @file Fleet sharing of bird's-eye occupancy (issue 21): what one vehicle tells the others of
+/// the cells it observed, encoded compactly, and what a vehicle keeps of its peers' summaries.
+///
+/// Cells lie on the global lattice of the shared `map` frame: cell (i, j) covers
+/// [i·r, (i+1)·r) × [j·r, (j+1)·r) for the fleet's resolution r, so summaries of vehicles whose
+/// windows sit anywhere line up cell for cell. A summary is cut into tiles of kBevTileEdge²
+/// cells on that lattice; a message carries whole tiles, each as runs of cells with the same
+/// state and observation time (BevTile). A keyframe carries every tile with something known; the
+/// messages between carry only the tiles that changed since the message before, so a receiver
+/// that missed one waits for the next keyframe (BevPeers).
+///
+/// Observation times travel as deciseconds of the map clock modulo 2^16 (109 minutes): a cell
+/// that nothing touched since the last message encodes the same, so its tile is not resent.
+/// Core code: stamps are arguments, nothing here reads a clock.
+
+#include <cstdint>
+#include <map>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "tarmac/core/grid2d.hpp"
+#include "tarmac/core/result.hpp"
+
+namespace tarmac::core {
+
+/// What a vehicle knows of a cell.
+enum class BevState : std::uint8_t { kUnknown = 0, kFree = 1, kOccupied = 2 };
+
+/// Cells along a tile's edge: a tile holds 32 × 32 cells (6.4 m at 0.2 m).
+constexpr int kBevTileEdge = 32;
+constexpr int kBevTileCells = kBevTileEdge * kBevTileEdge;
+/// The most tiles held of one peer (and carried by one message): 1024 tiles of 6.4 m are
+/// ~42,000 m² at 0.2 m, more than a vehicle's window; 16 MB of decoded cells.
+constexpr std::size_t kBevMaxPeerTiles = 1024;
+/// Observation times are kept to this step (0.1 s).
+constexpr std::int64_t kBevTimeStepNs = 100'000'000;
+
+/// One tile of a message: tile (x, y) holds the lattice cells [x·E, (x+1)·E) × [y·E, (y+1)·E),
+/// E = kBevTileEdge. `runs` are the tile's cells row by row (x fastest), as runs: a byte
+/// (state << 6) | (length − 1), length 1..64, followed for a known state by the cells'
+/// observation time, 16 bits little-endian (BevTime). Every tile covers its 1024 cells exactly.
+struct BevTile {
+  std::int32_t x = 0;
+  std::int32_t y = 0;
+  std::vector<std::uint8_t> runs;
+  friend bool operator==(const BevTile&, const BevTile&) = default;
+};
+
+/// One message of a vehicle's summary (the IDL message tarmac_msgs/FleetBev in transport).
+struct BevMessage {
+  std::string vehicle_id;
+  std::int64_t stamp_ns = 0;   ///< the summary's time, map clock
+  std::uint32_t sequence = 0;  ///< +1 per message of this vehicle
+  bool keyframe = false;       ///< every known tile; false: the tiles changed since sequence − 1
+  double resolution_m = 0.2;
+  std::vector<BevTile> tiles;
+};
+
+/// A vehicle's own cells, on its costmap's geometry (lattice-aligned: origin = k·resolution):
+/// each cell's state and the time of its last observation (0: never).
+struct BevSnapshot {
+  GridGeometry2D geometry;
+  std::span<const BevState> state;
+  std::span<const std::int64_t> observed_ns;
+};
+
+/// The encoder of one vehicle's messages: remembers the tiles it sent, to send only changes.
+class BevEncoder {
+ public:
+  BevEncoder(std::string vehicle_id, double resolution_m);
+
+  /// The message of `snapshot` at `stamp_ns`: every tile with a known cell when `keyframe`,
+  /// else the tiles whose encoding changed since the last message (a tile that became all
+  /// unknown, or left the snapshot, is sent once as unknown). Cells observed more than
+  /// `max_age_ns` before the stamp are sent as unknown: receivers would drop them anyway.
+  /// @pre snapshot's resolution is the encoder's and its origin lies on the lattice.
+  BevMessage encode(const BevSnapshot& snapshot, std::int64_t stamp_ns, bool keyframe,
+                    std::int64_t max_age_ns);
+
+  [[nodiscard]] std::uint32_t next_sequence() const { return sequence_; }
+
+ private:
+  std::string vehicle_id_;
+  double resolution_m_;
+  std::uint32_t sequence_ = 0;
+  std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::uint8_t>> sent_;
+};
+
+/// A cell as decoded: its state and observation time (ns, to kBevTimeStepNs).
+struct BevCell {
+  BevState state = BevState::kUnknown;
+  std::int64_t observed_ns = 0;
+};
+
+/// Decodes one tile's runs into its kBevTileCells cells (row by row), observation times resolved
+/// as the latest time at or before `stamp_ns` with the same 16-bit value. An error names what is
+/// malformed (a run past the tile's end, a short tile, a bad state, a truncated time).
+Status decode_tile(std::span<const std::uint8_t> runs, std::int64_t stamp_ns,
+                   std::span<BevCell, kBevTileCells> out);
+
+/// What one peer has told, and how it went.
+struct BevPeerStats {
+  std::uint64_t messages = 0;  ///< applied
+  std::uint64_t rejected = 0;  ///< malformed, stale, from the future, wrong resolution
+  std::uint64_t gaps = 0;      ///< a change message after a lost one: ignored to the keyframe
+  std::int64_t newest_stamp_ns = 0;
+  std::size_t tiles = 0;  ///< held now
+};
+
+/// The freshest peer knowledge of one cell, and whose it is.
+struct BevPeerCell {
+  BevCell cell;
+  const std::string* vehicle_id = nullptr;  ///< nullptr: no peer knows the cell
+};
+
+/// What a vehicle keeps of its peers' summaries: per peer, its tiles as last told. Messages must
+/// be applied in stamp order (as scans are) for the result to be deterministic.
+class BevPeers {
+ public:
+  /// @param own_id messages with this vehicle id are refused (one's own, or a peer claiming it)
+  /// @param max_age_ns peer observations older than this are forgotten (expire())
+  /// @param max_future_ns a message stamped later than now + this is refused
+  BevPeers(std::string own_id, double resolution_m, std::int64_t max_age_ns,
+           std::int64_t max_future_ns = 500'000'000);
+
+  /// Applies one message received at `now_ns`. Refused (counted in the peer's stats, the peer's
+  /// tiles unchanged) when malformed, stale (stamp older than now − max age), from the future,
+  /// of another resolution, not newer than the peer's last, or holding the peer to more than
+  /// kBevMaxPeerTiles tiles; a change message whose sequence
+  /// does not follow the last applied one is counted as a gap and ignored, and so is every
+  /// change message after it until a keyframe. Returns the refusal, Ok otherwise.
+  Status apply(const BevMessage& message, std::int64_t now_ns);
+
+  /// Forgets the tiles whose every cell was observed before now − max age, and cells older than
+  /// that inside the tiles kept.
+  void expire(std::int64_t now_ns);
+
+  /// The freshest observation of lattice cell (i, j) over all peers (ties: occupied first, then
+  /// the smaller vehicle id).
+  [[nodiscard]] BevPeerCell lookup(std::int64_t i, std::int64_t j) const;
+
+  [[nodiscard]] const std::map<std::string, BevPeerStats>& stats() const { return stats_; }
+  [[nodiscard]] double resolution_m() const { return resolution_m_; }
+  [[nodiscard]] std::int64_t max_age_ns() const { return max_age_ns_; }
+
+ private:
+  struct Peer {
+    std::uint32_t last_sequence = 0;
+    bool synced = false;  ///< a keyframe applied and no message lost since
+    std::int64_t last_stamp_ns = 0;
+    std::map<std::pair<std::int32_t, std::int32_t>, std::vector<BevCell>> tiles;
+  };
+  std::string own_id_;
+  double resolution_m_;
+  std::int64_t max_age_ns_;
+  std::int64_t max_future_ns_;
+  std::map<std::string, Peer> peers_;
+  std::map<std::string, BevPeerStats> stats_;
+};
+
+/// Lattice index of a cell coordinate of a lattice-aligned geometry's origin (origin / r).
+std::int64_t bev_lattice_index(double origin_m, double resolution_m);
+
+}  // namespace tarmac::core

@@ -1,0 +1,274 @@
+// Fleet BEV summaries (fleet_bev.hpp): the tile run encoding, the encoder that sends changed
+// tiles, and the peers' store.
+
+#include "tarmac/core/fleet_bev.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace tarmac::core {
+
+namespace {
+
+using TileKey = std::pair<std::int32_t, std::int32_t>;
+
+constexpr int kMaxRun = 64;
+/// Tile indices stay far inside int32 (a lattice index / 32 of a map of ±2^25 m at 0.1 m).
+constexpr std::int32_t kMaxTileIndex = 1 << 24;
+/// The most bytes a tile's runs can take (every cell a known run of one).
+constexpr std::size_t kMaxTileBytes = 3 * kBevTileCells;
+
+/// floor(a / b) for b > 0.
+std::int64_t floor_div(std::int64_t a, std::int64_t b) {
+  const std::int64_t q = a / b;
+  return (a % b != 0 && a < 0) ? q - 1 : q;
+}
+
+/// The 16-bit wire form of an observation time.
+std::uint16_t wire_time(std::int64_t observed_ns) {
+  return static_cast<std::uint16_t>(floor_div(observed_ns, kBevTimeStepNs) & 0xffff);
+}
+
+/// The latest time step at or before `stamp_ns` whose 16 bits are `wire`.
+std::int64_t resolve_time(std::uint16_t wire, std::int64_t stamp_ns) {
+  const std::int64_t now_step = floor_div(stamp_ns, kBevTimeStepNs);
+  const std::int64_t back = (now_step - wire) & 0xffff;  // steps before the stamp, mod 2^16
+  return (now_step - back) * kBevTimeStepNs;
+}
+
+/// Appends one tile's runs; returns false when every cell is unknown.
+bool encode_tile(std::span<const BevCell, kBevTileCells> cells, std::vector<std::uint8_t>& out) {
+  bool known = false;
+  int i = 0;
+  while (i < kBevTileCells) {
+    const BevCell& c = cells[static_cast<std::size_t>(i)];
+    const std::uint16_t t = c.state == BevState::kUnknown ? 0 : wire_time(c.observed_ns);
+    int len = 1;
+    while (i + len < kBevTileCells && len < kMaxRun) {
+      const BevCell& d = cells[static_cast<std::size_t>(i + len)];
+      if (d.state != c.state || (c.state != BevState::kUnknown && wire_time(d.observed_ns) != t)) {
+        break;
+      }
+      ++len;
+    }
+    out.push_back(static_cast<std::uint8_t>((static_cast<int>(c.state) << 6) | (len - 1)));
+    if (c.state != BevState::kUnknown) {
+      known = true;
+      out.push_back(static_cast<std::uint8_t>(t & 0xff));
+      out.push_back(static_cast<std::uint8_t>(t >> 8));
+    }
+    i += len;
+  }
+  return known;
+}
+
+Error refused(const std::string& code, const std::string& message) {
+  return Error{"fleet." + code, message};
+}
+
+}  // namespace
+
+std::int64_t bev_lattice_index(double origin_m, double resolution_m) {
+  return std::llround(origin_m / resolution_m);
+}
+
+Status decode_tile(std::span<const std::uint8_t> runs, std::int64_t stamp_ns,
+                   std::span<BevCell, kBevTileCells> out) {
+  std::size_t at = 0;
+  int cell = 0;
+  while (at < runs.size()) {
+    const std::uint8_t head = runs[at++];
+    const int state = head >> 6;
+    const int len = (head & (kMaxRun - 1)) + 1;
+    if (state > static_cast<int>(BevState::kOccupied)) {
+      return refused("malformed", "tile run with state " + std::to_string(state));
+    }
+    if (cell + len > kBevTileCells) return refused("malformed", "tile runs past 1024 cells");
+    BevCell c{static_cast<BevState>(state), 0};
+    if (c.state != BevState::kUnknown) {
+      if (at + 2 > runs.size()) return refused("malformed", "tile run without its time");
+      const auto wire = static_cast<std::uint16_t>(runs[at] | (runs[at + 1] << 8));
+      at += 2;
+      c.observed_ns = resolve_time(wire, stamp_ns);
+    }
+    std::fill_n(out.begin() + cell, len, c);
+    cell += len;
+  }
+  if (cell != kBevTileCells) {
+    return refused("malformed", "tile covers " + std::to_string(cell) + " of 1024 cells");
+  }
+  return Ok{};
+}
+
+BevEncoder::BevEncoder(std::string vehicle_id, double resolution_m)
+    : vehicle_id_(std::move(vehicle_id)), resolution_m_(resolution_m) {}
+
+BevMessage BevEncoder::encode(const BevSnapshot& snapshot, std::int64_t stamp_ns, bool keyframe,
+                              std::int64_t max_age_ns) {
+  const GridGeometry2D& g = snapshot.geometry;
+  TARMAC_ASSERT(g.resolution_m == resolution_m_, "BEV snapshot of another resolution");
+  TARMAC_ASSERT(
+      snapshot.state.size() == g.cell_count() && snapshot.observed_ns.size() == g.cell_count(),
+      "BEV snapshot arrays must cover the geometry");
+  BevMessage m;
+  m.vehicle_id = vehicle_id_;
+  m.stamp_ns = stamp_ns;
+  m.sequence = sequence_++;
+  m.keyframe = keyframe;
+  m.resolution_m = resolution_m_;
+  const std::int64_t i0 = bev_lattice_index(g.origin_x_m, g.resolution_m);
+  const std::int64_t j0 = bev_lattice_index(g.origin_y_m, g.resolution_m);
+  const auto w = static_cast<std::int64_t>(g.width), h = static_cast<std::int64_t>(g.height);
+  const std::int64_t tx0 = floor_div(i0, kBevTileEdge), tx1 = floor_div(i0 + w - 1, kBevTileEdge);
+  const std::int64_t ty0 = floor_div(j0, kBevTileEdge), ty1 = floor_div(j0 + h - 1, kBevTileEdge);
+  std::map<TileKey, std::vector<std::uint8_t>> now;
+  std::vector<BevCell> cells(kBevTileCells);
+  for (std::int64_t ty = ty0; ty <= ty1 && w > 0 && h > 0; ++ty) {
+    for (std::int64_t tx = tx0; tx <= tx1; ++tx) {
+      for (int cy = 0; cy < kBevTileEdge; ++cy) {
+        for (int cx = 0; cx < kBevTileEdge; ++cx) {
+          BevCell& c = cells[static_cast<std::size_t>(cy * kBevTileEdge + cx)];
+          c = BevCell{};
+          const std::int64_t x = tx * kBevTileEdge + cx - i0, y = ty * kBevTileEdge + cy - j0;
+          if (x < 0 || y < 0 || x >= w || y >= h) continue;
+          const auto k = static_cast<std::size_t>(y * w + x);
+          const std::int64_t seen = snapshot.observed_ns[k];
+          if (snapshot.state[k] == BevState::kUnknown || seen <= 0 || seen > stamp_ns ||
+              stamp_ns - seen > max_age_ns) {
+            continue;
+          }
+          c = BevCell{snapshot.state[k], seen};
+        }
+      }
+      std::vector<std::uint8_t> runs;
+      if (!encode_tile(std::span<const BevCell, kBevTileCells>(cells.data(), kBevTileCells),
+                       runs)) {
+        continue;
+      }
+      now.emplace(TileKey{static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty)},
+                  std::move(runs));
+    }
+  }
+  for (const auto& [key, runs] : now) {
+    const auto before = sent_.find(key);
+    if (keyframe || before == sent_.end() || before->second != runs) {
+      m.tiles.push_back(BevTile{key.first, key.second, runs});
+    }
+  }
+  if (!keyframe) {
+    // Tiles sent before with something known and now all unknown (or out of the snapshot).
+    std::vector<std::uint8_t> unknown;
+    for (int n = 0; n < kBevTileCells; n += kMaxRun) unknown.push_back(kMaxRun - 1);
+    for (const auto& [key, runs] : sent_) {
+      if (now.find(key) == now.end()) m.tiles.push_back(BevTile{key.first, key.second, unknown});
+    }
+    std::sort(m.tiles.begin(), m.tiles.end(), [](const BevTile& a, const BevTile& b) {
+      return TileKey{a.x, a.y} < TileKey{b.x, b.y};
+    });
+  }
+  sent_ = std::move(now);
+  return m;
+}
+
+BevPeers::BevPeers(std::string own_id, double resolution_m, std::int64_t max_age_ns,
+                   std::int64_t max_future_ns)
+    : own_id_(std::move(own_id)),
+      resolution_m_(resolution_m),
+      max_age_ns_(max_age_ns),
+      max_future_ns_(max_future_ns) {}
+
+Status BevPeers::apply(const BevMessage& m, std::int64_t now_ns) {
+  if (m.vehicle_id.empty()) return refused("malformed", "message without a vehicle id");
+  BevPeerStats& st = stats_[m.vehicle_id];
+  const auto refuse = [&](const std::string& code, const std::string& message) -> Status {
+    ++st.rejected;
+    return refused(code, m.vehicle_id + ": " + message);
+  };
+  if (m.vehicle_id == own_id_) return refuse("own_id", "a message with this vehicle's own id");
+  if (m.resolution_m != resolution_m_) return refuse("resolution", "another resolution");
+  if (m.stamp_ns > now_ns + max_future_ns_) return refuse("future", "stamped in the future");
+  if (m.stamp_ns < now_ns - max_age_ns_) return refuse("stale", "older than fleet.max_age_s");
+  Peer& peer = peers_[m.vehicle_id];
+  if (peer.last_stamp_ns != 0 && m.stamp_ns <= peer.last_stamp_ns) {
+    return refuse("order", "not newer than the last message applied");
+  }
+  if (!m.keyframe && (!peer.synced || m.sequence != peer.last_sequence + 1)) {
+    // A change message after a lost one (or before any keyframe): the tiles it does not carry
+    // may have changed in the lost one. Ignored until the next keyframe.
+    peer.synced = false;
+    ++st.gaps;
+    return Ok{};
+  }
+  if (m.tiles.size() > kBevMaxPeerTiles) return refuse("too_large", "too many tiles");
+  // Decode every tile first: a malformed message changes nothing.
+  std::vector<std::vector<BevCell>> decoded(m.tiles.size(), std::vector<BevCell>(kBevTileCells));
+  for (std::size_t t = 0; t < m.tiles.size(); ++t) {
+    const BevTile& tile = m.tiles[t];
+    if (std::abs(tile.x) > kMaxTileIndex || std::abs(tile.y) > kMaxTileIndex) {
+      return refuse("malformed", "tile index out of range");
+    }
+    if (tile.runs.size() > kMaxTileBytes) return refuse("malformed", "tile runs too long");
+    auto ok = decode_tile(tile.runs, m.stamp_ns,
+                          std::span<BevCell, kBevTileCells>(decoded[t].data(), kBevTileCells));
+    if (!ok) return refuse("malformed", ok.error().message);
+  }
+  auto tiles = m.keyframe ? decltype(peer.tiles){} : peer.tiles;
+  for (std::size_t t = 0; t < m.tiles.size(); ++t) {
+    const TileKey key{m.tiles[t].x, m.tiles[t].y};
+    const bool known = std::any_of(decoded[t].begin(), decoded[t].end(),
+                                   [](const BevCell& c) { return c.state != BevState::kUnknown; });
+    if (known) {
+      tiles[key] = std::move(decoded[t]);
+    } else {
+      tiles.erase(key);
+    }
+  }
+  // A bound on what one peer can make this vehicle hold (its memory is locked).
+  if (tiles.size() > kBevMaxPeerTiles) return refuse("too_large", "would hold too many tiles");
+  peer.tiles = std::move(tiles);
+  peer.synced = true;
+  peer.last_sequence = m.sequence;
+  peer.last_stamp_ns = m.stamp_ns;
+  ++st.messages;
+  st.newest_stamp_ns = m.stamp_ns;
+  st.tiles = peer.tiles.size();
+  return Ok{};
+}
+
+void BevPeers::expire(std::int64_t now_ns) {
+  const std::int64_t oldest = now_ns - max_age_ns_;
+  for (auto& [id, peer] : peers_) {
+    for (auto it = peer.tiles.begin(); it != peer.tiles.end();) {
+      bool any = false;
+      for (BevCell& c : it->second) {
+        if (c.state != BevState::kUnknown && c.observed_ns < oldest) c = BevCell{};
+        any = any || c.state != BevState::kUnknown;
+      }
+      it = any ? std::next(it) : peer.tiles.erase(it);
+    }
+    stats_[id].tiles = peer.tiles.size();
+  }
+}
+
+BevPeerCell BevPeers::lookup(std::int64_t i, std::int64_t j) const {
+  const TileKey key{static_cast<std::int32_t>(floor_div(i, kBevTileEdge)),
+                    static_cast<std::int32_t>(floor_div(j, kBevTileEdge))};
+  const auto offset =
+      static_cast<std::size_t>((j - std::int64_t{key.second} * kBevTileEdge) * kBevTileEdge +
+                               (i - std::int64_t{key.first} * kBevTileEdge));
+  BevPeerCell best;
+  for (const auto& [id, peer] : peers_) {  // vehicle id order: ties go to the smaller id
+    const auto it = peer.tiles.find(key);
+    if (it == peer.tiles.end()) continue;
+    const BevCell& c = it->second[offset];
+    if (c.state == BevState::kUnknown) continue;
+    const bool newer = best.vehicle_id == nullptr || c.observed_ns > best.cell.observed_ns ||
+                       (c.observed_ns == best.cell.observed_ns && c.state == BevState::kOccupied &&
+                        best.cell.state != BevState::kOccupied);
+    if (newer) best = BevPeerCell{c, &id};
+  }
+  return best;
+}
+
+}  // namespace tarmac::core

@@ -1,0 +1,253 @@
+// Fleet BEV summaries: the tile runs round-trip, only changed tiles are resent, a receiver that
+// lost a message waits for the keyframe, bad and stale messages are refused and counted, peers'
+// observations expire, and the freshest peer wins a cell.
+
+#include "tarmac/core/fleet_bev.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+#include <vector>
+
+namespace tarmac::core {
+namespace {
+
+constexpr double kRes = 0.2;
+constexpr std::int64_t kSecond = 1'000'000'000;
+constexpr std::int64_t kMaxAge = 10 * kSecond;
+
+/// A vehicle's cells on a lattice-aligned geometry.
+struct Cells {
+  GridGeometry2D geometry;
+  std::vector<BevState> state;
+  std::vector<std::int64_t> observed_ns;
+
+  Cells(std::int64_t i0, std::int64_t j0, std::uint32_t w, std::uint32_t h) {
+    geometry =
+        GridGeometry2D{static_cast<double>(i0) * kRes, static_cast<double>(j0) * kRes, kRes, w, h};
+    state.assign(geometry.cell_count(), BevState::kUnknown);
+    observed_ns.assign(geometry.cell_count(), 0);
+  }
+  void set(std::uint32_t x, std::uint32_t y, BevState s, std::int64_t t) {
+    state[y * geometry.width + x] = s;
+    observed_ns[y * geometry.width + x] = t;
+  }
+  [[nodiscard]] BevSnapshot snapshot() const { return {geometry, state, observed_ns}; }
+};
+
+/// Random states and observation times within the last 5 s of `stamp`, in patches (as a
+/// costmap has them), some cells unknown.
+Cells random_cells(std::mt19937& rng, std::int64_t i0, std::int64_t j0, std::uint32_t w,
+                   std::uint32_t h, std::int64_t stamp) {
+  Cells c(i0, j0, w, h);
+  std::uniform_int_distribution<int> state(0, 2);
+  std::uniform_int_distribution<std::int64_t> age(0, 5 * kSecond);
+  for (std::uint32_t y = 0; y < h; ++y) {
+    for (std::uint32_t x = 0; x < w; x += 5) {
+      const auto s = static_cast<BevState>(state(rng));
+      const std::int64_t t = stamp - age(rng);
+      for (std::uint32_t k = x; k < std::min(w, x + 5); ++k) c.set(k, y, s, t);
+    }
+  }
+  return c;
+}
+
+/// Every cell of `c` as a peer holding it must read: its state, its time to 0.1 s.
+void expect_peer_holds(const BevPeers& peers, const Cells& c, const std::string& id) {
+  const std::int64_t i0 = bev_lattice_index(c.geometry.origin_x_m, kRes);
+  const std::int64_t j0 = bev_lattice_index(c.geometry.origin_y_m, kRes);
+  for (std::uint32_t y = 0; y < c.geometry.height; ++y) {
+    for (std::uint32_t x = 0; x < c.geometry.width; ++x) {
+      const std::size_t k = y * c.geometry.width + x;
+      const BevPeerCell got = peers.lookup(i0 + x, j0 + y);
+      if (c.state[k] == BevState::kUnknown) {
+        ASSERT_EQ(got.vehicle_id, nullptr) << x << "," << y;
+        continue;
+      }
+      ASSERT_NE(got.vehicle_id, nullptr) << x << "," << y;
+      EXPECT_EQ(*got.vehicle_id, id);
+      ASSERT_EQ(got.cell.state, c.state[k]) << x << "," << y;
+      EXPECT_EQ(got.cell.observed_ns, c.observed_ns[k] / kBevTimeStepNs * kBevTimeStepNs);
+    }
+  }
+}
+
+TEST(FleetBev, KeyframeRoundTrip_EveryCellAsSent_AcrossNegativeTilesAndThe16BitWrap) {
+  std::mt19937 rng(3);
+  // Stamped just after the 16-bit decisecond counter wraps: older cells are before it.
+  const std::int64_t stamp = (std::int64_t{65536} * 20 + 30) * kBevTimeStepNs;
+  const Cells a = random_cells(rng, -70, -45, 150, 100, stamp);
+  BevEncoder enc("tug-a", kRes);
+  const BevMessage m = enc.encode(a.snapshot(), stamp, true, kMaxAge);
+  EXPECT_TRUE(m.keyframe);
+  EXPECT_EQ(m.sequence, 0u);
+  BevPeers peers("tug-b", kRes, kMaxAge);
+  ASSERT_TRUE(peers.apply(m, stamp).ok());
+  expect_peer_holds(peers, a, "tug-a");
+  EXPECT_EQ(peers.stats().at("tug-a").messages, 1u);
+}
+
+TEST(FleetBev, ChangeMessages_CarryOnlyTheTilesThatChanged) {
+  std::mt19937 rng(5);
+  const std::int64_t t0 = 1000 * kSecond;
+  Cells a = random_cells(rng, 0, 0, 200, 200, t0);
+  BevEncoder enc("tug-a", kRes);
+  BevPeers peers("tug-b", kRes, kMaxAge);
+  const BevMessage key = enc.encode(a.snapshot(), t0, true, kMaxAge);
+  ASSERT_TRUE(peers.apply(key, t0).ok());
+  // Nothing changed: nothing sent.
+  const BevMessage same = enc.encode(a.snapshot(), t0 + kSecond, false, kMaxAge);
+  EXPECT_TRUE(same.tiles.empty());
+  ASSERT_TRUE(peers.apply(same, t0 + kSecond).ok());
+  // One cell observed again: its tile only.
+  a.set(100, 70, BevState::kOccupied, t0 + 2 * kSecond);
+  const BevMessage one = enc.encode(a.snapshot(), t0 + 2 * kSecond, false, kMaxAge);
+  ASSERT_EQ(one.tiles.size(), 1u);
+  EXPECT_EQ(one.tiles[0].x, 100 / kBevTileEdge);
+  EXPECT_EQ(one.tiles[0].y, 70 / kBevTileEdge);
+  ASSERT_TRUE(peers.apply(one, t0 + 2 * kSecond).ok());
+  expect_peer_holds(peers, a, "tug-a");
+  // A tile that becomes unknown is sent once as unknown, and the peer forgets it.
+  for (std::uint32_t y = 0; y < 32; ++y) {
+    for (std::uint32_t x = 0; x < 32; ++x) a.set(x, y, BevState::kUnknown, 0);
+  }
+  const BevMessage gone = enc.encode(a.snapshot(), t0 + 3 * kSecond, false, kMaxAge);
+  ASSERT_EQ(gone.tiles.size(), 1u);
+  ASSERT_TRUE(peers.apply(gone, t0 + 3 * kSecond).ok());
+  expect_peer_holds(peers, a, "tug-a");
+  EXPECT_TRUE(enc.encode(a.snapshot(), t0 + 4 * kSecond, false, kMaxAge).tiles.empty());
+}
+
+TEST(FleetBev, ALostChangeMessage_IgnoresChangesUntilTheNextKeyframe) {
+  std::mt19937 rng(7);
+  const std::int64_t t0 = 500 * kSecond;
+  Cells a = random_cells(rng, 10, 10, 64, 64, t0);
+  BevEncoder enc("tug-a", kRes);
+  BevPeers peers("tug-b", kRes, kMaxAge);
+  // A change message before any keyframe: a late joiner waits.
+  a.set(0, 0, BevState::kOccupied, t0);
+  (void)enc.encode(a.snapshot(), t0, true, kMaxAge);  // lost: the late joiner never saw it
+  a.set(1, 0, BevState::kOccupied, t0 + kSecond);
+  ASSERT_TRUE(
+      peers.apply(enc.encode(a.snapshot(), t0 + kSecond, false, kMaxAge), t0 + kSecond).ok());
+  EXPECT_EQ(peers.stats().at("tug-a").gaps, 1u);
+  EXPECT_EQ(peers.lookup(11, 10).vehicle_id, nullptr);
+  // The keyframe syncs; then a lost change message makes the next one a gap too.
+  ASSERT_TRUE(
+      peers.apply(enc.encode(a.snapshot(), t0 + 2 * kSecond, true, kMaxAge), t0 + 2 * kSecond)
+          .ok());
+  expect_peer_holds(peers, a, "tug-a");
+  a.set(2, 0, BevState::kFree, t0 + 3 * kSecond);
+  (void)enc.encode(a.snapshot(), t0 + 3 * kSecond, false, kMaxAge);  // lost
+  a.set(3, 0, BevState::kFree, t0 + 4 * kSecond);
+  ASSERT_TRUE(
+      peers.apply(enc.encode(a.snapshot(), t0 + 4 * kSecond, false, kMaxAge), t0 + 4 * kSecond)
+          .ok());
+  EXPECT_EQ(peers.stats().at("tug-a").gaps, 2u);
+  EXPECT_EQ(peers.lookup(13, 10).vehicle_id, nullptr);  // the change after the gap: not applied
+  ASSERT_TRUE(
+      peers.apply(enc.encode(a.snapshot(), t0 + 5 * kSecond, true, kMaxAge), t0 + 5 * kSecond)
+          .ok());
+  expect_peer_holds(peers, a, "tug-a");
+}
+
+TEST(FleetBev, BadStaleFutureAndForeignMessages_AreRefusedCountedAndChangeNothing) {
+  std::mt19937 rng(9);
+  const std::int64_t t0 = 300 * kSecond;
+  const Cells a = random_cells(rng, 0, 0, 40, 40, t0);
+  BevEncoder enc("tug-a", kRes);
+  BevPeers peers("tug-b", kRes, kMaxAge);
+  const BevMessage good = enc.encode(a.snapshot(), t0, true, kMaxAge);
+  ASSERT_TRUE(peers.apply(good, t0).ok());
+  const auto refused = [&](BevMessage m, std::int64_t now, const std::string& code) {
+    const auto r = peers.apply(m, now);
+    ASSERT_FALSE(r.ok()) << code;
+    EXPECT_EQ(r.error().code, "fleet." + code) << r.error().message;
+  };
+  BevMessage m = good;
+  m.stamp_ns = t0 + kSecond;
+  refused(m, t0 + 20 * kSecond, "stale");
+  refused(m, t0, "future");
+  m.resolution_m = 0.1;
+  refused(m, t0 + kSecond, "resolution");
+  m = good;
+  m.vehicle_id = "tug-b";
+  refused(m, t0, "own_id");
+  m = good;
+  refused(m, t0 + kSecond, "order");  // the same stamp again
+  m.stamp_ns = t0 + kSecond;
+  m.tiles[0].runs.pop_back();  // a truncated time
+  refused(m, t0 + kSecond, "malformed");
+  m.tiles[0].runs = {63, 63};  // 128 of 1024 cells
+  refused(m, t0 + kSecond, "malformed");
+  m.tiles[0].runs.assign(17, 63);  // 1088 cells
+  refused(m, t0 + kSecond, "malformed");
+  m.tiles[0].runs = {0xff};  // state 3
+  refused(m, t0 + kSecond, "malformed");
+  m.tiles.assign(kBevMaxPeerTiles + 1, good.tiles[0]);
+  refused(m, t0 + kSecond, "too_large");
+  EXPECT_EQ(peers.stats().at("tug-a").rejected, 9u);
+  EXPECT_EQ(peers.stats().at("tug-b").rejected, 1u);
+  expect_peer_holds(peers, a, "tug-a");  // unchanged by any of them
+}
+
+TEST(FleetBev, PeerObservations_ExpireAfterMaxAge) {
+  const std::int64_t t0 = 100 * kSecond;
+  Cells a(0, 0, 64, 32);
+  a.set(3, 3, BevState::kOccupied, t0 - 8 * kSecond);
+  a.set(40, 3, BevState::kFree, t0);
+  BevEncoder enc("tug-a", kRes);
+  BevPeers peers("tug-b", kRes, kMaxAge);
+  ASSERT_TRUE(peers.apply(enc.encode(a.snapshot(), t0, true, kMaxAge), t0).ok());
+  EXPECT_NE(peers.lookup(3, 3).vehicle_id, nullptr);
+  peers.expire(t0 + 3 * kSecond);  // 11 s old
+  EXPECT_EQ(peers.lookup(3, 3).vehicle_id, nullptr);
+  EXPECT_EQ(peers.stats().at("tug-a").tiles, 1u);  // the tile of (40, 3) is kept
+  peers.expire(t0 + 11 * kSecond);
+  EXPECT_EQ(peers.lookup(40, 3).vehicle_id, nullptr);
+  EXPECT_EQ(peers.stats().at("tug-a").tiles, 0u);
+  // The encoder does not send what receivers would drop.
+  a.set(5, 5, BevState::kOccupied, t0 - 11 * kSecond);
+  const BevMessage m = enc.encode(a.snapshot(), t0, true, kMaxAge);
+  BevPeers fresh("tug-c", kRes, kMaxAge);
+  ASSERT_TRUE(fresh.apply(m, t0).ok());
+  EXPECT_EQ(fresh.lookup(5, 5).vehicle_id, nullptr);
+}
+
+TEST(FleetBev, TheFreshestPeerWins_TiesGoToOccupied) {
+  const std::int64_t t0 = 100 * kSecond;
+  Cells a(0, 0, 32, 32), c(0, 0, 32, 32);
+  a.set(1, 1, BevState::kFree, t0);
+  c.set(1, 1, BevState::kOccupied, t0 - kSecond);
+  a.set(2, 2, BevState::kFree, t0);
+  c.set(2, 2, BevState::kOccupied, t0);
+  BevEncoder ea("tug-a", kRes), ec("tug-c", kRes);
+  BevPeers peers("tug-b", kRes, kMaxAge);
+  ASSERT_TRUE(peers.apply(ea.encode(a.snapshot(), t0, true, kMaxAge), t0).ok());
+  ASSERT_TRUE(peers.apply(ec.encode(c.snapshot(), t0, true, kMaxAge), t0).ok());
+  EXPECT_EQ(peers.lookup(1, 1).cell.state, BevState::kFree);
+  EXPECT_EQ(*peers.lookup(1, 1).vehicle_id, "tug-a");
+  EXPECT_EQ(peers.lookup(2, 2).cell.state, BevState::kOccupied);
+  EXPECT_EQ(*peers.lookup(2, 2).vehicle_id, "tug-c");
+}
+
+TEST(FleetBev, AMostlyUniformCostmap_EncodesInAFewKilobytes) {
+  // 400 x 400 cells (the shipped window), free and seen by the last scan, a few obstacles.
+  const std::int64_t t0 = 100 * kSecond;
+  Cells a(-200, -200, 400, 400);
+  for (std::uint32_t y = 0; y < 400; ++y) {
+    for (std::uint32_t x = 0; x < 400; ++x) {
+      const bool obstacle = (x % 50 == 7) && (y % 40 < 3);
+      a.set(x, y, obstacle ? BevState::kOccupied : BevState::kFree, t0);
+    }
+  }
+  BevEncoder enc("tug-a", kRes);
+  const BevMessage m = enc.encode(a.snapshot(), t0, true, kMaxAge);
+  std::size_t bytes = 0;
+  for (const BevTile& t : m.tiles) bytes += t.runs.size() + 8;
+  EXPECT_EQ(m.tiles.size(), 196u);  // lattice cells −200 … 199: tiles −7 … 6 on each axis
+  EXPECT_LT(bytes, 16u * 1024u);
+}
+
+}  // namespace
+}  // namespace tarmac::core
