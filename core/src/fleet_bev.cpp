@@ -271,4 +271,74 @@ BevPeerCell BevPeers::lookup(std::int64_t i, std::int64_t j) const {
   return best;
 }
 
+BevFusionCounts BevPeers::fuse(const GridGeometry2D& g,
+                               std::span<const std::int64_t> own_observed_ns, std::int64_t now_ns,
+                               std::span<std::uint8_t> column_class) const {
+  TARMAC_ASSERT(g.resolution_m == resolution_m_, "fusing BEV cells of another resolution");
+  TARMAC_ASSERT(own_observed_ns.size() == g.cell_count() && column_class.size() == g.cell_count(),
+                "fusion arrays must cover the geometry");
+  // ColumnClass values (costmap_builder.hpp), kept numeric here: the costmap is not this
+  // file's business beyond them.
+  constexpr std::uint8_t kFree = 0, kObstacle = 1, kUnknown = 2, kVirtual = 3;
+  BevFusionCounts counts;
+  if (peers_.empty() || g.cell_count() == 0) return counts;
+  const std::int64_t oldest = now_ns - max_age_ns_;
+  const std::int64_t i0 = bev_lattice_index(g.origin_x_m, g.resolution_m);
+  const std::int64_t j0 = bev_lattice_index(g.origin_y_m, g.resolution_m);
+  const auto w = static_cast<std::int64_t>(g.width), h = static_cast<std::int64_t>(g.height);
+  // Tile by tile: each peer's tile is looked up once, not once per cell.
+  struct Held {
+    const std::string* id;
+    const std::vector<BevCell>* cells;
+  };
+  std::vector<Held> held;
+  for (std::int64_t ty = floor_div(j0, kBevTileEdge); ty <= floor_div(j0 + h - 1, kBevTileEdge);
+       ++ty) {
+    for (std::int64_t tx = floor_div(i0, kBevTileEdge); tx <= floor_div(i0 + w - 1, kBevTileEdge);
+         ++tx) {
+      held.clear();
+      const TileKey key{static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty)};
+      for (const auto& [id, peer] : peers_) {  // vehicle id order: ties go to the smaller id
+        const auto it = peer.tiles.find(key);
+        if (it != peer.tiles.end()) held.push_back(Held{&id, &it->second});
+      }
+      if (held.empty()) continue;
+      const std::int64_t y_lo = std::max<std::int64_t>(0, ty * kBevTileEdge - j0);
+      const std::int64_t y_hi = std::min<std::int64_t>(h, (ty + 1) * kBevTileEdge - j0);
+      const std::int64_t x_lo = std::max<std::int64_t>(0, tx * kBevTileEdge - i0);
+      const std::int64_t x_hi = std::min<std::int64_t>(w, (tx + 1) * kBevTileEdge - i0);
+      for (std::int64_t y = y_lo; y < y_hi; ++y) {
+        for (std::int64_t x = x_lo; x < x_hi; ++x) {
+          const auto k = static_cast<std::size_t>(y * w + x);
+          const std::uint8_t own = column_class[k];
+          if (own == kVirtual) continue;
+          const auto offset = static_cast<std::size_t>((j0 + y - ty * kBevTileEdge) * kBevTileEdge +
+                                                       (i0 + x - tx * kBevTileEdge));
+          const BevCell* best = nullptr;
+          const std::string* best_id = nullptr;
+          for (const Held& p : held) {
+            const BevCell& c = (*p.cells)[offset];
+            if (c.state == BevState::kUnknown || c.observed_ns < oldest) continue;
+            if (best == nullptr || c.observed_ns > best->observed_ns ||
+                (c.observed_ns == best->observed_ns && c.state == BevState::kOccupied &&
+                 best->state != BevState::kOccupied)) {
+              best = &c;
+              best_id = p.id;
+            }
+          }
+          if (best == nullptr) continue;
+          if (own != kUnknown && own_observed_ns[k] >= best->observed_ns) continue;
+          const bool occupied = best->state == BevState::kOccupied;
+          column_class[k] = occupied ? kObstacle : kFree;
+          ++counts.cells;
+          counts.occupied += occupied ? 1 : 0;
+          ++counts.cells_by_peer[*best_id];
+          counts.newest_observed_ns = std::max(counts.newest_observed_ns, best->observed_ns);
+        }
+      }
+    }
+  }
+  return counts;
+}
+
 }  // namespace tarmac::core

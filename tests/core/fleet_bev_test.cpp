@@ -249,5 +249,77 @@ TEST(FleetBev, AMostlyUniformCostmap_EncodesInAFewKilobytes) {
   EXPECT_LT(bytes, 16u * 1024u);
 }
 
+/// ColumnClass values (costmap_builder.hpp).
+constexpr std::uint8_t kFreeClass = 0, kObstacleClass = 1, kUnknownClass = 2, kVirtualClass = 3;
+
+TEST(FleetBevFusion, TheRules_CellByCell) {
+  const std::int64_t t0 = 100 * kSecond;
+  // The peer saw seven cells of one row occupied or free at t0 + 1 s; the own map has, cell by
+  // cell: unknown; free older; free newer; obstacle older (peer free); a virtual zone; the same
+  // time as the peer's; and a peer observation past max age.
+  Cells peer(0, 0, 8, 1);
+  for (std::uint32_t x = 0; x < 6; ++x) peer.set(x, 0, BevState::kOccupied, t0 + kSecond);
+  peer.set(3, 0, BevState::kFree, t0 + kSecond);
+  peer.set(6, 0, BevState::kOccupied, t0 - 20 * kSecond);
+  BevEncoder enc("tug-a", kRes);
+  BevPeers peers("tug-b", kRes, kMaxAge);
+  ASSERT_TRUE(
+      peers.apply(enc.encode(peer.snapshot(), t0 + kSecond, true, 30 * kSecond), t0 + kSecond)
+          .ok());
+  const GridGeometry2D g = peer.geometry;
+  std::vector<std::uint8_t> cls = {kUnknownClass, kFreeClass, kFreeClass,    kObstacleClass,
+                                   kVirtualClass, kFreeClass, kUnknownClass, kFreeClass};
+  const std::vector<std::int64_t> own = {
+      0, t0, t0 + 2 * kSecond, t0, t0 + 5 * kSecond, t0 + kSecond, 0, t0};
+  const BevFusionCounts n = peers.fuse(g, own, t0 + 2 * kSecond, cls);
+  const std::vector<std::uint8_t> want = {kObstacleClass, kObstacleClass, kFreeClass,
+                                          kFreeClass,     kVirtualClass,  kFreeClass,
+                                          kUnknownClass,  kFreeClass};
+  EXPECT_EQ(cls, want);
+  EXPECT_EQ(n.cells, 3u);
+  EXPECT_EQ(n.occupied, 2u);
+  EXPECT_EQ(n.cells_by_peer.at("tug-a"), 3u);
+  EXPECT_EQ(n.newest_observed_ns, t0 + kSecond);
+}
+
+TEST(FleetBevFusion, TileByTile_EqualsTheRulesAppliedThroughLookup) {
+  std::mt19937 rng(11);
+  const std::int64_t t0 = 2000 * kSecond;
+  BevPeers peers("own", kRes, kMaxAge);
+  for (const char* id : {"tug-c", "tug-a", "tug-d"}) {
+    const Cells c = random_cells(rng, -90 + static_cast<int>(rng() % 40),
+                                 -60 + static_cast<int>(rng() % 40), 120, 110, t0);
+    BevEncoder enc(id, kRes);
+    ASSERT_TRUE(peers.apply(enc.encode(c.snapshot(), t0, true, kMaxAge), t0).ok());
+  }
+  const std::int64_t now = t0 + 6 * kSecond;  // some peer cells past max age
+  Cells own = random_cells(rng, -100, -70, 150, 130, t0 + kSecond);
+  std::vector<std::uint8_t> cls(own.state.size());
+  for (std::size_t k = 0; k < cls.size(); ++k) {
+    cls[k] = own.state[k] == BevState::kUnknown ? kUnknownClass
+             : own.state[k] == BevState::kFree  ? kFreeClass
+                                                : kObstacleClass;
+    if (k % 97 == 0) cls[k] = kVirtualClass;
+  }
+  std::vector<std::uint8_t> want = cls;
+  const std::int64_t i0 = -100, j0 = -70;
+  std::uint64_t filled = 0;
+  for (std::uint32_t y = 0; y < own.geometry.height; ++y) {
+    for (std::uint32_t x = 0; x < own.geometry.width; ++x) {
+      const std::size_t k = y * own.geometry.width + x;
+      const BevPeerCell p = peers.lookup(i0 + x, j0 + y);
+      if (p.vehicle_id == nullptr || p.cell.observed_ns < now - kMaxAge) continue;
+      if (want[k] == kVirtualClass) continue;
+      if (want[k] != kUnknownClass && own.observed_ns[k] >= p.cell.observed_ns) continue;
+      want[k] = p.cell.state == BevState::kOccupied ? kObstacleClass : kFreeClass;
+      ++filled;
+    }
+  }
+  const BevFusionCounts n = peers.fuse(own.geometry, own.observed_ns, now, cls);
+  EXPECT_EQ(cls, want);
+  EXPECT_EQ(n.cells, filled);
+  EXPECT_GT(filled, 1000u);
+}
+
 }  // namespace
 }  // namespace tarmac::core

@@ -115,6 +115,14 @@ struct BevPeerCell {
   const std::string* vehicle_id = nullptr;  ///< nullptr: no peer knows the cell
 };
 
+/// What fusing the peers' cells into a costmap's column classes did (BevPeers::fuse).
+struct BevFusionCounts {
+  std::uint64_t cells = 0;     ///< cells whose class came from a peer
+  std::uint64_t occupied = 0;  ///< of which obstacles
+  std::map<std::string, std::uint64_t> cells_by_peer;
+  std::int64_t newest_observed_ns = 0;  ///< newest peer observation used (0: none)
+};
+
 /// What a vehicle keeps of its peers' summaries: per peer, its tiles as last told. Messages must
 /// be applied in stamp order (as scans are) for the result to be deterministic.
 class BevPeers {
@@ -140,6 +148,16 @@ class BevPeers {
   /// The freshest observation of lattice cell (i, j) over all peers (ties: occupied first, then
   /// the smaller vehicle id).
   [[nodiscard]] BevPeerCell lookup(std::int64_t i, std::int64_t j) const;
+
+  /// The fusion rules, on the column classes of a costmap (values of ColumnClass: 0 free,
+  /// 1 obstacle, 2 unknown, 3 virtual) on lattice-aligned geometry `g`, with each cell's own
+  /// last observation time (0: never). A cell takes the freshest peer observation not older than
+  /// now − max age when its own class is unknown or its own observation is older than the
+  /// peer's: the peer's occupied as an obstacle, its free as free. A cell observed here at or
+  /// after the peer's time keeps its own class (a fresh own observation is never overridden);
+  /// virtual-zone cells are never changed.
+  BevFusionCounts fuse(const GridGeometry2D& g, std::span<const std::int64_t> own_observed_ns,
+                       std::int64_t now_ns, std::span<std::uint8_t> column_class) const;
 
   [[nodiscard]] const std::map<std::string, BevPeerStats>& stats() const { return stats_; }
   [[nodiscard]] double resolution_m() const { return resolution_m_; }
