@@ -1,6 +1,7 @@
 #include "tarmac/config/config.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -276,6 +277,20 @@ core::Status validate_daemon(const Config& c) {
     if (s.topic == c.pose.topic) return err("pose.topic", "same topic as sensor " + s.id);
   }
   if (c.outputs.frame_id.empty()) return err("outputs.frame_id", "must not be empty");
+  if (c.fleet.enabled) {
+    const std::string& id = c.fleet.vehicle_id;
+    const bool id_ok =
+        !id.empty() && id.size() <= 64 && std::all_of(id.begin(), id.end(), [](char ch) {
+          return std::isalnum(static_cast<unsigned char>(ch)) != 0 || ch == '_' || ch == '-';
+        });
+    if (!id_ok) {
+      return err("fleet.vehicle_id", "must be 1..64 of [A-Za-z0-9_-] when fleet.enabled is true");
+    }
+    if (c.fleet.topic.empty()) return err("fleet.topic", "must not be empty");
+    // The summaries' encoding and fusion exist in core (fleet_bev.hpp); the daemon does not
+    // publish or fuse them yet. Refused rather than silently ignored.
+    return err("fleet.enabled", "fleet sharing is not available in this build yet");
+  }
   for (const auto& [key, topic] :
        {std::pair{"outputs.costmap_topic", &c.outputs.costmap_topic},
         std::pair{"outputs.esdf_slice_topic", &c.outputs.esdf_slice_topic},

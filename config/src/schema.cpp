@@ -486,6 +486,18 @@ std::vector<Key> make_schema() {
               "corrections.rebuild_points_per_cycle", 0, 100'000'000, "points",
               "points re-integrated per integrated scan while rebuilding; 0: all at once",
               [](Config& c) -> Field { return &c.mapping.corrections.rebuild_points_per_cycle; }),
+          // fleet
+          boolean("fleet.enabled", "share bird's-eye summaries with the fleet and fuse theirs",
+                  [](Config& c) -> Field { return &c.fleet.enabled; }),
+          string("fleet.vehicle_id",
+                 "this vehicle's id, unique in the fleet: 1..64 of [A-Za-z0-9_-]",
+                 [](Config& c) -> Field { return &c.fleet.vehicle_id; }),
+          topic("fleet.topic", "tarmac_msgs/FleetBev, every vehicle's summaries",
+                [](Config& c) -> Field { return &c.fleet.topic; }),
+          real("fleet.publish_period_s", 0.1, 60.0, "s", "a summary this often",
+               [](Config& c) -> Field { return &c.fleet.publish_period_s; }),
+          real("fleet.max_age_s", 0.5, 600.0, "s", "peers' observations older than this expire",
+               [](Config& c) -> Field { return &c.fleet.max_age_s; }),
       });
   return keys;
 }

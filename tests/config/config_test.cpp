@@ -327,6 +327,26 @@ TEST(Config, EsdfBandSectionAppliesAndIsValidated) {
             "outputs.esdf_band_topic: must not be empty when esdf_band.enabled is true");
 }
 
+TEST(Config, FleetSectionIsReadAndValidated_EnablingItIsRefusedUntilTheDaemonShares) {
+  auto config = load_config_string(
+      "version: 1\nfleet: {vehicle_id: tug-7, topic: /tarmac/fleet/bev, publish_period_s: 0.5,\n"
+      "        max_age_s: 20}\n");
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  const FleetConfig& f = config.value().fleet;
+  EXPECT_FALSE(f.enabled);
+  EXPECT_EQ(f.vehicle_id, "tug-7");
+  EXPECT_EQ(f.topic, "rt/tarmac/fleet/bev");  // ROS form mapped to the DDS form
+  EXPECT_EQ(f.publish_period_s, 0.5);
+  EXPECT_EQ(f.max_age_s, 20.0);
+  EXPECT_EQ(Config{}.fleet.topic, "rt/tarmac/fleet/bev");
+  EXPECT_EQ(error_of("version: 1\nfleet: {enabled: true}\n"),
+            "fleet.vehicle_id: must be 1..64 of [A-Za-z0-9_-] when fleet.enabled is true");
+  EXPECT_EQ(error_of("version: 1\nfleet: {enabled: true, vehicle_id: \"tug 7\"}\n"),
+            "fleet.vehicle_id: must be 1..64 of [A-Za-z0-9_-] when fleet.enabled is true");
+  EXPECT_EQ(error_of("version: 1\nfleet: {enabled: true, vehicle_id: tug-7}\n"),
+            "fleet.enabled: fleet sharing is not available in this build yet");
+}
+
 TEST(Config, ShippedDefaultsAreOneFrontLidarOnTheDesignTopics) {
   const Config c;
   ASSERT_EQ(c.sensors.size(), 1u);

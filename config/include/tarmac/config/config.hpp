@@ -161,6 +161,17 @@ struct StateConfig {
   double save_period_s = 300.0;
 };
 
+/// Fleet sharing of bird's-eye occupancy between vehicles (YAML `fleet`; issue 21).
+struct FleetConfig {
+  bool enabled = false;
+  /// This vehicle's id in the fleet: unique, 1..64 of [A-Za-z0-9_-] (it names the vehicle's DDS
+  /// partition and its grant in the permissions file). Required when enabled.
+  std::string vehicle_id;
+  std::string topic = "rt/tarmac/fleet/bev";  ///< every vehicle's summaries, one topic
+  double publish_period_s = 1.0;              ///< a summary this often
+  double max_age_s = 10.0;                    ///< peers' observations older than this are forgotten
+};
+
 /// The core's defaults, except where the daemon wants otherwise: 8192 TSDF blocks reserved at
 /// start (32 MB), so the first scans from an empty map cost no page faults (the core's own
 /// default is 0, for tools and tests that build many mappers).
@@ -180,6 +191,7 @@ struct Config {
   QuotaConfig quotas;
   OutputConfig outputs;
   StateConfig state;
+  FleetConfig fleet;
   core::MapperParams mapping = daemon_mapping_defaults();  ///< YAML filters, occupancy, costmap,
                                                            ///< esdf_band, tsdf, corrections
 };
