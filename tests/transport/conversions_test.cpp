@@ -259,5 +259,35 @@ TEST(Path, RejectsEachMalformedPathWithItsCode) {
   EXPECT_EQ(from_path_msg(nan_position, "map", poses).error().code, "pose.non_finite");
 }
 
+TEST(FleetBev, RoundTripsEveryField_RefusesAnotherFrameAndABadResolution) {
+  core::BevMessage m;
+  m.vehicle_id = "tug-7";
+  m.stamp_ns = -1'500'000'001;  // before the epoch too
+  m.sequence = 4'000'000'000u;
+  m.keyframe = true;
+  m.resolution_m = 0.2;  // exact on the wire: float64
+  m.tiles = {core::BevTile{-3, 7, {0x7f, 0x40, 0x12, 0x34}},
+             core::BevTile{1 << 20, -(1 << 20), {}}};
+  const FleetBevMsg msg = to_fleet_bev(m, "map");
+  EXPECT_EQ(msg.header().frame_id(), "map");
+  const auto back = from_fleet_bev(msg, "map");
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back.value().vehicle_id, m.vehicle_id);
+  EXPECT_EQ(back.value().stamp_ns, m.stamp_ns);
+  EXPECT_EQ(back.value().sequence, m.sequence);
+  EXPECT_EQ(back.value().keyframe, m.keyframe);
+  EXPECT_EQ(back.value().resolution_m, m.resolution_m);
+  EXPECT_EQ(back.value().tiles, m.tiles);
+  EXPECT_EQ(from_fleet_bev(msg, "odom").error().code, "fleet.frame");
+  FleetBevMsg bad = msg;
+  bad.resolution(std::nan(""));
+  EXPECT_EQ(from_fleet_bev(bad, "map").error().code, "fleet.resolution");
+  bad.resolution(0.0);
+  EXPECT_EQ(from_fleet_bev(bad, "map").error().code, "fleet.resolution");
+  bad = msg;
+  bad.vehicle_id("");
+  EXPECT_EQ(from_fleet_bev(bad, "map").error().code, "fleet.malformed");
+}
+
 }  // namespace
 }  // namespace tarmac::transport

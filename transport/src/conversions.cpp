@@ -560,4 +560,43 @@ core::Result<std::vector<core::VirtualZone>> from_virtual_obstacles(
   return zones;
 }
 
+FleetBevMsg to_fleet_bev(const core::BevMessage& message, const std::string& frame_id) {
+  FleetBevMsg msg;
+  msg.header().stamp(to_time_msg(message.stamp_ns));
+  msg.header().frame_id(frame_id);
+  msg.vehicle_id(message.vehicle_id);
+  msg.sequence_number(message.sequence);
+  msg.keyframe(message.keyframe);
+  msg.resolution(message.resolution_m);
+  msg.tiles().resize(message.tiles.size());
+  for (std::size_t t = 0; t < message.tiles.size(); ++t) {
+    msg.tiles()[t].x(message.tiles[t].x);
+    msg.tiles()[t].y(message.tiles[t].y);
+    msg.tiles()[t].runs(message.tiles[t].runs);
+  }
+  return msg;
+}
+
+core::Result<core::BevMessage> from_fleet_bev(const FleetBevMsg& msg, const std::string& frame_id) {
+  if (msg.vehicle_id().empty()) return core::Error{"fleet.malformed", "no vehicle id"};
+  if (msg.header().frame_id() != frame_id) {
+    return core::Error{"fleet.frame", msg.vehicle_id() + ": frame '" + msg.header().frame_id() +
+                                          "', not the shared '" + frame_id + "'"};
+  }
+  if (!std::isfinite(msg.resolution()) || msg.resolution() <= 0.0) {
+    return core::Error{"fleet.resolution", msg.vehicle_id() + ": resolution not a positive number"};
+  }
+  core::BevMessage m;
+  m.vehicle_id = msg.vehicle_id();
+  m.stamp_ns = from_time_msg(msg.header().stamp());
+  m.sequence = msg.sequence_number();
+  m.keyframe = msg.keyframe();
+  m.resolution_m = msg.resolution();
+  m.tiles.resize(msg.tiles().size());
+  for (std::size_t t = 0; t < msg.tiles().size(); ++t) {
+    m.tiles[t] = core::BevTile{msg.tiles()[t].x(), msg.tiles()[t].y(), msg.tiles()[t].runs()};
+  }
+  return m;
+}
+
 }  // namespace tarmac::transport

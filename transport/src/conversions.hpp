@@ -18,6 +18,7 @@
 #include "tarmac/core/costmap_builder.hpp"
 #include "tarmac/core/distance_field.hpp"
 #include "tarmac/core/esdf_band.hpp"
+#include "tarmac/core/fleet_bev.hpp"
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/result.hpp"
@@ -39,6 +40,7 @@ using DistanceMapVolumeMsg = tarmac_msgs::msg::dds_::DistanceMapVolume_;
 using CycleReportMsg = tarmac_msgs::msg::dds_::CycleReport_;
 using VirtualObstacleArrayMsg = tarmac_msgs::msg::dds_::VirtualObstacleArray_;
 using DiagnosticArrayMsg = diagnostic_msgs::msg::dds_::DiagnosticArray_;
+using FleetBevMsg = tarmac_msgs::msg::dds_::FleetBev_;
 
 /// ns since the epoch <-> builtin_interfaces/Time (sec may be negative; nanosec in [0, 1e9)).
 TimeMsg to_time_msg(std::int64_t stamp_ns);
@@ -103,5 +105,12 @@ void fill_diagnostic_array(const DiagnosticReport& report, DiagnosticArrayMsg& m
 /// Rejects polygons with fewer than 3 vertices or non-finite coordinates ("zones.*").
 core::Result<std::vector<core::VirtualZone>> from_virtual_obstacles(
     const VirtualObstacleArrayMsg& msg);
+
+/// A fleet summary -> tarmac_msgs/FleetBev in `frame_id`.
+FleetBevMsg to_fleet_bev(const core::BevMessage& message, const std::string& frame_id);
+/// tarmac_msgs/FleetBev -> a fleet summary. Rejects a frame other than `frame_id` (the summaries
+/// are in the shared map frame), a non-finite or non-positive resolution and an empty vehicle id
+/// ("fleet.*"); the tiles' contents are checked where they are applied (BevPeers::apply).
+core::Result<core::BevMessage> from_fleet_bev(const FleetBevMsg& msg, const std::string& frame_id);
 
 }  // namespace tarmac::transport
