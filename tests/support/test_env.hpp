@@ -21,6 +21,7 @@ enum Domain : std::uint32_t {
   kDomainCycloneInterop = 114,
   kDomainConfinement = 115,
   kDomainLoopbackPath = 120,
+  kDomainDiscoveryServer = 121,  // and UDP port 24121 for its server
   // DDS Security (tests/transport/security_test.cpp): 116..119
   kDomainSecurityExchange = 116,
   kDomainSecurityUnauthenticated = 117,

@@ -14,6 +14,7 @@
 #include <iterator>
 #include <mutex>
 
+#include <fastdds/rtps/attributes/ServerAttributes.h>
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
@@ -39,6 +40,20 @@ bool is_ipv4(const std::string& text) {
 
 core::Error config_error(const std::string& key, const std::string& why) {
   return core::Error{"config.transport", key + ": " + why};
+}
+
+/// "a.b.c.d:port" split; false when it is not an IPv4 address and a port 1..65535.
+bool split_server(const std::string& text, std::string& address, std::uint32_t& port) {
+  const auto colon = text.rfind(':');
+  if (colon == std::string::npos) return false;
+  address = text.substr(0, colon);
+  const std::string digits = text.substr(colon + 1);
+  if (digits.empty() || digits.size() > 5 ||
+      !std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+    return false;
+  }
+  port = static_cast<std::uint32_t>(std::stoul(digits));
+  return is_ipv4(address) && port >= 1 && port <= 65535;
 }
 
 Locator_t udp_locator(const std::string& address) {
@@ -207,6 +222,25 @@ fdds::DomainParticipantQos participant_qos(const ParticipantConfig& config) {
       break;
     }
   }
+  if (!config.discovery_servers.empty()) {
+    // A client of the servers: it announces itself to them only, and they tell it of the
+    // others (validate() checked each entry).
+    builtin.discovery_config.discoveryProtocol =
+        eprosima::fastrtps::rtps::DiscoveryProtocol::CLIENT;
+    builtin.initialPeersList.clear();
+    for (std::size_t id = 0; id < config.discovery_servers.size(); ++id) {
+      std::string address;
+      std::uint32_t port = 0;
+      split_server(config.discovery_servers[id], address, port);
+      eprosima::fastdds::rtps::RemoteServerAttributes server;
+      eprosima::fastdds::rtps::get_server_client_default_guidPrefix(static_cast<int>(id),
+                                                                    server.guidPrefix);
+      Locator_t locator = udp_locator(address);
+      locator.port = port;
+      server.metatrafficUnicastLocatorList.push_back(locator);
+      builtin.discovery_config.m_DiscoveryServers.push_back(server);
+    }
+  }
   return qos;
 }
 
@@ -328,6 +362,21 @@ core::Status ParticipantConfig::validate() const {
   for (const auto& address : initial_peers) {
     if (!is_ipv4(address))
       return config_error("dds.initial_peers", "not an IPv4 address: " + address);
+  }
+  if (!discovery_servers.empty() && transport == TransportMode::kSharedMemoryOnly) {
+    return config_error("dds.discovery_servers", "need a UDP transport, transport is 'shm'");
+  }
+  if (discovery_servers.size() > 256) return config_error("dds.discovery_servers", "at most 256");
+  for (const auto& server : discovery_servers) {
+    std::string address;
+    std::uint32_t port = 0;
+    if (!split_server(server, address, port)) {
+      return config_error("dds.discovery_servers", "not IPv4:port (port 1..65535): " + server);
+    }
+    if (transport == TransportMode::kLocalhost && address.rfind("127.", 0) != 0) {
+      return config_error("dds.discovery_servers",
+                          "transport 'localhost' reaches 127.0.0.0/8 only, not " + server);
+    }
   }
   return security.validate();
 }

@@ -52,6 +52,12 @@ struct ParticipantConfig {
   std::vector<std::string> network_interfaces;
   /// kNetwork only: unicast discovery peers (IPv4 addresses), in addition to multicast.
   std::vector<std::string> initial_peers;
+  /// Fast DDS discovery servers, "IPv4:port" each (`fastdds discovery -i N -l IP -p PORT`):
+  /// non-empty makes this participant their client, so it discovers the others through them
+  /// instead of announcing itself to every peer (fleet scale, docs/fleet.md). Entry N is the
+  /// server of id N, as in ROS_DISCOVERY_SERVER. UDP transports only; with transport
+  /// 'localhost' the servers must be on 127.0.0.0/8.
+  std::vector<std::string> discovery_servers;
   /// Shared-memory segment per participant. The Fast DDS default (512 KiB) makes a 2 MB scan
   /// take ~30 ms; 32 MiB brings it under 1 ms (STACK.md).
   std::uint32_t shm_segment_bytes = 32u << 20;
