@@ -1,3 +1,9 @@
+// The executor (executor.hpp): its state (Impl), the tick (inputs, one daemon::Cycle, drops,
+// publishing, the report), clock steps, and the run loop with its timing and between-tick work.
+// Just over 600 lines because Impl's members are declared here beside the tick that uses them;
+// the window file and TSDF loading are in map_store.cpp, the tick's inputs, schedule and report
+// in tick_*.cpp, pose corrections in pose_corrections.cpp.
+
 #include "tarmac/daemon/executor.hpp"
 
 #include <algorithm>
