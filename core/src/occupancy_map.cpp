@@ -250,6 +250,7 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W, TaskRunner& runne
     min_ = target;
     placed_ = true;
     restore_static(min_, min_ + dims_ - VoxelIndex::Ones());
+    update_band();
     return;
   }
   // Axis by axis: the voxels entering along an axis occupy exactly the ring slabs of the voxels
@@ -279,8 +280,51 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W, TaskRunner& runne
       lo[a] = target[a];
       hi[a] = min_[a] - 1;
     }
+    if (a < 2 && !column_observed_ns_.empty()) {
+      // The columns leaving: never observed when they come back in.
+      const int first =
+          std::abs(shift) >= dims_[a] ? 0 : (shift > 0 ? min_[a] + dims_[a] : target[a]);
+      const int count = std::min(std::abs(shift), dims_[a]);
+      const int nx = dims_.x(), ny = dims_.y();
+      for (int k = 0; k < count; ++k) {
+        const int r = wrap(first + k, dims_[a]);
+        for (int o = 0; o < (a == 0 ? ny : nx); ++o) {
+          column_observed_ns_[static_cast<std::size_t>(a == 0 ? o * nx + r : r * nx + o)] = 0;
+        }
+      }
+    }
     min_[a] = target[a];
     restore_static(lo, hi);
+  }
+  update_band();
+}
+
+void OccupancyMap::track_column_observations(int band_lo, int band_hi) {
+  band_lo_ = std::max(0, band_lo);
+  band_hi_ = std::min(dims_.z() - 1, band_hi);
+  column_observed_ns_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(), 0);
+  in_band_.assign(static_cast<std::size_t>(dims_.z()), 0);
+  update_band();
+}
+
+void OccupancyMap::update_band() {
+  if (in_band_.empty()) return;
+  std::fill(in_band_.begin(), in_band_.end(), std::uint8_t{0});
+  for (int z = band_lo_; z <= band_hi_; ++z) {
+    in_band_[static_cast<std::size_t>(wrap(min_.z() + z, dims_.z()))] = 1;
+  }
+}
+
+void OccupancyMap::export_column_observed(std::vector<std::int64_t>& out) const {
+  const int nx = dims_.x(), ny = dims_.y();
+  out.assign(static_cast<std::size_t>(nx) * ny, 0);
+  if (column_observed_ns_.empty()) return;
+  for (int y = 0; y < ny; ++y) {
+    const std::size_t ring_row = static_cast<std::size_t>(ring_y(y)) * nx;
+    for (int x = 0; x < nx; ++x) {
+      out[static_cast<std::size_t>(y) * nx + x] =
+          column_observed_ns_[ring_row + static_cast<std::size_t>(ring_x(x))];
+    }
   }
 }
 
@@ -414,6 +458,7 @@ void OccupancyMap::reset() {
   // before the correction sits in the uncorrected frame).
   static_->clear();
   for (auto& c : candidates_) c.clear();
+  std::fill(column_observed_ns_.begin(), column_observed_ns_.end(), std::int64_t{0});
   min_ = VoxelIndex::Zero();
   placed_ = false;
 }

@@ -854,5 +854,64 @@ TEST(OccupancyMap, Deterministic_ForOneTwoAndFourThreads) {
   EXPECT_EQ(0, std::memcmp(results[0].data(), results[2].data(), results[0].size() * 4));
 }
 
+TEST(OccupancyMap, ColumnObservations_InTheBandOnly_StampedPerScan_MoveWithTheWindow) {
+  // Window 100 x 100 x 20 at 0.2 m from z = −2 m (sensor at z = 0): band = layers 0..12, i.e.
+  // z in [−2, 0.6) m. One ray along +x at z = 0.1 to x = 6 m, one climbing to (0, 3, 1.9) m: it
+  // leaves the band at y ≈ 0.8 m.
+  const std::int64_t t1 = 1'000'000'000, t2 = 2'000'000'000;
+  OccupancyMap tracked(small_params()), plain(small_params());
+  tracked.track_column_observations(0, 12);
+  const Scan scan{Eigen::Vector3d(0.1, 0.1, 0.1), {{6.1f, 0.1f, 0.1f}, {0.1f, 3.1f, 1.9f}}, {}};
+  tracked.set_observation_stamp(t1);
+  integrate(tracked, scan);
+  integrate(plain, scan);
+  std::vector<float> a, b;
+  tracked.export_log_odds(a);
+  plain.export_log_odds(b);
+  EXPECT_EQ(a, b) << "tracking changed the map";
+  std::vector<std::int64_t> seen;
+  tracked.export_column_observed(seen);
+  const VoxelIndex lo = tracked.window_min();
+  const int nx = tracked.window_size().x();
+  const auto at = [&](double x, double y) {
+    const int ix = static_cast<int>(std::floor(x / 0.2)) - lo.x();
+    const int iy = static_cast<int>(std::floor(y / 0.2)) - lo.y();
+    return seen[static_cast<std::size_t>(iy * nx + ix)];
+  };
+  EXPECT_EQ(at(0.1, 0.1), t1);  // the sensor's column
+  EXPECT_EQ(at(3.1, 0.1), t1);  // passed in the band
+  EXPECT_EQ(at(6.1, 0.1), t1);  // the return
+  EXPECT_EQ(at(0.1, 0.5), t1);  // the climbing ray still in the band (z ≈ 0.35 m)
+  EXPECT_EQ(at(0.1, 2.5), 0);   // ... passed above it (z ≈ 1.6 m)
+  EXPECT_EQ(at(0.1, 3.1), 0);   // its return at 1.9 m: above the band
+  EXPECT_EQ(at(-3.0, -3.0), 0);
+  // A second scan stamps what it observes, the rest keeps its time.
+  tracked.set_observation_stamp(t2);
+  integrate(tracked, Scan{Eigen::Vector3d(0.1, 0.1, 0.1), {{0.1f, -2.9f, 0.1f}}, {}});
+  tracked.export_column_observed(seen);
+  EXPECT_EQ(at(0.1, -2.9), t2);
+  EXPECT_EQ(at(3.1, 0.1), t1);
+  // The window moves 5 m along +x: the columns stay with the world, those entering are unseen.
+  SerialRunner runner;
+  tracked.recenter(Eigen::Vector3d(5.1, 0.1, 0.1), runner);
+  tracked.export_column_observed(seen);
+  const VoxelIndex moved = tracked.window_min();
+  ASSERT_EQ(moved.x(), lo.x() + 25);
+  const auto at2 = [&](double x, double y) {
+    const int ix = static_cast<int>(std::floor(x / 0.2)) - moved.x();
+    const int iy = static_cast<int>(std::floor(y / 0.2)) - moved.y();
+    return seen[static_cast<std::size_t>(iy * nx + ix)];
+  };
+  EXPECT_EQ(at2(3.1, 0.1), t1);
+  EXPECT_EQ(at2(6.1, 0.1), t1);
+  EXPECT_EQ(at2(14.9, 0.1), 0);  // entered now, where ring slots held columns that left
+  std::int64_t newest = 0;
+  for (std::size_t k = static_cast<std::size_t>(nx - 25); k < seen.size();
+       k += static_cast<std::size_t>(nx)) {
+    for (int j = 0; j < 25; ++j) newest = std::max(newest, seen[k + static_cast<std::size_t>(j)]);
+  }
+  EXPECT_EQ(newest, 0) << "a column that entered kept a stamp of the one that left its slots";
+}
+
 }  // namespace
 }  // namespace tarmac::core

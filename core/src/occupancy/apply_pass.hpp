@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cstdint>
 #include <cstring>
@@ -81,6 +82,28 @@ struct ApplyPass {
   float l_miss, l_min;
   std::vector<std::uint32_t>& candidates;
   std::uint64_t updates = 0;  ///< misses given (voxels at the floor count: a miss holds them)
+  /// Column observation times (OccupancyMap::track_column_observations), or nullptr: the
+  /// columns of marked voxels in band layers get `stamp`. Two tasks may store the same stamp
+  /// into one column (other layers): relaxed atomic stores.
+  std::int64_t* column_stamp = nullptr;
+  const std::uint8_t* in_band = nullptr;  ///< per ring layer
+  std::size_t plane = 0;                  ///< voxels per layer
+  std::int64_t stamp = 0;
+
+  void stamp_columns(std::size_t wi, std::uint64_t marks) {
+    const std::size_t base = wi << 6;
+    std::size_t z = base / plane;
+    std::size_t col = base - z * plane;
+    for (int bit = 0; bit < 64; ++bit, ++col) {
+      if (col == plane) {  // the word runs into the next layer
+        col = 0;
+        ++z;
+      }
+      if (((marks >> bit) & 1u) != 0 && in_band[z] != 0) {
+        std::atomic_ref<std::int64_t>(column_stamp[col]).store(stamp, std::memory_order_relaxed);
+      }
+    }
+  }
 
   /// Words whose marks need an update (not hit, not at the lower clamp), collected with their
   /// log-odds lines prefetched, then updated together: the voxels are scattered over the
@@ -99,6 +122,7 @@ struct ApplyPass {
         task_bits[t][wi] = 0;
       }
       if (m == 0) continue;
+      if (column_stamp != nullptr) stamp_columns(wi, m);
       m &= ~hit_bits[wi];
       updates += static_cast<std::uint64_t>(bit_count(m));
       m &= ~floor_bits[wi];

@@ -237,6 +237,13 @@ void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
     }
   }
   n_hit_slots_ = n_first;
+  if (!column_observed_ns_.empty()) {
+    const std::size_t plane = static_cast<std::size_t>(dims_.x()) * dims_.y();
+    for (std::size_t k = 0; k < n_first; ++k) {
+      const std::size_t z = first_hits[k] / plane;
+      if (in_band_[z] != 0) column_observed_ns_[first_hits[k] - z * plane] = observation_stamp_ns_;
+    }
+  }
   stats.hit_updates += n_first;
   stats.promotions += promotions;
 }
@@ -315,6 +322,12 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
     ApplyPass pass{task_bits,        hit_bits_.data(), floor_bits_.data(),
                    log_odds_.data(), rise_cm_.data(),  miss_lanes,
                    l_miss_,          l_min_,           candidates_[task]};
+    if (!column_observed_ns_.empty()) {
+      pass.column_stamp = column_observed_ns_.data();
+      pass.in_band = in_band_.data();
+      pass.plane = static_cast<std::size_t>(dims_.x()) * static_cast<std::size_t>(dims_.y());
+      pass.stamp = observation_stamp_ns_;
+    }
     if (flag_words) {
       pass.gather_flagged(n_blocks * task / kApplyTasks, n_blocks * (task + 1) / kApplyTasks,
                           dirty_words_);

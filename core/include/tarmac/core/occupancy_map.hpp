@@ -135,6 +135,18 @@ class OccupancyMap {
                                  TaskRunner& runner,
                                  const Eigen::Vector3d& up_W = Eigen::Vector3d::UnitZ());
 
+  /// Per window column, the time of its last observation (fleet sharing, docs/fleet.md): a
+  /// return, or a ray passing, in one of the window-relative layers [band_lo, band_hi] (the
+  /// vehicle's envelope; a ray passing high above a column does not show what is on its
+  /// ground). Off until called (no memory, no cost); changes no map value. integrate() records
+  /// the stamp of set_observation_stamp().
+  void track_column_observations(int band_lo, int band_hi);
+  /// The stamp integrate() records for the columns it observes (the scan's time, ns).
+  void set_observation_stamp(std::int64_t stamp_ns) { observation_stamp_ns_ = stamp_ns; }
+  /// Each window column's last observation time, ns (0: never, or tracking off), row-major from
+  /// the window's lowest corner like the costmap: out[y · window x + x]. Resized to fit.
+  void export_column_observed(std::vector<std::int64_t>& out) const;
+
   /// Forgets everything: every voxel unknown, the static layer empty (site-wide), the window
   /// unplaced (the next recenter() or integrate() places it), as if just constructed. Keeps the
   /// window storage; a rebuild after a pose correction starts from it.
@@ -266,6 +278,14 @@ class OccupancyMap {
   /// Large windows only: per ray task, one bit per mark word its rays marked (a word of these
   /// covers 4096 voxels), so the apply pass reads only those words.
   std::vector<std::vector<std::uint64_t>> dirty_words_;
+  /// track_column_observations(): per column in ring order, the last observation's stamp;
+  /// in_band_[ring layer] when the layer is in the band. Empty when off.
+  std::vector<std::int64_t> column_observed_ns_;
+  std::vector<std::uint8_t> in_band_;
+  int band_lo_ = 0, band_hi_ = -1;
+  std::int64_t observation_stamp_ns_ = 0;
+  /// Recomputes in_band_ for the window's current ring origin (after it moves in z).
+  void update_band();
   std::vector<std::uint32_t> hit_slots_;  ///< the first n_hit_slots_: to clear hit_bits_ after
   std::size_t n_hit_slots_ = 0;           ///< the scan
   /// Per scan: the rays in the order they are walked (by direction), their direction buckets
