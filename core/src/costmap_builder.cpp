@@ -171,7 +171,8 @@ bool polygon_contains(std::span<const Eigen::Vector2d> polygon, const Eigen::Vec
 
 void build_costmap(const OccupancyMap& map, const CostmapParams& params,
                    const Eigen::Isometry3d& T_W_B, std::span<const VirtualZone> zones,
-                   std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner) {
+                   std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner,
+                   CostmapPeers* peers) {
   using namespace costmap;  // NOLINT(google-build-using-namespace): the steps, in order
   const double v = map.params().voxel_size_m;
   const Eigen::Vector3i dims = map.window_size();
@@ -207,6 +208,7 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   reject_non_ground(pass, plane);
   fill_ground_gaps(pass, plane);
   classify_columns(pass);
+  if (peers != nullptr && peers->peers != nullptr) fuse_peers(pass, *peers);
   add_virtual_zones(pass, zones, stamp_ns);
   inflate(pass);
 }

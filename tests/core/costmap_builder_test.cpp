@@ -88,6 +88,49 @@ TEST_F(Envelope, WingAboveVehicleDoesNotBlock_ConeOnGroundDoes) {
   EXPECT_NEAR(layers_.ground_z_m.at(80, 80), 0.1, 1e-6);  // centre of the ground voxel [0, 0.2)
 }
 
+TEST_F(Envelope, Peers_FillWhatThisVehicleDidNotSee_InflatedLikeItsOwn_OwnNewerCellsKept) {
+  constexpr std::int64_t kS = 1'000'000'000;
+  const std::int64_t t_own = 100 * kS;
+  map_.track_column_observations(0, 30);
+  map_.set_observation_stamp(t_own);
+  scan({});  // the apron within 12 m: free, observed at t_own
+  // A peer's cells on the same lattice: occupied and free beyond this vehicle's 12 m, occupied
+  // where this vehicle saw free later than the peer, and occupied where the peer saw it later.
+  const GridGeometry2D g{-16.0, -16.0, 0.2, 160, 160};
+  std::vector<BevState> state(g.cell_count(), BevState::kUnknown);
+  std::vector<std::int64_t> seen(g.cell_count(), 0);
+  const auto put = [&](double x, double y, BevState s, std::int64_t t) {
+    const auto c = g.cell_of(x, y);
+    state[c->y() * 160 + c->x()] = s;
+    seen[c->y() * 160 + c->x()] = t;
+  };
+  put(14.1, 0.1, BevState::kOccupied, t_own);
+  put(14.1, 0.7, BevState::kFree, t_own);
+  put(14.1, 5.1, BevState::kFree, t_own);
+  put(6.1, 6.1, BevState::kOccupied, t_own - kS);
+  put(-6.1, -6.1, BevState::kOccupied, t_own + kS);
+  BevEncoder peer("tug-b", 0.2);
+  BevPeers peers("tug-a", 0.2, 10 * kS);
+  ASSERT_TRUE(peers.apply(peer.encode({g, state, seen}, t_own + kS, true, 10 * kS), t_own + kS));
+  std::vector<std::int64_t> own;
+  map_.export_column_observed(own);
+  CostmapPeers fleet{&peers, own, t_own + kS, {}};
+  SerialRunner runner;
+  build_costmap(map_, params(), Eigen::Isometry3d::Identity(), {}, 0, layers_, runner, &fleet);
+  EXPECT_EQ(cost_at(14.1, 0.1), kCostLethal) << "a peer's obstacle where this vehicle saw nothing";
+  EXPECT_EQ(cost_at(14.1, 0.7), kCostInscribed) << "inflated like one's own (free, 0.6 m away)";
+  EXPECT_EQ(cost_at(14.1, 1.3), kCostUnknown) << "unknown to everyone";
+  EXPECT_EQ(cost_at(14.1, 5.1), kCostFree);
+  EXPECT_EQ(cost_at(6.1, 6.1), kCostFree) << "this vehicle's newer observation is kept";
+  EXPECT_EQ(cost_at(-6.1, -6.1), kCostLethal) << "the peer's newer observation wins";
+  EXPECT_EQ(fleet.counts.cells, 4u);
+  EXPECT_EQ(fleet.counts.occupied, 2u);
+  EXPECT_EQ(fleet.counts.cells_by_peer.at("tug-b"), 4u);
+  build();  // no peers
+  EXPECT_EQ(cost_at(14.1, 0.1), kCostUnknown);
+  EXPECT_EQ(cost_at(-6.1, -6.1), kCostFree);
+}
+
 TEST_F(Envelope, LowStructureInsideEnvelopeBlocks) {
   std::vector<Eigen::Vector3f> extra;
   box(extra, {4.0f, -1.0f, 2.0f}, {5.0f, 1.0f, 2.2f});  // a beam at 2 m: below 2.8 m

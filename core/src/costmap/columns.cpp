@@ -273,4 +273,12 @@ void classify_columns(const CostmapPass& pass) {
   });
 }
 
+void fuse_peers(const CostmapPass& pass, CostmapPeers& peers) {
+  auto& out = pass.out;
+  std::span<std::uint8_t> classes(out.column_class.cells());
+  peers.counts = peers.peers->fuse(pass.geometry, peers.own_observed_ns, peers.now_ns, classes);
+  if (peers.counts.cells == 0) return;
+  for (std::size_t i = 0; i < classes.size(); ++i) out.esdf_input[i] = esdf_state(classes[i]);
+}
+
 }  // namespace tarmac::core::costmap

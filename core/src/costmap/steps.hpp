@@ -89,5 +89,8 @@ void fill_ground_gaps(const CostmapPass& pass, const GroundPlane& plane);
 /// 6. Every column's ground and class against the vehicle's envelope: out.ground_layer,
 ///    out.ground_z_m, out.column_class, out.esdf_input.
 void classify_columns(const CostmapPass& pass);
+/// 6b. Peers' cells where this vehicle's are unknown or older (BevPeers::fuse, the fleet's
+///     rules): out.column_class and out.esdf_input of the cells they fill.
+void fuse_peers(const CostmapPass& pass, CostmapPeers& peers);
 
 }  // namespace tarmac::core::costmap

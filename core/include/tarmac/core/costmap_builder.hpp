@@ -16,6 +16,7 @@
 #include <Eigen/Geometry>
 
 #include "tarmac/core/distance_field.hpp"
+#include "tarmac/core/fleet_bev.hpp"
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/result.hpp"
@@ -110,13 +111,26 @@ struct CostmapLayers {
   std::vector<std::uint16_t> ground_scan;  ///< per cell: scan of those returns
 };
 
+/// Peers' bird's-eye cells to fuse into the column classes, before the virtual zones and the
+/// inflation (fleet sharing, docs/fleet.md).
+struct CostmapPeers {
+  const BevPeers* peers = nullptr;
+  /// Each costmap cell's own last observation time, ns, row-major (OccupancyMap::
+  /// export_column_observed); 0: never.
+  std::span<const std::int64_t> own_observed_ns;
+  std::int64_t now_ns = 0;
+  BevFusionCounts counts;  ///< what the fusion did (set by build_costmap)
+};
+
 /// Builds the costmap of the occupancy window at the window's horizontal resolution.
 /// @param T_W_B vehicle base pose: its xy plane is the ground prior (and the fallback ground
 /// where nothing was seen), so tilted world frames work.
 /// @param stamp_ns current time, for zone expiry only.
+/// @param peers when given (and its `peers` set): the peers' cells fused into the classes.
 void build_costmap(const OccupancyMap& map, const CostmapParams& params,
                    const Eigen::Isometry3d& T_W_B, std::span<const VirtualZone> zones,
-                   std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner);
+                   std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner,
+                   CostmapPeers* peers = nullptr);
 
 /// Nav2 inflation cost (0..254 scale: 254 lethal, 253 inscribed) at a distance from an obstacle.
 std::uint8_t nav2_cost(double distance_m, const CostmapParams& params);
