@@ -208,7 +208,10 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   reject_non_ground(pass, plane);
   fill_ground_gaps(pass, plane);
   classify_columns(pass);
-  if (peers != nullptr && peers->peers != nullptr) fuse_peers(pass, *peers);
+  if (peers != nullptr) {
+    out.own_column_class.assign(out.column_class.cells().begin(), out.column_class.cells().end());
+    if (peers->peers != nullptr) fuse_peers(pass, *peers);
+  }
   add_virtual_zones(pass, zones, stamp_ns);
   inflate(pass);
 }

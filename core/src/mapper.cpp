@@ -174,6 +174,7 @@ std::size_t Mapper::top_up_tsdf_spares(std::size_t max_blocks) {
 OccupancyUpdateStats Mapper::integrate(const FilteredScan& scan, TaskRunner& runner) {
   TARMAC_ASSERT(is_last_ingested(scan), "Mapper::integrate takes the last ingest()'s scan");
   map_.recenter(scan.T_W_B.translation(), runner);
+  map_.set_observation_stamp(scan.stamp_ns);
   return map_.integrate(scan.sensor_W, scan.points_W, scan.clearing_W, runner,
                         scan.T_W_B.linear().col(2));
 }
@@ -204,6 +205,42 @@ const CostmapLayers& Mapper::update_costmap(std::span<const VirtualZone> zones,
                                             std::int64_t stamp_ns, TaskRunner& runner) {
   build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner);
   return layers_;
+}
+
+void Mapper::track_fleet_observations() {
+  const double v = params_.occupancy.voxel_size_m;
+  const double below = params_.occupancy.window_below_m;
+  const CostmapParams& c = params_.costmap;
+  map_.track_column_observations(
+      static_cast<int>(std::floor((below - c.ground_tolerance_m) / v)),
+      static_cast<int>(std::floor((below + c.vehicle_height_m + c.clearance_m) / v)));
+}
+
+const CostmapLayers& Mapper::update_costmap(std::span<const VirtualZone> zones,
+                                            std::int64_t stamp_ns, TaskRunner& runner,
+                                            const BevPeers* peers, BevFusionCounts& counts) {
+  map_.export_column_observed(column_observed_);
+  CostmapPeers fleet{peers, column_observed_, stamp_ns, {}};
+  build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner, &fleet);
+  counts = std::move(fleet.counts);
+  return layers_;
+}
+
+BevSnapshot Mapper::fleet_snapshot() {
+  const std::vector<std::uint8_t>& own = layers_.own_column_class;
+  const GridGeometry2D& g = layers_.costmap.geometry();
+  if (own.size() != g.cell_count() || column_observed_.size() != g.cell_count()) {
+    // No update_costmap() with peers yet: nothing of one's own to share.
+    return BevSnapshot{GridGeometry2D{0.0, 0.0, params_.occupancy.voxel_size_m, 0, 0}, {}, {}};
+  }
+  own_cells_.resize(own.size());
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    const auto c = static_cast<ColumnClass>(own[i]);
+    own_cells_[i] = c == ColumnClass::kFree       ? BevState::kFree
+                    : c == ColumnClass::kObstacle ? BevState::kOccupied
+                                                  : BevState::kUnknown;
+  }
+  return BevSnapshot{g, own_cells_, column_observed_};
 }
 
 const EsdfBand& Mapper::update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,

@@ -4,10 +4,15 @@
 
 #include "tarmac/core/fleet_bev.hpp"
 
+#include <cmath>
+
 #include <gtest/gtest.h>
 
 #include <random>
 #include <vector>
+
+#include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/core/mapper.hpp"
 
 namespace tarmac::core {
 namespace {
@@ -319,6 +324,85 @@ TEST(FleetBevFusion, TileByTile_EqualsTheRulesAppliedThroughLookup) {
   EXPECT_EQ(cls, want);
   EXPECT_EQ(n.cells, filled);
   EXPECT_GT(filled, 1000u);
+}
+
+/// A ring wall 6 m round a sensor 1.8 m up, and the ground inside it.
+PointCloud ring_scan(std::int64_t stamp_ns) {
+  PointCloud cloud;
+  cloud.stamp_ns = stamp_ns;
+  for (int i = 0; i < 3000; ++i) {
+    const float a = 2.0f * static_cast<float>(M_PI) * static_cast<float>(i) / 3000.0f;
+    for (float z = -1.7f; z < 0.7f; z += 0.3f) {
+      cloud.points_S.emplace_back(6.0f * std::cos(a), 6.0f * std::sin(a), z);
+    }
+    for (float r = 1.0f; r < 6.0f; r += 0.5f) {
+      cloud.points_S.emplace_back(r * std::cos(a), r * std::sin(a), -1.8f);
+    }
+  }
+  return cloud;
+}
+
+TEST(FleetBevMapper, BSeesTheWallOnlyASaw_BsOwnCellsKeepTheirClasses) {
+  constexpr std::int64_t kT = 1'000'000'000;
+  MapperParams params;
+  params.costmap.free_rule = FreeRule::kAnyVoxel;  // no sky beams in this scan
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.translation().z() = 1.8;
+  const auto base_at = [](double x) {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.translation().x() = x;
+    return T;
+  };
+  SerialRunner runner;
+  const auto run = [&](Mapper& m, double x, const BevPeers* peers, BevFusionCounts& counts) {
+    m.track_fleet_observations();
+    m.integrate(m.ingest(ring_scan(kT), base_at(x), T_B_S), runner);
+    m.update_costmap({}, kT, runner, peers, counts);
+  };
+  // A at x = 0 sees its ring; its summary goes to B at x = 20 m (A's ring is inside B's 80 m
+  // window but beyond what B's own ring shows it).
+  Mapper a(params), b(params), b_alone(params);
+  BevFusionCounts counts;
+  run(a, 0.0, nullptr, counts);
+  BevEncoder enc("tug-a", params.occupancy.voxel_size_m);
+  const BevMessage m = enc.encode(a.fleet_snapshot(), kT, true, 10 * kT);
+  EXPECT_GE(m.tiles.size(), 4u);  // the 12 m ring over 6.4 m tiles
+  BevPeers peers("tug-b", params.occupancy.voxel_size_m, 10 * kT);
+  ASSERT_TRUE(peers.apply(m, kT).ok());
+  run(b, 20.0, &peers, counts);
+  BevFusionCounts none;
+  run(b_alone, 20.0, nullptr, none);
+  EXPECT_GT(counts.cells, 1000u);
+  EXPECT_GT(counts.occupied, 100u);
+  EXPECT_EQ(none.cells, 0u);
+  const Costmap& fused = b.costmap().costmap;
+  const Costmap& alone = b_alone.costmap().costmap;
+  const auto cost = [](const Costmap& c, double x, double y) {
+    const auto cell = c.geometry().cell_of(x, y);
+    return c.at(static_cast<std::uint32_t>(cell->x()), static_cast<std::uint32_t>(cell->y()));
+  };
+  EXPECT_EQ(cost(fused, 6.0, 0.1), kCostLethal) << "A's wall, east of A";
+  EXPECT_EQ(cost(alone, 6.0, 0.1), kCostUnknown);
+  EXPECT_EQ(cost(fused, 1.5, 0.1), kCostFree) << "A's ground, beyond the wall's inflation";
+  EXPECT_EQ(cost(alone, 1.5, 0.1), kCostUnknown);
+  // Every cell B observed itself keeps B's own class.
+  const auto& cls_alone = b_alone.costmap().column_class.cells();
+  const auto& cls_fused = b.costmap().column_class.cells();
+  ASSERT_EQ(cls_fused.size(), cls_alone.size());
+  std::size_t compared = 0;
+  for (std::size_t i = 0; i < cls_alone.size(); ++i) {
+    if (cls_alone[i] == static_cast<std::uint8_t>(ColumnClass::kUnknown)) continue;
+    ASSERT_EQ(cls_fused[i], cls_alone[i]) << i;
+    ++compared;
+  }
+  EXPECT_GT(compared, 2000u);  // B's ring: ~113 m² of 0.04 m² cells
+  // B's own summary carries B's observations only, never what A told it.
+  BevPeers c("tug-c", params.occupancy.voxel_size_m, 10 * kT);
+  BevEncoder enc_b("tug-b", params.occupancy.voxel_size_m);
+  ASSERT_TRUE(c.apply(enc_b.encode(b.fleet_snapshot(), kT, true, 10 * kT), kT).ok());
+  const double r = params.occupancy.voxel_size_m;
+  EXPECT_EQ(c.lookup(static_cast<std::int64_t>(std::floor(6.0 / r)), 0).vehicle_id, nullptr);
+  EXPECT_NE(c.lookup(static_cast<std::int64_t>(std::floor(26.0 / r)), 0).vehicle_id, nullptr);
 }
 
 }  // namespace

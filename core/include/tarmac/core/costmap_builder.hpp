@@ -109,12 +109,17 @@ struct CostmapLayers {
   /// 32..63 in the second).
   std::vector<std::uint32_t> occupied_bits, known_bits;
   std::vector<std::uint16_t> ground_scan;  ///< per cell: scan of those returns
+  /// The column classes as this vehicle's own observations made them, before peers' cells and
+  /// virtual zones (filled when build_costmap is given a CostmapPeers): what a fleet summary
+  /// shares, never what it was told.
+  std::vector<std::uint8_t> own_column_class;
 };
 
 /// Peers' bird's-eye cells to fuse into the column classes, before the virtual zones and the
-/// inflation (fleet sharing, docs/fleet.md).
+/// inflation (fleet sharing, docs/fleet.md). Given, it also keeps the own classes
+/// (CostmapLayers::own_column_class), peers or not.
 struct CostmapPeers {
-  const BevPeers* peers = nullptr;
+  const BevPeers* peers = nullptr;  ///< nullptr: none to fuse (yet)
   /// Each costmap cell's own last observation time, ns, row-major (OccupancyMap::
   /// export_column_observed); 0: never.
   std::span<const std::int64_t> own_observed_ns;

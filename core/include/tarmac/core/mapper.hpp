@@ -111,6 +111,20 @@ class Mapper {
   /// pose of the last ingested scan; returns them.
   const CostmapLayers& update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                                       TaskRunner& runner);
+  /// Fleet sharing (docs/fleet.md): from now on the window records each column's last
+  /// observation in the vehicle's envelope (from ground_tolerance_m below the base to
+  /// vehicle_height_m + clearance_m above it), stamped with the scans' stamps.
+  void track_fleet_observations();
+  /// Stage 3 with peers' cells fused into the classes before inflation (BevPeers::fuse rules);
+  /// `peers` may hold none yet. @pre track_fleet_observations() was called.
+  const CostmapLayers& update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+                                      TaskRunner& runner, const BevPeers* peers,
+                                      BevFusionCounts& counts);
+  /// This vehicle's own cells of the last update_costmap() with peers, for its fleet summary:
+  /// the classes before peers and zones, each with its last observation time. Views into the
+  /// mapper, valid until its next stage call.
+  BevSnapshot fleet_snapshot();
+
   /// Stage 3b: the 3D ESDF band (esdf_band.hpp) from the window and the costmap of the last
   /// update_costmap() call; returns it (unchanged when esdf_band.enabled is false).
   const EsdfBand& update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
@@ -200,6 +214,8 @@ class Mapper {
   std::vector<Eigen::Vector3f> rebuild_points_W_;
   CorrectionStats correction_stats_;
   CostmapLayers layers_;
+  std::vector<std::int64_t> column_observed_;  ///< fleet: own observation times, costmap order
+  std::vector<BevState> own_cells_;            ///< fleet: the snapshot's states
   EsdfBand band_;
   std::vector<Eigen::Vector3f> points_W_;
   std::vector<Eigen::Vector3f> clearing_W_;  ///< the last scan's beams without return, world
