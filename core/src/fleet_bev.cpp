@@ -69,6 +69,30 @@ Error refused(const std::string& code, const std::string& message) {
 
 }  // namespace
 
+std::size_t bev_wire_bytes(const BevMessage& m, std::size_t frame_id_length) {
+  std::size_t at = 0;  // offset in the CDR body (alignment counts from its start)
+  const auto align = [&](std::size_t n) { at = (at + n - 1) / n * n; };
+  const auto string = [&](std::size_t length) {
+    align(4);
+    at += 4 + length + 1;  // length (with the terminator), characters, terminator
+  };
+  at += 8;  // header.stamp: int32 sec, uint32 nanosec
+  string(frame_id_length);
+  string(m.vehicle_id.size());
+  align(4);
+  at += 4;  // sequence_number
+  at += 1;  // keyframe
+  align(8);
+  at += 8;  // resolution
+  align(4);
+  at += 4;  // tiles: count
+  for (const BevTile& t : m.tiles) {
+    align(4);
+    at += 4 + 4 + 4 + t.runs.size();  // x, y, runs: count and bytes
+  }
+  return 4 + at;  // encapsulation header
+}
+
 std::int64_t bev_lattice_index(double origin_m, double resolution_m) {
   return std::llround(origin_m / resolution_m);
 }

@@ -63,10 +63,18 @@ const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud, const Eigen:
   return r;
 }
 
+void Cycle::share_with_fleet(const core::BevPeers* peers) {
+  if (!fleet_) mapper_.track_fleet_observations();
+  fleet_ = true;
+  peers_ = peers;
+}
+
 const core::CostmapLayers& Cycle::update_costmap(std::span<const core::VirtualZone> zones,
                                                  std::int64_t stamp_ns) {
   const auto t0 = Clock::now();
-  const core::CostmapLayers& layers = mapper_.update_costmap(zones, stamp_ns, runner_);
+  const core::CostmapLayers& layers =
+      fleet_ ? mapper_.update_costmap(zones, stamp_ns, runner_, peers_, fleet_counts_)
+             : mapper_.update_costmap(zones, stamp_ns, runner_);
   tick_.costmap_ms += ms_between(t0, Clock::now());
   return layers;
 }

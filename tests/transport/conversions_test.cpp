@@ -278,6 +278,13 @@ TEST(FleetBev, RoundTripsEveryField_RefusesAnotherFrameAndABadResolution) {
   EXPECT_EQ(back.value().keyframe, m.keyframe);
   EXPECT_EQ(back.value().resolution_m, m.resolution_m);
   EXPECT_EQ(back.value().tiles, m.tiles);
+  // The core's wire size (for traffic figures) is Fast DDS's CDR size plus the encapsulation.
+  EXPECT_EQ(core::bev_wire_bytes(m, 3), 4 + FleetBevMsg::getCdrSerializedSize(msg));
+  core::BevMessage odd = m;
+  odd.vehicle_id = "t";
+  odd.tiles[0].runs.assign(5, 1);
+  EXPECT_EQ(core::bev_wire_bytes(odd, 7),
+            4 + FleetBevMsg::getCdrSerializedSize(to_fleet_bev(odd, "map_xyz")));
   EXPECT_EQ(from_fleet_bev(msg, "odom").error().code, "fleet.frame");
   FleetBevMsg bad = msg;
   bad.resolution(std::nan(""));

@@ -41,6 +41,7 @@ struct Options {
   std::size_t threads = 2;
   std::size_t max_scans = 0;  // 0: all
   double sensor_height_m = 1.9;
+  double fleet_period_s = 0.0;  ///< > 0: encode a fleet summary this often, report its bytes
 };
 
 struct StageTimes {
@@ -77,6 +78,8 @@ struct Run {
   std::uint64_t jump_corrections = 0;
   std::size_t next_correction = 0;  ///< --corrections applied so far
   std::size_t rebuild_steps_after_end = 0;
+  /// --fleet-period: each summary's wire bytes and whether it was a keyframe.
+  std::vector<std::pair<std::size_t, bool>> fleet_messages;
 };
 
 /// Reads and checks everything the run needs before any work is done: the config, the sequence,
@@ -196,6 +199,23 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
   core::PoseJumpDetector jumps(params.corrections);
   Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
   T_B_S.translation().z() = opt.sensor_height_m;
+  // --fleet-period: this vehicle's summaries as tarmacd would send them (a keyframe every
+  // kKeyframeEvery messages), to measure their bytes; no peers.
+  constexpr std::size_t kKeyframeEvery = 10;
+  std::optional<core::BevEncoder> fleet;
+  std::int64_t next_summary_ns = std::numeric_limits<std::int64_t>::min();
+  if (opt.fleet_period_s > 0.0) {
+    cycle.share_with_fleet(nullptr);
+    fleet.emplace("vehicle", params.occupancy.voxel_size_m);
+  }
+  const auto send_summary = [&](core::BevEncoder& enc, std::int64_t stamp_ns) {
+    if (stamp_ns < next_summary_ns) return;
+    next_summary_ns = stamp_ns + static_cast<std::int64_t>(opt.fleet_period_s * 1e9);
+    const bool keyframe = enc.next_sequence() % kKeyframeEvery == 0;
+    const core::BevMessage m = enc.encode(mapper.fleet_snapshot(), stamp_ns, keyframe,
+                                          static_cast<std::int64_t>(cfg.fleet.max_age_s * 1e9));
+    run.fleet_messages.emplace_back(core::bev_wire_bytes(m, cfg.outputs.frame_id.size()), keyframe);
+  };
   // The corrected trajectories published after the scans before scan `k`.
   const auto apply_corrections_before = [&](std::size_t k) {
     while (run.next_correction < in.corrections.size() &&
@@ -247,6 +267,7 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     if (r.rebuild.scans > 0)
       run.rebuild_ms.push_back(r.rebuild_ms);  // not the steps waiting to start
     cycle.update_costmap({}, cloud.stamp_ns);
+    if (fleet) send_summary(*fleet, cloud.stamp_ns);
     // The 3D band (esdf_band.enabled), every scan as the daemon does every cycle.
     cycle.update_esdf_band({}, cloud.stamp_ns);
     const double f_ms = r.ingest_ms, o_ms = r.integrate_ms, tsdf_ms = r.tsdf_ms;
@@ -400,6 +421,38 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     std::printf("%s\n", tools::safety_summary(in.safety->report()).c_str());
     timing["safety"] = tools::safety_json(*in.safety);
   }
+  if (!run.fleet_messages.empty()) {
+    // Each message stands for one period: bytes per second over the messages' periods.
+    std::size_t total = 0, keyframes = 0, key_bytes = 0, key_max = 0, change_bytes = 0,
+                change_max = 0;
+    for (const auto& [bytes, keyframe] : run.fleet_messages) {
+      total += bytes;
+      if (keyframe) {
+        ++keyframes;
+        key_bytes += bytes;
+        key_max = std::max(key_max, bytes);
+      } else {
+        change_bytes += bytes;
+        change_max = std::max(change_max, bytes);
+      }
+    }
+    const std::size_t n = run.fleet_messages.size(), changes = n - keyframes;
+    const double per_s =
+        static_cast<double>(total) / (static_cast<double>(n) * opt.fleet_period_s) / 1024.0;
+    std::printf(
+        "fleet summary every %.2f s: %zu messages (%zu keyframes, mean %.1f KiB, max %.1f KiB; "
+        "%zu change messages, mean %.1f KiB, max %.1f KiB) -> %.1f KiB/s per vehicle\n",
+        opt.fleet_period_s, n, keyframes,
+        keyframes > 0 ? static_cast<double>(key_bytes) / keyframes / 1024.0 : 0.0,
+        static_cast<double>(key_max) / 1024.0, changes,
+        changes > 0 ? static_cast<double>(change_bytes) / changes / 1024.0 : 0.0,
+        static_cast<double>(change_max) / 1024.0, per_s);
+    timing["fleet"] = {{"period_s", opt.fleet_period_s},
+                       {"messages", n},
+                       {"keyframes", keyframes},
+                       {"bytes", total},
+                       {"kib_per_s", per_s}};
+  }
   if (auto w = tools::write_json(std::filesystem::path(opt.out) / "timing.json", timing); !w) {
     std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
     return kExitIo;
@@ -499,6 +552,11 @@ int main(int argc, char** argv) {
       ->transform(cli::number<double>());
   app.add_option("--prior", opt.prior, "a tsdf.vdb from an earlier run: writes changes.npy/.png")
       ->check(CLI::ExistingFile);
+  app.add_option("--fleet-period", opt.fleet_period_s,
+                 "encode this vehicle's fleet summary every S seconds of scan time (a keyframe "
+                 "every 10th) and report its bytes per second (docs/fleet.md); 0: off")
+      ->type_name("S")
+      ->transform(cli::non_negative<double>());
   app.add_option("--corrections", opt.corrections,
                  "corrected trajectories: lines 'K stamp_s' + 12 numbers of T_world_sensor (as "
                  "poses.txt); the lines of one K form one correction, applied after scan K "

@@ -178,6 +178,12 @@ class BevPeers {
   std::map<std::string, BevPeerStats> stats_;
 };
 
+/// The bytes of `message` on the wire as tarmac_msgs/FleetBev in a frame named with
+/// `frame_id_length` characters: its CDR serialisation (XCDR1, little endian, 4-byte
+/// encapsulation header), without the RTPS and UDP headers around it. For the fleet's traffic
+/// figures; a transport test checks it against Fast DDS's own size.
+std::size_t bev_wire_bytes(const BevMessage& message, std::size_t frame_id_length);
+
 /// Lattice index of a cell coordinate of a lattice-aligned geometry's origin (origin / r).
 std::int64_t bev_lattice_index(double origin_m, double resolution_m);
 

@@ -67,6 +67,13 @@ class Cycle {
   /// pose at the scan's stamp; `motion`: for deskewing (null: none).
   const ScanResult& scan(const core::PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                          const Eigen::Isometry3d& T_B_S, const core::ScanMotion* motion = nullptr);
+  /// Fleet sharing (docs/fleet.md): from now on the window records its columns' observation
+  /// times, and update_costmap() fuses `peers`' cells (null: none) and keeps the own classes
+  /// for Mapper::fleet_snapshot().
+  void share_with_fleet(const core::BevPeers* peers);
+  /// What the last update_costmap() took from peers.
+  [[nodiscard]] const core::BevFusionCounts& fleet_counts() const { return fleet_counts_; }
+
   /// The costmap and the 2D ESDF from the window, once per tick (when something changed).
   const core::CostmapLayers& update_costmap(std::span<const core::VirtualZone> zones,
                                             std::int64_t stamp_ns);
@@ -84,6 +91,9 @@ class Cycle {
   Quotas quotas_;
   Tick tick_;
   ScanResult last_;
+  bool fleet_ = false;
+  const core::BevPeers* peers_ = nullptr;
+  core::BevFusionCounts fleet_counts_;
 };
 
 }  // namespace tarmac::daemon
