@@ -77,6 +77,25 @@ void expect_peer_holds(const BevPeers& peers, const Cells& c, const std::string&
   }
 }
 
+/// tug-a's random cells and encoder, and tug-b's store of what tug-a sends.
+struct Link {
+  Cells a;
+  BevEncoder enc{"tug-a", kRes};
+  BevPeers peers{"tug-b", kRes, kMaxAge};
+  Link(unsigned seed, std::int64_t t0, std::int64_t i0, std::int64_t j0, std::uint32_t w,
+       std::uint32_t h)
+      : a([&] {
+          std::mt19937 rng(seed);
+          return random_cells(rng, i0, j0, w, h, t0);
+        }()) {}
+  /// A keyframe of `a` at `t`, applied by tug-b at `t`; returns it.
+  BevMessage sync(std::int64_t t) {
+    BevMessage m = enc.encode(a.snapshot(), t, true, kMaxAge);
+    EXPECT_TRUE(peers.apply(m, t).ok());
+    return m;
+  }
+};
+
 TEST(FleetBev, KeyframeRoundTrip_EveryCellAsSent_AcrossNegativeTilesAndThe16BitWrap) {
   std::mt19937 rng(3);
   // Stamped just after the 16-bit decisecond counter wraps: older cells are before it.
@@ -93,13 +112,10 @@ TEST(FleetBev, KeyframeRoundTrip_EveryCellAsSent_AcrossNegativeTilesAndThe16BitW
 }
 
 TEST(FleetBev, ChangeMessages_CarryOnlyTheTilesThatChanged) {
-  std::mt19937 rng(5);
   const std::int64_t t0 = 1000 * kSecond;
-  Cells a = random_cells(rng, 0, 0, 200, 200, t0);
-  BevEncoder enc("tug-a", kRes);
-  BevPeers peers("tug-b", kRes, kMaxAge);
-  const BevMessage key = enc.encode(a.snapshot(), t0, true, kMaxAge);
-  ASSERT_TRUE(peers.apply(key, t0).ok());
+  Link link(5, t0, 0, 0, 200, 200);
+  auto& [a, enc, peers] = link;
+  link.sync(t0);
   // Nothing changed: nothing sent.
   const BevMessage same = enc.encode(a.snapshot(), t0 + kSecond, false, kMaxAge);
   EXPECT_TRUE(same.tiles.empty());
@@ -124,11 +140,9 @@ TEST(FleetBev, ChangeMessages_CarryOnlyTheTilesThatChanged) {
 }
 
 TEST(FleetBev, ALostChangeMessage_IgnoresChangesUntilTheNextKeyframe) {
-  std::mt19937 rng(7);
   const std::int64_t t0 = 500 * kSecond;
-  Cells a = random_cells(rng, 10, 10, 64, 64, t0);
-  BevEncoder enc("tug-a", kRes);
-  BevPeers peers("tug-b", kRes, kMaxAge);
+  Link link(7, t0, 10, 10, 64, 64);
+  auto& [a, enc, peers] = link;
   // A change message before any keyframe: a late joiner waits.
   a.set(0, 0, BevState::kOccupied, t0);
   (void)enc.encode(a.snapshot(), t0, true, kMaxAge);  // lost: the late joiner never saw it
@@ -157,13 +171,10 @@ TEST(FleetBev, ALostChangeMessage_IgnoresChangesUntilTheNextKeyframe) {
 }
 
 TEST(FleetBev, BadStaleFutureAndForeignMessages_AreRefusedCountedAndChangeNothing) {
-  std::mt19937 rng(9);
   const std::int64_t t0 = 300 * kSecond;
-  const Cells a = random_cells(rng, 0, 0, 40, 40, t0);
-  BevEncoder enc("tug-a", kRes);
-  BevPeers peers("tug-b", kRes, kMaxAge);
-  const BevMessage good = enc.encode(a.snapshot(), t0, true, kMaxAge);
-  ASSERT_TRUE(peers.apply(good, t0).ok());
+  Link link(9, t0, 0, 0, 40, 40);
+  auto& [a, enc, peers] = link;
+  const BevMessage good = link.sync(t0);
   const auto refused = [&](BevMessage m, std::int64_t now, const std::string& code) {
     const auto r = peers.apply(m, now);
     ASSERT_FALSE(r.ok()) << code;
