@@ -63,6 +63,15 @@ bool encode_tile(std::span<const BevCell, kBevTileCells> cells, std::vector<std:
   return known;
 }
 
+/// The rule between peers: `c` replaces `best` (null: none yet) when it was observed later, or
+/// at the same time and occupied where `best` is not. Peers are visited in vehicle id order, so
+/// remaining ties go to the smaller id.
+bool fresher(const BevCell& c, const BevCell* best) {
+  return best == nullptr || c.observed_ns > best->observed_ns ||
+         (c.observed_ns == best->observed_ns && c.state == BevState::kOccupied &&
+          best->state != BevState::kOccupied);
+}
+
 Error refused(const std::string& code, const std::string& message) {
   return Error{"fleet." + code, message};
 }
@@ -287,10 +296,7 @@ BevPeerCell BevPeers::lookup(std::int64_t i, std::int64_t j) const {
     if (it == peer.tiles.end()) continue;
     const BevCell& c = it->second[offset];
     if (c.state == BevState::kUnknown) continue;
-    const bool newer = best.vehicle_id == nullptr || c.observed_ns > best.cell.observed_ns ||
-                       (c.observed_ns == best.cell.observed_ns && c.state == BevState::kOccupied &&
-                        best.cell.state != BevState::kOccupied);
-    if (newer) best = BevPeerCell{c, &id};
+    if (fresher(c, best.vehicle_id == nullptr ? nullptr : &best.cell)) best = BevPeerCell{c, &id};
   }
   return best;
 }
@@ -343,9 +349,7 @@ BevFusionCounts BevPeers::fuse(const GridGeometry2D& g,
           for (const Held& p : held) {
             const BevCell& c = (*p.cells)[offset];
             if (c.state == BevState::kUnknown || c.observed_ns < oldest) continue;
-            if (best == nullptr || c.observed_ns > best->observed_ns ||
-                (c.observed_ns == best->observed_ns && c.state == BevState::kOccupied &&
-                 best->state != BevState::kOccupied)) {
+            if (fresher(c, best)) {
               best = &c;
               best_id = p.id;
             }

@@ -91,17 +91,16 @@ struct ApplyPass {
   std::int64_t stamp = 0;
 
   void stamp_columns(std::size_t wi, std::uint64_t marks) {
+    // One division per word; a word may run into the next layer (then its column wraps to 0).
     const std::size_t base = wi << 6;
-    std::size_t z = base / plane;
-    std::size_t col = base - z * plane;
-    for (int bit = 0; bit < 64; ++bit, ++col) {
-      if (col == plane) {  // the word runs into the next layer
-        col = 0;
-        ++z;
-      }
-      if (((marks >> bit) & 1u) != 0 && in_band[z] != 0) {
-        std::atomic_ref<std::int64_t>(column_stamp[col]).store(stamp, std::memory_order_relaxed);
-      }
+    const std::size_t z = base / plane;
+    const std::size_t col0 = base - z * plane;
+    for (; marks != 0; marks &= marks - 1) {
+      const auto bit = static_cast<std::size_t>(std::countr_zero(marks));
+      const bool next_layer = col0 + bit >= plane;
+      if (in_band[z + (next_layer ? 1 : 0)] == 0) continue;
+      const std::size_t col = next_layer ? col0 + bit - plane : col0 + bit;
+      std::atomic_ref<std::int64_t>(column_stamp[col]).store(stamp, std::memory_order_relaxed);
     }
   }
 
