@@ -157,6 +157,7 @@ class Executor::Impl {
   void on_clock_step(std::int64_t step_ns, std::int64_t tick_time_ns);
   /// The report's input ages at this tick: each sensor's newest scan, then the pose stream.
   void fill_input_ages(transport::CycleReport& report) const;
+  [[nodiscard]] double age_at_tick_ms(std::int64_t stamp_ns) const;
   /// The DiagnosticArray from this tick's facts (every outputs.diagnostic_array_every ticks).
   void publish_diagnostics(const double* stage_ms, double jitter_ms, bool overrun);
   /// The stamp clock (RunHooks::stamp_clock_ns, else CLOCK_REALTIME).
@@ -353,17 +354,23 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   ++cycle_index;
 }
 
+// A sample stamped after the tick (accepted within the future tolerance, or drained while the
+// tick ran late) is as fresh as can be: age 0. Negative ages stay reserved for "none yet".
+double Executor::Impl::age_at_tick_ms(std::int64_t stamp_ns) const {
+  return static_cast<double>(std::max<std::int64_t>(tick_ns - stamp_ns, 0)) / kNsPerMs;
+}
+
 void Executor::Impl::fill_input_ages(transport::CycleReport& report) const {
   for (std::size_t i = 0; i < config.sensors.size(); ++i) {
     const std::int64_t newest = scheduler.newest_stamp(static_cast<std::uint32_t>(i));
     auto& age = report.input_ages[i];
-    age.age_ms = newest == 0 ? -1.0 : static_cast<double>(tick_ns - newest) / kNsPerMs;
+    age.age_ms = newest == 0 ? -1.0 : age_at_tick_ms(newest);
     age.stale = newest == 0 || tick_ns - newest > ms_to_ns(config.sensors[i].max_age_ms);
   }
   {
     const auto newest = poses.newest_stamp();
     auto& age = report.input_ages.back();
-    age.age_ms = newest ? static_cast<double>(tick_ns - *newest) / kNsPerMs : -1.0;
+    age.age_ms = newest ? age_at_tick_ms(*newest) : -1.0;
     age.stale = !newest || tick_ns - *newest > ms_to_ns(config.pose.max_age_ms);
   }
 }

@@ -280,6 +280,42 @@ TEST_F(Faults, PoseStreamStops_ScansDroppedCostmapStaleInDiagnostics_MappingResu
   EXPECT_EQ(after->message, "ok");
 }
 
+// ---- b2: a sensor whose clock leads the vehicle's, within the future tolerance ----
+
+TEST_F(Faults, SensorClockAheadWithinTolerance_ScansIntegrated_ItsAgeIsZeroNeverNegative) {
+  auto cfg = test_config(test::kDomainFaultSensorAhead, 2);
+  RunningExecutor executor(cfg);
+  auto participant = peer(test::kDomainFaultSensorAhead);
+  auto reports = ReportReader::create(participant, cfg.outputs.cycle_report_topic,
+                                      cfg.dds.qos.diagnostics, 400);
+  ASSERT_TRUE(reports.ok());
+  // Stamps 150 ms ahead of the tick clock (the tolerance is 200 ms): each scan is taken,
+  // and each is still "in the future" at the ticks that follow its arrival.
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0 / kTimeScale;
+  options.max_scans = 10;
+  options.clock_offset_ns = 150'000'000LL * kTimeScale;
+  ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
+  for (int i = 0; i < 150 * kTimeScale && executor.get().totals().scans_integrated < 10; ++i) {
+    std::this_thread::sleep_for(20ms);
+  }
+  EXPECT_EQ(executor.get().totals().scans_integrated, 10u);
+  std::vector<transport::CycleReport> seen;
+  take_reports(*reports.value(), seen);
+  std::size_t received = 0, at_zero = 0;
+  for (const auto& r : seen) {
+    const auto* front = age_of(r, "front");
+    ASSERT_NE(front, nullptr);
+    if (front->age_ms == -1.0) continue;  // none yet
+    ++received;
+    EXPECT_GE(front->age_ms, 0.0) << "cycle " << r.cycle_index;
+    at_zero += front->age_ms == 0.0 ? 1 : 0;
+  }
+  EXPECT_GT(received, 0u) << "no report after the first scan";
+  EXPECT_GT(at_zero, 0u) << "no tick saw a scan stamped after it";
+}
+
 // ---- c: the wall clock steps ±1 h ----
 
 /// The executor's stamp clock is CLOCK_REALTIME + an offset the test steps by `step_ns` (the

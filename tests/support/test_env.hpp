@@ -64,6 +64,7 @@ enum Domain : std::uint32_t {
   kDomainFaultOverload = 174,
   kDomainFaultKill = 175,
   kDomainSoakShort = 176,
+  kDomainFaultSensorAhead = 177,
   // tarmacd's costmaps over DDS scored against the simulator's truth
   // (tests/daemon/safety_dds_test.cpp): 180..189
   kDomainSafetyDds = 180,

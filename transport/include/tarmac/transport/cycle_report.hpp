@@ -27,9 +27,9 @@ struct ReasonReport {
 
 /// Age of the newest sample of one input at tick time.
 struct InputAgeReport {
-  std::string input;  ///< sensor id or "pose"
-  double age_ms = 0.0;
-  bool stale = false;  ///< older than the input's limit (or never received)
+  std::string input;    ///< sensor id or "pose"
+  double age_ms = 0.0;  ///< 0 if stamped at or after the tick; -1 when none yet
+  bool stale = false;   ///< older than the input's limit (or never received)
 };
 
 struct CycleReport {
