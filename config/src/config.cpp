@@ -287,9 +287,10 @@ core::Status validate_daemon(const Config& c) {
       return err("fleet.vehicle_id", "must be 1..64 of [A-Za-z0-9_-] when fleet.enabled is true");
     }
     if (c.fleet.topic.empty()) return err("fleet.topic", "must not be empty");
-    // The summaries' encoding and fusion exist in core (fleet_bev.hpp); the daemon does not
-    // publish or fuse them yet. Refused rather than silently ignored.
-    return err("fleet.enabled", "fleet sharing is not available in this build yet");
+    // A peer's cells would expire before its next summary: the costmap would flicker.
+    if (c.fleet.max_age_s < c.fleet.publish_period_s) {
+      return err("fleet.max_age_s", "must be at least fleet.publish_period_s");
+    }
   }
   for (const auto& [key, topic] :
        {std::pair{"outputs.costmap_topic", &c.outputs.costmap_topic},

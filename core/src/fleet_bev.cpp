@@ -150,58 +150,100 @@ BevMessage BevEncoder::encode(const BevSnapshot& snapshot, std::int64_t stamp_ns
   m.sequence = sequence_++;
   m.keyframe = keyframe;
   m.resolution_m = resolution_m_;
+  const auto fresh = [&](std::int64_t seen) {
+    return seen > 0 && seen <= stamp_ns && stamp_ns - seen <= max_age_ns;
+  };
+  // Cells observed too long ago are forgotten, here as at the receivers.
+  const auto age = [&](std::vector<BevCell>& cells) {
+    bool any = false;
+    for (BevCell& c : cells) {
+      if (c.state != BevState::kUnknown && !fresh(c.observed_ns)) c = BevCell{};
+      any = any || c.state != BevState::kUnknown;
+    }
+    return any;
+  };
   const std::int64_t i0 = bev_lattice_index(g.origin_x_m, g.resolution_m);
   const std::int64_t j0 = bev_lattice_index(g.origin_y_m, g.resolution_m);
   const auto w = static_cast<std::int64_t>(g.width), h = static_cast<std::int64_t>(g.height);
   const std::int64_t tx0 = floor_div(i0, kBevTileEdge), tx1 = floor_div(i0 + w - 1, kBevTileEdge);
   const std::int64_t ty0 = floor_div(j0, kBevTileEdge), ty1 = floor_div(j0 + h - 1, kBevTileEdge);
-  std::map<TileKey, std::vector<std::uint8_t>> now;
-  std::vector<BevCell> cells(kBevTileCells);
+  const auto in_snapshot = [&](const TileKey& k) {
+    return w > 0 && h > 0 && k.first >= tx0 && k.first <= tx1 && k.second >= ty0 && k.second <= ty1;
+  };
+  // Tiles the snapshot covers: its cells over what was held (a tile the window's edge cuts keeps
+  // its cells beyond the edge until they age out).
   for (std::int64_t ty = ty0; ty <= ty1 && w > 0 && h > 0; ++ty) {
     for (std::int64_t tx = tx0; tx <= tx1; ++tx) {
+      const TileKey key{static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty)};
+      auto it = held_.find(key);
+      std::vector<BevCell> cells =
+          it != held_.end() ? it->second.cells : std::vector<BevCell>(kBevTileCells);
       for (int cy = 0; cy < kBevTileEdge; ++cy) {
+        const std::int64_t y = ty * kBevTileEdge + cy - j0;
+        if (y < 0 || y >= h) continue;
         for (int cx = 0; cx < kBevTileEdge; ++cx) {
-          BevCell& c = cells[static_cast<std::size_t>(cy * kBevTileEdge + cx)];
-          c = BevCell{};
-          const std::int64_t x = tx * kBevTileEdge + cx - i0, y = ty * kBevTileEdge + cy - j0;
-          if (x < 0 || y < 0 || x >= w || y >= h) continue;
+          const std::int64_t x = tx * kBevTileEdge + cx - i0;
+          if (x < 0 || x >= w) continue;
           const auto k = static_cast<std::size_t>(y * w + x);
-          const std::int64_t seen = snapshot.observed_ns[k];
-          if (snapshot.state[k] == BevState::kUnknown || seen <= 0 || seen > stamp_ns ||
-              stamp_ns - seen > max_age_ns) {
-            continue;
-          }
-          c = BevCell{snapshot.state[k], seen};
+          BevCell& c = cells[static_cast<std::size_t>(cy * kBevTileEdge + cx)];
+          c = snapshot.state[k] == BevState::kUnknown
+                  ? BevCell{}
+                  : BevCell{snapshot.state[k], snapshot.observed_ns[k]};
         }
       }
-      std::vector<std::uint8_t> runs;
-      if (!encode_tile(std::span<const BevCell, kBevTileCells>(cells.data(), kBevTileCells),
-                       runs)) {
+      if (!age(cells)) {
+        if (it != held_.end()) {
+          held_.erase(it);
+          if (!keyframe) m.tiles.push_back(unknown_tile(key));  // retracted once
+        }
         continue;
       }
-      now.emplace(TileKey{static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty)},
-                  std::move(runs));
+      if (it == held_.end()) it = held_.emplace(key, Held{}).first;
+      it->second.cells = std::move(cells);
     }
   }
-  for (const auto& [key, runs] : now) {
-    const auto before = sent_.find(key);
-    if (keyframe || before == sent_.end() || before->second != runs) {
+  // Tiles beyond the snapshot (the vehicle drove on): kept while a cell is fresh, not resent
+  // as they age (receivers age them alike) — only in keyframes.
+  for (auto it = held_.begin(); it != held_.end();) {
+    if (!in_snapshot(it->first) && !age(it->second.cells)) {
+      it = held_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  // At most kBevMaxPeerTiles, as a receiver holds of a peer: the stalest go (retracted).
+  while (held_.size() > kBevMaxPeerTiles) {
+    auto stalest = held_.begin();
+    std::int64_t stalest_ns = INT64_MAX;
+    for (auto it = held_.begin(); it != held_.end(); ++it) {
+      std::int64_t newest = 0;
+      for (const BevCell& c : it->second.cells) newest = std::max(newest, c.observed_ns);
+      if (newest < stalest_ns) {
+        stalest_ns = newest;
+        stalest = it;
+      }
+    }
+    if (!keyframe) m.tiles.push_back(unknown_tile(stalest->first));
+    held_.erase(stalest);
+  }
+  for (auto& [key, tile] : held_) {
+    std::vector<std::uint8_t> runs;
+    encode_tile(std::span<const BevCell, kBevTileCells>(tile.cells.data(), kBevTileCells), runs);
+    if (keyframe || (in_snapshot(key) && runs != tile.sent)) {
       m.tiles.push_back(BevTile{key.first, key.second, runs});
+      tile.sent = std::move(runs);
     }
   }
-  if (!keyframe) {
-    // Tiles sent before with something known and now all unknown (or out of the snapshot).
-    std::vector<std::uint8_t> unknown;
-    for (int n = 0; n < kBevTileCells; n += kMaxRun) unknown.push_back(kMaxRun - 1);
-    for (const auto& [key, runs] : sent_) {
-      if (now.find(key) == now.end()) m.tiles.push_back(BevTile{key.first, key.second, unknown});
-    }
-    std::sort(m.tiles.begin(), m.tiles.end(), [](const BevTile& a, const BevTile& b) {
-      return TileKey{a.x, a.y} < TileKey{b.x, b.y};
-    });
-  }
-  sent_ = std::move(now);
+  std::sort(m.tiles.begin(), m.tiles.end(), [](const BevTile& a, const BevTile& b) {
+    return TileKey{a.x, a.y} < TileKey{b.x, b.y};
+  });
   return m;
+}
+
+BevTile BevEncoder::unknown_tile(std::pair<std::int32_t, std::int32_t> key) {
+  BevTile t{key.first, key.second, {}};
+  for (int n = 0; n < kBevTileCells; n += kMaxRun) t.runs.push_back(kMaxRun - 1);
+  return t;
 }
 
 BevPeers::BevPeers(std::string own_id, double resolution_m, std::int64_t max_age_ns,
@@ -213,6 +255,9 @@ BevPeers::BevPeers(std::string own_id, double resolution_m, std::int64_t max_age
 
 Status BevPeers::apply(const BevMessage& m, std::int64_t now_ns) {
   if (m.vehicle_id.empty()) return refused("malformed", "message without a vehicle id");
+  if (stats_.count(m.vehicle_id) == 0 && stats_.size() >= kBevMaxPeers) {
+    return refused("too_many_peers", m.vehicle_id + ": already kBevMaxPeers peers");
+  }
   BevPeerStats& st = stats_[m.vehicle_id];
   const auto refuse = [&](const std::string& code, const std::string& message) -> Status {
     ++st.rejected;
@@ -246,20 +291,34 @@ Status BevPeers::apply(const BevMessage& m, std::int64_t now_ns) {
                           std::span<BevCell, kBevTileCells>(decoded[t].data(), kBevTileCells));
     if (!ok) return refuse("malformed", ok.error().message);
   }
-  auto tiles = m.keyframe ? decltype(peer.tiles){} : peer.tiles;
+  std::vector<TileKey> keys(m.tiles.size());
+  for (std::size_t t = 0; t < m.tiles.size(); ++t) keys[t] = {m.tiles[t].x, m.tiles[t].y};
+  std::sort(keys.begin(), keys.end());
+  if (std::adjacent_find(keys.begin(), keys.end()) != keys.end()) {
+    return refuse("malformed", "a tile sent twice");
+  }
+  std::vector<char> known(m.tiles.size());
+  for (std::size_t t = 0; t < m.tiles.size(); ++t) {
+    known[t] = std::any_of(decoded[t].begin(), decoded[t].end(),
+                           [](const BevCell& c) { return c.state != BevState::kUnknown; });
+  }
+  // A bound on what one peer can make this vehicle hold (its memory is locked), counted before
+  // anything changes (a message's tiles are distinct: checked above).
+  std::size_t held = m.keyframe ? 0 : peer.tiles.size();
+  for (std::size_t t = 0; t < m.tiles.size(); ++t) {
+    const bool had = !m.keyframe && peer.tiles.count({m.tiles[t].x, m.tiles[t].y}) != 0;
+    held = held + (known[t] && !had ? 1 : 0) - (!known[t] && had ? 1 : 0);
+  }
+  if (held > kBevMaxPeerTiles) return refuse("too_large", "would hold too many tiles");
+  if (m.keyframe) peer.tiles.clear();
   for (std::size_t t = 0; t < m.tiles.size(); ++t) {
     const TileKey key{m.tiles[t].x, m.tiles[t].y};
-    const bool known = std::any_of(decoded[t].begin(), decoded[t].end(),
-                                   [](const BevCell& c) { return c.state != BevState::kUnknown; });
-    if (known) {
-      tiles[key] = std::move(decoded[t]);
+    if (known[t]) {
+      peer.tiles[key] = std::move(decoded[t]);
     } else {
-      tiles.erase(key);
+      peer.tiles.erase(key);
     }
   }
-  // A bound on what one peer can make this vehicle hold (its memory is locked).
-  if (tiles.size() > kBevMaxPeerTiles) return refuse("too_large", "would hold too many tiles");
-  peer.tiles = std::move(tiles);
   peer.synced = true;
   peer.last_sequence = m.sequence;
   peer.last_stamp_ns = m.stamp_ns;

@@ -17,6 +17,7 @@
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
 
+#include "fleet_share.hpp"
 #include "map_store.hpp"
 #include "pose_corrections.hpp"
 #include "tarmac/core/assert.hpp"
@@ -171,6 +172,7 @@ class Executor::Impl {
   std::vector<SensorSink> sinks;
   std::unique_ptr<TickInputs> inputs;
   std::unique_ptr<transport::MapOutputs> outputs;
+  std::unique_ptr<FleetShare> fleet;  // fleet.enabled: peers' summaries in, this vehicle's out
   std::vector<Eigen::Isometry3d> T_B_S;
 
   PoseBuffer poses;
@@ -216,6 +218,8 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
 
   // ---- drain: queues -> scheduler slots, pose buffer, zones; then select by stamp ----
   const bool zones_changed = inputs->drain(zones, drops, rejections, cycle_index);
+  // Peers' summaries change this vehicle's costmap only once it has one of its own.
+  const bool fleet_changed = fleet && fleet->take(tick_ns, drops, rejections) && have_costmap;
   const auto stats = scheduler.select(tick_ns, poses, selected, drops);
   shed[kDrain] = stats.deferred_scans;
   shed[kIngest] = stats.decimated_points;
@@ -275,8 +279,11 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   }
 
   // ---- costmap + 2D ESDF, once per tick (when something changed) ----
-  const bool update = !selected.empty() || zones_changed || rebuilt;
+  const bool update = !selected.empty() || zones_changed || rebuilt || fleet_changed;
   if (update) {
+    // Peers' observations age on the costmap's clock (its newest scan), not the tick's: the
+    // same scans and summaries give the same costmap.
+    if (fleet) fleet->expire(newest_stamp_ns);
     cycle->update_costmap(zones, newest_stamp_ns);
     have_costmap = true;
   }
@@ -300,6 +307,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     outputs->publish_slice(layers.obstacle_distance, layers.costmap.geometry(), newest_stamp_ns,
                            config.outputs.frame_id);
   }
+  if (fleet && have_costmap) fleet->publish_if_due(tick_ns, mapper);
   const auto t_costmap_out = Clock::now();
   // Measured, never used to decide: newest integrated scan stamp -> costmap handed to DDS.
   double stamp_to_publish_ms = -1.0;
@@ -336,9 +344,14 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   report.points_in = done.points_in;
   report.points_used = done.points_used;
   report.map_memory_bytes = mapper.occupancy().memory_bytes();
+  if (fleet) fleet->fill_report(tick_ns, cycle->fleet_counts(), report);
   {
     // Before the report goes out, so whoever reads the report and then the totals agrees.
     std::lock_guard lock(totals_mutex);
+    if (fleet) {
+      totals.fleet_messages_published = fleet->messages_published();
+      totals.fleet_bytes_published = fleet->bytes_published();
+    }
     totals.ticks += 1;
     totals.skipped_ticks += skipped;
     totals.overruns += overrun ? 1 : 0;
@@ -442,6 +455,12 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
   auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
   if (!outputs) return outputs.error();
   impl->outputs = std::move(outputs).value();
+  if (cfg.fleet.enabled) {
+    auto fleet = FleetShare::create(impl->participant, cfg, cfg.mapping.occupancy.voxel_size_m,
+                                    impl->drops, impl->rejections);
+    if (!fleet) return fleet.error();
+    impl->fleet = std::move(fleet).value();
+  }
   impl->dds_threads = threads_since(threads_before);
   return std::unique_ptr<Executor>(new Executor(std::move(impl)));
 }
@@ -457,6 +476,7 @@ void Executor::prepare(const RunHooks& hooks) {
   d.pool = real_time_setup(d.config.executor, hooks.on_thread_start);
   d.cycle = std::make_unique<Cycle>(d.mapper, *d.pool,
                                     Cycle::Quotas{d.config.quotas.tsdf_points_per_cycle});
+  if (d.fleet) d.cycle->share_with_fleet(&d.fleet->peers());
   raise_dds_threads(d.config.executor, d.dds_threads);
 }
 

@@ -12,7 +12,7 @@ constexpr const char* kStageNames[kStageCount] = {"drain",   "ingest",  "integra
 }  // namespace
 
 TickReport::TickReport(const config::Config& config, const std::string& config_hash)
-    : costmap_max_age_ms_(config.outputs.costmap_max_age_ms) {
+    : costmap_max_age_ms_(config.outputs.costmap_max_age_ms), fleet_(config.fleet.enabled) {
   report_.frame_id = config.outputs.frame_id;
   report_.config_hash = config_hash;
   report_.cycle_budget_ms = config.budgets.cycle_ms;
@@ -61,6 +61,7 @@ TickReport::TickReport(const config::Config& config, const std::string& config_h
     diag_.values[kDiagFixed + 2 * i].first = prefix + ".age_ms";
     diag_.values[kDiagFixed + 2 * i + 1].first = prefix + ".stale";
   }
+  if (fleet_) diag_.values.emplace_back("fleet.newest_age_ms", std::string());
   for (auto& v : diag_.values) v.second.reserve(32);
   diag_.message.reserve(kDiagMessageSize);
 }
@@ -176,10 +177,36 @@ const transport::DiagnosticReport& TickReport::diagnostics(const DiagnosticFacts
     append(a.input.c_str(), a.age_ms, " (none yet)");
     any_input_stale = true;
   }
+  if (fleet_) put_fleet();
   if (f.overrun) append(used > 0 ? "; over budget" : "over budget");
   diag_.level = costmap_stale ? 2 : (any_input_stale || f.overrun) ? 1 : 0;
   diag_.message = used > 0 ? message : "ok";
   return diag_;
+}
+
+void TickReport::put_fleet() {
+  // After the fixed keys and the inputs' pairs: the newest peer cell's age, then each peer's
+  // cells and summary age (a pair added the first time a peer is heard of).
+  const std::size_t base = kDiagFixed + 2 * report_.input_ages.size() + 1;
+  const auto put = [&](std::size_t i, double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.3f", v);
+    diag_.values[i].second = buf;
+  };
+  put(base - 1, report_.fleet_newest_age_ms);
+  const auto& peers = report_.fleet_peers;
+  if (diag_.values.size() < base + 2 * peers.size()) diag_.values.resize(base + 2 * peers.size());
+  for (std::size_t i = 0; i < peers.size(); ++i) {
+    auto& cells = diag_.values[base + 2 * i];
+    auto& age = diag_.values[base + 2 * i + 1];
+    if (cells.first.size() != 6 + peers[i].vehicle_id.size() + 6 ||
+        cells.first.compare(6, peers[i].vehicle_id.size(), peers[i].vehicle_id) != 0) {
+      cells.first = "fleet." + peers[i].vehicle_id + ".cells";
+      age.first = "fleet." + peers[i].vehicle_id + ".age_ms";
+    }
+    put(base + 2 * i, static_cast<double>(peers[i].cells));
+    put(base + 2 * i + 1, peers[i].age_ms);
+  }
 }
 
 }  // namespace tarmac::daemon

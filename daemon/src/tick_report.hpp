@@ -96,9 +96,13 @@ class TickReport {
   static constexpr std::size_t kDiagFixed = 17;
   static constexpr std::size_t kDiagMessageSize = 256;
 
+  /// The fleet's values (fleet.enabled): from report_'s fleet fields.
+  void put_fleet();
+
   transport::CycleReport report_;
   transport::DiagnosticReport diag_;
   double costmap_max_age_ms_;
+  bool fleet_;
 };
 
 }  // namespace tarmac::daemon

@@ -327,7 +327,7 @@ TEST(Config, EsdfBandSectionAppliesAndIsValidated) {
             "outputs.esdf_band_topic: must not be empty when esdf_band.enabled is true");
 }
 
-TEST(Config, FleetSectionIsReadAndValidated_EnablingItIsRefusedUntilTheDaemonShares) {
+TEST(Config, FleetSectionIsReadAndValidated) {
   auto config = load_config_string(
       "version: 1\nfleet: {vehicle_id: tug-7, topic: /tarmac/fleet/bev, publish_period_s: 0.5,\n"
       "        max_age_s: 20}\n");
@@ -343,8 +343,11 @@ TEST(Config, FleetSectionIsReadAndValidated_EnablingItIsRefusedUntilTheDaemonSha
             "fleet.vehicle_id: must be 1..64 of [A-Za-z0-9_-] when fleet.enabled is true");
   EXPECT_EQ(error_of("version: 1\nfleet: {enabled: true, vehicle_id: \"tug 7\"}\n"),
             "fleet.vehicle_id: must be 1..64 of [A-Za-z0-9_-] when fleet.enabled is true");
-  EXPECT_EQ(error_of("version: 1\nfleet: {enabled: true, vehicle_id: tug-7}\n"),
-            "fleet.enabled: fleet sharing is not available in this build yet");
+  EXPECT_EQ(error_of("version: 1\nfleet: {enabled: true, vehicle_id: tug-7, max_age_s: 0.5}\n"),
+            "fleet.max_age_s: must be at least fleet.publish_period_s");
+  auto enabled = load_config_string("version: 1\nfleet: {enabled: true, vehicle_id: tug-7}\n");
+  ASSERT_TRUE(enabled.ok()) << enabled.error().message;
+  EXPECT_TRUE(enabled.value().fleet.enabled);
 }
 
 TEST(Config, ShippedDefaultsAreOneFrontLidarOnTheDesignTopics) {

@@ -200,9 +200,11 @@ TEST(FleetBev, BadStaleFutureAndForeignMessages_AreRefusedCountedAndChangeNothin
   refused(m, t0 + kSecond, "malformed");
   m.tiles[0].runs = {0xff};  // state 3
   refused(m, t0 + kSecond, "malformed");
+  m.tiles = {good.tiles[0], good.tiles[0]};  // one tile twice
+  refused(m, t0 + kSecond, "malformed");
   m.tiles.assign(kBevMaxPeerTiles + 1, good.tiles[0]);
   refused(m, t0 + kSecond, "too_large");
-  EXPECT_EQ(peers.stats().at("tug-a").rejected, 9u);
+  EXPECT_EQ(peers.stats().at("tug-a").rejected, 10u);
   EXPECT_EQ(peers.stats().at("tug-b").rejected, 1u);
   expect_peer_holds(peers, a, "tug-a");  // unchanged by any of them
 }

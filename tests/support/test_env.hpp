@@ -68,6 +68,9 @@ enum Domain : std::uint32_t {
   // tarmacd's costmaps over DDS scored against the simulator's truth
   // (tests/daemon/safety_dds_test.cpp): 180..189
   kDomainSafetyDds = 180,
+  // Fleet sharing between executors (tests/daemon/fleet_test.cpp): 190..199
+  kDomainFleetTwoVehicles = 190,
+  kDomainFleetExpiry = 191,
 };
 
 /// How many times slower than the normal build this build runs: 1, or more under a sanitizer

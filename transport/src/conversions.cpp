@@ -488,6 +488,18 @@ void fill_cycle_report(const CycleReport& r, CycleReportMsg& msg) {
   msg.points_used(r.points_used);
   msg.map_memory_bytes(r.map_memory_bytes);
   msg.config_hash() = r.config_hash;
+  msg.fleet_peers().resize(r.fleet_peers.size());
+  for (std::size_t i = 0; i < r.fleet_peers.size(); ++i) {
+    const auto& p = r.fleet_peers[i];
+    auto& m = msg.fleet_peers()[i];
+    m.vehicle_id() = p.vehicle_id;
+    m.cells(p.cells);
+    m.age_ms(static_cast<float>(p.age_ms));
+    m.messages(p.messages);
+    m.rejected(p.rejected);
+    m.gaps(p.gaps);
+  }
+  msg.fleet_newest_age_ms(static_cast<float>(r.fleet_newest_age_ms));
 }
 
 CycleReport from_cycle_report(const CycleReportMsg& msg) {
@@ -514,6 +526,11 @@ CycleReport from_cycle_report(const CycleReportMsg& msg) {
   r.points_used = msg.points_used();
   r.map_memory_bytes = msg.map_memory_bytes();
   r.config_hash = msg.config_hash();
+  for (const auto& p : msg.fleet_peers()) {
+    r.fleet_peers.push_back(FleetPeerReport{p.vehicle_id(), p.cells(), p.age_ms(), p.messages(),
+                                            p.rejected(), p.gaps()});
+  }
+  r.fleet_newest_age_ms = msg.fleet_newest_age_ms();
   return r;
 }
 
@@ -562,6 +579,12 @@ core::Result<std::vector<core::VirtualZone>> from_virtual_obstacles(
 
 FleetBevMsg to_fleet_bev(const core::BevMessage& message, const std::string& frame_id) {
   FleetBevMsg msg;
+  fill_fleet_bev(message, frame_id, msg);
+  return msg;
+}
+
+void fill_fleet_bev(const core::BevMessage& message, const std::string& frame_id,
+                    FleetBevMsg& msg) {
   msg.header().stamp(to_time_msg(message.stamp_ns));
   msg.header().frame_id(frame_id);
   msg.vehicle_id(message.vehicle_id);
@@ -574,7 +597,6 @@ FleetBevMsg to_fleet_bev(const core::BevMessage& message, const std::string& fra
     msg.tiles()[t].y(message.tiles[t].y);
     msg.tiles()[t].runs(message.tiles[t].runs);
   }
-  return msg;
 }
 
 core::Result<core::BevMessage> from_fleet_bev(const FleetBevMsg& msg, const std::string& frame_id) {

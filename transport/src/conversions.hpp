@@ -108,6 +108,8 @@ core::Result<std::vector<core::VirtualZone>> from_virtual_obstacles(
 
 /// A fleet summary -> tarmac_msgs/FleetBev in `frame_id`.
 FleetBevMsg to_fleet_bev(const core::BevMessage& message, const std::string& frame_id);
+/// The same into `msg`, whose buffers are reused.
+void fill_fleet_bev(const core::BevMessage& message, const std::string& frame_id, FleetBevMsg& msg);
 /// tarmac_msgs/FleetBev -> a fleet summary. Rejects a frame other than `frame_id` (the summaries
 /// are in the shared map frame), a non-finite or non-positive resolution and an empty vehicle id
 /// ("fleet.*"); the tiles' contents are checked where they are applied (BevPeers::apply).

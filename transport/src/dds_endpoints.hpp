@@ -44,23 +44,28 @@ class Writer {
  public:
   using Message = typename PubSubType::type;
 
+  /// @param partition the writer's DDS partition (empty: the default partition)
   static core::Result<std::unique_ptr<Writer>> create(const Participant& participant,
                                                       const std::string& topic_name,
-                                                      const QosSpec& qos) {
+                                                      const QosSpec& qos,
+                                                      const std::string& partition = {}) {
     if (auto valid = qos.validate(); !valid) return valid.error();
     const auto& impl = participant.impl();
     auto topic = impl->topic(topic_name, fdds::TypeSupport(new PubSubType()));
     if (!topic) return topic.error();
+    fdds::Publisher* publisher = impl->publisher(partition);
     fdds::DataWriter* writer =
-        impl->publisher()->create_datawriter(topic.value(), to_writer_qos(qos));
+        publisher == nullptr ? nullptr
+                             : publisher->create_datawriter(topic.value(), to_writer_qos(qos));
     if (writer == nullptr) {
-      return core::Error{"dds.writer",
-                         "cannot create a writer on " + topic_name + security_refusal_hint(*impl)};
+      return core::Error{"dds.writer", "cannot create a writer on " + topic_name +
+                                           (partition.empty() ? "" : " in partition " + partition) +
+                                           security_refusal_hint(*impl)};
     }
-    return std::unique_ptr<Writer>(new Writer(impl, writer));
+    return std::unique_ptr<Writer>(new Writer(impl, publisher, writer));
   }
 
-  ~Writer() { impl_->publisher()->delete_datawriter(writer_); }
+  ~Writer() { publisher_->delete_datawriter(writer_); }
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
@@ -89,10 +94,12 @@ class Writer {
   }
 
  private:
-  Writer(std::shared_ptr<ParticipantImpl> impl, fdds::DataWriter* writer)
-      : impl_(std::move(impl)), writer_(writer) {}
+  Writer(std::shared_ptr<ParticipantImpl> impl, fdds::Publisher* publisher,
+         fdds::DataWriter* writer)
+      : impl_(std::move(impl)), publisher_(publisher), writer_(writer) {}
 
   std::shared_ptr<ParticipantImpl> impl_;
+  fdds::Publisher* publisher_;
   fdds::DataWriter* writer_;
 };
 
@@ -103,20 +110,27 @@ class Reader : private fdds::DataReaderListener {
   using Message = typename PubSubType::type;
 
   /// @param queue_capacity samples kept between drains; when full the oldest is dropped.
+  /// @param partition the reader's DDS partition, wildcards allowed (empty: the default one)
   static core::Result<std::unique_ptr<Reader>> create(const Participant& participant,
                                                       const std::string& topic_name,
                                                       const QosSpec& qos,
-                                                      std::size_t queue_capacity) {
+                                                      std::size_t queue_capacity,
+                                                      const std::string& partition = {}) {
     if (auto valid = qos.validate(); !valid) return valid.error();
     if (queue_capacity == 0) return core::Error{"config.qos", "queue_capacity: must be >= 1"};
     const auto& impl = participant.impl();
     auto topic = impl->topic(topic_name, fdds::TypeSupport(new PubSubType()));
     if (!topic) return topic.error();
     std::unique_ptr<Reader> reader(new Reader(impl, queue_capacity));
+    reader->subscriber_ = impl->subscriber(partition);
+    if (reader->subscriber_ == nullptr) {
+      return core::Error{"dds.reader", "cannot create a subscriber in partition " + partition +
+                                           security_refusal_hint(*impl)};
+    }
     // The listener is attached at creation so no sample arrives unseen.
     // Lost and rejected samples too: a scan lost in transport (fragments overflowing a socket
     // buffer, a gap in a best-effort stream) is counted, never silent.
-    reader->reader_ = impl->subscriber()->create_datareader(
+    reader->reader_ = reader->subscriber_->create_datareader(
         topic.value(), to_reader_qos(qos), reader.get(),
         fdds::StatusMask::data_available()
             << fdds::StatusMask::sample_lost() << fdds::StatusMask::sample_rejected());
@@ -130,7 +144,7 @@ class Reader : private fdds::DataReaderListener {
   ~Reader() override {
     if (reader_ != nullptr) {
       reader_->set_listener(nullptr);
-      impl_->subscriber()->delete_datareader(reader_);
+      subscriber_->delete_datareader(reader_);
     }
   }
   Reader(const Reader&) = delete;
@@ -208,6 +222,7 @@ class Reader : private fdds::DataReaderListener {
   }
 
   std::shared_ptr<ParticipantImpl> impl_;
+  fdds::Subscriber* subscriber_ = nullptr;
   fdds::DataReader* reader_ = nullptr;
   const std::size_t capacity_;
   std::mutex mutex_;

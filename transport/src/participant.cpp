@@ -394,8 +394,9 @@ core::Result<Participant> Participant::create(const ParticipantConfig& config) {
     collect_dds_errors();
     take_dds_errors();  // only this creation's refusals below
   }
-  fdds::DomainParticipant* participant =
-      factory->create_participant(config.domain_id, participant_qos(config));
+  auto writers = std::make_unique<DiscoveredWriters>();
+  fdds::DomainParticipant* participant = factory->create_participant(
+      config.domain_id, participant_qos(config), writers.get(), fdds::StatusMask::none());
   if (participant == nullptr && config.security.enabled) {
     const std::string logged = take_dds_errors();
     std::string why = diagnose_security(config.security);
@@ -416,7 +417,8 @@ core::Result<Participant> Participant::create(const ParticipantConfig& config) {
   }
   fdds::Publisher* publisher = participant->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
   fdds::Subscriber* subscriber = participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
-  auto impl = std::make_shared<ParticipantImpl>(config, participant, publisher, subscriber);
+  auto impl = std::make_shared<ParticipantImpl>(config, participant, publisher, subscriber,
+                                                std::move(writers));
   if (publisher == nullptr || subscriber == nullptr) {
     return core::Error{"dds.participant", "Fast DDS refused to create a publisher/subscriber"};
   }
@@ -431,6 +433,49 @@ ParticipantImpl::~ParticipantImpl() {
   // Endpoints hold a shared_ptr to this object, so all of them are gone by now.
   participant_->delete_contained_entities();
   fdds::DomainParticipantFactory::get_instance()->delete_participant(participant_);
+}
+
+void DiscoveredWriters::on_publisher_discovery(
+    fdds::DomainParticipant* /*participant*/,
+    eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) {
+  using Status = eprosima::fastrtps::rtps::WriterDiscoveryInfo::DISCOVERY_STATUS;
+  std::lock_guard lock(mutex_);
+  if (info.status == Status::REMOVED_WRITER) {
+    partitions_.erase(info.info.guid());
+  } else {
+    partitions_[info.info.guid()] = info.info.m_qos.m_partition.getNames();
+  }
+}
+
+std::vector<std::string> DiscoveredWriters::partitions(
+    const eprosima::fastrtps::rtps::GUID_t& guid) const {
+  std::lock_guard lock(mutex_);
+  const auto it = partitions_.find(guid);
+  return it == partitions_.end() ? std::vector<std::string>{} : it->second;
+}
+
+fdds::Publisher* ParticipantImpl::publisher(const std::string& partition) {
+  if (partition.empty()) return publisher_;
+  std::lock_guard lock(mutex_);
+  auto& publisher = partition_publishers_[partition];
+  if (publisher == nullptr) {
+    fdds::PublisherQos qos = fdds::PUBLISHER_QOS_DEFAULT;
+    qos.partition().push_back(partition.c_str());
+    publisher = participant_->create_publisher(qos);
+  }
+  return publisher;
+}
+
+fdds::Subscriber* ParticipantImpl::subscriber(const std::string& partition) {
+  if (partition.empty()) return subscriber_;
+  std::lock_guard lock(mutex_);
+  auto& subscriber = partition_subscribers_[partition];
+  if (subscriber == nullptr) {
+    fdds::SubscriberQos qos = fdds::SUBSCRIBER_QOS_DEFAULT;
+    qos.partition().push_back(partition.c_str());
+    subscriber = participant_->create_subscriber(qos);
+  }
+  return subscriber;
 }
 
 core::Result<fdds::Topic*> ParticipantImpl::topic(const std::string& name, fdds::TypeSupport type) {

@@ -4,10 +4,13 @@
 /// raw IDL types.
 
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
@@ -23,14 +26,31 @@ namespace tarmac::transport {
 
 namespace fdds = eprosima::fastdds::dds;
 
+/// The partitions of every writer discovered (remote or local), by GUID: what a reader needs to
+/// know which partition a sample came from (Fast DDS 2.9 has no get_matched_publication_data).
+class DiscoveredWriters final : public fdds::DomainParticipantListener {
+ public:
+  void on_publisher_discovery(fdds::DomainParticipant* participant,
+                              eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) override;
+  /// The partitions writer `guid` was announced with; empty when unknown (or the default).
+  [[nodiscard]] std::vector<std::string> partitions(
+      const eprosima::fastrtps::rtps::GUID_t& guid) const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::map<eprosima::fastrtps::rtps::GUID_t, std::vector<std::string>> partitions_;
+};
+
 class ParticipantImpl {
  public:
   ParticipantImpl(ParticipantConfig config, fdds::DomainParticipant* participant,
-                  fdds::Publisher* publisher, fdds::Subscriber* subscriber)
+                  fdds::Publisher* publisher, fdds::Subscriber* subscriber,
+                  std::unique_ptr<DiscoveredWriters> writers)
       : config_(std::move(config)),
         participant_(participant),
         publisher_(publisher),
-        subscriber_(subscriber) {}
+        subscriber_(subscriber),
+        writers_(std::move(writers)) {}
   ~ParticipantImpl();
   ParticipantImpl(const ParticipantImpl&) = delete;
   ParticipantImpl& operator=(const ParticipantImpl&) = delete;
@@ -43,14 +63,24 @@ class ParticipantImpl {
   [[nodiscard]] fdds::DomainParticipant* participant() const { return participant_; }
   [[nodiscard]] fdds::Publisher* publisher() const { return publisher_; }
   [[nodiscard]] fdds::Subscriber* subscriber() const { return subscriber_; }
+  /// The publisher (subscriber) whose DDS partition is `partition`, created on first use; the
+  /// default ones for an empty name. nullptr when Fast DDS refused it (with security on: no
+  /// grant for the partition).
+  fdds::Publisher* publisher(const std::string& partition);
+  fdds::Subscriber* subscriber(const std::string& partition);
+  [[nodiscard]] const DiscoveredWriters& discovered_writers() const { return *writers_; }
 
  private:
   ParticipantConfig config_;
   fdds::DomainParticipant* participant_;
   fdds::Publisher* publisher_;
   fdds::Subscriber* subscriber_;
-  std::mutex mutex_;  // guards topics_ and type registration
+  std::mutex mutex_;  // guards topics_, type registration and the partitioned entities
   std::map<std::string, fdds::Topic*> topics_;
+  std::map<std::string, fdds::Publisher*> partition_publishers_;
+  std::map<std::string, fdds::Subscriber*> partition_subscribers_;
+  std::unique_ptr<DiscoveredWriters>
+      writers_;  // outlives participant_ (deleted in ~ParticipantImpl)
 };
 
 /// Error entries Fast DDS logged since the last call (its log is asynchronous: this flushes it

@@ -34,6 +34,9 @@ constexpr int kBevTileCells = kBevTileEdge * kBevTileEdge;
 /// The most tiles held of one peer (and carried by one message): 1024 tiles of 6.4 m are
 /// ~42,000 m² at 0.2 m, more than a vehicle's window; 16 MB of decoded cells.
 constexpr std::size_t kBevMaxPeerTiles = 1024;
+/// The most vehicles kept track of: a message naming one more is refused ("too_many_peers"), so
+/// a sender inventing ids cannot grow what a vehicle holds.
+constexpr std::size_t kBevMaxPeers = 64;
 /// Observation times are kept to this step (0.1 s).
 constexpr std::int64_t kBevTimeStepNs = 100'000'000;
 
@@ -66,15 +69,24 @@ struct BevSnapshot {
   std::span<const std::int64_t> observed_ns;
 };
 
+/// A cell as decoded: its state and observation time (ns, to kBevTimeStepNs).
+struct BevCell {
+  BevState state = BevState::kUnknown;
+  std::int64_t observed_ns = 0;
+};
+
 /// The encoder of one vehicle's messages: remembers the tiles it sent, to send only changes.
 class BevEncoder {
  public:
   BevEncoder(std::string vehicle_id, double resolution_m);
 
   /// The message of `snapshot` at `stamp_ns`: every tile with a known cell when `keyframe`,
-  /// else the tiles whose encoding changed since the last message (a tile that became all
-  /// unknown, or left the snapshot, is sent once as unknown). Cells observed more than
-  /// `max_age_ns` before the stamp are sent as unknown: receivers would drop them anyway.
+  /// else the snapshot's tiles whose encoding changed since they were last sent (a tile that
+  /// became all unknown is sent once as unknown). What the vehicle observed and then left
+  /// behind (cells beyond the snapshot, e.g. its window moved on) stays in its summary until it
+  /// is older than `max_age_ns` — in keyframes; receivers age those cells alike. Cells observed
+  /// more than `max_age_ns` before the stamp are sent as unknown. At most kBevMaxPeerTiles
+  /// tiles are kept (the stalest retracted).
   /// @pre snapshot's resolution is the encoder's and its origin lies on the lattice.
   BevMessage encode(const BevSnapshot& snapshot, std::int64_t stamp_ns, bool keyframe,
                     std::int64_t max_age_ns);
@@ -82,16 +94,18 @@ class BevEncoder {
   [[nodiscard]] std::uint32_t next_sequence() const { return sequence_; }
 
  private:
+  /// A tile as this vehicle knows it (cells beyond its window kept until they age out) and as
+  /// it was last sent.
+  struct Held {
+    std::vector<BevCell> cells;
+    std::vector<std::uint8_t> sent;
+  };
+  static BevTile unknown_tile(std::pair<std::int32_t, std::int32_t> key);
+
   std::string vehicle_id_;
   double resolution_m_;
   std::uint32_t sequence_ = 0;
-  std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::uint8_t>> sent_;
-};
-
-/// A cell as decoded: its state and observation time (ns, to kBevTimeStepNs).
-struct BevCell {
-  BevState state = BevState::kUnknown;
-  std::int64_t observed_ns = 0;
+  std::map<std::pair<std::int32_t, std::int32_t>, Held> held_;
 };
 
 /// Decodes one tile's runs into its kBevTileCells cells (row by row), observation times resolved
@@ -135,8 +149,9 @@ class BevPeers {
 
   /// Applies one message received at `now_ns`. Refused (counted in the peer's stats, the peer's
   /// tiles unchanged) when malformed, stale (stamp older than now − max age), from the future,
-  /// of another resolution, not newer than the peer's last, or holding the peer to more than
-  /// kBevMaxPeerTiles tiles; a change message whose sequence
+  /// of another resolution, not newer than the peer's last, holding the peer to more than
+  /// kBevMaxPeerTiles tiles, or from a vehicle beyond the first kBevMaxPeers; a change message
+  /// whose sequence
   /// does not follow the last applied one is counted as a gap and ignored, and so is every
   /// change message after it until a keyframe. Returns the refusal, Ok otherwise.
   Status apply(const BevMessage& message, std::int64_t now_ns);

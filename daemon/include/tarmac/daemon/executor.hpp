@@ -43,6 +43,8 @@ struct ExecutorTotals {
   std::uint64_t scans_reintegrated = 0;  ///< retained scans re-integrated by rebuilds
   std::uint64_t clock_steps = 0;         ///< steps of the stamp clock the ticks followed
   std::int64_t last_clock_step_ns = 0;   ///< the last such step (+: the clock jumped ahead)
+  std::uint64_t fleet_messages_published = 0;  ///< this vehicle's fleet summaries sent
+  std::uint64_t fleet_bytes_published = 0;     ///< their serialized bytes
 };
 
 /// What load_tsdf() found in the state directory.

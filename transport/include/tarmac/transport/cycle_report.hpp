@@ -32,6 +32,14 @@ struct InputAgeReport {
   bool stale = false;   ///< older than the input's limit (or never received)
 };
 
+/// What one peer vehicle's summaries gave this vehicle (fleet sharing).
+struct FleetPeerReport {
+  std::string vehicle_id;
+  std::uint64_t cells = 0;  ///< costmap cells whose class came from this peer, this tick
+  double age_ms = -1.0;     ///< tick time minus its newest applied summary's stamp
+  std::uint64_t messages = 0, rejected = 0, gaps = 0;  ///< since start
+};
+
 struct CycleReport {
   std::int64_t stamp_ns = 0;  ///< newest integrated scan stamp (0 before the first)
   std::string frame_id;
@@ -50,6 +58,8 @@ struct CycleReport {
   std::uint64_t points_used = 0;
   std::uint64_t map_memory_bytes = 0;
   std::string config_hash;
+  std::vector<FleetPeerReport> fleet_peers;  ///< empty with fleet sharing off
+  double fleet_newest_age_ms = -1.0;         ///< tick time minus the newest peer cell used; -1 none
 };
 
 /// The DiagnosticArray tarmacd publishes now and then: one status with key/value pairs.

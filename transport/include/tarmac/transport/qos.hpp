@@ -37,6 +37,10 @@ inline constexpr QosSpec kEsdfSlice{Reliability::kBestEffort, Durability::kVolat
 inline constexpr QosSpec kEsdfBand{Reliability::kBestEffort, Durability::kVolatile, 1};
 /// Diagnostics out: reliable, keep last 20 (the auditor must not miss a cycle).
 inline constexpr QosSpec kDiagnostics{Reliability::kReliable, Durability::kVolatile, 20};
+/// Fleet summaries, in and out: reliable (a lost change message costs its receiver every change
+/// up to the next keyframe), volatile (a late joiner waits for a keyframe: an older message is
+/// of no use to it), keep last 16.
+inline constexpr QosSpec kFleet{Reliability::kReliable, Durability::kVolatile, 16};
 }  // namespace qos
 
 /// Default topic names, ROS 2 wire form (rt/ prefix). DESIGN.md §5.
