@@ -2,6 +2,7 @@
 # Creates DDS Security material for a tarmac deployment or test (docs/operations.md "DDS Security"):
 #
 #   tools/make-dds-security.sh OUTDIR [--protection sign|encrypt|none] [--days N]
+#                                     [--vehicles "ID ID ..."]
 #
 # OUTDIR/ca.cert.pem            the CA: identity CA and permissions CA (dds.security.identity_ca,
 #                               dds.security.permissions_ca)
@@ -17,7 +18,13 @@
 #              CycleReport, DiagnosticArray
 #   publisher  publishes LiDAR, pose and pose corrections (tarmac-replay, a localisation stack, LiDAR drivers)
 #   obstacles  publishes virtual obstacles; subscribes the costmap
-#   monitor    subscribes every tarmac topic, publishes nothing (tarmac-audit, tarmac-echo)
+#   monitor    subscribes every tarmac topic, publishes nothing (tarmac-audit, tarmac-echo,
+#              tarmac-fleet: the fleet summaries of every vehicle)
+#   tarmacd-<ID>  with --vehicles, one per vehicle: tarmacd's grant, plus the fleet summaries
+#              (rt/tarmac/fleet/bev, docs/fleet.md): published in the DDS partition
+#              tarmac_fleet_<ID> only, subscribed in tarmac_fleet_*. tarmacd refuses a summary whose
+#              vehicle id is not its writer's partition, so with these grants a vehicle cannot
+#              publish as another. Vehicle ids: 1..64 of [A-Za-z0-9_-] (fleet.vehicle_id).
 #
 # Governance: unauthenticated participants are refused, joining needs a valid permissions grant,
 # discovery and liveliness are encrypted, read and write access control is on for every topic.
@@ -32,7 +39,7 @@
 set -eu
 
 usage() {
-  echo "usage: $0 OUTDIR [--protection sign|encrypt|none] [--days N]" >&2
+  echo "usage: $0 OUTDIR [--protection sign|encrypt|none] [--days N] [--vehicles \"ID ID ...\"]" >&2
   exit 64
 }
 [ $# -ge 1 ] || usage
@@ -40,10 +47,12 @@ out=$1
 shift
 protection=sign
 days=3650
+vehicles=
 while [ $# -gt 0 ]; do
   case $1 in
     --protection) [ $# -ge 2 ] || usage; protection=$2; shift 2 ;;
     --days) [ $# -ge 2 ] || usage; days=$2; shift 2 ;;
+    --vehicles) [ $# -ge 2 ] || usage; vehicles=$2; shift 2 ;;
     *) usage ;;
   esac
 done
@@ -53,6 +62,12 @@ case $protection in
   none) kind=NONE ;;
   *) usage ;;
 esac
+for v in $vehicles; do
+  case $v in
+    *[!A-Za-z0-9_-]*) echo "$0: vehicle id '$v': only [A-Za-z0-9_-]" >&2; exit 64 ;;
+  esac
+  [ ${#v} -le 64 ] || { echo "$0: vehicle id '$v': more than 64 characters" >&2; exit 64; }
+done
 command -v openssl >/dev/null || { echo "$0: openssl not found" >&2; exit 69; }
 
 mkdir -p "$out"
@@ -68,6 +83,7 @@ chmod 644 ca.cert.pem
 
 # ---- one identity per participant ----
 identities="tarmacd publisher obstacles monitor"
+for v in $vehicles; do identities="$identities tarmacd-$v"; done
 for id in $identities; do
   mkdir -p "$id"
   openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$id/key.pem" 2>/dev/null
@@ -125,7 +141,14 @@ slice=rt/tarmac/esdf_slice
 band=rt/tarmac/esdf_band
 report=rt/tarmac/diagnostics
 diag=rt/diagnostics
-grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS (already rendered, may be empty)
+fleet=rt/tarmac/fleet/bev
+in_partition() {  # in_partition PARTITION TOPIC... -> <topics> and <partitions> elements
+  p=$1
+  shift
+  topics "$@"
+  printf '<partitions><partition>%s</partition></partitions>' "$p"
+}
+grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS [PUBLISH2 SUBSCRIBE2] (rendered, may be empty)
   subject=$(openssl x509 -in "$1/cert.pem" -noout -subject -nameopt RFC2253 | sed 's/^subject=//')
   echo "    <grant name=\"$1\">"
   echo "      <subject_name>$subject</subject_name>"
@@ -134,6 +157,8 @@ grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS (already rendered, may be 
   echo "        <domains><id_range><min>0</min><max>232</max></id_range></domains>"
   [ -z "$2" ] || echo "        <publish>$2</publish>"
   [ -z "$3" ] || echo "        <subscribe>$3</subscribe>"
+  [ -z "${4:-}" ] || echo "        <publish>$4</publish>"
+  [ -z "${5:-}" ] || echo "        <subscribe>$5</subscribe>"
   echo "      </allow_rule>"
   echo "      <default>DENY</default>"
   echo "    </grant>"
@@ -147,7 +172,13 @@ grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS (already rendered, may be 
     "$(topics "$lidar" "$pose" "$correction" "$obstacles")"
   grant publisher "$(topics "$lidar" "$pose" "$correction")" ""
   grant obstacles "$(topics "$obstacles")" "$(topics "$costmap")"
-  grant monitor "" "$(topics "$lidar" "$pose" "$correction" "$obstacles" "$costmap" "$slice" "$band" "$report" "$diag")"
+  grant monitor "" "$(topics "$lidar" "$pose" "$correction" "$obstacles" "$costmap" "$slice" "$band" "$report" "$diag")" \
+    "" "$(in_partition 'tarmac_fleet_*' "$fleet")"
+  for v in $vehicles; do
+    grant "tarmacd-$v" "$(topics "$costmap" "$slice" "$band" "$report" "$diag")" \
+      "$(topics "$lidar" "$pose" "$correction" "$obstacles")" \
+      "$(in_partition "tarmac_fleet_$v" "$fleet")" "$(in_partition 'tarmac_fleet_*' "$fleet")"
+  done
   echo '  </permissions>'
   echo '</dds>'
 } > permissions.xml

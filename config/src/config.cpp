@@ -5,6 +5,7 @@
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -460,6 +461,18 @@ std::string config_hash(const Config& config) {
   char buf[17];
   std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
   return buf;
+}
+
+int load_tool_config(const std::string& program, const std::string& path, Config& cfg) {
+  if (path.empty()) return 0;
+  auto loaded = load_config_file(path);
+  if (!loaded) {
+    std::fprintf(stderr, "%s: invalid config: %s\n", program.c_str(),
+                 loaded.error().message.c_str());
+    return 78;
+  }
+  cfg = std::move(loaded).value();
+  return 0;
 }
 
 }  // namespace tarmac::config

@@ -93,6 +93,7 @@ std::size_t bev_wire_bytes(const BevMessage& m, std::size_t frame_id_length) {
   at += 1;  // keyframe
   align(8);
   at += 8;  // resolution
+  at += 4;  // position_std_m (float32, aligned after the float64)
   align(4);
   at += 4;  // tiles: count
   for (const BevTile& t : m.tiles) {
@@ -247,11 +248,12 @@ BevTile BevEncoder::unknown_tile(std::pair<std::int32_t, std::int32_t> key) {
 }
 
 BevPeers::BevPeers(std::string own_id, double resolution_m, std::int64_t max_age_ns,
-                   std::int64_t max_future_ns)
+                   std::int64_t max_future_ns, double max_position_std_m)
     : own_id_(std::move(own_id)),
       resolution_m_(resolution_m),
       max_age_ns_(max_age_ns),
-      max_future_ns_(max_future_ns) {}
+      max_future_ns_(max_future_ns),
+      max_position_std_m_(max_position_std_m) {}
 
 Status BevPeers::apply(const BevMessage& m, std::int64_t now_ns) {
   if (m.vehicle_id.empty()) return refused("malformed", "message without a vehicle id");
@@ -265,6 +267,10 @@ Status BevPeers::apply(const BevMessage& m, std::int64_t now_ns) {
   };
   if (m.vehicle_id == own_id_) return refuse("own_id", "a message with this vehicle's own id");
   if (m.resolution_m != resolution_m_) return refuse("resolution", "another resolution");
+  if (max_position_std_m_ > 0.0 && !(m.position_std_m <= max_position_std_m_)) {
+    // Its cells may sit further from where they are than the receiver's margin covers.
+    return refuse("localisation", "position uncertainty beyond the fleet's bound");
+  }
   if (m.stamp_ns > now_ns + max_future_ns_) return refuse("future", "stamped in the future");
   if (m.stamp_ns < now_ns - max_age_ns_) return refuse("stale", "older than fleet.max_age_s");
   Peer& peer = peers_[m.vehicle_id];
@@ -341,6 +347,16 @@ void BevPeers::expire(std::int64_t now_ns) {
     }
     stats_[id].tiles = peer.tiles.size();
   }
+}
+
+std::vector<std::pair<std::int32_t, std::int32_t>> BevPeers::tiles() const {
+  std::vector<TileKey> keys;
+  for (const auto& [id, peer] : peers_) {
+    for (const auto& [key, cells] : peer.tiles) keys.push_back(key);
+  }
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  return keys;
 }
 
 BevPeerCell BevPeers::lookup(std::int64_t i, std::int64_t j) const {

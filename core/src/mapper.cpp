@@ -211,9 +211,11 @@ void Mapper::track_fleet_observations() {
   const double v = params_.occupancy.voxel_size_m;
   const double below = params_.occupancy.window_below_m;
   const CostmapParams& c = params_.costmap;
-  map_.track_column_observations(
-      static_cast<int>(std::floor((below - c.ground_tolerance_m) / v)),
-      static_cast<int>(std::floor((below + c.vehicle_height_m + c.clearance_m) / v)));
+  const int lo = static_cast<int>(std::floor((below - c.ground_tolerance_m) / v));
+  const int hi = static_cast<int>(std::floor((below + c.vehicle_height_m + c.clearance_m) / v));
+  map_.track_column_observations(lo, hi);
+  // The window a pose correction rebuilds replaces this one: it keeps the times too.
+  if (spare_) spare_->track_column_observations(lo, hi);
 }
 
 const CostmapLayers& Mapper::update_costmap(std::span<const VirtualZone> zones,
@@ -351,6 +353,7 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
     transform_points(T_W_S, r.points_S, rebuild_points_W_);
     rotate_directions(T_W_S, r.no_return_S, rebuild_clearing_W_);
     spare_->recenter(r.T_W_B.translation());
+    spare_->set_observation_stamp(r.stamp_ns);
     spare_->integrate(T_W_S.translation(), rebuild_points_W_, rebuild_clearing_W_, runner,
                       r.T_W_B.linear().col(2));
     if (params_.tsdf.enabled && r.tsdf_wanted) {

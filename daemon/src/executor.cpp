@@ -70,7 +70,10 @@ class Executor::Impl {
         return;
       }
       switch (owner_.poses.insert(sample)) {
-        case PoseBuffer::Insert::kOk: owner_.corrections.on_pose(sample); break;
+        case PoseBuffer::Insert::kOk:
+          owner_.corrections.on_pose(sample);
+          if (owner_.fleet) owner_.fleet->note_pose(sample.position_std_m);
+          break;
         case PoseBuffer::Insert::kOutOfOrder: owner_.rejections.add("pose.out_of_order"); break;
         case PoseBuffer::Insert::kDuplicate: owner_.rejections.add("pose.duplicate_stamp"); break;
       }

@@ -34,9 +34,9 @@ core::Result<std::unique_ptr<FleetShare>> FleetShare::create(
   for (const char* r : {"queue.fleet_overflow", "transport.fleet_lost", "fleet.gap"}) {
     drops.declare(r);
   }
-  for (const char* r :
-       {"fleet.frame", "fleet.resolution", "fleet.malformed", "fleet.impersonation", "fleet.own_id",
-        "fleet.future", "fleet.stale", "fleet.order", "fleet.too_large", "fleet.too_many_peers"}) {
+  for (const char* r : {"fleet.frame", "fleet.resolution", "fleet.malformed", "fleet.impersonation",
+                        "fleet.own_id", "fleet.future", "fleet.stale", "fleet.order",
+                        "fleet.too_large", "fleet.too_many_peers", "fleet.localisation"}) {
     rejections.declare(r);
   }
   return std::unique_ptr<FleetShare>(new FleetShare(config, resolution_m, std::move(link).value()));
@@ -46,13 +46,18 @@ FleetShare::FleetShare(const config::Config& config, double resolution_m,
                        std::unique_ptr<transport::FleetLink> link)
     : link_(std::move(link)),
       peers_(config.fleet.vehicle_id, resolution_m, seconds_to_ns(config.fleet.max_age_s),
-             std::llround(config.executor.max_future_ms * 1e6)),
+             std::llround(config.executor.max_future_ms * 1e6), position_bound_m(config)),
       encoder_(config.fleet.vehicle_id, resolution_m),
       period_ns_(seconds_to_ns(config.fleet.publish_period_s)),
       max_age_ns_(seconds_to_ns(config.fleet.max_age_s)),
       input_delay_ns_(std::llround(config.executor.input_delay_ms * 1e6)),
       max_future_ns_(std::llround(config.executor.max_future_ms * 1e6)) {
   pending_.reserve(2 * kMaxPending);
+}
+
+double FleetShare::position_bound_m(const config::Config& config) {
+  const auto& c = config.mapping.costmap;
+  return std::max(c.inflation_radius_m - c.inscribed_radius_m, 0.0) / 3.0;
 }
 
 void FleetShare::summary(core::BevMessage&& message) {
@@ -111,7 +116,11 @@ std::size_t FleetShare::publish_if_due(std::int64_t tick_ns, core::Mapper& mappe
   next_publish_ns_ = (tick_ns / period_ns_ + 1) * period_ns_;
   const core::BevSnapshot snapshot = mapper.fleet_snapshot();
   const bool keyframe = encoder_.next_sequence() % kKeyframeEvery == 0;
-  const core::BevMessage message = encoder_.encode(snapshot, tick_ns, keyframe, max_age_ns_);
+  core::BevMessage message = encoder_.encode(snapshot, tick_ns, keyframe, max_age_ns_);
+  if (pose_since_summary_) pose_std_sent_m_ = pose_std_max_m_;
+  message.position_std_m = pose_std_sent_m_;
+  pose_std_max_m_ = 0.0;
+  pose_since_summary_ = false;
   if (!link_->publish(message)) return 0;
   bytes_published_ += link_->last_bytes();
   ++messages_published_;

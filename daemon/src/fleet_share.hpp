@@ -9,6 +9,7 @@
 /// id, sequence) order, so the same summaries with the same stamps give the same peers' cells
 /// whatever their arrival times within the delay.
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -50,6 +51,18 @@ class FleetShare final : private transport::FleetSink {
 
   [[nodiscard]] const core::BevPeers& peers() const { return peers_; }
 
+  /// A pose of this vehicle was taken, with its localiser's position uncertainty (1σ, m; 0: not
+  /// stated): the next summary states the largest since the last one.
+  void note_pose(double position_std_m) {
+    pose_std_max_m_ = std::max(pose_std_max_m_, position_std_m);
+    pose_since_summary_ = true;
+  }
+
+  /// The bound on a peer's stated position uncertainty (1σ) this vehicle accepts: a third of its
+  /// inflation margin (costmap.inflation_radius_m − inscribed_radius_m), so that a peer's cells
+  /// sit within that margin of where they are at 3σ (docs/fleet.md).
+  static double position_bound_m(const config::Config& config);
+
   /// After the costmap: when a period has passed since the last, encodes `mapper`'s own cells
   /// (Mapper::fleet_snapshot) stamped `tick_ns` and publishes them. Returns the bytes written
   /// (0: not due, or refused by DDS).
@@ -83,6 +96,9 @@ class FleetShare final : private transport::FleetSink {
   ReasonCounters* drops_ = nullptr;
   std::uint64_t overflow_seen_ = 0, lost_seen_ = 0;
   std::uint64_t bytes_published_ = 0, messages_published_ = 0;
+  double pose_std_max_m_ = 0.0;   // since the last summary
+  double pose_std_sent_m_ = 0.0;  // in the last summary: kept when no pose came since
+  bool pose_since_summary_ = false;
 };
 
 }  // namespace tarmac::daemon

@@ -418,5 +418,64 @@ TEST(FleetBevMapper, BSeesTheWallOnlyASaw_BsOwnCellsKeepTheirClasses) {
   EXPECT_NE(c.lookup(static_cast<std::int64_t>(std::floor(26.0 / r)), 0).vehicle_id, nullptr);
 }
 
+// A pose correction rebuilds the window from the retained scans: the rebuilt window keeps each
+// column's observation time (the scan's stamp), or the vehicle's summary would hold nothing
+// until its columns were observed again.
+TEST(FleetBevMapper, RebuiltWindowAfterACorrection_KeepsTheObservationTimes) {
+  constexpr std::int64_t kT = 1'000'000'000;
+  MapperParams params;
+  params.costmap.free_rule = FreeRule::kAnyVoxel;
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.translation().z() = 1.8;
+  SerialRunner runner;
+  Mapper m(params);
+  m.track_fleet_observations();
+  BevFusionCounts counts;
+  for (int k = 1; k <= 3; ++k) {
+    Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
+    T_W_B.translation().x() = 0.5 * k;
+    m.integrate(m.ingest(ring_scan(k * kT), T_W_B, T_B_S), runner);
+    m.rebuild_step(runner);
+  }
+  m.update_costmap({}, 3 * kT, runner, nullptr, counts);
+  const BevSnapshot before = m.fleet_snapshot();
+  const std::vector<BevState> states(before.state.begin(), before.state.end());
+  const std::vector<std::int64_t> times(before.observed_ns.begin(), before.observed_ns.end());
+  ASSERT_GT(std::count_if(times.begin(), times.end(), [](std::int64_t t) { return t > 0; }), 1000);
+
+  // An identity correction of the first two scans: the rebuilt window is the same window.
+  ASSERT_GT(m.correct_rigid(Eigen::Isometry3d::Identity(), 3 * kT), 0u);
+  for (int i = 0; i < 10 && m.rebuilding(); ++i) m.rebuild_step(runner);
+  ASSERT_FALSE(m.rebuilding());
+  ASSERT_EQ(m.correction_stats().rebuilds_completed, 1u);
+  m.update_costmap({}, 3 * kT, runner, nullptr, counts);
+  const BevSnapshot after = m.fleet_snapshot();
+  EXPECT_TRUE(std::equal(states.begin(), states.end(), after.state.begin(), after.state.end()));
+  EXPECT_TRUE(
+      std::equal(times.begin(), times.end(), after.observed_ns.begin(), after.observed_ns.end()));
+}
+
+// A peer whose localiser states more position uncertainty than the bound is not used: its cells
+// may sit further from where they are than the receiver's inflation margin covers.
+TEST(FleetBev, APeerBeyondThePositionBound_IsRefused_UnstatedIsTrusted) {
+  constexpr std::int64_t kT = 1'000'000'000;
+  BevPeers peers("tug-b", 0.2, 10 * kT, kT, 0.5);
+  BevMessage m;
+  m.vehicle_id = "tug-a";
+  m.stamp_ns = kT;
+  m.keyframe = true;
+  m.position_std_m = 0.6;
+  const auto refused = peers.apply(m, kT);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, "fleet.localisation");
+  m.position_std_m = 0.5;
+  EXPECT_TRUE(peers.apply(m, kT).ok());
+  m.stamp_ns += kT;
+  m.position_std_m = 0.0;  // the localiser states none
+  EXPECT_TRUE(peers.apply(m, 2 * kT).ok());
+  EXPECT_EQ(peers.stats().at("tug-a").rejected, 1u);
+  EXPECT_EQ(peers.stats().at("tug-a").messages, 2u);
+}
+
 }  // namespace
 }  // namespace tarmac::core

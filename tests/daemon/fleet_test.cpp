@@ -5,6 +5,10 @@
 
 #include <unistd.h>
 
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -20,6 +24,7 @@
 #include "executor_harness.hpp"
 #include "loopback_only.hpp"
 #include "nav_msgsPubSubTypes.h"
+#include "site_view.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/fleet_bev.hpp"
 #include "tarmac/daemon/clock.hpp"
@@ -100,6 +105,7 @@ config::Config vehicle(std::uint32_t domain, const std::string& id, bool share) 
   c.fleet.enabled = share;
   c.fleet.vehicle_id = id;
   c.fleet.publish_period_s = 1.0 * kTimeScale;
+  c.fleet.max_age_s = 10.0 * kTimeScale;  // the replays' stamps are slowed down by kTimeScale
   return c;
 }
 
@@ -217,8 +223,9 @@ TEST_F(Fleet, TwoVehiclesOnHalvesOfTheLoop_AGainsWhatOnlyBSaw_KeepsItsOwn_BadSum
   ASSERT_TRUE(stats_b.ok()) << stats_b.error().message;
   const std::int64_t a_last = last_stamp(stats_a.value());
 
-  // Bad summaries: stale (a minute old), malformed (runs past the tile), and one claiming to be
-  // tug-b from tug-x's partition. Each must be counted by A and change nothing.
+  // Bad summaries: stale (twice the max age), malformed (runs past the tile), from a sender stating
+  // a position uncertainty beyond A's bound, and one claiming to be tug-b from tug-x's partition.
+  // Each must be counted by A and change nothing.
   {
     auto rogue = FleetWriter::create(participant, cfg_a.fleet.topic, transport::qos::kFleet,
                                      transport::fleet_partition("tug-x"));
@@ -231,7 +238,8 @@ TEST_F(Fleet, TwoVehiclesOnHalvesOfTheLoop_AGainsWhatOnlyBSaw_KeepsItsOwn_BadSum
     bad.vehicle_id = "tug-x";
     bad.keyframe = true;
     bad.resolution_m = cfg_a.mapping.occupancy.voxel_size_m;
-    bad.stamp_ns = clock_now_ns(CLOCK_REALTIME) - 60 * kSecondNs;
+    bad.stamp_ns =
+        clock_now_ns(CLOCK_REALTIME) - 2 * static_cast<std::int64_t>(cfg_a.fleet.max_age_s * 1e9);
     std::vector<std::uint8_t> occupied(16 * 3);
     for (std::size_t k = 0; k < 16; ++k) occupied[3 * k] = (2 << 6) | 63;  // 16 × 64 cells
     bad.tiles = {core::BevTile{0, 0, occupied}};
@@ -239,9 +247,13 @@ TEST_F(Fleet, TwoVehiclesOnHalvesOfTheLoop_AGainsWhatOnlyBSaw_KeepsItsOwn_BadSum
     bad.stamp_ns = clock_now_ns(CLOCK_REALTIME);
     bad.tiles[0].runs.push_back(0);  // one cell past the tile's 1024
     ASSERT_TRUE(rogue.value()->write(transport::to_fleet_bev(bad, "map")));
+    bad.tiles[0].runs.pop_back();
+    bad.stamp_ns += 1;
+    bad.position_std_m = 5.0;  // a peer lost in its localisation
+    ASSERT_TRUE(rogue.value()->write(transport::to_fleet_bev(bad, "map")));
+    bad.position_std_m = 0.0;
     bad.vehicle_id = "tug-b";
     bad.sequence = 1000;
-    bad.tiles[0].runs.pop_back();
     ASSERT_TRUE(impostor.value()->write(transport::to_fleet_bev(bad, "map")));
   }
 
@@ -257,7 +269,8 @@ TEST_F(Fleet, TwoVehiclesOnHalvesOfTheLoop_AGainsWhatOnlyBSaw_KeepsItsOwn_BadSum
   const std::uint64_t seen = b_messages(now_report);
   const auto report = wait_for_report(*reports.value(), [&](const transport::CycleReport& r) {
     return b_messages(r) >= seen + 2 && total_of(r.rejections, "fleet.impersonation") > 0 &&
-           total_of(r.rejections, "fleet.malformed") > 0;
+           total_of(r.rejections, "fleet.malformed") > 0 &&
+           total_of(r.rejections, "fleet.localisation") > 0;
   });
   ASSERT_GE(b_messages(report), seen + 2) << "A did not apply B's summaries";
   const Grid shared = newest_grid(*grids.value(), a_last);
@@ -271,11 +284,12 @@ TEST_F(Fleet, TwoVehiclesOnHalvesOfTheLoop_AGainsWhatOnlyBSaw_KeepsItsOwn_BadSum
   EXPECT_EQ(total_of(report.rejections, "fleet.stale"), 1u);
   EXPECT_EQ(total_of(report.rejections, "fleet.malformed"), 1u);
   EXPECT_EQ(total_of(report.rejections, "fleet.impersonation"), 1u);
+  EXPECT_EQ(total_of(report.rejections, "fleet.localisation"), 1u);
   for (const auto& p : report.fleet_peers) {
     if (p.vehicle_id == "tug-x") {
       EXPECT_EQ(p.cells, 0u);
       EXPECT_EQ(p.messages, 0u);
-      EXPECT_EQ(p.rejected, 2u);
+      EXPECT_EQ(p.rejected, 3u);
     }
   }
 
@@ -367,6 +381,84 @@ TEST_F(Fleet, PeerCellsExpireAfterMaxAge) {
   ASSERT_EQ(last.fleet_peers.size(), 1u);
   EXPECT_EQ(last.fleet_peers[0].cells, 0u) << "B's cells outlived fleet.max_age_s";
   EXPECT_EQ(last.fleet_newest_age_ms, -1.0);
+}
+
+// tarmac-fleet, live then from its recording: two vehicles' summaries fused into one site view.
+TEST_F(Fleet, SiteView_LiveAndFromItsRecording_TheSameSite) {
+  constexpr std::uint32_t kDomain = test::kDomainFleetSiteView;
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("tarmac-fleet-site-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  {
+    std::ofstream yaml(dir / "tarmac.yaml");
+    yaml << "version: 1\ndds: {domain_id: " << kDomain << "}\n";
+  }
+  auto participant = peer(kDomain);
+  const double r = config::Config{}.mapping.occupancy.voxel_size_m;
+  // Two vehicles' windows 10 m apart, each with a wall: 64 x 64 cells, free, a line occupied.
+  const auto snapshot_of = [&](double x0, std::vector<core::BevState>& state,
+                               std::vector<std::int64_t>& seen, std::int64_t t) {
+    state.assign(64 * 64, core::BevState::kFree);
+    seen.assign(64 * 64, t);
+    for (int y = 0; y < 64; ++y)
+      state[static_cast<std::size_t>(y * 64 + 40)] = core::BevState::kOccupied;
+    return core::BevSnapshot{core::GridGeometry2D{x0, 0.0, r, 64, 64}, state, seen};
+  };
+  std::vector<transport::FleetLinkOptions> options(2);
+  std::vector<std::unique_ptr<transport::FleetLink>> links;
+  for (int v = 0; v < 2; ++v) {
+    options[v].vehicle_id = v == 0 ? "tug-a" : "tug-b";
+    auto link = transport::FleetLink::create(participant, options[v]);
+    ASSERT_TRUE(link.ok()) << link.error().message;
+    links.push_back(std::move(link).value());
+  }
+  const std::string fleet_tool = TARMAC_FLEET;
+  const std::string live = fleet_tool + " --config " + (dir / "tarmac.yaml").string() +
+                           " --seconds " + std::to_string(6 * kTimeScale) + " --out " +
+                           (dir / "live").string() + " --record " + (dir / "rec").string() + " > " +
+                           (dir / "live.log").string() + " 2>&1";
+  int live_rc = -1;
+  std::thread tool([&] { live_rc = std::system(live.c_str()); });
+  for (int i = 0; i < 500 && links[1]->matched_readers() < 3; ++i)
+    std::this_thread::sleep_for(10ms);
+  ASSERT_GE(links[1]->matched_readers(), 3u) << "tarmac-fleet never subscribed";
+  const std::int64_t t = clock_now_ns(CLOCK_REALTIME);
+  std::vector<core::BevState> state;
+  std::vector<std::int64_t> seen;
+  for (int v = 0; v < 2; ++v) {
+    core::BevEncoder encoder(options[v].vehicle_id, r);
+    const auto snap = snapshot_of(v * 10.0, state, seen, t);
+    ASSERT_TRUE(
+        links[static_cast<std::size_t>(v)]->publish(encoder.encode(snap, t, true, 10 * kSecondNs)));
+  }
+  tool.join();
+  ASSERT_EQ(live_rc, 0) << std::ifstream(dir / "live.log").rdbuf();
+  const std::string play = fleet_tool + " --play " + (dir / "rec").string() + " --out " +
+                           (dir / "play").string() + " > " + (dir / "play.log").string() + " 2>&1";
+  ASSERT_EQ(std::system(play.c_str()), 0) << std::ifstream(dir / "play.log").rdbuf();
+
+  const auto bytes = [](const std::filesystem::path& f) {
+    std::ifstream in(f, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  // The same cells and owners; the ages (and so the PNG's shades) are taken at the end of the
+  // listening live, at the newest stamp from a recording.
+  for (const char* f : {"site.npy", "site_vehicle.npy"}) {
+    EXPECT_FALSE(bytes(dir / "live" / f).empty()) << f;
+    EXPECT_EQ(bytes(dir / "live" / f), bytes(dir / "play" / f)) << f;
+  }
+  EXPECT_GT(bytes(dir / "live" / "site.png").size(), 100u);
+  // 64 + 50 columns wide (the windows overlap by 14), one wall each: occupied cells 64 + 64.
+  const std::string json = bytes(dir / "play" / "site.json");
+  EXPECT_NE(json.find("\"id\": \"tug-a\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"id\": \"tug-b\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"occupied_cells\": 64"), std::string::npos) << json;
+  const std::string log = bytes(dir / "play.log");
+  EXPECT_NE(log.find("2 summaries from 2 vehicles (0 refused)"), std::string::npos) << log;
+  EXPECT_NE(log.find(std::to_string(64 * 64 + 50 * 64) + " known, 128 occupied"), std::string::npos)
+      << log;
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -90,6 +90,7 @@ void RtpsSniffer::run() {
     std::lock_guard lock(mutex_);
     if (from.sll_ifindex == lo_index_) {
       ++counts_.loopback;
+      if (from.sll_pkttype != PACKET_OUTGOING) counts_.loopback_bytes += len;
     } else {
       if (counts_.off_host++ == 0) {
         char name[IF_NAMESIZE] = "?";

@@ -17,6 +17,8 @@ class RtpsSniffer {
  public:
   struct Counts {
     std::uint64_t loopback = 0;  ///< RTPS packets seen on lo
+    /// RTPS bytes (UDP payload) delivered on lo, each packet once (its outgoing copy not counted)
+    std::uint64_t loopback_bytes = 0;
     std::uint64_t off_host = 0;  ///< RTPS packets seen on any other interface
     std::string first_off_host;  ///< "<ifname>: <src> -> <dst>" of the first such packet
   };

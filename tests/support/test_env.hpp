@@ -27,6 +27,7 @@ enum Domain : std::uint32_t {
   kDomainSecurityUnauthenticated = 117,
   kDomainSecurityOtherCa = 118,
   kDomainSecurityDenied = 119,
+  kDomainSecurityFleet = 122,
   // tarmacd integration tests (tests/daemon/): 130..152
   kDomainDaemonWorkers1 = 130,
   kDomainDaemonWorkers2 = 131,
@@ -71,6 +72,7 @@ enum Domain : std::uint32_t {
   // Fleet sharing between executors (tests/daemon/fleet_test.cpp): 190..199
   kDomainFleetTwoVehicles = 190,
   kDomainFleetExpiry = 191,
+  kDomainFleetSiteView = 192,
 };
 
 /// How many times slower than the normal build this build runs: 1, or more under a sanitizer

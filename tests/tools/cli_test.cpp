@@ -142,6 +142,15 @@ const std::vector<Program>& programs() {
                        "--config=" TARMAC_SOURCE_DIR "/tests/config/bad_unknown_key.yaml"},
        .equals_exit = 78,
        .numeric_option = "--count"},
+      // An invalid config: exit 78 before DDS.
+      {.name = "tarmac-fleet",
+       .path = TARMAC_FLEET,
+       .required = {"--out", "{tmp}/site"},
+       .runs_without_arguments = false,
+       .equals_form = {"--out={tmp}/site",
+                       "--config=" TARMAC_SOURCE_DIR "/tests/config/bad_unknown_key.yaml"},
+       .equals_exit = 78,
+       .numeric_option = "--seconds"},
   };
   return all;
 }

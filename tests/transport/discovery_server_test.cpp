@@ -1,6 +1,7 @@
 // Fleet scale: participants configured with dds.discovery_servers find each other through a
 // Fast DDS discovery server (`fastdds discovery`, Debian fastdds-tools) on loopback, and not
-// without it. Six vehicles' fleet summaries reach every other vehicle.
+// without it. Six vehicles' fleet summaries reach every other vehicle; the discovery's time and
+// traffic on loopback are printed (docs/fleet.md).
 
 #include <signal.h>
 #include <sys/wait.h>
@@ -20,6 +21,7 @@
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
 #include "loopback_only.hpp"
+#include "tarmac/transport/fleet.hpp"
 #include "tarmac/transport/participant.hpp"
 #include "tarmac_msgsPubSubTypes.h"
 #include "test_env.hpp"
@@ -28,8 +30,6 @@ namespace tarmac::transport {
 namespace {
 
 using namespace std::chrono_literals;
-using BevWriter = Writer<tarmac_msgs::msg::dds_::FleetBev_PubSubType>;
-using BevReader = Reader<tarmac_msgs::msg::dds_::FleetBev_PubSubType>;
 
 constexpr int kServerPort = 24121;
 constexpr const char* kTopic = "rt/tarmac/fleet/bev";
@@ -77,30 +77,51 @@ ParticipantConfig client(const std::string& name) {
   return c;
 }
 
-/// One vehicle: its participant, a writer of its summaries and a reader of everyone's.
+/// One vehicle: its participant and its fleet link (tarmacd's: its own partition out, every
+/// vehicle's in).
 struct Vehicle {
   std::string id;
   Participant participant;
-  std::unique_ptr<BevWriter> writer;
-  std::unique_ptr<BevReader> reader;
+  std::unique_ptr<FleetLink> link;
 };
 
 std::unique_ptr<Vehicle> make_vehicle(const std::string& id) {
   auto p = Participant::create(client(id));
   EXPECT_TRUE(p.ok()) << (p.ok() ? "" : p.error().message);
   if (!p.ok()) return nullptr;
-  auto v = std::make_unique<Vehicle>(Vehicle{id, std::move(p).value(), nullptr, nullptr});
-  const QosSpec q{Reliability::kReliable, Durability::kVolatile, 8};
-  auto w = BevWriter::create(v->participant, kTopic, q);
-  auto r = BevReader::create(v->participant, kTopic, q, 64);
-  EXPECT_TRUE(w.ok() && r.ok());
-  if (!w.ok() || !r.ok()) return nullptr;
-  v->writer = std::move(w).value();
-  v->reader = std::move(r).value();
+  auto v = std::make_unique<Vehicle>(Vehicle{id, std::move(p).value(), nullptr});
+  FleetLinkOptions o;
+  o.topic = kTopic;
+  o.vehicle_id = id;
+  auto link = FleetLink::create(v->participant, o);
+  EXPECT_TRUE(link.ok()) << (link.ok() ? "" : link.error().message);
+  if (!link.ok()) return nullptr;
+  v->link = std::move(link).value();
   return v;
 }
 
-class DiscoveryServerTest : public test::LoopbackOnly {};
+bool wait_for_readers(const FleetLink& link, std::size_t n, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (link.matched_readers() < n) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(5ms);
+  }
+  return true;
+}
+
+/// The vehicle ids of the summaries a link hands over.
+struct Ids final : FleetSink {
+  void summary(core::BevMessage&& m) override { ids.push_back(m.vehicle_id); }
+  void reject(std::string_view reason) override { refused.emplace_back(reason); }
+  std::vector<std::string> ids, refused;
+};
+
+class DiscoveryServerTest : public test::LoopbackOnly {
+ protected:
+  [[nodiscard]] test::RtpsSniffer::Counts traffic() const {
+    return sniffer_ ? sniffer_->counts() : test::RtpsSniffer::Counts{};
+  }
+};
 
 TEST_F(DiscoveryServerTest, SixVehiclesFindEachOtherThroughTheServer_NoneWithoutIt) {
   TARMAC_REQUIRE_OR_SKIP(have_fastdds_tool(), "fastdds (Debian fastdds-tools) not installed");
@@ -109,11 +130,13 @@ TEST_F(DiscoveryServerTest, SixVehiclesFindEachOtherThroughTheServer_NoneWithout
     auto a = make_vehicle("lone-a");
     auto b = make_vehicle("lone-b");
     ASSERT_TRUE(a && b);
-    EXPECT_FALSE(a->writer->wait_for_readers(2, 3s)) << "clients matched without their server";
+    EXPECT_FALSE(wait_for_readers(*a->link, 2, 3s)) << "clients matched without their server";
   }
   DiscoveryServer server;
   ASSERT_TRUE(server.running()) << "fastdds discovery did not start";
   constexpr int kVehicles = 6;
+  std::this_thread::sleep_for(500ms);  // the server up and quiet
+  const auto before = traffic();
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<std::unique_ptr<Vehicle>> fleet;
   for (int i = 0; i < kVehicles; ++i) {
@@ -121,10 +144,20 @@ TEST_F(DiscoveryServerTest, SixVehiclesFindEachOtherThroughTheServer_NoneWithout
     ASSERT_TRUE(fleet.back());
   }
   // Each writer matches every reader, its own participant's included.
-  for (auto& v : fleet) ASSERT_TRUE(v->writer->wait_for_readers(kVehicles, 20s)) << v->id;
+  for (auto& v : fleet) ASSERT_TRUE(wait_for_readers(*v->link, kVehicles, 20s)) << v->id;
   const double discovery_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("discovery of %d clients through the server: %.2f s\n", kVehicles, discovery_s);
+  const auto discovered = traffic();
+  // Then idle for 5 s: what discovery keeps sending (announcements, heartbeats) once all match.
+  std::this_thread::sleep_for(5s);
+  const auto idle = traffic();
+  std::printf(
+      "discovery of %d clients through the server: %.2f s, %.1f KiB in %llu RTPS packets on "
+      "loopback; then idle %.2f KiB/s\n",
+      kVehicles, discovery_s,
+      static_cast<double>(discovered.loopback_bytes - before.loopback_bytes) / 1024.0,
+      static_cast<unsigned long long>(discovered.loopback - before.loopback),
+      static_cast<double>(idle.loopback_bytes - discovered.loopback_bytes) / 1024.0 / 5.0);
 
   for (auto& v : fleet) {
     core::BevMessage m;
@@ -133,22 +166,23 @@ TEST_F(DiscoveryServerTest, SixVehiclesFindEachOtherThroughTheServer_NoneWithout
     m.keyframe = true;
     m.tiles = {
         core::BevTile{0, 0, {63, 63, 63, 63, 63, 63, 63, 63, 63, 63, 63, 63, 63, 63, 63, 63}}};
-    ASSERT_TRUE(v->writer->write(to_fleet_bev(m, "map")));
+    ASSERT_TRUE(v->link->publish(m));
   }
+  // Each vehicle hears the five others (its own summary is not handed over).
   for (auto& v : fleet) {
-    std::vector<FleetBevMsg> got;
+    Ids got;
     const auto deadline = std::chrono::steady_clock::now() + 10s;
-    while (got.size() < kVehicles && std::chrono::steady_clock::now() < deadline) {
-      v->reader->wait_for_sample(100ms);
-      v->reader->take_all(got);
+    while (got.ids.size() < kVehicles - 1 && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(20ms);
+      v->link->drain(got);
     }
-    std::vector<std::string> from;
-    for (const auto& msg : got) from.push_back(msg.vehicle_id());
-    std::sort(from.begin(), from.end());
-    EXPECT_EQ(from.size(), static_cast<std::size_t>(kVehicles)) << v->id;
-    for (int i = 0; i < kVehicles && i < static_cast<int>(from.size()); ++i) {
-      EXPECT_EQ(from[static_cast<std::size_t>(i)], "tug-" + std::to_string(i)) << v->id;
+    std::sort(got.ids.begin(), got.ids.end());
+    std::vector<std::string> want;
+    for (int i = 0; i < kVehicles; ++i) {
+      if ("tug-" + std::to_string(i) != v->id) want.push_back("tug-" + std::to_string(i));
     }
+    EXPECT_EQ(got.ids, want) << v->id;
+    EXPECT_TRUE(got.refused.empty()) << v->id;
   }
 }
 

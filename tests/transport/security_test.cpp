@@ -20,7 +20,9 @@
 #include "loopback_only.hpp"
 #include "rtps_sniffer.hpp"
 #include "sensor_msgsPubSubTypes.h"
+#include "tarmac/transport/fleet.hpp"
 #include "tarmac/transport/participant.hpp"
+#include "tarmac_msgsPubSubTypes.h"
 #include "test_env.hpp"
 
 namespace tarmac::transport {
@@ -34,9 +36,10 @@ using CloudWriter = Writer<sensor_msgs::msg::dds_::PointCloud2_PubSubType>;
 using CloudReader = Reader<sensor_msgs::msg::dds_::PointCloud2_PubSubType>;
 
 /// Runs the shipped script into `dir`; false (and the reason) when it fails.
-bool make_material(const fs::path& dir, std::string& why) {
+bool make_material(const fs::path& dir, std::string& why, const std::string& extra = "") {
   const fs::path script = test::source_dir() / "tools" / "make-dds-security.sh";
-  const std::string command = "sh '" + script.string() + "' '" + dir.string() + "' >/dev/null";
+  const std::string command =
+      "sh '" + script.string() + "' '" + dir.string() + "' " + extra + " >/dev/null";
   const int rc = std::system(command.c_str());
   if (rc != 0) why = command + " exited with " + std::to_string(rc);
   return rc == 0;
@@ -48,7 +51,8 @@ class DdsSecurity : public test::LoopbackOnly {
     char pattern[] = "/tmp/tarmac-dds-security-XXXXXX";
     ASSERT_NE(mkdtemp(pattern), nullptr);
     root_ = pattern;
-    ok_ = make_material(root_ / "fleet", why_) && make_material(root_ / "rogue", why_);
+    ok_ = make_material(root_ / "fleet", why_, "--vehicles 'tug-a tug-b'") &&
+          make_material(root_ / "rogue", why_);
   }
   static void TearDownTestSuite() {
     std::error_code ec;
@@ -230,6 +234,70 @@ TEST_F(DdsSecurity, TopicNotGrantedIsRefusedAtWriterCreation) {
       must_create(config(test::kDomainSecurityDenied, "monitor", security("fleet", "monitor")));
   EXPECT_TRUE(PoseReader::create(monitor, topics::kPose, qos::kPose, 4).ok());
   EXPECT_FALSE(PoseWriter::create(monitor, topics::kPose, qos::kPose).ok());
+}
+
+/// Collects the fleet summaries a link hands over, and its refusals.
+class FleetInbox final : public FleetSink {
+ public:
+  void summary(core::BevMessage&& m) override { ids.push_back(m.vehicle_id); }
+  void reject(std::string_view reason) override { refused.emplace_back(reason); }
+  std::vector<std::string> ids, refused;
+};
+
+TEST_F(DdsSecurity, FleetVehicle_PublishesUnderItsOwnIdOnly) {
+  // make-dds-security.sh --vehicles 'tug-a tug-b': tarmacd-tug-a may publish fleet summaries in
+  // its own partition only.
+  constexpr auto kDomain = test::kDomainSecurityFleet;
+  auto a = must_create(config(kDomain, "tarmacd-tug-a", security("fleet", "tarmacd-tug-a")));
+  auto b = must_create(config(kDomain, "tarmacd-tug-b", security("fleet", "tarmacd-tug-b")));
+  auto monitor = must_create(config(kDomain, "monitor", security("fleet", "monitor")));
+  FleetLinkOptions as_a;
+  as_a.vehicle_id = "tug-a";
+  auto link_a = must(FleetLink::create(a, as_a));
+  FleetLinkOptions as_b = as_a;
+  as_b.vehicle_id = "tug-b";
+  auto link_b = must(FleetLink::create(b, as_b));
+  auto site = must(FleetLink::create(monitor, FleetLinkOptions{}));  // the site view: reads only
+  // tug-a's identity cannot write in tug-b's partition: refused at creation.
+  const auto forged = FleetLink::create(a, as_b);
+  ASSERT_FALSE(forged.ok());
+  EXPECT_NE(forged.error().message.find("tarmac_fleet_tug-b"), std::string::npos)
+      << forged.error().message;
+  // Nor may the monitor publish at all.
+  EXPECT_FALSE(FleetLink::create(monitor, as_a).ok());
+  // In its own partition under another vehicle's id: delivered, then refused by the id check.
+  using FleetWriter = Writer<tarmac_msgs::msg::dds_::FleetBev_PubSubType>;
+  auto impostor = must(FleetWriter::create(a, as_a.topic, qos::kFleet, fleet_partition("tug-a")));
+  // tug-a's own link's reader, tug-b's and the site view's; and the readers' side of it: tug-b's
+  // reader has tug-a's, the impostor's and its own writer, the site view tug-a's and tug-b's too.
+  ASSERT_TRUE(impostor->wait_for_readers(3, 10s));
+  for (int i = 0; i < 500 && (link_b->matched_writers() < 3 || site->matched_writers() < 3); ++i) {
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_GE(link_b->matched_writers(), 3u);
+  ASSERT_GE(site->matched_writers(), 3u);
+
+  core::BevMessage m;
+  m.vehicle_id = "tug-a";
+  m.stamp_ns = 1'000'000'000;
+  m.keyframe = true;
+  ASSERT_TRUE(link_a->publish(m));
+  m.vehicle_id = "tug-b";
+  ASSERT_TRUE(impostor->write(to_fleet_bev(m, "map")));
+  FleetInbox at_b, at_site;
+  for (int i = 0; i < 500 && (at_site.ids.size() + at_site.refused.size() < 2 ||
+                              at_b.ids.size() + at_b.refused.size() < 2);
+       ++i) {
+    std::this_thread::sleep_for(20ms);
+    link_b->drain(at_b);
+    site->drain(at_site);
+  }
+  std::this_thread::sleep_for(100ms);
+  link_b->drain(at_b);
+  EXPECT_EQ(at_b.ids, std::vector<std::string>{"tug-a"});
+  EXPECT_EQ(at_b.refused, std::vector<std::string>{"fleet.impersonation"});
+  EXPECT_EQ(at_site.ids, std::vector<std::string>{"tug-a"});
+  EXPECT_EQ(at_site.refused, std::vector<std::string>{"fleet.impersonation"});
 }
 
 TEST_F(DdsSecurity, CertificateFromAnotherCaFailsAtCreation) {

@@ -207,14 +207,7 @@ std::optional<int> parse_options(int argc, char** argv, Options& opt) {
 /// Reads the config and, with --score, the dataset's ground truth. 0, or the exit code after
 /// saying why on stderr.
 int load_inputs(const Options& opt, config::Config& cfg, std::optional<Scoring>& scoring) {
-  if (!opt.config.empty()) {
-    auto loaded = config::load_config_file(opt.config);
-    if (!loaded) {
-      std::fprintf(stderr, "tarmac-audit: invalid config: %s\n", loaded.error().message.c_str());
-      return kExitConfig;
-    }
-    cfg = std::move(loaded).value();
-  }
+  if (const int rc = config::load_tool_config("tarmac-audit", opt.config, cfg); rc != 0) return rc;
   if (!opt.score.empty()) {
     if (cfg.pose.type != config::PoseType::kPoseWithCovarianceStamped) {
       std::fprintf(stderr, "tarmac-audit: --score reads PoseWithCovarianceStamped poses only\n");

@@ -168,14 +168,7 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingDirectory);
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
   config::Config cfg;
-  if (!config_path.empty()) {
-    auto loaded = config::load_config_file(config_path);
-    if (!loaded) {
-      std::fprintf(stderr, "tarmac-echo: invalid config: %s\n", loaded.error().message.c_str());
-      return 78;
-    }
-    cfg = std::move(loaded).value();
-  }
+  if (const int rc = config::load_tool_config("tarmac-echo", config_path, cfg); rc != 0) return rc;
   cfg.dds.participant.name = "tarmac-echo";
   if (!identity_dir.empty()) cfg.dds.participant.security.use_identity_dir(identity_dir);
   auto participant = transport::Participant::create(cfg.dds.participant);

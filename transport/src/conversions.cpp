@@ -591,6 +591,7 @@ void fill_fleet_bev(const core::BevMessage& message, const std::string& frame_id
   msg.sequence_number(message.sequence);
   msg.keyframe(message.keyframe);
   msg.resolution(message.resolution_m);
+  msg.position_std_m(static_cast<float>(message.position_std_m));
   msg.tiles().resize(message.tiles.size());
   for (std::size_t t = 0; t < message.tiles.size(); ++t) {
     msg.tiles()[t].x(message.tiles[t].x);
@@ -614,6 +615,10 @@ core::Result<core::BevMessage> from_fleet_bev(const FleetBevMsg& msg, const std:
   m.sequence = msg.sequence_number();
   m.keyframe = msg.keyframe();
   m.resolution_m = msg.resolution();
+  if (!std::isfinite(msg.position_std_m()) || msg.position_std_m() < 0.0f) {
+    return core::Error{"fleet.malformed", msg.vehicle_id() + ": position_std_m not a number >= 0"};
+  }
+  m.position_std_m = msg.position_std_m();
   m.tiles.resize(msg.tiles().size());
   for (std::size_t t = 0; t < msg.tiles().size(); ++t) {
     m.tiles[t] = core::BevTile{msg.tiles()[t].x(), msg.tiles()[t].y(), msg.tiles()[t].runs()};

@@ -72,16 +72,19 @@ class FleetLink::Impl : private fdds::DataReaderListener {
     }
     const std::size_t n = batch_.size();
     for (auto& r : batch_) {
-      if (r.message.vehicle_id() == options_.vehicle_id) continue;  // one's own
+      // The writer's partition names the vehicle it may speak for (granted per vehicle when
+      // DDS Security is on): a summary under another id is refused — this vehicle's own id
+      // included, unless it comes from this vehicle's own partition (its own echo, skipped).
+      const std::string& id = r.message.vehicle_id();
+      const bool its_own_partition = std::find(r.partitions.begin(), r.partitions.end(),
+                                               fleet_partition(id)) != r.partitions.end();
+      if (its_own_partition && id == options_.vehicle_id) continue;
       auto message = from_fleet_bev(r.message, options_.frame_id);
       if (!message) {
         sink.reject(message.error().code);
         continue;
       }
-      // The writer's partition names the vehicle it may speak for (granted per vehicle when
-      // DDS Security is on): a summary under another id is refused.
-      const std::string own = fleet_partition(message.value().vehicle_id);
-      if (std::find(r.partitions.begin(), r.partitions.end(), own) == r.partitions.end()) {
+      if (!its_own_partition) {
         sink.reject("fleet.impersonation");
         continue;
       }

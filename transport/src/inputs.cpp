@@ -1,5 +1,8 @@
 #include "tarmac/transport/inputs.hpp"
 
+#include <array>
+#include <cmath>
+
 #include "conversions.hpp"
 #include "dds_endpoints.hpp"
 #include "geometry_msgsPubSubTypes.h"
@@ -97,7 +100,8 @@ class PoseInput::Impl {
   std::vector<PoseStampedMsg> stamped_batch;
   std::vector<OdometryMsg> odometry_batch;
 
-  void convert(const std_msgs::msg::dds_::Header_& header, const PoseMsg& pose, PoseSink& sink) {
+  void convert(const std_msgs::msg::dds_::Header_& header, const PoseMsg& pose,
+               const std::array<double, 36>& covariance, PoseSink& sink) {
     if (header.frame_id() != frame_id) {
       sink.reject("pose.unknown_frame");
       return;
@@ -107,7 +111,9 @@ class PoseInput::Impl {
       sink.reject(T.error().code);
       return;
     }
-    sink.pose(PoseSample{from_time_msg(header.stamp()), T.value()});
+    const double var = std::max(covariance[0], covariance[7]);
+    const double std_m = std::isfinite(var) && var > 0.0 ? std::sqrt(var) : 0.0;
+    sink.pose(PoseSample{from_time_msg(header.stamp()), T.value(), std_m});
   }
 };
 
@@ -134,7 +140,9 @@ PoseInput::PoseInput(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 PoseInput::~PoseInput() = default;
 
 std::size_t PoseInput::drain(PoseSink& sink) {
-  const auto convert = [&](const auto& m) { impl_->convert(m.header(), m.pose().pose(), sink); };
+  const auto convert = [&](const auto& m) {
+    impl_->convert(m.header(), m.pose().pose(), m.pose().covariance(), sink);
+  };
   return impl_->stamped ? drain_batch(*impl_->stamped, impl_->stamped_batch, convert)
                         : drain_batch(*impl_->odometry, impl_->odometry_batch, convert);
 }

@@ -454,28 +454,36 @@ std::vector<std::string> DiscoveredWriters::partitions(
   return it == partitions_.end() ? std::vector<std::string>{} : it->second;
 }
 
+namespace {
+
+/// The entity of `partition` in `cache`, created with `qos` (its partition added) on first use.
+template <typename Entity, typename Qos, typename Create>
+Entity* partitioned(std::map<std::string, Entity*>& cache, const std::string& partition, Qos qos,
+                    Create create) {
+  Entity*& entity = cache[partition];
+  if (entity == nullptr) {
+    qos.partition().push_back(partition.c_str());
+    entity = create(qos);
+  }
+  return entity;
+}
+
+}  // namespace
+
 fdds::Publisher* ParticipantImpl::publisher(const std::string& partition) {
   if (partition.empty()) return publisher_;
   std::lock_guard lock(mutex_);
-  auto& publisher = partition_publishers_[partition];
-  if (publisher == nullptr) {
-    fdds::PublisherQos qos = fdds::PUBLISHER_QOS_DEFAULT;
-    qos.partition().push_back(partition.c_str());
-    publisher = participant_->create_publisher(qos);
-  }
-  return publisher;
+  return partitioned(
+      partition_publishers_, partition, fdds::PUBLISHER_QOS_DEFAULT,
+      [&](const fdds::PublisherQos& q) { return participant_->create_publisher(q); });
 }
 
 fdds::Subscriber* ParticipantImpl::subscriber(const std::string& partition) {
   if (partition.empty()) return subscriber_;
   std::lock_guard lock(mutex_);
-  auto& subscriber = partition_subscribers_[partition];
-  if (subscriber == nullptr) {
-    fdds::SubscriberQos qos = fdds::SUBSCRIBER_QOS_DEFAULT;
-    qos.partition().push_back(partition.c_str());
-    subscriber = participant_->create_subscriber(qos);
-  }
-  return subscriber;
+  return partitioned(
+      partition_subscribers_, partition, fdds::SUBSCRIBER_QOS_DEFAULT,
+      [&](const fdds::SubscriberQos& q) { return participant_->create_subscriber(q); });
 }
 
 core::Result<fdds::Topic*> ParticipantImpl::topic(const std::string& name, fdds::TypeSupport type) {

@@ -202,6 +202,10 @@ core::Result<Config> load_config_string(const std::string& yaml_text);
 /// Reads and parses a file; "config.io" when it cannot be read.
 core::Result<Config> load_config_file(const std::string& path);
 
+/// For the tools' --config FILE: the file's config into `cfg` (an empty path keeps `cfg`, the
+/// built-in defaults) and 0, or 78 (EX_CONFIG) after "<program>: invalid config: <why>" on stderr.
+int load_tool_config(const std::string& program, const std::string& path, Config& cfg);
+
 /// A stable hash (16 hex digits, FNV-1a 64) of the effective config, for logs and CycleReport.
 std::string config_hash(const Config& config);
 /// The effective config rendered as YAML (defaults filled in), for the start-up log.

@@ -58,6 +58,8 @@ struct BevMessage {
   std::uint32_t sequence = 0;  ///< +1 per message of this vehicle
   bool keyframe = false;       ///< every known tile; false: the tiles changed since sequence − 1
   double resolution_m = 0.2;
+  /// The sender's horizontal position uncertainty (1σ, m) from its localiser; 0: not stated.
+  double position_std_m = 0.0;
   std::vector<BevTile> tiles;
 };
 
@@ -144,13 +146,16 @@ class BevPeers {
   /// @param own_id messages with this vehicle id are refused (one's own, or a peer claiming it)
   /// @param max_age_ns peer observations older than this are forgotten (expire())
   /// @param max_future_ns a message stamped later than now + this is refused
+  /// @param max_position_std_m a message whose sender states a position uncertainty (1σ) above
+  ///        this is refused ("localisation"); 0: no bound
   BevPeers(std::string own_id, double resolution_m, std::int64_t max_age_ns,
-           std::int64_t max_future_ns = 500'000'000);
+           std::int64_t max_future_ns = 500'000'000, double max_position_std_m = 0.0);
 
   /// Applies one message received at `now_ns`. Refused (counted in the peer's stats, the peer's
   /// tiles unchanged) when malformed, stale (stamp older than now − max age), from the future,
   /// of another resolution, not newer than the peer's last, holding the peer to more than
-  /// kBevMaxPeerTiles tiles, or from a vehicle beyond the first kBevMaxPeers; a change message
+  /// kBevMaxPeerTiles tiles, from a vehicle beyond the first kBevMaxPeers, or from a sender whose
+  /// stated position uncertainty exceeds the bound; a change message
   /// whose sequence
   /// does not follow the last applied one is counted as a gap and ignored, and so is every
   /// change message after it until a keyframe. Returns the refusal, Ok otherwise.
@@ -175,6 +180,8 @@ class BevPeers {
                        std::int64_t now_ns, std::span<std::uint8_t> column_class) const;
 
   [[nodiscard]] const std::map<std::string, BevPeerStats>& stats() const { return stats_; }
+  /// Every tile some peer holds, sorted, each once (the site view's extent).
+  [[nodiscard]] std::vector<std::pair<std::int32_t, std::int32_t>> tiles() const;
   [[nodiscard]] double resolution_m() const { return resolution_m_; }
   [[nodiscard]] std::int64_t max_age_ns() const { return max_age_ns_; }
 
@@ -189,6 +196,7 @@ class BevPeers {
   double resolution_m_;
   std::int64_t max_age_ns_;
   std::int64_t max_future_ns_;
+  double max_position_std_m_;
   std::map<std::string, Peer> peers_;
   std::map<std::string, BevPeerStats> stats_;
 };

@@ -69,6 +69,10 @@ class ScanInput {
 struct PoseSample {
   std::int64_t stamp_ns = 0;
   Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
+  /// The localiser's horizontal position uncertainty, 1σ (m): √max(cov_xx, cov_yy) of the
+  /// message's covariance; 0 when it states none (all zero, negative or not finite: ROS's
+  /// "unknown" conventions). Fleet summaries carry it (docs/fleet.md).
+  double position_std_m = 0.0;
 };
 
 class PoseSink {
