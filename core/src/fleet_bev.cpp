@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 namespace tarmac::core {
 
@@ -101,6 +102,13 @@ std::size_t bev_wire_bytes(const BevMessage& m, std::size_t frame_id_length) {
     at += 4 + 4 + 4 + t.runs.size();  // x, y, runs: count and bytes
   }
   return 4 + at;  // encapsulation header
+}
+
+void sort_in_apply_order(std::vector<BevMessage>& messages) {
+  std::sort(messages.begin(), messages.end(), [](const BevMessage& a, const BevMessage& b) {
+    return std::tie(a.stamp_ns, a.vehicle_id, a.sequence) <
+           std::tie(b.stamp_ns, b.vehicle_id, b.sequence);
+  });
 }
 
 std::int64_t bev_lattice_index(double origin_m, double resolution_m) {

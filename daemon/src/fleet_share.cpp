@@ -83,10 +83,7 @@ bool FleetShare::take(std::int64_t tick_ns, ReasonCounters& drops, ReasonCounter
   lost_seen_ = lost;
   if (pending_.empty()) return false;
 
-  std::sort(pending_.begin(), pending_.end(), [](const auto& a, const auto& b) {
-    return std::tie(a.stamp_ns, a.vehicle_id, a.sequence) <
-           std::tie(b.stamp_ns, b.vehicle_id, b.sequence);
-  });
+  core::sort_in_apply_order(pending_);
   // Due: stamped at least the input delay before the tick. One from beyond the future tolerance
   // is handed over now, to be refused and counted, not held.
   const std::int64_t horizon = tick_ns - input_delay_ns_;

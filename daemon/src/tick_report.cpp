@@ -196,13 +196,13 @@ void TickReport::put_fleet() {
   put(base - 1, report_.fleet_newest_age_ms);
   const auto& peers = report_.fleet_peers;
   if (diag_.values.size() < base + 2 * peers.size()) diag_.values.resize(base + 2 * peers.size());
+  diag_peers_.resize(std::max(diag_peers_.size(), peers.size()));
   for (std::size_t i = 0; i < peers.size(); ++i) {
-    auto& cells = diag_.values[base + 2 * i];
-    auto& age = diag_.values[base + 2 * i + 1];
-    if (cells.first.size() != 6 + peers[i].vehicle_id.size() + 6 ||
-        cells.first.compare(6, peers[i].vehicle_id.size(), peers[i].vehicle_id) != 0) {
-      cells.first = "fleet." + peers[i].vehicle_id + ".cells";
-      age.first = "fleet." + peers[i].vehicle_id + ".age_ms";
+    if (diag_peers_[i] !=
+        peers[i].vehicle_id) {  // peers are in id order: a new one shifts the rest
+      diag_peers_[i] = peers[i].vehicle_id;
+      diag_.values[base + 2 * i].first = "fleet." + peers[i].vehicle_id + ".cells";
+      diag_.values[base + 2 * i + 1].first = "fleet." + peers[i].vehicle_id + ".age_ms";
     }
     put(base + 2 * i, static_cast<double>(peers[i].cells));
     put(base + 2 * i + 1, peers[i].age_ms);

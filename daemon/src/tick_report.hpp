@@ -103,6 +103,7 @@ class TickReport {
   transport::DiagnosticReport diag_;
   double costmap_max_age_ms_;
   bool fleet_;
+  std::vector<std::string> diag_peers_;  ///< the peer whose keys hold each fleet pair
 };
 
 }  // namespace tarmac::daemon

@@ -45,10 +45,7 @@ class Site final : public transport::FleetSink {
 
   /// Applies what was taken since the last call, at `now_ns` (a recording: each at its stamp).
   void apply(std::int64_t now_ns, fleet::Recorder* recorder) {
-    std::sort(batch_.begin(), batch_.end(), [](const auto& a, const auto& b) {
-      return std::tie(a.stamp_ns, a.vehicle_id, a.sequence) <
-             std::tie(b.stamp_ns, b.vehicle_id, b.sequence);
-    });
+    core::sort_in_apply_order(batch_);
     for (const auto& m : batch_) {
       if (recorder != nullptr) {
         if (auto s = recorder->append(m); !s)

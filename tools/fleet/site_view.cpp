@@ -186,7 +186,7 @@ core::Result<Recorder> Recorder::open(const std::filesystem::path& file) {
   out.write(kMagic, 4);
   out.write(reinterpret_cast<const char*>(&kVersion), sizeof kVersion);
   if (!out) return core::Error{"io", file.string() + ": cannot write"};
-  return Recorder(file);
+  return Recorder(file, std::move(out));
 }
 
 core::Status Recorder::append(const core::BevMessage& m) {
@@ -204,10 +204,9 @@ core::Status Recorder::append(const core::BevMessage& m) {
     put<std::uint32_t>(rec, static_cast<std::uint32_t>(t.runs.size()));
     rec.append(reinterpret_cast<const char*>(t.runs.data()), t.runs.size());
   }
-  std::ofstream out(file_, std::ios::binary | std::ios::app);
-  out.write(rec.data(), static_cast<std::streamsize>(rec.size()));
-  out.flush();
-  if (!out) return core::Error{"io", file_.string() + ": cannot append"};
+  out_.write(rec.data(), static_cast<std::streamsize>(rec.size()));
+  out_.flush();  // a recording cut short by a kill keeps every summary written so far
+  if (!out_) return core::Error{"io", file_.string() + ": cannot append"};
   return core::Ok{};
 }
 

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -43,8 +44,10 @@ class Recorder {
   core::Status append(const core::BevMessage& message);
 
  private:
-  explicit Recorder(std::filesystem::path file) : file_(std::move(file)) {}
+  Recorder(std::filesystem::path file, std::ofstream out)
+      : file_(std::move(file)), out_(std::move(out)) {}
   std::filesystem::path file_;
+  std::ofstream out_;  // open for the recording's life: one write per summary
 };
 
 /// Every summary of a recording, in file order. A truncated or malformed file is an error that

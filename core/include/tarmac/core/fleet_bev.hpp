@@ -207,6 +207,10 @@ class BevPeers {
 /// figures; a transport test checks it against Fast DDS's own size.
 std::size_t bev_wire_bytes(const BevMessage& message, std::size_t frame_id_length);
 
+/// Sorts summaries into the order they are applied in: stamp, then vehicle id, then sequence
+/// (tarmacd and tarmac-fleet alike, so both hold the same peers' cells).
+void sort_in_apply_order(std::vector<BevMessage>& messages);
+
 /// Lattice index of a cell coordinate of a lattice-aligned geometry's origin (origin / r).
 std::int64_t bev_lattice_index(double origin_m, double resolution_m);
 
