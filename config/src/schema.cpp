@@ -474,6 +474,9 @@ std::vector<Key> make_schema() {
           integer("tsdf.reserve_blocks", 0, 10'000'000, "blocks",
                   "blocks (4 KB each) built at start so new blocks cost no page faults",
                   [](Config& c) -> Field { return &c.mapping.tsdf.reserve_blocks; }),
+          integer("tsdf.resident_limit_mb", 0, 1'000'000, "MiB",
+                  "tiles beyond this are paged to state.dir/tsdf_tiles, far ones first; 0: none",
+                  [](Config& c) -> Field { return &c.mapping.tsdf.resident_limit_mb; }),
           // corrections
           boolean("corrections.enabled",
                   "retain scans and rebuild the maps when poses are corrected",

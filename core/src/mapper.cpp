@@ -374,4 +374,13 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
   return step;
 }
 
+void Mapper::rebuild_sensors(std::vector<Eigen::Vector3d>& out) const {
+  out.clear();
+  if (!rebuilding()) return;
+  for (std::uint64_t s = rebuilding_ ? cursor_seq_ : oldest_seq(); s < next_seq_; ++s) {
+    const RetainedScan& r = retained(s);
+    if (r.tsdf_wanted) out.push_back((r.T_W_B * r.T_B_S).translation());
+  }
+}
+
 }  // namespace tarmac::core

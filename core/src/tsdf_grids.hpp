@@ -3,6 +3,8 @@
 /// from a public header: an OpenVDB translation unit costs ~12 s and ~650 MB to compile).
 
 #include <algorithm>
+#include <cstdint>
+#include <unordered_set>
 #include <vector>
 
 #include <openvdb/openvdb.h>
@@ -42,7 +44,29 @@ struct TsdfLeafCache {
 struct TsdfLayer::Grids {
   TsdfGrid::Ptr tsdf;
   std::vector<TsdfLeafCache> leaf_cache;
+  /// Tiles paged out (pack_tile keys): read by the integrator's tasks, changed between scans.
+  std::unordered_set<std::uint64_t> absent;
+  /// Tiles changed since TsdfLayer::take_touched_tiles() (kept only when tracking is on).
+  bool track_touched = false;
+  std::unordered_set<std::uint64_t> touched;
+  void touch(int bx, int by, int bz);
 };
+
+/// A tile's key in Grids::absent (21 bits per axis, like the integrator's block keys).
+inline std::uint64_t pack_tile(int tx, int ty, int tz) {
+  constexpr int kBias = 1 << 20;
+  return (static_cast<std::uint64_t>(tx + kBias) << 42) |
+         (static_cast<std::uint64_t>(ty + kBias) << 21) | static_cast<std::uint64_t>(tz + kBias);
+}
+
+inline void TsdfLayer::Grids::touch(int bx, int by, int bz) {
+  if (track_touched) touched.insert(pack_tile(bx >> 4, by >> 4, bz >> 4));
+}
+
+/// OpenVDB's nodes of the TSDF tree: a tile is a Node.
+using TsdfLeaf = TsdfTree::LeafNodeType;
+using TsdfTopNode = TsdfTree::RootNodeType::ChildNodeType;  // 32³ tiles
+using TsdfNode = TsdfTopNode::ChildNodeType;                // 16³ blocks: a tile
 
 /// Index-to-world transform of the lattice: index i ↦ centre (i + ½)·v of voxel [i·v, (i+1)·v).
 openvdb::math::Transform::Ptr tsdf_transform(float voxel_size_m);

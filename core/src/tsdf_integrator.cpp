@@ -134,6 +134,7 @@ struct Partition {
   std::array<std::uint32_t, kTsdfBlockVoxels> count{};
   std::array<std::uint32_t, kTsdfBlockVoxels> touched{};
   std::uint64_t voxel_updates = 0;
+  std::uint64_t blocks_refused = 0, samples_refused = 0;
 
   std::size_t home(std::uint64_t key) const {
     return static_cast<std::size_t>(mix(key) >> 20) & (table_keys.size() - 1);
@@ -511,6 +512,7 @@ void group_by_block(Partition& part, const std::vector<SampleBin>& bins, std::si
 /// aside and handed to the tree in step 3 (part.new_leaves). The cache spares a walk down the
 /// tree (several dependent cache misses) per block.
 void find_leaves(Partition& part, TsdfLeafCache& cache, Tree& tree,
+                 const std::unordered_set<std::uint64_t>& absent,
                  std::vector<std::unique_ptr<Leaf>>& spares, const Value& background) {
   const std::size_t slots = part.slot_keys.size();
   // The leaf of every block: from the leaf cache, else found in the tree read-only (its
@@ -550,6 +552,14 @@ void find_leaves(Partition& part, TsdfLeafCache& cache, Tree& tree,
         const openvdb::Coord origin(b.x() * kTsdfBlockEdge, b.y() * kTsdfBlockEdge,
                                     b.z() * kTsdfBlockEdge);
         Leaf* leaf = acc_tree.probeLeaf(origin);
+        if (leaf == nullptr && !absent.empty() &&
+            absent.contains(pack_tile(b.x() >> 4, b.y() >> 4, b.z() >> 4))) {
+          // Its tile is paged out: building the block would shadow the tile's stored values.
+          part.slot_entry[sl] = TsdfLeafCache::Entry{key, nullptr, nullptr};
+          part.slot_lines[sl] = 0;
+          ++part.blocks_refused;
+          continue;
+        }
         if (leaf == nullptr) {
           // A spare (all background, inactive, as a new leaf) when there is one.
           if (spares.empty()) {
@@ -580,16 +590,21 @@ void apply_samples(Partition& part, float max_w) {
   constexpr std::size_t kLinesAhead = 24;
   std::size_t pf_slot = 0, issued = 0, consumed = 0;
   std::uint64_t pf_lines = 0;
+  const auto prefetch_mask = [&](std::size_t sl) {
+    if (part.slot_entry[sl].leaf != nullptr) {
+      __builtin_prefetch(&part.slot_entry[sl].leaf->getValueMask(), 1);
+    }
+  };
   if (slots > 0) {
     pf_lines = part.slot_lines[0];
-    __builtin_prefetch(&part.slot_entry[0].leaf->getValueMask(), 1);
+    prefetch_mask(0);
   }
   const auto prefetch_until = [&](std::size_t target) {
     while (issued < target) {
       if (pf_lines == 0) {
         if (++pf_slot >= slots) return;
         pf_lines = part.slot_lines[pf_slot];
-        __builtin_prefetch(&part.slot_entry[pf_slot].leaf->getValueMask(), 1);
+        prefetch_mask(pf_slot);
         continue;
       }
       const int l = __builtin_ctzll(pf_lines);
@@ -604,6 +619,10 @@ void apply_samples(Partition& part, float max_w) {
     prefetch_until(consumed + kLinesAhead);
     Leaf* leaf = part.slot_entry[sl].leaf;
     Value* values = part.slot_entry[sl].values;
+    if (leaf == nullptr) {  // refused: its tile is paged out
+      part.samples_refused += part.slot_start[sl + 1] - part.slot_start[sl];
+      continue;
+    }
     std::size_t nt = 0;
     // The voxels of the block, each once in first-touch order (branch-free: whether a sample
     // is a voxel's first is unpredictable).
@@ -695,8 +714,10 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     Partition& part = s.partitions[p];
     part.new_leaves.clear();
     part.voxel_updates = 0;
+    part.blocks_refused = 0;
+    part.samples_refused = 0;
     group_by_block(part, s.bins, p);
-    find_leaves(part, grids.leaf_cache[p], tree, s.spares[p], background);
+    find_leaves(part, grids.leaf_cache[p], tree, grids.absent, s.spares[p], background);
     apply_samples(part, max_w);
   });
 
@@ -714,7 +735,14 @@ const TsdfUpdate& TsdfIntegrator::integrate(const Eigen::Vector3d& origin_W,
     }
     update_.blocks_created += part.new_leaves.size();
     update_.voxel_updates += part.voxel_updates;
-    for (const std::uint64_t key : part.slot_keys) update_.blocks.push_back(unpack_block(key));
+    update_.blocks_refused += part.blocks_refused;
+    update_.samples_refused += part.samples_refused;
+    for (std::size_t sl = 0; sl < part.slot_keys.size(); ++sl) {
+      if (part.blocks_refused > 0 && part.slot_entry[sl].leaf == nullptr) continue;
+      update_.blocks.push_back(unpack_block(part.slot_keys[sl]));
+      const BlockIndex& b = update_.blocks.back();
+      grids.touch(b.x(), b.y(), b.z());
+    }
     update_.samples += part.grouped.size();
     part.reset_table();
   }

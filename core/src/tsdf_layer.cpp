@@ -7,6 +7,7 @@
 #include <string>
 
 #include "tarmac/core/assert.hpp"
+#include "tarmac/core/tsdf_tiles.hpp"
 #include "tsdf_grids.hpp"
 
 namespace tarmac::core {
@@ -32,6 +33,7 @@ Status TsdfParams::validate() const {
     return bad("max_range_m", "must be in (0, 1000] m");
   }
   if (reserve_blocks > 10'000'000) return bad("reserve_blocks", "must be in [0, 1e7]");
+  if (resident_limit_mb > 1'000'000) return bad("resident_limit_mb", "must be in [0, 1e6]");
   return Ok{};
 }
 
@@ -99,26 +101,14 @@ std::optional<TsdfBlockView> TsdfLayer::find_block(const BlockIndex& b) const {
 
 std::uint64_t TsdfLayer::digest() const {
   // FNV-1a 64 over 32-bit words (coordinates, then distance and weight of every voxel).
-  std::uint64_t h = 1469598103934665603ull;
-  const auto word = [&h](std::uint32_t x) {
-    h ^= x;
-    h *= 1099511628211ull;
-  };
-  for_each_block([&](const TsdfBlockView& b) {
-    for (int a = 0; a < 3; ++a) word(static_cast<std::uint32_t>(b.block[a]));
-    for (int n = 0; n < kTsdfBlockVoxels; ++n) {
-      std::uint32_t d, w;
-      std::memcpy(&d, &b.voxels[n].distance_m, 4);
-      std::memcpy(&w, &b.voxels[n].weight, 4);
-      word(d);
-      word(w);
-    }
-  });
-  return h;
+  TsdfDigest digest;
+  for_each_block([&digest](const TsdfBlockView& b) { digest.add(b); });
+  return digest.value();
 }
 
 void TsdfLayer::clear() {
   make_tsdf_grids(voxel_size_m_, truncation_m_, *grids_);
+  grids_->absent.clear();
   for (auto& cache : grids_->leaf_cache) cache.drop();
 }
 
@@ -131,6 +121,7 @@ std::size_t TsdfLayer::erase_blocks(std::span<const BlockIndex> blocks) {
     // The leaf is replaced by an inactive background tile: the block reads as never observed.
     Leaf* leaf = tree.stealNode<Leaf>(o, background, false);
     if (leaf == nullptr) continue;
+    grids_->touch(b.x(), b.y(), b.z());
     delete leaf;
     ++erased;
   }
@@ -140,6 +131,7 @@ std::size_t TsdfLayer::erase_blocks(std::span<const BlockIndex> blocks) {
 TsdfLayer TsdfLayer::clone() const {
   TsdfLayer copy(voxel_size_m_, truncation_m_);
   copy.grids_->tsdf = grids_->tsdf->deepCopy();
+  copy.grids_->absent = grids_->absent;
   return copy;
 }
 

@@ -36,7 +36,11 @@ const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud, const Eigen:
     const std::uint64_t n = filtered.points_W.size();
     if (tick_.tsdf_points + n <= quotas_.tsdf_points_per_cycle) {
       tick_.tsdf_points += n;
+      if (pager_ != nullptr) pager_->before_scan(mapper_.tsdf(), filtered.sensor_W);
       r.tsdf = &mapper_.integrate_tsdf(filtered, runner_);
+      if (pager_ != nullptr) {
+        pager_->after_scan(mapper_.tsdf(), filtered.sensor_W, mapper_.rebuilding());
+      }
       ++tick_.tsdf_scans;
       r.tsdf_ms = ms_between(t2, Clock::now());
     } else {
@@ -48,6 +52,10 @@ const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud, const Eigen:
   // so its progress is a function of the scan sequence, not of how scans fall into ticks.
   if (mapper_.rebuilding()) {
     const auto t3 = Clock::now();
+    if (pager_ != nullptr) {
+      mapper_.rebuild_sensors(rebuild_sensors_);
+      pager_->before_rebuild(mapper_.tsdf(), rebuild_sensors_);
+    }
     r.rebuild = mapper_.rebuild_step(runner_);
     r.rebuild_ms = ms_between(t3, Clock::now());
     tick_.scans_reintegrated += r.rebuild.scans;

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -22,6 +23,7 @@
 #include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
+#include "tarmac/daemon/tsdf_pager.hpp"
 #include "tarmac/tools/array_io.hpp"
 #include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/kitti.hpp"
@@ -42,6 +44,7 @@ struct Options {
   std::size_t max_scans = 0;  // 0: all
   double sensor_height_m = 1.9;
   double fleet_period_s = 0.0;  ///< > 0: encode a fleet summary this often, report its bytes
+  std::string memory_log;       ///< per scan: distance driven, RSS, resident and stored TSDF
 };
 
 struct StageTimes {
@@ -78,6 +81,11 @@ struct Run {
   std::uint64_t jump_corrections = 0;
   std::size_t next_correction = 0;  ///< --corrections applied so far
   std::size_t rebuild_steps_after_end = 0;
+  double distance_m = 0.0;  ///< driven (sensor path in x, y)
+  /// --memory-log: one CSV line per scan.
+  std::FILE* memory_log = nullptr;
+  /// tsdf.resident_limit_mb > 0: the TSDF's tiles paged to out/tsdf_tiles.
+  daemon::TsdfPager* pager = nullptr;
   /// --fleet-period: each summary's wire bytes and whether it was a keyframe.
   std::vector<std::pair<std::size_t, bool>> fleet_messages;
 };
@@ -123,6 +131,12 @@ int load_inputs(const Options& opt, Inputs& in) {
     return kExitIo;
   }
 
+  if (!opt.prior.empty() && params.tsdf.resident_limit_mb > 0) {
+    std::fprintf(stderr,
+                 "tarmac-map: --prior needs the whole TSDF in memory: set tsdf.resident_limit_mb "
+                 "to 0 (change detection over tiles is not there yet)\n");
+    return kExitConfig;
+  }
   // The prior map for change detection, checked before any work is done.
   if (!opt.prior.empty()) {
     auto loaded = core::load_tsdf(opt.prior);
@@ -187,6 +201,27 @@ int load_inputs(const Options& opt, Inputs& in) {
   return 0;
 }
 
+/// Resident set of this process, bytes (/proc/self/statm).
+std::size_t rss_bytes() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (f == nullptr) return 0;
+  unsigned long size = 0, resident = 0;
+  const int got = std::fscanf(f, "%lu %lu", &size, &resident);
+  std::fclose(f);
+  return got == 2 ? resident * static_cast<std::size_t>(sysconf(_SC_PAGESIZE)) : 0;
+}
+
+/// --memory-log: scan, distance driven (m), RSS, the TSDF's resident tiles as counted against
+/// the limit, and the tile store (MiB).
+void log_memory(const Run& run, const core::Mapper& mapper, std::size_t k) {
+  constexpr double kMiB = 1024.0 * 1024.0;
+  const daemon::TsdfPagerStats st = run.pager ? run.pager->stats() : daemon::TsdfPagerStats{};
+  std::fprintf(run.memory_log, "%zu,%.1f,%.1f,%.1f,%.1f\n", k, run.distance_m,
+               static_cast<double>(rss_bytes()) / kMiB,
+               static_cast<double>(mapper.tsdf().resident_bytes()) / kMiB,
+               static_cast<double>(st.stored_bytes) / kMiB);
+}
+
 /// Maps the sequence scan by scan through the daemon's stages (daemon::Cycle), applying the
 /// corrections and feeding the ground-truth trackers; a rebuild still running after the last
 /// scan is finished. Exits with kExitData on a scan it cannot read.
@@ -196,7 +231,9 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
   const config::Config& cfg = in.cfg;
   std::vector<tools::DynamicBox> moving_now;  // the moving objects' boxes at the current scan
   daemon::Cycle cycle(mapper, pool, daemon::Cycle::Quotas{cfg.quotas.tsdf_points_per_cycle});
+  cycle.page_tsdf(run.pager);
   core::PoseJumpDetector jumps(params.corrections);
+  std::optional<Eigen::Vector3d> last_sensor_W;
   Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
   T_B_S.translation().z() = opt.sensor_height_m;
   // --fleet-period: this vehicle's summaries as tarmacd would send them (a keyframe every
@@ -310,6 +347,9 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     run.dropped_ego += counts.ego_vehicle;
     run.dropped_isolated += counts.isolated;
     run.voxel_visits += occ.voxel_visits;
+    if (last_sensor_W) run.distance_m += (scan.sensor_W - *last_sensor_W).head<2>().norm();
+    last_sensor_W = scan.sensor_W;
+    if (run.memory_log != nullptr) log_memory(run, mapper, k);
     if (tty) std::fprintf(stderr, "\rtarmac-map: scan %zu/%zu", k + 1, n);
   }
   if (tty) std::fprintf(stderr, "\n");
@@ -457,7 +497,21 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
     return kExitIo;
   }
-  if (params.tsdf.enabled) {
+  if (run.pager != nullptr) {
+    constexpr double kMiB = 1024.0 * 1024.0;
+    const daemon::TsdfPagerStats st = run.pager->stats();
+    std::printf(
+        "tsdf paging (limit %u MiB): peak resident %.1f MiB, now %.1f MiB in %zu tiles; tile "
+        "store %zu tiles, %.1f MiB (%s/tsdf_tiles); %llu evicted, %llu written, %llu loaded, "
+        "%llu scans over the limit, %llu write / %llu load errors; driven %.0f m\n",
+        params.tsdf.resident_limit_mb, static_cast<double>(st.peak_resident_bytes) / kMiB,
+        static_cast<double>(st.resident_bytes) / kMiB, st.resident_tiles, st.stored_tiles,
+        static_cast<double>(st.stored_bytes) / kMiB, opt.out.c_str(),
+        static_cast<unsigned long long>(st.evicted), static_cast<unsigned long long>(st.written),
+        static_cast<unsigned long long>(st.loaded), static_cast<unsigned long long>(st.over_limit),
+        static_cast<unsigned long long>(st.write_errors),
+        static_cast<unsigned long long>(st.load_errors), run.distance_m);
+  } else if (params.tsdf.enabled) {
     std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
                 "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
                 tsdf_out.save_ms);
@@ -507,12 +561,14 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     return std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(vec.data()),
                                          vec.size() * sizeof(vec[0]));
   };
-  std::printf("digest: occupancy %s costmap %s esdf_slice %s esdf %s tsdf %016llx\n",
-              tools::digest(bytes(window_out.log_odds)).c_str(),
-              tools::digest(bytes(mapper.costmap().costmap.cells())).c_str(),
-              tools::digest(bytes(mapper.costmap().obstacle_distance.distance_m)).c_str(),
-              tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
-              static_cast<unsigned long long>(mapper.tsdf().digest()));
+  std::printf(
+      "digest: occupancy %s costmap %s esdf_slice %s esdf %s tsdf %016llx\n",
+      tools::digest(bytes(window_out.log_odds)).c_str(),
+      tools::digest(bytes(mapper.costmap().costmap.cells())).c_str(),
+      tools::digest(bytes(mapper.costmap().obstacle_distance.distance_m)).c_str(),
+      tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
+      static_cast<unsigned long long>(run.pager != nullptr ? run.pager->site_digest(mapper.tsdf())
+                                                           : mapper.tsdf().digest()));
   if (window_out.have_band) {
     std::printf("digest: esdf_band %s\n",
                 tools::digest(bytes(mapper.esdf_band().field.distance_m)).c_str());
@@ -523,9 +579,10 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
       "timing.json%s%s}\n",
       opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
-      params.tsdf.enabled ? (in.prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
-                                      : ",tsdf.vdb,tsdf.json,mesh.ply")
-                          : "");
+      tsdf_out.paged        ? ",tsdf_tiles/"
+      : params.tsdf.enabled ? (in.prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
+                                        : ",tsdf.vdb,tsdf.json,mesh.ply")
+                            : "");
   return 0;
 }
 
@@ -562,6 +619,10 @@ int main(int argc, char** argv) {
                  "poses.txt); the lines of one K form one correction, applied after scan K "
                  "(tarmac-sim --correct-at)")
       ->check(CLI::ExistingFile);
+  app.add_option("--memory-log", opt.memory_log,
+                 "CSV, one line per scan: scan, distance driven m, RSS MiB, TSDF resident MiB "
+                 "(as counted against tsdf.resident_limit_mb), tile store MiB")
+      ->type_name("FILE");
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
 
   Inputs in;
@@ -570,7 +631,40 @@ int main(int argc, char** argv) {
   core::Mapper mapper(in.cfg.mapping);
   mapper.reserve_scans(in.cfg.quotas.reserve_points_per_scan);  // as tarmacd before READY=1
   Run run;
+  const core::TsdfParams& tsdf = in.cfg.mapping.tsdf;
+  std::unique_ptr<daemon::TsdfPager> pager;
+  if (tsdf.enabled && tsdf.resident_limit_mb > 0) {
+    // Offline, each scan waits for the tiles it can touch: the map is the unlimited one, bit
+    // for bit (tarmacd never waits).
+    daemon::TsdfPagerParams pp = daemon::TsdfPagerParams::for_mapper(
+        in.cfg.mapping, std::filesystem::path(opt.out) / "tsdf_tiles");
+    pp.wait_for_loads = true;
+    pp.resume = false;
+    auto opened = daemon::TsdfPager::open(pp, mapper.tsdf());
+    if (!opened) {
+      std::fprintf(stderr, "tarmac-map: %s\n", opened.error().message.c_str());
+      return kExitIo;
+    }
+    pager = std::move(opened).value();
+    run.pager = pager.get();
+  }
+  if (!opt.memory_log.empty()) {
+    run.memory_log = std::fopen(opt.memory_log.c_str(), "w");
+    if (run.memory_log == nullptr) {
+      std::fprintf(stderr, "tarmac-map: %s: cannot write\n", opt.memory_log.c_str());
+      return kExitIo;
+    }
+    std::fprintf(run.memory_log, "scan,distance_m,rss_mib,tsdf_resident_mib,tile_store_mib\n");
+  }
   run_sequence(opt, in, mapper, pool, run);
+  if (run.memory_log != nullptr) std::fclose(run.memory_log);
+  if (pager) {
+    pager->flush(mapper.tsdf());
+    if (auto stored = pager->store_all(mapper.tsdf()); !stored) {
+      std::fprintf(stderr, "tarmac-map: %s\n", stored.error().message.c_str());
+      return kExitIo;
+    }
+  }
 
   // ---- outputs ----
   const std::filesystem::path out = opt.out;
@@ -580,7 +674,9 @@ int main(int argc, char** argv) {
     return kExitIo;
   }
   map_tool::TsdfOutputs tsdf_out;
-  if (in.cfg.mapping.tsdf.enabled) {
+  if (pager) {
+    tsdf_out.paged = true;  // the site is the tile store: products over tiles are not written
+  } else if (in.cfg.mapping.tsdf.enabled) {
     if (auto w = map_tool::write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(in.cfg),
                                               run.last_stamp_ns,
                                               in.prior ? &in.prior->layer : nullptr, tsdf_out);

@@ -38,6 +38,7 @@ struct TsdfOutputs {
   double mesh_ms = 0.0, save_ms = 0.0, changes_ms = 0.0;
   std::size_t vertices = 0, triangles = 0;
   core::ChangeMap changes;
+  bool paged = false;  ///< tsdf.resident_limit_mb > 0: the TSDF is the tile store, no products
 };
 
 /// tsdf.vdb, tsdf.json, mesh.ply and, with a prior, changes.npy + changes.png.

@@ -185,11 +185,12 @@ void Lidar::scan(const Scene& scene, const Eigen::Isometry3d& T_W_S, double t_s,
   returns.clear();
   const Eigen::Vector3d origin_W = T_W_S.translation();
   const Eigen::Matrix3d R_W_S = T_W_S.linear();
+  const std::vector<int> candidates = scene.near(origin_W, params_.max_range_m, t_s);
   for (int j = 0; j < params_.azimuth_steps; ++j) {
     for (int b = 0; b < params_.beams; ++b) {
       const Eigen::Vector3d& dir_S = direction_S(b, j);
       const std::optional<Hit> hit =
-          scene.raycast(origin_W, R_W_S * dir_S, params_.max_range_m, t_s);
+          scene.raycast(origin_W, R_W_S * dir_S, params_.max_range_m, t_s, &candidates);
       if (!hit) continue;
       LidarReturn r;
       r.true_range_m = hit->range_m;

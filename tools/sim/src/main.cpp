@@ -50,8 +50,9 @@ int main(int argc, char** argv) {
   app.add_option("--scene", scene_name,
                  "airside, terminal (long walls beside the path) or aircraft (a loop round a "
                  "parked aircraft whose belly is in the vehicle envelope, turns of 20 m radius, "
-                 "default speed 10 m/s)")
-      ->check(CLI::IsMember({"airside", "terminal", "aircraft"}));
+                 "default speed 10 m/s) or site (a 2.2 km service road round an apron: "
+                 "buildings, parked aircraft, poles; 10 m/s)")
+      ->check(CLI::IsMember({"airside", "terminal", "aircraft", "site"}));
   auto* drift = app.add_option("--drift-m", params.drift_m,
                                "pose drift: written poses shifted along scene y, growing to M")
                     ->transform(cli::in_range(-100.0, 100.0));
@@ -74,12 +75,20 @@ int main(int argc, char** argv) {
                                        speed_given ? params.path.speed_mps : 10.0, 20.0);
     params.path.sensor_height_m = sensor_height_m;
   }
+  if (scene_name == "site") {
+    const double sensor_height_m = params.path.sensor_height_m;
+    // The service road round the apron, 2.2 km, at 10 m/s by default, turns of 20 m radius.
+    params.path = sim::DrivePath::loop(sim::Scene::site_route_min(), sim::Scene::site_route_max(),
+                                       speed_given ? params.path.speed_mps : 10.0, 20.0);
+    params.path.sensor_height_m = sensor_height_m;
+  }
   if (const std::string error = params.validate(); !error.empty()) {
     return cli::usage_error(app, error);
   }
 
   const sim::Scene scene = scene_name == "terminal"   ? sim::Scene::terminal_walls()
                            : scene_name == "aircraft" ? sim::Scene::aircraft_stand()
+                           : scene_name == "site"     ? sim::Scene::airport_site()
                                                       : sim::Scene::airside_default();
   const sim::SequenceResult result = sim::write_sequence(scene, params, out_dir);
   if (!result.ok()) {

@@ -325,11 +325,28 @@ Aabb Scene::bounds_at(int id, double t_s) const {
   return bounds(shape_at(id, t_s));
 }
 
+std::vector<int> Scene::near(const Eigen::Vector3d& p_W, double radius_m, double t_s) const {
+  std::vector<int> ids;
+  for (const Object& object : objects_) {
+    const Aabb b = bounds_at(object.id, t_s);
+    bool in = true;
+    for (int a = 0; a < 3; ++a) {
+      in = in && b.min_W[a] <= p_W[a] + radius_m && b.max_W[a] >= p_W[a] - radius_m;
+    }
+    if (in) ids.push_back(object.id);
+  }
+  return ids;
+}
+
 std::optional<Hit> Scene::raycast(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
-                                  double max_range_m, double t_s) const {
+                                  double max_range_m, double t_s,
+                                  const std::vector<int>* candidates) const {
   const Eigen::Vector3d d = dir_W.normalized();
   std::optional<Hit> best;
-  for (const Object& object : objects_) {
+  const std::size_t n = candidates != nullptr ? candidates->size() : objects_.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Object& object =
+        candidates != nullptr ? objects_[static_cast<std::size_t>((*candidates)[i])] : objects_[i];
     const std::optional<double> range_m = object.motion
                                               ? intersect(shape_at(object.id, t_s), origin_W, d)
                                               : intersect(object.shape_W, origin_W, d);
@@ -403,6 +420,66 @@ Scene Scene::aircraft_stand() {
   scene.add("tail", "tail", Box{V(15.0, -0.2, 3.3), V(18.0, 0.2, 8.0)});
   scene.add("cone_nose", "cone", Cone{V(20.0, 0.0, 0.0), 0.2, 0.5});
   scene.add("cone_wing", "cone", Cone{V(0.0, -16.0, 0.0), 0.2, 0.5});
+  return scene;
+}
+
+Scene Scene::airport_site() {
+  using V = Eigen::Vector3d;
+  Scene scene;
+  scene.add("ground", "ground", Plane{V::UnitZ(), 0.0});
+  const Eigen::Vector2d lo = site_route_min(), hi = site_route_max();
+  // The road's four sides, counter-clockwise; `out` points away from the apron.
+  struct Side {
+    Eigen::Vector2d from, to, out;
+  };
+  const Side sides[] = {{{lo.x(), lo.y()}, {hi.x(), lo.y()}, {0.0, -1.0}},
+                        {{hi.x(), lo.y()}, {hi.x(), hi.y()}, {1.0, 0.0}},
+                        {{hi.x(), hi.y()}, {lo.x(), hi.y()}, {0.0, 1.0}},
+                        {{lo.x(), hi.y()}, {lo.x(), lo.y()}, {-1.0, 0.0}}};
+  // An axis-aligned box from a centre on the ground and its extents along and across the road.
+  const auto box = [](const Eigen::Vector2d& c, const Eigen::Vector2d& along, double half_along,
+                      double half_across, double z0, double z1) {
+    const Eigen::Vector2d across(-along.y(), along.x());
+    const Eigen::Vector2d e = (along * half_along + across * half_across).cwiseAbs();
+    return Box{V(c.x() - e.x(), c.y() - e.y(), z0), V(c.x() + e.x(), c.y() + e.y(), z1)};
+  };
+  int n = 0;
+  for (const Side& side : sides) {
+    const Eigen::Vector2d dir = (side.to - side.from).normalized();
+    const double length = (side.to - side.from).norm();
+    const Axis along_axis = std::abs(dir.x()) > 0.5 ? Axis::kX : Axis::kY;
+    // Keep the corners' turning arcs clear (20 m radius) and the sides' ends apart.
+    for (double s = 40.0; s + 40.0 <= length; s += 10.0, ++n) {
+      const Eigen::Vector2d at = side.from + s * dir;
+      const std::string id = std::to_string(n);
+      const int step = static_cast<int>(std::lround(s / 10.0));
+      if (step % 6 == 0) {  // a building outside the road, its height varying along the site
+        const double height = 8.0 + 2.0 * static_cast<double>(n % 4);
+        scene.add("building_" + id, "building",
+                  box(at + 32.0 * side.out, dir, 18.0, 10.0, 0.0, height));
+      }
+      if (step % 9 == 4) {  // a parked aircraft inside, nose along the road
+        const Eigen::Vector2d c = at - 28.0 * side.out;
+        // The fuselage spans c ± 17 m along the road; a cylinder grows along +axis from its base.
+        V base(c.x(), c.y(), 3.2);
+        base[static_cast<int>(along_axis)] -= 17.0;
+        scene.add("fuselage_" + id, "fuselage", Cylinder{along_axis, base, 34.0, 1.9});
+        scene.add("wings_" + id, "wing", box(c + 2.0 * dir, dir, 3.0, 16.0, 3.4, 3.7));
+        scene.add("tail_" + id, "tail", box(c - 15.0 * dir, dir, 1.5, 0.2, 3.2, 9.0));
+        scene.add(
+            "gear_" + id, "landing_gear",
+            Cylinder{Axis::kZ, V(c.x(), c.y(), 0.0) + V(dir.x(), dir.y(), 0.0) * 12.0, 1.5, 0.25});
+      }
+      if (step % 5 == 2) {  // a light pole beside the road
+        const Eigen::Vector2d p = at + 9.0 * side.out;
+        scene.add("pole_" + id, "pole", Cylinder{Axis::kZ, V(p.x(), p.y(), 0.0), 10.0, 0.2});
+      }
+      if (step % 13 == 7) {  // a cone on the road's edge
+        const Eigen::Vector2d p = at - 4.0 * side.out;
+        scene.add("cone_" + id, "cone", Cone{V(p.x(), p.y(), 0.0), 0.2, 0.5});
+      }
+    }
+  }
   return scene;
 }
 

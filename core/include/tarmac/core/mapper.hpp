@@ -159,6 +159,9 @@ class Mapper {
   /// Deterministic: the quota counts points, never time. Call it after each ingested scan (its
   /// stages done).
   RebuildStep rebuild_step(TaskRunner& runner);
+  /// The sensor positions (revised poses) of the retained scans a running or scheduled rebuild
+  /// re-integrates into the TSDF, into `out` (cleared): the ground it will write to.
+  void rebuild_sensors(std::vector<Eigen::Vector3d>& out) const;
   /// A rebuild is scheduled or running.
   [[nodiscard]] bool rebuilding() const { return rebuilding_ || pending_; }
   /// Retained scans the running rebuild has still to re-integrate (0 when none runs).
@@ -195,6 +198,9 @@ class Mapper {
     std::vector<BlockIndex> tsdf_blocks;       ///< blocks of that contribution
   };
   RetainedScan& retained(std::uint64_t seq) { return retained_[seq % retained_.size()]; }
+  const RetainedScan& retained(std::uint64_t seq) const {
+    return retained_[seq % retained_.size()];
+  }
   [[nodiscard]] std::uint64_t oldest_seq() const;
   void schedule_rebuild(std::int64_t from_stamp_ns);
   void start_rebuild();

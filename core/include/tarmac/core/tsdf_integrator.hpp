@@ -49,9 +49,16 @@ struct TsdfParams {
   /// page fault of its first touch (~4 µs per 4 KB page on the project's VMs: about a fifth of
   /// the integration time while the map grows). 0..1e7; 0: none.
   std::uint32_t reserve_blocks = 0;
+  /// Resident memory of the TSDF's tiles above which the far ones are paged to disk, MiB
+  /// (tsdf_tiles.hpp; the daemon's TsdfPager does the paging). 0..1e6; 0: no limit.
+  std::uint32_t resident_limit_mb = 0;
 
   [[nodiscard]] Status validate() const;
 };
+
+class TsdfTile;
+struct TsdfTileInfo;
+using TileIndex = Eigen::Vector3i;
 
 /// Integer voxel coordinates on the world lattice (same convention as VoxelIndex).
 using TsdfVoxelIndex = Eigen::Vector3i;
@@ -128,6 +135,30 @@ class TsdfLayer {
   /// thread can save while this layer keeps integrating. Costs a copy of memory_bytes().
   [[nodiscard]] TsdfLayer clone() const;
 
+  // Tiles (tsdf_tiles.hpp): a paged map holds some tiles; the others are absent (on disk).
+  /// Resident tiles and their blocks, in TileKey order.
+  [[nodiscard]] std::vector<TsdfTileInfo> resident_tiles() const;
+  /// What the resident tiles cost as counted against a paging limit: blocks · kTsdfBlockBytes +
+  /// tiles · kTsdfTileNodeBytes (deterministic, unlike the allocator's figures).
+  [[nodiscard]] std::size_t resident_bytes() const;
+  /// Takes tile `t` out of the layer (nothing when it holds no block); it becomes absent.
+  [[nodiscard]] std::optional<TsdfTile> detach_tile(const TileIndex& t);
+  /// A copy of resident tile `t` (nothing when it holds no block); the layer keeps it.
+  [[nodiscard]] std::optional<TsdfTile> copy_tile(const TileIndex& t) const;
+  /// Puts a detached or decoded tile back; it is no longer absent.
+  /// @pre no block of the tile is resident (true while it is absent: nothing builds there).
+  void attach_tile(TsdfTile&& tile);
+  /// Marks a tile absent (a layer started over a tile store), or forgets that it was (a tile
+  /// whose file was lost: its ground is mapped afresh).
+  void mark_absent(const TileIndex& t);
+  void forget_absent(const TileIndex& t);
+  [[nodiscard]] bool is_absent(const TileIndex& t) const;
+  [[nodiscard]] std::size_t absent_count() const;
+  /// Keeps (or stops keeping) the tiles that integration and erase_blocks change.
+  void track_touched_tiles(bool on);
+  /// The tiles changed since the last call, sorted; empties the set.
+  [[nodiscard]] std::vector<TileIndex> take_touched_tiles();
+
   /// OpenVDB grids (defined in core/src/tsdf_grids.hpp, for the core's own .cpp files only).
   /// Mutable access drops the integrator's leaf-pointer cache (the tree may change).
   struct Grids;
@@ -147,6 +178,9 @@ struct TsdfUpdate {
   std::uint64_t samples = 0;        ///< (ray, voxel) pairs inside the band, before merging
   std::uint64_t voxel_updates = 0;  ///< voxels updated (each at most once per scan)
   std::uint64_t blocks_created = 0;
+  /// Blocks inside absent tiles (paged out, not back yet): their samples were not applied.
+  std::uint64_t blocks_refused = 0;
+  std::uint64_t samples_refused = 0;
   /// Every block this scan updated, in ascending (x, y, z) order.
   std::vector<BlockIndex> blocks;
 };

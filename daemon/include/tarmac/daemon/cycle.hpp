@@ -16,11 +16,13 @@
 #include <cstdint>
 #include <limits>
 #include <span>
+#include <vector>
 
 #include <Eigen/Geometry>
 
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/task_runner.hpp"
+#include "tarmac/daemon/tsdf_pager.hpp"
 
 namespace tarmac::daemon {
 
@@ -71,6 +73,9 @@ class Cycle {
   /// times, and update_costmap() fuses `peers`' cells (null: none) and keeps the own classes
   /// for Mapper::fleet_snapshot().
   void share_with_fleet(const core::BevPeers* peers);
+  /// Pages the TSDF through `pager` from now on (null: no paging): before each scan's TSDF
+  /// integration the pager brings back the tiles near it, after it evicts down to its limit.
+  void page_tsdf(TsdfPager* pager) { pager_ = pager; }
   /// What the last update_costmap() took from peers.
   [[nodiscard]] const core::BevFusionCounts& fleet_counts() const { return fleet_counts_; }
 
@@ -93,6 +98,8 @@ class Cycle {
   ScanResult last_;
   bool fleet_ = false;
   const core::BevPeers* peers_ = nullptr;
+  TsdfPager* pager_ = nullptr;
+  std::vector<Eigen::Vector3d> rebuild_sensors_;
   core::BevFusionCounts fleet_counts_;
 };
 

@@ -132,8 +132,14 @@ class Scene {
   /// of the ray origin_W + r · dir_W over all objects at time t_s; nothing when no surface is
   /// within max_range_m. `dir_W` need not be normalised (it is normalised here; range_m is along
   /// the unit direction).
+  /// `candidates` (ascending ids; null: every object): the objects that can be hit, e.g. those
+  /// near(origin_W, max_range_m, t_s) — the same answer, faster on a large site.
   std::optional<Hit> raycast(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
-                             double max_range_m, double t_s) const;
+                             double max_range_m, double t_s,
+                             const std::vector<int>* candidates = nullptr) const;
+  /// Ids (ascending) of the objects whose bounds at t_s come within `radius_m` of p_W along
+  /// every axis: the only ones a ray from p_W can hit within radius_m.
+  std::vector<int> near(const Eigen::Vector3d& p_W, double radius_m, double t_s) const;
 
   /// True when p_W lies inside any non-ground object at time t_s, or below the ground (z < 0).
   bool occupied(const Eigen::Vector3d& p_W, double t_s) const;
@@ -194,6 +200,15 @@ class Scene {
   ///  - id 11 cone_wing          cone, base (0, -16, 0), r = 0.2, h = 0.5
   /// The loop round it: the rectangle [-30, -22] .. [30, 22].
   static Scene aircraft_stand();
+
+  /// A whole airport site for long drives (DrivePath::loop over site_route_min/max(): a service
+  /// road round an apron, 2.2 km): along the road's outer side, hangars and terminal buildings
+  /// (boxes) every 60 m; on its inner side, parked aircraft (fuselage, wings, tail) every 90 m;
+  /// light poles every 50 m and a cone every 130 m beside the road. Procedural and fixed: every
+  /// object's place follows from its index along the road.
+  static Scene airport_site();
+  static Eigen::Vector2d site_route_min() { return {-400.0, -150.0}; }
+  static Eigen::Vector2d site_route_max() { return {400.0, 150.0}; }
 
  private:
   std::vector<Object> objects_;

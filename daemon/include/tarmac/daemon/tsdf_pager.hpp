@@ -1,0 +1,116 @@
+#pragma once
+/// @file Bounded resident memory for the site-wide TSDF (`tsdf.resident_limit_mb`): tiles
+/// (core/tsdf_tiles.hpp) far from the vehicle leave the layer and go to a tile store on disk,
+/// and come back as the vehicle nears them. Which tiles leave and which are asked back is decided
+/// between scans, from the vehicle's position and the map alone (deterministic); the disk work
+/// (encode and write, read and decode) runs on a background thread of its own, never in a scan.
+///
+/// Rules (docs/mapping.md, "Site-scale maps"):
+///  - a scan can touch tiles within `need_radius_m` of its sensor (x, y): tsdf.max_range_m plus
+///    the truncation; tiles on disk within `load_radius_m` (one tile further) are asked back;
+///  - over the limit, tiles are evicted farthest first, never one within load_radius_m nor one a
+///    scan of the last `keep_scans` touched; down to 90 % of the limit. A tile loaded and not
+///    changed since is dropped without a write;
+///  - a tile still loading is absent: the integrator refuses to build blocks there (counted), so
+///    nothing in memory ever shadows a stored tile. `wait_for_loads` (tarmac-map) makes each scan
+///    wait for the tiles it can touch instead: the map is then bit for bit the unlimited one;
+///    tarmacd never waits, and a load later than the vehicle counts in `loads_late`;
+///  - a failed write puts the tile back in memory (counted; eviction stops: the disk is not to be
+///    trusted); a tile that fails to load is renamed `.refused`, counted, and its ground is mapped
+///    afresh.
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "tarmac/core/mapper.hpp"
+#include "tarmac/core/result.hpp"
+#include "tarmac/core/tsdf_integrator.hpp"
+#include "tarmac/core/tsdf_tiles.hpp"
+
+namespace tarmac::daemon {
+
+struct TsdfPagerParams {
+  std::size_t limit_bytes = 0;  ///< resident tiles above this are evicted (> 0)
+  std::filesystem::path dir;    ///< the tile store: one file per tile
+  float voxel_size_m = 0.1f;
+  float truncation_m = 0.3f;
+  double need_radius_m = 50.3;  ///< tiles a scan can touch: within this of the sensor (x, y)
+  double load_radius_m = 63.1;  ///< tiles on disk within this are asked back (>= need_radius_m)
+  std::size_t keep_scans = 52;  ///< tiles touched by the last this many scans stay
+  bool wait_for_loads = false;  ///< a scan waits for the tiles it can touch (tarmac-map)
+  bool resume = true;           ///< false: tiles left in `dir` by an earlier run are removed
+
+  /// For a mapper: need and load radius from the TSDF's max range and truncation; keep_scans
+  /// covers the scans retained for a pose-correction rebuild (it erases their blocks).
+  static TsdfPagerParams for_mapper(const core::MapperParams& mapping, std::filesystem::path dir);
+};
+
+struct TsdfPagerStats {
+  std::size_t resident_bytes = 0;  ///< TsdfLayer::resident_bytes() after the last scan
+  std::size_t peak_resident_bytes = 0;
+  std::size_t resident_tiles = 0;
+  std::size_t stored_tiles = 0;  ///< tiles with a file in the store
+  std::uint64_t stored_bytes = 0;
+  std::uint64_t evicted = 0;       ///< tiles taken out of memory
+  std::uint64_t written = 0;       ///< tile files written
+  std::uint64_t loaded = 0;        ///< tiles read back
+  std::uint64_t loads_late = 0;    ///< scans that met a tile they could touch still on disk
+  std::uint64_t over_limit = 0;    ///< scans left above the limit (all else in the working set)
+  std::uint64_t write_errors = 0;  ///< writes that failed (the tile stayed in memory)
+  std::uint64_t load_errors = 0;   ///< tiles refused on reading (renamed .refused)
+  std::size_t io_queued = 0;       ///< writes and reads not done yet
+};
+
+class TsdfPager {
+ public:
+  /// Opens (creates) the tile store; with `resume`, its tiles are marked absent in `layer` and
+  /// come back as the vehicle nears them.
+  static core::Result<std::unique_ptr<TsdfPager>> open(const TsdfPagerParams& params,
+                                                       core::TsdfLayer& layer);
+  ~TsdfPager();
+  TsdfPager(const TsdfPager&) = delete;
+  TsdfPager& operator=(const TsdfPager&) = delete;
+
+  /// Before a scan's TSDF integration: takes the tiles the worker has read back, asks back the
+  /// tiles on disk within the load radius, and (wait_for_loads) waits for those within the need
+  /// radius.
+  void before_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W);
+  /// The same for a pose-correction rebuild step: the tiles around every retained scan it will
+  /// re-integrate (Mapper::rebuild_sensors).
+  void before_rebuild(core::TsdfLayer& layer, std::span<const Eigen::Vector3d> sensors_W);
+  /// After it: the tiles it changed are marked, then eviction down to the limit, unless `hold`
+  /// (a pose-correction rebuild is running: it erases and rewrites the retained scans' blocks,
+  /// wherever their corrected poses put them).
+  void after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W, bool hold = false);
+  /// Waits until the worker has done every queued write and read (and takes the reads back).
+  void flush(core::TsdfLayer& layer);
+  /// Writes every resident tile changed since it was last stored (copies: the layer keeps them),
+  /// then waits: the store alone is then the whole map.
+  core::Status store_all(core::TsdfLayer& layer);
+
+  /// Every block of the site (resident tiles and stored ones, each read and dropped in turn), in
+  /// TsdfLayer::for_each_block's order; call flush() first. False when a stored tile cannot be
+  /// read (its blocks are then missing from the visit).
+  bool for_each_site_block(const core::TsdfLayer& layer,
+                           const std::function<void(const core::TsdfBlockView&)>& fn) const;
+  /// The site's digest: equal to TsdfLayer::digest() of the same map held whole.
+  [[nodiscard]] std::uint64_t site_digest(const core::TsdfLayer& layer) const;
+
+  [[nodiscard]] TsdfPagerStats stats() const;
+  [[nodiscard]] const TsdfPagerParams& params() const { return params_; }
+
+ private:
+  struct Impl;
+  explicit TsdfPager(const TsdfPagerParams& params);
+  TsdfPagerParams params_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tarmac::daemon
