@@ -406,6 +406,11 @@ void Executor::Impl::publish_diagnostics(const double* stage_ms, double jitter_m
   facts.pending_scans = scheduler.pending();
   facts.pose_samples = poses.size();
   facts.clock_steps = totals.clock_steps;
+  TsdfPagerStats paging;
+  if (store.pager() != nullptr) {
+    paging = store.pager()->stats();
+    facts.paging = &paging;
+  }
   outputs->publish_diagnostics(reports.diagnostics(facts));
 }
 
@@ -476,9 +481,15 @@ void Executor::prepare(const RunHooks& hooks) {
   if (d.pool) return;
   if (hooks.on_thread_start) hooks.on_thread_start();
   if (d.store.periodic()) d.store.start_saver();  // before real_time_setup: not pinned, not FIFO
+  if (auto paged = d.store.open_pager(d.mapper); !paged) {
+    // Mapping goes on with the whole TSDF in memory; the DiagnosticArray has no paging keys.
+    spdlog::error("state: TSDF paging off, the TSDF is not bounded: {} [{}]", paged.error().message,
+                  paged.error().code);
+  }
   d.pool = real_time_setup(d.config.executor, hooks.on_thread_start);
   d.cycle = std::make_unique<Cycle>(d.mapper, *d.pool,
                                     Cycle::Quotas{d.config.quotas.tsdf_points_per_cycle});
+  d.cycle->page_tsdf(d.store.pager());
   if (d.fleet) d.cycle->share_with_fleet(&d.fleet->peers());
   raise_dds_threads(d.config.executor, d.dds_threads);
 }

@@ -102,12 +102,42 @@ core::Status MapStore::save_window(const core::OccupancyMap& map, std::int64_t s
   return core::Ok{};
 }
 
-core::Status MapStore::save_tsdf(const core::Mapper& mapper, std::int64_t newest_stamp_ns) const {
+core::Status MapStore::save_tsdf(core::Mapper& mapper, std::int64_t newest_stamp_ns) {
   std::error_code ec;
   std::filesystem::create_directories(state_.dir, ec);
   if (ec) return core::Error{"state.io", state_.dir + ": " + ec.message()};
   const core::StaticOccupancy occupancy = static_occupancy(mapper);
+  if (pager_) {
+    if (auto stored = pager_->store_all(mapper.tsdf()); !stored) return stored;
+    const core::TsdfLayer none(tsdf_.voxel_size_m, tsdf_.truncation_m);
+    return core::save_tsdf(tsdf_path(), none, tsdf_info(newest_stamp_ns), &occupancy);
+  }
   return core::save_tsdf(tsdf_path(), mapper.tsdf(), tsdf_info(newest_stamp_ns), &occupancy);
+}
+
+core::Status MapStore::open_pager(core::Mapper& mapper) {
+  if (pager_ || !tsdf_.enabled || tsdf_.resident_limit_mb == 0) return core::Ok{};
+  core::MapperParams mp = mapper.params();
+  TsdfPagerParams p =
+      TsdfPagerParams::for_mapper(mp, std::filesystem::path(state_.dir) / "tsdf_tiles");
+  // tarmacd never waits for a tile: a late one is counted (its samples refused), not waited for.
+  p.wait_for_loads = false;
+  const bool loaded_blocks = mapper.tsdf().block_count() > 0;
+  p.resume = state_.load_on_start && !loaded_blocks;
+  if (loaded_blocks) {
+    spdlog::warn(
+        "state: {} holds a TSDF (saved without tsdf.resident_limit_mb): it is the map, the tile "
+        "store {} is emptied",
+        tsdf_path().string(), p.dir.string());
+  }
+  auto opened = TsdfPager::open(p, mapper.tsdf());
+  if (!opened) return opened.error();
+  pager_ = std::move(opened).value();
+  const TsdfPagerStats st = pager_->stats();
+  spdlog::info("state: TSDF paged through {} (limit {} MiB): {} tiles stored, {:.1f} MiB",
+               p.dir.string(), tsdf_.resident_limit_mb, st.stored_tiles,
+               static_cast<double>(st.stored_bytes) / (1024.0 * 1024.0));
+  return core::Ok{};
 }
 
 TsdfLoadResult MapStore::load_tsdf(core::Mapper& mapper) {
@@ -204,14 +234,22 @@ MapStore::SaveCounts MapStore::counts() const {
   return {saves_.load(), failures_.load(), skipped_.load()};
 }
 
-void MapStore::snapshot(const core::Mapper& mapper, std::int64_t newest_stamp_ns) {
+void MapStore::snapshot(core::Mapper& mapper, std::int64_t newest_stamp_ns) {
   if (saver_busy_.load()) {
     ++skipped_;
     spdlog::warn("state: periodic TSDF save skipped, the previous one is still being written");
     return;
   }
   const auto t0 = Clock::now();
-  auto copy = std::make_unique<core::TsdfLayer>(mapper.tsdf().clone());
+  std::unique_ptr<core::TsdfLayer> copy;
+  if (pager_) {
+    // The tiles changed since they were last stored, copied now and written by the pager's
+    // thread; the file keeps the static occupancy.
+    pager_->store_changed(mapper.tsdf());
+    copy = std::make_unique<core::TsdfLayer>(tsdf_.voxel_size_m, tsdf_.truncation_m);
+  } else {
+    copy = std::make_unique<core::TsdfLayer>(mapper.tsdf().clone());
+  }
   core::StaticOccupancy static_copy = static_occupancy(mapper);
   const double copy_ms = ms_between(t0, Clock::now());
   saver_busy_ = true;

@@ -18,6 +18,7 @@
 #include "tarmac/core/result.hpp"
 #include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/daemon/executor.hpp"
+#include "tarmac/daemon/tsdf_pager.hpp"
 
 namespace tarmac::daemon {
 
@@ -46,7 +47,17 @@ class MapStore {
   /// Writes the mapper's TSDF and static occupancy to state.dir/state.tsdf_file with tsdf_io
   /// (atomic: .tmp, fsync, rename). `newest_stamp_ns`: the newest scan integrated since start
   /// (0: none, the file carries the loaded map's stamp). Not for the cycle.
-  core::Status save_tsdf(const core::Mapper& mapper, std::int64_t newest_stamp_ns) const;
+  /// With paging (tsdf.resident_limit_mb > 0) the TSDF is the tile store: every changed tile is
+  /// written to it first, and the file holds the static occupancy and an empty TSDF.
+  core::Status save_tsdf(core::Mapper& mapper, std::int64_t newest_stamp_ns);
+
+  /// tsdf.resident_limit_mb > 0: opens the tile store state.dir/tsdf_tiles (after load_tsdf):
+  /// its tiles are the map when state.load_on_start and the loaded file held no TSDF blocks;
+  /// otherwise it is emptied. Call before the real-time setup: the pager's thread stays
+  /// SCHED_OTHER and unpinned. Without paging: nothing.
+  core::Status open_pager(core::Mapper& mapper);
+  /// The pager, or null (no paging, or it could not open).
+  [[nodiscard]] TsdfPager* pager() const { return pager_.get(); }
 
   /// Executor::load_tsdf(): loads the static map into `mapper`, or refuses the file (renamed to
   /// <file>.refused); removes a save cut short (<file>.tmp). Logs one line either way.
@@ -64,7 +75,9 @@ class MapStore {
   /// Periodic save, between ticks on the executor thread: copies the TSDF and the static layer
   /// and hands the copy to the saver thread (skipped, counted, when the previous copy is still
   /// being written).
-  void snapshot(const core::Mapper& mapper, std::int64_t newest_stamp_ns);
+  /// With paging, the changed tiles' copies go to the pager's thread and the file gets the
+  /// static occupancy only.
+  void snapshot(core::Mapper& mapper, std::int64_t newest_stamp_ns);
 
   /// Thread-safe.
   [[nodiscard]] SaveCounts counts() const;
@@ -77,6 +90,7 @@ class MapStore {
   void saver_loop();
 
   config::StateConfig state_;
+  std::unique_ptr<TsdfPager> pager_;
   core::TsdfParams tsdf_;
   float static_voxel_size_m_;
   std::string frame_id_;  // the lattice lives in the pose / map frame

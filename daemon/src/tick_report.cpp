@@ -61,6 +61,13 @@ TickReport::TickReport(const config::Config& config, const std::string& config_h
     diag_.values[kDiagFixed + 2 * i].first = prefix + ".age_ms";
     diag_.values[kDiagFixed + 2 * i + 1].first = prefix + ".stale";
   }
+  if (config.mapping.tsdf.enabled && config.mapping.tsdf.resident_limit_mb > 0) {
+    for (const char* key : {"tsdf_resident_mib", "tsdf_tiles_stored", "tsdf_tile_loads_late_total",
+                            "tsdf_tile_errors_total"}) {
+      diag_.values.emplace_back(key, std::string());
+      ++paging_keys_;
+    }
+  }
   if (fleet_) diag_.values.emplace_back("fleet.newest_age_ms", std::string());
   for (auto& v : diag_.values) v.second.reserve(32);
   diag_.message.reserve(kDiagMessageSize);
@@ -177,9 +184,21 @@ const transport::DiagnosticReport& TickReport::diagnostics(const DiagnosticFacts
     append(a.input.c_str(), a.age_ms, " (none yet)");
     any_input_stale = true;
   }
+  if (paging_keys_ > 0 && f.paging != nullptr) {
+    const std::size_t b = paging_base();
+    put(b, static_cast<double>(f.paging->resident_bytes) / (1024.0 * 1024.0));
+    put(b + 1, static_cast<double>(f.paging->stored_tiles));
+    put(b + 2, static_cast<double>(f.paging->loads_late));
+    const std::uint64_t errors = f.paging->write_errors + f.paging->load_errors;
+    put(b + 3, static_cast<double>(errors));
+    // A failed write stops eviction (memory then grows past the limit): worth a warning.
+    if (f.paging->write_errors > 0)
+      append(used > 0 ? "; tsdf tile writes failing" : "tsdf tile writes failing");
+  }
   if (fleet_) put_fleet();
   if (f.overrun) append(used > 0 ? "; over budget" : "over budget");
-  diag_.level = costmap_stale ? 2 : (any_input_stale || f.overrun) ? 1 : 0;
+  const bool paging_failing = f.paging != nullptr && f.paging->write_errors > 0;
+  diag_.level = costmap_stale ? 2 : (any_input_stale || f.overrun || paging_failing) ? 1 : 0;
   diag_.message = used > 0 ? message : "ok";
   return diag_;
 }
@@ -187,7 +206,7 @@ const transport::DiagnosticReport& TickReport::diagnostics(const DiagnosticFacts
 void TickReport::put_fleet() {
   // After the fixed keys and the inputs' pairs: the newest peer cell's age, then each peer's
   // cells and summary age (a pair added the first time a peer is heard of).
-  const std::size_t base = kDiagFixed + 2 * report_.input_ages.size() + 1;
+  const std::size_t base = paging_base() + paging_keys_ + 1;
   const auto put = [&](std::size_t i, double v) {
     char buf[32];
     std::snprintf(buf, sizeof buf, "%.3f", v);

@@ -12,6 +12,7 @@
 
 #include "tarmac/config/config.hpp"
 #include "tarmac/daemon/reason_counters.hpp"
+#include "tarmac/daemon/tsdf_pager.hpp"
 #include "tarmac/transport/cycle_report.hpp"
 
 namespace tarmac::daemon {
@@ -68,6 +69,8 @@ struct DiagnosticFacts {
   std::size_t pending_scans = 0;
   std::size_t pose_samples = 0;
   std::uint64_t clock_steps = 0;
+  /// tsdf.resident_limit_mb > 0: the pager's counts (null: no paging).
+  const TsdfPagerStats* paging = nullptr;
 };
 
 class TickReport {
@@ -98,6 +101,11 @@ class TickReport {
 
   /// The fleet's values (fleet.enabled): from report_'s fleet fields.
   void put_fleet();
+  /// Index of the first paging pair (after the inputs' pairs), and how many there are.
+  [[nodiscard]] std::size_t paging_base() const {
+    return kDiagFixed + 2 * report_.input_ages.size();
+  }
+  std::size_t paging_keys_ = 0;
 
   transport::CycleReport report_;
   transport::DiagnosticReport diag_;

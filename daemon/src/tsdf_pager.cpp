@@ -100,17 +100,20 @@ struct Entry {
   bool stored = false;  // a file holds the tile's current values
   bool load_after_write = false;
   std::uint64_t last_touched = 0;  // scan count when last changed
+  std::uint64_t version = 0;       // changes seen: a copy written is current only if unchanged
 };
 
 struct Job {
   bool write = false;
   TileIndex tile = TileIndex::Zero();
+  std::uint64_t version = 0;
   std::optional<TsdfTile> data;  // write: the tile
 };
 
 struct Done {
   bool write = false;
   TileIndex tile = TileIndex::Zero();
+  std::uint64_t version = 0;
   std::optional<TsdfTile> data;  // read: the tile; failed write: the tile back
   std::optional<core::Error> error;
   std::uint64_t bytes = 0;
@@ -150,7 +153,7 @@ struct TsdfPager::Impl {
       jobs.pop_front();
       ++busy;
       lock.unlock();
-      Done d{job.write, job.tile, std::nullopt, std::nullopt, 0};
+      Done d{job.write, job.tile, job.version, std::nullopt, std::nullopt, 0};
       if (job.write) {
         const std::vector<std::uint8_t> bytes =
             job.data->encode(params.voxel_size_m, params.truncation_m);
@@ -188,7 +191,7 @@ struct TsdfPager::Impl {
   void request_load(Entry& e) {
     if (e.state == State::kStored) {
       e.state = State::kLoading;
-      submit(Job{false, e.tile, std::nullopt});
+      submit(Job{false, e.tile, e.version, std::nullopt});
     } else if (e.state == State::kWriting) {
       e.load_after_write = true;
     }
@@ -201,15 +204,21 @@ struct TsdfPager::Impl {
       if (d.write) {
         if (d.error) {
           ++stats.write_errors;
-          evict_stopped = true;
-          layer.attach_tile(std::move(*d.data));
-          e.state = State::kResident;
+          evict_stopped = true;  // the disk is not to be trusted: nothing more leaves memory
+          if (e.state == State::kWriting) {  // an evicted tile: back into the layer
+            layer.attach_tile(std::move(*d.data));
+            e.state = State::kResident;
+          }  // else a copy (store_changed): the layer still holds the tile
           continue;
         }
         ++stats.written;
         file_bytes[TileKey::of(d.tile)] = d.bytes;
-        e.stored = true;
-        if (e.state == State::kWriting) e.state = State::kStored;
+        if (e.state == State::kWriting) {
+          e.state = State::kStored;
+          e.stored = true;
+        } else if (e.version == d.version) {
+          e.stored = true;  // a copy of a tile that has not changed since
+        }
         if (e.load_after_write) {
           e.load_after_write = false;
           request_load(e);
@@ -312,7 +321,7 @@ struct TsdfPager::Impl {
         e.state = State::kStored;  // unchanged since read or written: dropped, not rewritten
       } else {
         e.state = State::kWriting;
-        submit(Job{true, c.tile, std::move(tile)});
+        submit(Job{true, c.tile, e.version, std::move(tile)});
       }
     }
     if (bytes > params.limit_bytes) ++stats.over_limit;
@@ -414,6 +423,7 @@ void TsdfPager::after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor
     e.tile = t;
     e.state = State::kResident;
     e.stored = false;  // the file, if any, is stale now
+    ++e.version;
     e.last_touched = impl.scans;
   }
   impl.evict(layer, sensor_W, hold);
@@ -423,52 +433,34 @@ void TsdfPager::flush(core::TsdfLayer& layer) {
   impl_->wait_until(layer, [] { return false; });
 }
 
-core::Status TsdfPager::store_all(core::TsdfLayer& layer) {
+std::size_t TsdfPager::store_changed(core::TsdfLayer& layer) {
   Impl& impl = *impl_;
+  impl.poll(layer);
   for (const TileIndex& t : layer.take_touched_tiles()) {
     Entry& e = impl.tiles[TileKey::of(t)];
     e.tile = t;
     e.state = State::kResident;
     e.stored = false;
+    ++e.version;
   }
-  // Resident tiles the pager has no entry for (e.g. a layer loaded whole) are unstored too.
+  std::size_t copies = 0;
   for (const core::TsdfTileInfo& info : layer.resident_tiles()) {
     Entry& e = impl.tiles[TileKey::of(info.tile)];
-    if (e.state != State::kResident) continue;
     e.tile = info.tile;
-    if (e.stored) continue;
-    // A copy goes to the worker; the layer keeps the tile. Marked stored only once written.
-    impl.submit(Job{true, info.tile, layer.copy_tile(info.tile)});
+    if (e.state != State::kResident || e.stored) continue;
+    // A copy goes to the worker; the layer keeps the tile. Marked stored once written, if the
+    // tile has not changed meanwhile.
+    impl.submit(Job{true, info.tile, e.version, layer.copy_tile(info.tile)});
+    ++copies;
   }
-  const std::uint64_t errors_before = impl.stats.write_errors;
-  // A failed write of a copy must not put the copy back into the layer.
-  std::deque<Done> finished;
-  while (true) {
-    {
-      std::unique_lock lock(impl.mutex);
-      impl.wake_scan.wait(
-          lock, [&] { return !impl.done.empty() || (impl.jobs.empty() && impl.busy == 0); });
-      finished.swap(impl.done);
-    }
-    if (finished.empty()) break;
-    for (Done& d : finished) {
-      if (d.write && d.error) {
-        Entry& e = impl.tiles[TileKey::of(d.tile)];
-        if (e.state == State::kResident) {  // a copy: the layer still holds the tile
-          ++impl.stats.write_errors;
-          d.data.reset();
-          d.write = false;
-          d.error.reset();
-          continue;
-        }
-      }
-      std::deque<Done> one;
-      one.push_back(std::move(d));
-      impl.collect(layer, one);
-    }
-    finished.clear();
-  }
-  if (impl.stats.write_errors != errors_before) {
+  return copies;
+}
+
+core::Status TsdfPager::store_all(core::TsdfLayer& layer) {
+  const std::uint64_t errors_before = impl_->stats.write_errors;
+  store_changed(layer);
+  flush(layer);
+  if (impl_->stats.write_errors != errors_before) {
     return core::Error{"tsdf_tile.write",
                        "some tiles could not be written to " + params_.dir.string()};
   }

@@ -23,8 +23,10 @@
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/tsdf_io.hpp"
+#include "tarmac/core/tsdf_tiles.hpp"
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/executor.hpp"
+#include "tarmac/daemon/tsdf_pager.hpp"
 #include "tarmac/replay/replayer.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
@@ -533,6 +535,57 @@ TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
     EXPECT_EQ(saved.value().layer.digest(), executor.get().tsdf().digest());
     EXPECT_GT(saved.value().layer.voxel_count(), 0u);
     EXPECT_EQ(saved.value().info.frame_id, cfg.outputs.frame_id);
+  }
+  std::filesystem::remove_all(dir);
+}
+
+TEST_F(Daemon, Paging_TheTileStoreIsTheMapAfterSaveAndRestart) {
+  // tsdf.resident_limit_mb > 0 in tarmacd: the TSDF goes to state.dir/tsdf_tiles on save; the
+  // .vdb keeps the static occupancy only; a restart resumes from the tiles (absent until near).
+  auto cfg = test_config(test::kDomainDaemonPaging, 2);
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("tarmac-paging-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  cfg.state.dir = dir.string();
+  cfg.state.save_period_s = 0.0;
+  cfg.mapping.tsdf.resident_limit_mb = 1;
+  std::uint64_t digest = 0;
+  {
+    RunningExecutor executor(cfg);
+    auto participant = peer(test::kDomainDaemonPaging);
+    tools::ReplayOptions options;
+    options.lidar_qos = cfg.dds.qos.lidar;
+    options.rate_scale = 2.0 / kTimeScale;
+    options.max_scans = 4;
+    ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
+    for (int i = 0; i < 100 * kTimeScale && executor.get().totals().scans_integrated < 4; ++i) {
+      std::this_thread::sleep_for(20ms);
+    }
+    ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
+    executor.stop();
+    digest = executor.get().tsdf().digest();
+    ASSERT_NE(executor.get().tsdf().block_count(), 0u);
+    ASSERT_TRUE(executor.get().save_tsdf().ok());
+  }
+  const auto saved = core::load_tsdf(dir / cfg.state.tsdf_file);
+  ASSERT_TRUE(saved.ok()) << saved.error().message;
+  EXPECT_EQ(saved.value().layer.block_count(), 0u);  // the TSDF is in the tiles
+  // The store alone holds the map.
+  core::TsdfLayer layer(cfg.mapping.tsdf.voxel_size_m, cfg.mapping.tsdf.truncation_m);
+  auto pager = daemon::TsdfPager::open(
+      daemon::TsdfPagerParams::for_mapper(cfg.mapping, dir / "tsdf_tiles"), layer);
+  ASSERT_TRUE(pager.ok()) << pager.error().message;
+  EXPECT_GT(pager.value()->stats().stored_tiles, 0u);
+  EXPECT_EQ(pager.value()->site_digest(layer), digest);
+  pager.value().reset();
+  // tarmacd restarted over it: the tiles are absent until the vehicle is near, the map the same.
+  {
+    auto created = daemon::Executor::create(cfg);
+    ASSERT_TRUE(created.ok());
+    EXPECT_EQ(created.value()->load_tsdf().kind, daemon::TsdfLoadResult::Kind::kLoaded);
+    created.value()->prepare();
+    EXPECT_EQ(created.value()->tsdf().block_count(), 0u);
+    EXPECT_GT(created.value()->tsdf().absent_count(), 0u);
   }
   std::filesystem::remove_all(dir);
 }

@@ -53,6 +53,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonStopStartup = 150,
   kDomainDaemonStopReady = 151,
   kDomainDaemonStopSlowRate = 152,
+  kDomainDaemonPaging = 153,
   // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 160..169
   kDomainCycloneUdpClouds = 160,
   kDomainCycloneTinyBuffer = 161,

@@ -91,8 +91,11 @@ class TsdfPager {
   void after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W, bool hold = false);
   /// Waits until the worker has done every queued write and read (and takes the reads back).
   void flush(core::TsdfLayer& layer);
-  /// Writes every resident tile changed since it was last stored (copies: the layer keeps them),
-  /// then waits: the store alone is then the whole map.
+  /// Hands a copy of every resident tile changed since it was last stored to the worker (the
+  /// layer keeps the tiles; the copies cost their memory until written); returns the copies.
+  /// Between ticks: tarmacd's periodic save.
+  std::size_t store_changed(core::TsdfLayer& layer);
+  /// store_changed, then waits: the store alone is then the whole map (the save on exit).
   core::Status store_all(core::TsdfLayer& layer);
 
   /// Every block of the site (resident tiles and stored ones, each read and dropped in turn), in
