@@ -5,7 +5,7 @@
 # (DiagnosticArray), and every drop and overrun since start. They must stay flat.
 #
 #   tools/soak.sh [--cycles N] [--rate-hz HZ] [--warmup N] [--beams N] [--dataset DIR]
-#                 [--max-rss-growth-kb KB] [--out DIR]
+#                 [--max-rss-growth-kb KB] [--resident-limit-mb MB] [--out DIR]
 #
 # Defaults: 10000 cycles at 50 Hz (the shipped 10 Hz, sped up so the run takes minutes; scans
 # come at the same rate), 500 warm-up cycles, a 32-beam simulated airside sequence (tarmac-sim)
@@ -15,11 +15,14 @@
 # correction and rebuild the window every loop).
 # Exit 0 when flat: threads and descriptors equal, pending scans within the quota, RSS grown by
 # at most --max-rss-growth-kb (default 16384: the TSDF grows until the loop has covered it).
+# --resident-limit-mb sets tsdf.resident_limit_mb (the TSDF paged to DIR/state/tsdf_tiles): a
+# long drive (tarmac-sim --scene site) then soaks at site scale.
 # Needs a built tree (build/bin). DDS stays on loopback (domain TARMAC_DOMAIN, default 78).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 cycles=10000 rate_hz=50 warmup=500 beams=32 dataset="" max_rss_growth_kb=16384 out=out/soak
+resident_limit_mb=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --cycles) cycles=$2; shift 2 ;;
@@ -28,8 +31,9 @@ while [ $# -gt 0 ]; do
     --beams) beams=$2; shift 2 ;;
     --dataset) dataset=$2; shift 2 ;;
     --max-rss-growth-kb) max_rss_growth_kb=$2; shift 2 ;;
+    --resident-limit-mb) resident_limit_mb=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
-    -h|--help) sed -n 2,20p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,22p "$0"; exit 0 ;;
     *) echo "soak: unknown option $1" >&2; exit 64 ;;
   esac
 done
@@ -51,6 +55,7 @@ sed -e "s|^  dir: /var/lib/tarmac |  dir: $out/state |" \
     -e "s|^  realtime_priority: 10 |  realtime_priority: 0 |" \
     -e "s|^  lock_memory: true |  lock_memory: false |" \
     -e "s|^  cycle_ms: 90.0 |  cycle_ms: $period_ms |" \
+    -e "s|^  resident_limit_mb: 0 |  resident_limit_mb: $resident_limit_mb |" \
     -e "/^corrections:/,/^  enabled:/s|^  enabled: true |  enabled: false |" \
     config/tarmac.yaml > "$out/tarmac.yaml"
 "$bin/tarmacd" --check-config "$out/tarmac.yaml" > /dev/null
@@ -81,7 +86,8 @@ sample() {
     echo "fds=$(ls /proc/$pid/fd | wc -l)"
     echo "threads=$(ls /proc/$pid/task | wc -l)"
     for key in pending_scans pose_buffer_samples scans_integrated_total drops_total \
-               skipped_ticks_total costmap_age_ms; do
+               skipped_ticks_total costmap_age_ms tsdf_resident_mib tsdf_tiles_stored \
+               tsdf_tile_loads_late_total tsdf_tile_errors_total; do
       echo "$key=$(tr ' ' '\n' <<< "$diag" | sed -n "s/^$key=//p" | head -1)"
     done
   } > "$out/$name.txt"
@@ -113,7 +119,8 @@ v() { sed -n "s/^$2=//p" "$out/$1.txt"; }
   echo "| figure | start (cycle $(v start cycle)) | end (cycle $(v end cycle)) |"
   echo "| --- | --- | --- |"
   for k in rss_kb hwm_kb fds threads pending_scans pose_buffer_samples scans_integrated_total \
-           drops_total skipped_ticks_total costmap_age_ms; do
+           drops_total skipped_ticks_total costmap_age_ms tsdf_resident_mib tsdf_tiles_stored \
+           tsdf_tile_loads_late_total tsdf_tile_errors_total; do
     echo "| $k | $(v start $k) | $(v end $k) |"
   done
   echo

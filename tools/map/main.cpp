@@ -11,6 +11,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -21,6 +22,7 @@
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/tsdf_io.hpp"
+#include "tarmac/core/tsdf_tiles.hpp"
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/daemon/tsdf_pager.hpp"
@@ -371,6 +373,51 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
   run.last_stamp_ns = cloud.stamp_ns;
 }
 
+/// Where the TSDF's bytes go, over the whole site (paged tiles read back one at a time): blocks,
+/// observed voxels, the ground they cover (x, y columns of blocks) and the bytes per 1,000 m² and
+/// per km driven, in memory (as TsdfLayer::resident_bytes counts them) and in the tile store.
+void print_tsdf_footprint(const core::Mapper& mapper, const Run& run) {
+  std::unordered_set<std::uint64_t> columns, tiles;
+  std::uint64_t blocks = 0, observed = 0;
+  const auto visit = [&](const core::TsdfBlockView& b) {
+    ++blocks;
+    for (int i = 0; i < core::kTsdfBlockVoxels; ++i) observed += b.voxels[i].weight > 0.0f;
+    const auto key = [](int x, int y, int z) {
+      return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) << 32) ^
+             (static_cast<std::uint64_t>(static_cast<std::uint32_t>(y)) << 11) ^
+             static_cast<std::uint64_t>(static_cast<std::uint32_t>(z));
+    };
+    columns.insert(key(b.block.x(), b.block.y(), 0));
+    const core::TileIndex t = core::tile_of_block(b.block);
+    tiles.insert(key(t.x(), t.y(), t.z()));
+  };
+  if (run.pager != nullptr) {
+    run.pager->for_each_site_block(mapper.tsdf(), visit);
+  } else {
+    mapper.tsdf().for_each_block(visit);
+  }
+  const double edge = core::kTsdfBlockEdge * static_cast<double>(mapper.tsdf().voxel_size_m());
+  const double area_m2 = static_cast<double>(columns.size()) * edge * edge;
+  const double mib = static_cast<double>(blocks * core::kTsdfBlockBytes +
+                                         tiles.size() * core::kTsdfTileNodeBytes) /
+                     (1024.0 * 1024.0);
+  const double km = run.distance_m / 1000.0;
+  std::printf(
+      "tsdf site: %llu blocks, %.1f %% of their voxels observed, ground covered %.0f m^2; in "
+      "memory %.1f MiB = %.2f MiB per 1,000 m^2, %.0f MiB per km driven",
+      static_cast<unsigned long long>(blocks),
+      blocks > 0 ? 100.0 * static_cast<double>(observed) /
+                       static_cast<double>(blocks * core::kTsdfBlockVoxels)
+                 : 0.0,
+      area_m2, mib, area_m2 > 0 ? mib / area_m2 * 1000.0 : 0.0, km > 0 ? mib / km : 0.0);
+  if (run.pager != nullptr) {
+    const double store = static_cast<double>(run.pager->stats().stored_bytes) / (1024.0 * 1024.0);
+    std::printf("; tile store %.1f MiB = %.2f MiB per 1,000 m^2, %.0f MiB per km", store,
+                area_m2 > 0 ? store / area_m2 * 1000.0 : 0.0, km > 0 ? store / km : 0.0);
+  }
+  std::printf("\n");
+}
+
 /// Prints the stage table, the run's summaries and the digests; writes timing.json. 0 or
 /// kExitIo.
 int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, const Run& run,
@@ -534,6 +581,8 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
           static_cast<unsigned long long>(tsdf_out.changes.removed_voxels), tsdf_out.changes_ms);
     }
   }
+
+  if (params.tsdf.enabled) print_tsdf_footprint(mapper, run);
 
   if (params.corrections.enabled) {
     const core::CorrectionStats& cs = mapper.correction_stats();
