@@ -69,7 +69,7 @@ cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo "${launcher[@]
   -DTARMAC_TEST_TIMEOUT_S="${TARMAC_TEST_TIMEOUT_S:-600}"
 # The binaries --quick builds and runs (ctest labels each test with its binary): fewer to
 # build is most of what it saves, as the instrumented build is most of a sanitizer run's time.
-quick_binaries=(core_tests transport_tests config_tests tsdf_tests pose_correction_tests
+quick_binaries=(core_tests transport_tests config_tests tsdf_tests tsdf_paging_tests pose_correction_tests
   daemon_tests tarmacd_process_tests interop_tests)
 select=()
 if [ "$quick" -eq 1 ]; then

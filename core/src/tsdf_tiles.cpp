@@ -262,6 +262,12 @@ void TsdfDigest::add(const TsdfBlockView& b) {
 
 std::vector<TsdfTileInfo> TsdfLayer::resident_tiles() const {
   std::vector<TsdfTileInfo> out;
+  resident_tiles(out);
+  return out;
+}
+
+void TsdfLayer::resident_tiles(std::vector<TsdfTileInfo>& out) const {
+  out.clear();
   const auto& root = grids_->tsdf->tree().root();
   for (auto top = root.cbeginChildOn(); top; ++top) {
     for (auto node = top->cbeginChildOn(); node; ++node) {
@@ -270,7 +276,6 @@ std::vector<TsdfTileInfo> TsdfLayer::resident_tiles() const {
                                  static_cast<std::size_t>(node->leafCount())});
     }
   }
-  return out;
 }
 
 std::size_t TsdfLayer::resident_bytes() const {
@@ -359,19 +364,17 @@ void TsdfLayer::track_touched_tiles(bool on) {
   if (!on) grids_->touched.clear();
 }
 
-std::vector<TileIndex> TsdfLayer::take_touched_tiles() {
-  std::vector<std::uint64_t> keys(grids_->touched.begin(), grids_->touched.end());
-  grids_->touched.clear();
-  std::sort(keys.begin(), keys.end());
-  std::vector<TileIndex> out;
-  out.reserve(keys.size());
-  constexpr std::uint64_t m = (std::uint64_t{1} << 21) - 1;
-  constexpr int kBias = 1 << 20;
-  for (const std::uint64_t k : keys) {
+void TsdfLayer::take_touched_tiles(std::vector<TileIndex>& out) {
+  out.clear();
+  for (const std::uint64_t k : grids_->touched) {
+    constexpr std::uint64_t m = (std::uint64_t{1} << 21) - 1;
+    constexpr int kBias = 1 << 20;
     out.emplace_back(static_cast<int>((k >> 42) & m) - kBias,
                      static_cast<int>((k >> 21) & m) - kBias, static_cast<int>(k & m) - kBias);
   }
-  return out;
+  grids_->touched.clear();  // keeps its buckets
+  std::sort(out.begin(), out.end(),
+            [](const TileIndex& a, const TileIndex& b) { return TileKey::of(a) < TileKey::of(b); });
 }
 
 }  // namespace tarmac::core

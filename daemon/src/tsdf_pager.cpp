@@ -128,6 +128,15 @@ struct TsdfPager::Impl {
   bool evict_stopped = false;
   TsdfPagerStats stats;
   std::map<TileKey, std::uint64_t> file_bytes;
+  // Reused between scans (no allocation once grown).
+  std::vector<TileIndex> touched;
+  std::vector<core::TsdfTileInfo> resident;
+  struct Candidate {
+    double distance;
+    TileKey key;
+    TileIndex tile;
+  };
+  std::vector<Candidate> candidates;
 
   std::mutex mutex;
   std::condition_variable wake_worker, wake_scan;
@@ -291,13 +300,9 @@ struct TsdfPager::Impl {
       return;
     }
     const double tile_m = core::kTsdfTileEdge * static_cast<double>(params.voxel_size_m);
-    struct Candidate {
-      double distance;
-      TileKey key;
-      TileIndex tile;
-    };
-    std::vector<Candidate> candidates;
-    for (const core::TsdfTileInfo& info : layer.resident_tiles()) {
+    candidates.clear();
+    layer.resident_tiles(resident);
+    for (const core::TsdfTileInfo& info : resident) {
       const TileKey key = TileKey::of(info.tile);
       const auto it = tiles.find(key);
       if (it != tiles.end() && it->second.last_touched + params.keep_scans > scans) continue;
@@ -418,7 +423,8 @@ void TsdfPager::before_rebuild(core::TsdfLayer& layer, std::span<const Eigen::Ve
 void TsdfPager::after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W, bool hold) {
   Impl& impl = *impl_;
   ++impl.scans;
-  for (const TileIndex& t : layer.take_touched_tiles()) {
+  layer.take_touched_tiles(impl.touched);
+  for (const TileIndex& t : impl.touched) {
     Entry& e = impl.tiles[TileKey::of(t)];
     e.tile = t;
     e.state = State::kResident;
@@ -436,7 +442,8 @@ void TsdfPager::flush(core::TsdfLayer& layer) {
 std::size_t TsdfPager::store_changed(core::TsdfLayer& layer) {
   Impl& impl = *impl_;
   impl.poll(layer);
-  for (const TileIndex& t : layer.take_touched_tiles()) {
+  layer.take_touched_tiles(impl.touched);
+  for (const TileIndex& t : impl.touched) {
     Entry& e = impl.tiles[TileKey::of(t)];
     e.tile = t;
     e.state = State::kResident;
@@ -444,7 +451,8 @@ std::size_t TsdfPager::store_changed(core::TsdfLayer& layer) {
     ++e.version;
   }
   std::size_t copies = 0;
-  for (const core::TsdfTileInfo& info : layer.resident_tiles()) {
+  layer.resident_tiles(impl.resident);
+  for (const core::TsdfTileInfo& info : impl.resident) {
     Entry& e = impl.tiles[TileKey::of(info.tile)];
     e.tile = info.tile;
     if (e.state != State::kResident || e.stored) continue;

@@ -138,6 +138,8 @@ class TsdfLayer {
   // Tiles (tsdf_tiles.hpp): a paged map holds some tiles; the others are absent (on disk).
   /// Resident tiles and their blocks, in TileKey order.
   [[nodiscard]] std::vector<TsdfTileInfo> resident_tiles() const;
+  /// The same into `out` (cleared; its capacity is kept: no allocation once it has grown).
+  void resident_tiles(std::vector<TsdfTileInfo>& out) const;
   /// What the resident tiles cost as counted against a paging limit: blocks · kTsdfBlockBytes +
   /// tiles · kTsdfTileNodeBytes (deterministic, unlike the allocator's figures).
   [[nodiscard]] std::size_t resident_bytes() const;
@@ -156,8 +158,8 @@ class TsdfLayer {
   [[nodiscard]] std::size_t absent_count() const;
   /// Keeps (or stops keeping) the tiles that integration and erase_blocks change.
   void track_touched_tiles(bool on);
-  /// The tiles changed since the last call, sorted; empties the set.
-  [[nodiscard]] std::vector<TileIndex> take_touched_tiles();
+  /// The tiles changed since the last call, sorted, into `out` (cleared); empties the set.
+  void take_touched_tiles(std::vector<TileIndex>& out);
 
   /// OpenVDB grids (defined in core/src/tsdf_grids.hpp, for the core's own .cpp files only).
   /// Mutable access drops the integrator's leaf-pointer cache (the tree may change).
