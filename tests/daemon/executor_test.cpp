@@ -500,6 +500,21 @@ TEST_F(Daemon, TinyBudget_ProducesOverrunsInCycleReport) {
   EXPECT_EQ(total_of(last.drops, "scan.tsdf_shed_quota"), 0u);
 }
 
+/// Replays the first four scans of the sequence into `executor` (domain and QoS of `cfg`) and
+/// waits until it has integrated them.
+void replay_four_scans(RunningExecutor& executor, const config::Config& cfg) {
+  auto participant = peer(cfg.dds.participant.domain_id);
+  tools::ReplayOptions options;
+  options.lidar_qos = cfg.dds.qos.lidar;
+  options.rate_scale = 2.0 / kTimeScale;
+  options.max_scans = 4;
+  ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
+  for (int i = 0; i < 100 * kTimeScale && executor.get().totals().scans_integrated < 4; ++i) {
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
+}
+
 TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
   auto cfg = test_config(test::kDomainDaemonPeriodicSave, 2);
   const auto dir = std::filesystem::temp_directory_path() /
@@ -509,16 +524,7 @@ TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
   cfg.state.save_period_s = 0.3 * kTimeScale;  // every 3 ticks
   {
     RunningExecutor executor(cfg);
-    auto participant = peer(test::kDomainDaemonPeriodicSave);
-    tools::ReplayOptions options;
-    options.lidar_qos = cfg.dds.qos.lidar;
-    options.rate_scale = 2.0 / kTimeScale;
-    options.max_scans = 4;
-    ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
-    for (int i = 0; i < 100 * kTimeScale && executor.get().totals().scans_integrated < 4; ++i) {
-      std::this_thread::sleep_for(20ms);
-    }
-    ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
+    ASSERT_NO_FATAL_FAILURE(replay_four_scans(executor, cfg));
     // One save may be in flight with a snapshot from before the last scan: wait for two more.
     const std::uint64_t saves_then = executor.get().totals().tsdf_saves;
     for (int i = 0; i < 100 * kTimeScale && executor.get().totals().tsdf_saves < saves_then + 2;
@@ -552,16 +558,7 @@ TEST_F(Daemon, Paging_TheTileStoreIsTheMapAfterSaveAndRestart) {
   std::uint64_t digest = 0;
   {
     RunningExecutor executor(cfg);
-    auto participant = peer(test::kDomainDaemonPaging);
-    tools::ReplayOptions options;
-    options.lidar_qos = cfg.dds.qos.lidar;
-    options.rate_scale = 2.0 / kTimeScale;
-    options.max_scans = 4;
-    ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
-    for (int i = 0; i < 100 * kTimeScale && executor.get().totals().scans_integrated < 4; ++i) {
-      std::this_thread::sleep_for(20ms);
-    }
-    ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
+    ASSERT_NO_FATAL_FAILURE(replay_four_scans(executor, cfg));
     executor.stop();
     digest = executor.get().tsdf().digest();
     ASSERT_NE(executor.get().tsdf().block_count(), 0u);
