@@ -510,6 +510,43 @@ bool TsdfPager::for_each_site_block(
   return ok;
 }
 
+core::Status TsdfPager::mesh_site(
+    const core::TsdfLayer& layer, float min_weight,
+    const std::function<core::Status(const core::TriangleMesh&)>& piece) const {
+  std::map<TileKey, bool> site;  // true: resident
+  layer.resident_tiles(impl_->resident);
+  for (const core::TsdfTileInfo& info : impl_->resident) site[TileKey::of(info.tile)] = true;
+  for (const auto& [key, e] : impl_->tiles) {
+    if (e.state != State::kResident) site.emplace(key, false);
+  }
+  core::TriangleMesh mesh;
+  for (const auto& [key, resident] : site) {
+    const TileIndex t(key.tile[0], key.tile[1], key.tile[2]);
+    core::TsdfLayer piece_layer(params_.voxel_size_m, params_.truncation_m);
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          const TileIndex n = t + TileIndex(dx, dy, dz);
+          const auto it = site.find(TileKey::of(n));
+          if (it == site.end()) continue;
+          if (it->second) {
+            piece_layer.attach_tile(std::move(*layer.copy_tile(n)));
+            continue;
+          }
+          core::Result<TsdfTile> read = read_tile(impl_->file_of(n), params_, n);
+          if (!read) return read.error();
+          piece_layer.attach_tile(std::move(read).value());
+        }
+      }
+    }
+    const Eigen::Vector3i lo = t * core::kTsdfTileEdge;
+    const Eigen::Vector3i hi = lo + Eigen::Vector3i::Constant(core::kTsdfTileEdge);
+    if (auto s = core::extract_mesh(piece_layer, min_weight, lo, hi, mesh); !s) return s;
+    if (auto s = piece(mesh); !s) return s;
+  }
+  return core::Ok{};
+}
+
 std::uint64_t TsdfPager::site_digest(const core::TsdfLayer& layer) const {
   core::TsdfDigest digest;
   for_each_site_block(layer, [&digest](const core::TsdfBlockView& b) { digest.add(b); });

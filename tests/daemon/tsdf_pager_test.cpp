@@ -4,6 +4,8 @@
 // written at the end is the whole map for a restart; damaged tiles are refused and counted.
 #include "tarmac/daemon/tsdf_pager.hpp"
 
+#include <algorithm>
+#include <array>
 #include <filesystem>
 #include <fstream>
 #include <vector>
@@ -11,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
 #include "tarmac/sim/lidar.hpp"
@@ -124,6 +127,54 @@ TEST_F(TsdfPaging, SmallLimit_SameMapBitForBit_TilesLeaveAndComeBack) {
   EXPECT_EQ(restarted.tsdf().block_count(), 0u);
   EXPECT_GT(restarted.tsdf().absent_count(), 0u);
   EXPECT_EQ(reopened.value()->site_digest(restarted.tsdf()), expected);
+}
+
+/// A mesh's triangles as sorted tuples of their corners' coordinates (each triangle rotated to
+/// start at its smallest corner, winding kept): equal for the same surface however the vertices
+/// are numbered or shared.
+std::vector<std::array<float, 9>> triangle_set(const std::vector<core::TriangleMesh>& pieces) {
+  std::vector<std::array<float, 9>> out;
+  for (const core::TriangleMesh& m : pieces) {
+    for (const Eigen::Vector3i& t : m.triangles) {
+      std::array<std::array<float, 3>, 3> c;
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector3f& v = m.vertices_W[static_cast<std::size_t>(t[k])];
+        c[static_cast<std::size_t>(k)] = {v.x(), v.y(), v.z()};
+      }
+      const auto first = std::min_element(c.begin(), c.end()) - c.begin();
+      std::rotate(c.begin(), c.begin() + first, c.end());
+      out.push_back(
+          {c[0][0], c[0][1], c[0][2], c[1][0], c[1][1], c[1][2], c[2][0], c[2][1], c[2][2]});
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+TEST_F(TsdfPaging, SiteMeshTileByTile_HoldsTheWholeMapsTriangles) {
+  core::Mapper whole(params());
+  map(whole, nullptr);
+  core::TriangleMesh whole_mesh;
+  ASSERT_TRUE(core::extract_mesh(whole.tsdf(), 1.0f, whole_mesh).ok());
+  ASSERT_GT(whole_mesh.triangles.size(), 1000u);
+
+  core::Mapper paged(params());
+  auto pager = TsdfPager::open(pager_params(true), paged.tsdf());
+  ASSERT_TRUE(pager.ok());
+  map(paged, pager.value().get());
+  ASSERT_GT(pager.value()->stats().evicted, 0u);  // some tiles are read back from the store
+  std::vector<core::TriangleMesh> pieces;
+  ASSERT_TRUE(pager.value()
+                  ->mesh_site(paged.tsdf(), 1.0f,
+                              [&pieces](const core::TriangleMesh& piece) -> core::Status {
+                                pieces.push_back(piece);
+                                return core::Ok{};
+                              })
+                  .ok());
+  EXPECT_GT(pieces.size(), 4u);
+  const auto from_tiles = triangle_set(pieces);
+  EXPECT_EQ(from_tiles.size(), whole_mesh.triangles.size());
+  EXPECT_TRUE(from_tiles == triangle_set({whole_mesh}));
 }
 
 TEST_F(TsdfPaging, DamagedTile_RefusedCountedRenamed_MapGoesOn) {

@@ -29,6 +29,7 @@
 #include "tarmac/tools/array_io.hpp"
 #include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/kitti.hpp"
+#include "tarmac/tools/mesh_io.hpp"
 #include "tarmac/tools/safety.hpp"
 #include "tarmac/tools/stats.hpp"
 
@@ -545,6 +546,8 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     return kExitIo;
   }
   if (run.pager != nullptr) {
+    std::printf("%-16s %9.2f   (once, at the end, tile by tile: %zu vertices, %zu triangles)\n",
+                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles);
     constexpr double kMiB = 1024.0 * 1024.0;
     const daemon::TsdfPagerStats st = run.pager->stats();
     std::printf(
@@ -628,7 +631,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
       "timing.json%s%s}\n",
       opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
-      tsdf_out.paged        ? ",tsdf_tiles/"
+      tsdf_out.paged        ? ",tsdf_tiles/,mesh.ply"
       : params.tsdf.enabled ? (in.prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
                                         : ",tsdf.vdb,tsdf.json,mesh.ply")
                             : "");
@@ -724,7 +727,22 @@ int main(int argc, char** argv) {
   }
   map_tool::TsdfOutputs tsdf_out;
   if (pager) {
-    tsdf_out.paged = true;  // the site is the tile store: products over tiles are not written
+    // The site is the tile store; its mesh is written tile by tile (at most 27 tiles in memory
+    // besides the resident ones).
+    tsdf_out.paged = true;
+    tools::PlyPieces ply(out / "mesh.ply");
+    core::Status meshed = core::Ok{};
+    tsdf_out.mesh_ms = timed_ms([&] {
+      meshed = pager->mesh_site(mapper.tsdf(), 1.0f,
+                                [&ply](const core::TriangleMesh& piece) { return ply.add(piece); });
+      if (meshed) meshed = ply.finish();
+    });
+    if (!meshed) {
+      std::fprintf(stderr, "tarmac-map: %s\n", meshed.error().message.c_str());
+      return kExitIo;
+    }
+    tsdf_out.vertices = ply.vertices();
+    tsdf_out.triangles = ply.triangles();
   } else if (in.cfg.mapping.tsdf.enabled) {
     if (auto w = map_tool::write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(in.cfg),
                                               run.last_stamp_ns,

@@ -23,4 +23,12 @@ struct TriangleMesh {
 /// @param min_weight voxels with a lower weight count as unobserved (>= 0).
 Status extract_mesh(const TsdfLayer& layer, float min_weight, TriangleMesh& out);
 
+/// The same, restricted to the cells whose first corner (voxel index) lies in [lo, hi): a piece
+/// of a larger map (the site mesh tile by tile, tsdf_tiles.hpp), meshed from a layer that also
+/// holds the piece's neighbours, so that every cell and every edge of the piece sees the voxels
+/// it would see in the whole map. The pieces of a partition of the map together hold the whole
+/// map's triangles (their vertices are not shared across pieces).
+Status extract_mesh(const TsdfLayer& layer, float min_weight, const Eigen::Vector3i& lo,
+                    const Eigen::Vector3i& hi, TriangleMesh& out);
+
 }  // namespace tarmac::core

@@ -32,6 +32,7 @@
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
+#include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/core/tsdf_tiles.hpp"
 
 namespace tarmac::daemon {
@@ -103,6 +104,12 @@ class TsdfPager {
   /// read (its blocks are then missing from the visit).
   bool for_each_site_block(const core::TsdfLayer& layer,
                            const std::function<void(const core::TsdfBlockView&)>& fn) const;
+  /// The site's mesh, tile by tile (core::extract_mesh of each tile, meshed with its 26
+  /// neighbours present, read back from the store when away, so at most 27 tiles are in memory
+  /// besides the layer): `piece` gets each tile's triangles, in site order; together they are the
+  /// whole map's. Stops at the first error `piece` returns, or a tile that cannot be read.
+  core::Status mesh_site(const core::TsdfLayer& layer, float min_weight,
+                         const std::function<core::Status(const core::TriangleMesh&)>& piece) const;
   /// The site's digest: equal to TsdfLayer::digest() of the same map held whole.
   [[nodiscard]] std::uint64_t site_digest(const core::TsdfLayer& layer) const;
 
