@@ -105,6 +105,7 @@ struct Entry {
 
 struct Job {
   bool write = false;
+  bool copy = false;  // write: a copy of a resident tile (store_changed), not an evicted one
   TileIndex tile = TileIndex::Zero();
   std::uint64_t version = 0;
   std::optional<TsdfTile> data;  // write: the tile
@@ -112,6 +113,7 @@ struct Job {
 
 struct Done {
   bool write = false;
+  bool copy = false;
   TileIndex tile = TileIndex::Zero();
   std::uint64_t version = 0;
   std::optional<TsdfTile> data;  // read: the tile; failed write: the tile back
@@ -162,7 +164,7 @@ struct TsdfPager::Impl {
       jobs.pop_front();
       ++busy;
       lock.unlock();
-      Done d{job.write, job.tile, job.version, std::nullopt, std::nullopt, 0};
+      Done d{job.write, job.copy, job.tile, job.version, std::nullopt, std::nullopt, 0};
       if (job.write) {
         const std::vector<std::uint8_t> bytes =
             job.data->encode(params.voxel_size_m, params.truncation_m);
@@ -200,7 +202,7 @@ struct TsdfPager::Impl {
   void request_load(Entry& e) {
     if (e.state == State::kStored) {
       e.state = State::kLoading;
-      submit(Job{false, e.tile, e.version, std::nullopt});
+      submit(Job{false, false, e.tile, e.version, std::nullopt});
     } else if (e.state == State::kWriting) {
       e.load_after_write = true;
     }
@@ -214,18 +216,18 @@ struct TsdfPager::Impl {
         if (d.error) {
           ++stats.write_errors;
           evict_stopped = true;  // the disk is not to be trusted: nothing more leaves memory
-          if (e.state == State::kWriting) {  // an evicted tile: back into the layer
+          if (!d.copy) {         // an evicted tile: back into the layer
             layer.attach_tile(std::move(*d.data));
             e.state = State::kResident;
-          }  // else a copy (store_changed): the layer still holds the tile
+          }  // a copy (store_changed): the layer, or a later eviction's write, holds the tile
           continue;
         }
         ++stats.written;
         file_bytes[TileKey::of(d.tile)] = d.bytes;
-        if (e.state == State::kWriting) {
+        if (!d.copy) {
           e.state = State::kStored;
           e.stored = true;
-        } else if (e.version == d.version) {
+        } else if (e.state == State::kResident && e.version == d.version) {
           e.stored = true;  // a copy of a tile that has not changed since
         }
         if (e.load_after_write) {
@@ -326,7 +328,7 @@ struct TsdfPager::Impl {
         e.state = State::kStored;  // unchanged since read or written: dropped, not rewritten
       } else {
         e.state = State::kWriting;
-        submit(Job{true, c.tile, e.version, std::move(tile)});
+        submit(Job{true, false, c.tile, e.version, std::move(tile)});
       }
     }
     if (bytes > params.limit_bytes) ++stats.over_limit;
@@ -458,7 +460,7 @@ std::size_t TsdfPager::store_changed(core::TsdfLayer& layer) {
     if (e.state != State::kResident || e.stored) continue;
     // A copy goes to the worker; the layer keeps the tile. Marked stored once written, if the
     // tile has not changed meanwhile.
-    impl.submit(Job{true, info.tile, e.version, layer.copy_tile(info.tile)});
+    impl.submit(Job{true, true, info.tile, e.version, layer.copy_tile(info.tile)});
     ++copies;
   }
   return copies;
