@@ -117,9 +117,8 @@ core::Status MapStore::save_tsdf(core::Mapper& mapper, std::int64_t newest_stamp
 
 core::Status MapStore::open_pager(core::Mapper& mapper) {
   if (pager_ || !tsdf_.enabled || tsdf_.resident_limit_mb == 0) return core::Ok{};
-  core::MapperParams mp = mapper.params();
-  TsdfPagerParams p =
-      TsdfPagerParams::for_mapper(mp, std::filesystem::path(state_.dir) / "tsdf_tiles");
+  TsdfPagerParams p = TsdfPagerParams::for_mapper(mapper.params(),
+                                                  std::filesystem::path(state_.dir) / "tsdf_tiles");
   // tarmacd never waits for a tile: a late one is counted (its samples refused), not waited for.
   p.wait_for_loads = false;
   const bool loaded_blocks = mapper.tsdf().block_count() > 0;
