@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
+#include <tuple>
 #include <utility>
 
 #include "occupancy/log_odds.hpp"
@@ -135,8 +137,7 @@ OccupancyMap::~OccupancyMap() = default;
 std::size_t OccupancyMap::memory_bytes() const {
   std::size_t bytes =
       log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() + state_.capacity() +
-      hit_floor_.capacity() + scan_rays_.memory_bytes() +
-      static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t)) +
+      hit_floor_.capacity() + scan_rays_.memory_bytes() + static_bytes() +
       (scan_ground_z_.capacity() + scan_ground_near_z_.capacity()) * sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
       (hit_bits_.capacity() + floor_bits_.capacity()) * sizeof(std::uint64_t) +
@@ -235,17 +236,22 @@ void OccupancyMap::keep_leaving(std::size_t first, std::size_t count,
   }
 }
 
+VoxelIndex OccupancyMap::window_min_at(const Eigen::Vector3d& position_W) const {
+  const double v = params_.voxel_size_m;
+  VoxelIndex target;
+  target.x() = static_cast<int>(std::floor(position_W.x() / v)) - dims_.x() / 2;
+  target.y() = static_cast<int>(std::floor(position_W.y() / v)) - dims_.y() / 2;
+  target.z() = static_cast<int>(std::floor((position_W.z() - params_.window_below_m) / v));
+  return target;
+}
+
 void OccupancyMap::recenter(const Eigen::Vector3d& position_W) {
   SerialRunner serial;
   recenter(position_W, serial);
 }
 
 void OccupancyMap::recenter(const Eigen::Vector3d& position_W, TaskRunner& runner) {
-  const double v = params_.voxel_size_m;
-  VoxelIndex target;
-  target.x() = static_cast<int>(std::floor(position_W.x() / v)) - dims_.x() / 2;
-  target.y() = static_cast<int>(std::floor(position_W.y() / v)) - dims_.y() / 2;
-  target.z() = static_cast<int>(std::floor((position_W.z() - params_.window_below_m) / v));
+  const VoxelIndex target = window_min_at(position_W);
   if (!placed_) {
     min_ = target;
     placed_ = true;
@@ -384,11 +390,8 @@ void OccupancyMap::export_static(std::vector<VoxelIndex>& out) const {
   out.clear();
   out.reserve(static_->count);
   static_->for_each([&](std::uint64_t key, const StaticStore::Mask& mask) {
-    const auto field = [&](int shift) {
-      return static_cast<int>(static_cast<std::int64_t>((key >> shift) & ((1u << 21) - 1)) -
-                              (std::int64_t{1} << 20));
-    };
-    const int bx = field(0), by = field(21), bz = field(42);
+    const int bx = StaticStore::block_x(key), by = StaticStore::block_y(key),
+              bz = StaticStore::block_z(key);
     for (int w = 0; w < 8; ++w) {
       for (std::uint64_t m = mask[w]; m != 0; m &= m - 1) {
         const int b = w * 64 + std::countr_zero(m);
@@ -413,6 +416,86 @@ void OccupancyMap::import_static(std::span<const VoxelIndex> voxels) {
   static_ = std::make_unique<StaticStore>(static_reservation(dims_));
   for (const VoxelIndex& v : voxels) static_->insert(v);
   if (placed_) restore_static(min_, min_ + dims_ - VoxelIndex::Ones());
+}
+
+bool OccupancyMap::take_static_columns(int lo_x, int lo_y, int hi_x, int hi_y,
+                                       std::vector<VoxelIndex>& out) {
+  return static_columns(lo_x, lo_y, hi_x, hi_y, out, true);
+}
+
+void OccupancyMap::copy_static_columns(int lo_x, int lo_y, int hi_x, int hi_y,
+                                       std::vector<VoxelIndex>& out) {
+  static_columns(lo_x, lo_y, hi_x, hi_y, out, false);
+}
+
+void OccupancyMap::static_tiles(int edge, std::vector<Eigen::Vector2i>& out) const {
+  TARMAC_ASSERT(edge > 0 && edge % StaticStore::kSide == 0, "static tiles are whole blocks");
+  const int per = edge / StaticStore::kSide;
+  const auto tile = [per](int b) { return b >= 0 ? b / per : -((-b + per - 1) / per); };
+  out.clear();
+  static_->for_each([&](std::uint64_t key, const StaticStore::Mask&) {
+    out.emplace_back(tile(StaticStore::block_x(key)), tile(StaticStore::block_y(key)));
+  });
+  const auto order = [](const Eigen::Vector2i& a, const Eigen::Vector2i& b) {
+    return std::tie(a.y(), a.x()) < std::tie(b.y(), b.x());
+  };
+  std::sort(out.begin(), out.end(), order);
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+}
+
+bool OccupancyMap::static_columns(int lo_x, int lo_y, int hi_x, int hi_y,
+                                  std::vector<VoxelIndex>& out, bool take) {
+  constexpr int kS = StaticStore::kShift;
+  TARMAC_ASSERT(((lo_x | lo_y) & (StaticStore::kSide - 1)) == 0 &&
+                    ((hi_x + 1) & (StaticStore::kSide - 1)) == 0 &&
+                    ((hi_y + 1) & (StaticStore::kSide - 1)) == 0,
+                "take_static_columns takes whole blocks");
+  if (take && placed_) {
+    const VoxelIndex top = min_ + dims_ - VoxelIndex::Ones();
+    const bool meets = lo_x <= top.x() && hi_x >= min_.x() && lo_y <= top.y() && hi_y >= min_.y();
+    if (meets) return false;  // the window's voxels carry the static state too
+  }
+  const std::size_t first = out.size();
+  taken_keys_.clear();
+  static_->for_each([&](std::uint64_t key, const StaticStore::Mask& mask) {
+    const int bx = StaticStore::block_x(key), by = StaticStore::block_y(key);
+    if (bx < (lo_x >> kS) || bx > (hi_x >> kS) || by < (lo_y >> kS) || by > (hi_y >> kS)) return;
+    taken_keys_.push_back(key);
+    const int bz = StaticStore::block_z(key);
+    for (int w = 0; w < 8; ++w) {
+      for (std::uint64_t m = mask[w]; m != 0; m &= m - 1) {
+        const int b = w * 64 + std::countr_zero(m);
+        out.emplace_back((bx << kS) | (b & 7), (by << kS) | ((b >> 3) & 7), (bz << kS) | (b >> 6));
+      }
+    }
+  });
+  if (take) {
+    for (const std::uint64_t key : taken_keys_) static_->erase_block(key);
+  }
+  std::sort(out.begin() + static_cast<std::ptrdiff_t>(first), out.end(),
+            [](const VoxelIndex& a, const VoxelIndex& b) {
+              return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+            });
+  return true;
+}
+
+void OccupancyMap::put_static(std::span<const VoxelIndex> voxels) {
+  if (voxels.empty()) return;
+  VoxelIndex lo = voxels.front(), hi = voxels.front();
+  for (const VoxelIndex& v : voxels) {
+    static_->insert(v);
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  if (!placed_) return;
+  // Those inside the window read static now (a tile that came back after the window reached it).
+  lo = lo.cwiseMax(min_);
+  hi = hi.cwiseMin(min_ + dims_ - VoxelIndex::Ones());
+  if ((lo.array() <= hi.array()).all()) restore_static(lo, hi);
+}
+
+std::size_t OccupancyMap::static_bytes() const {
+  return static_->keys.capacity() * (sizeof(StaticStore::Mask) + sizeof(std::uint64_t));
 }
 
 std::array<int, 3> OccupancyMap::ring_origin() const {

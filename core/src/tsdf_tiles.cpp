@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <tuple>
 
 #include "tarmac/core/assert.hpp"
 #include "tsdf_grids.hpp"
@@ -375,6 +376,95 @@ void TsdfLayer::take_touched_tiles(std::vector<TileIndex>& out) {
   grids_->touched.clear();  // keeps its buckets
   std::sort(out.begin(), out.end(),
             [](const TileIndex& a, const TileIndex& b) { return TileKey::of(a) < TileKey::of(b); });
+}
+
+namespace {
+constexpr char kStaticMagic[8] = {'T', 'M', 'S', 'T', 'A', 'T', 'C', '1'};
+/// magic, version, voxel size, tile (2 × int32), voxels, checksum.
+constexpr std::size_t kStaticHeaderBytes = 8 + 4 + 4 + 8 + 4 + 8;
+}  // namespace
+
+std::uint64_t static_voxels_digest(std::span<const Eigen::Vector3i> voxels) {
+  std::uint64_t h = 1469598103934665603ull;
+  for (const Eigen::Vector3i& v : voxels) {
+    for (int a = 0; a < 3; ++a) {
+      h ^= static_cast<std::uint32_t>(v[a]);
+      h *= 1099511628211ull;
+    }
+  }
+  return h;
+}
+
+std::vector<std::uint8_t> StaticTile::encode(float voxel_size_m) const {
+  std::vector<std::uint8_t> payload;
+  payload.reserve(voxels.size() * 6);
+  Writer w(payload);
+  for (const Eigen::Vector3i& v : voxels) {
+    w.put(static_cast<std::uint8_t>(v.x() - index.x() * kStaticTileEdge));
+    w.put(static_cast<std::uint8_t>(v.y() - index.y() * kStaticTileEdge));
+    w.put(static_cast<std::int32_t>(v.z()));
+  }
+  std::vector<std::uint8_t> out;
+  out.reserve(kStaticHeaderBytes + payload.size());
+  Writer h(out);
+  for (const char c : kStaticMagic) h.put(c);
+  h.put(kVersion);
+  h.put(voxel_size_m);
+  h.put(static_cast<std::int32_t>(index.x()));
+  h.put(static_cast<std::int32_t>(index.y()));
+  h.put(static_cast<std::uint32_t>(voxels.size()));
+  h.put(fnv1a(payload));
+  out.insert(out.end(), payload.begin(), payload.end());
+  return out;
+}
+
+Result<StaticTile> StaticTile::decode(std::span<const std::uint8_t> bytes, float voxel_size_m,
+                                      const StaticTileIndex& expected) {
+  const auto corrupt = [](const std::string& why) -> Error {
+    return Error{"static_tile.corrupt", why};
+  };
+  Reader r(bytes);
+  char magic[8];
+  for (char& c : magic) {
+    if (!r.get(c)) return corrupt("shorter than its header");
+  }
+  if (std::memcmp(magic, kStaticMagic, 8) != 0) return corrupt("not a tarmac static tile");
+  std::uint32_t version = 0, count = 0;
+  float voxel = 0.0f;
+  std::int32_t t[2];
+  std::uint64_t checksum = 0;
+  if (!r.get(version) || !r.get(voxel) || !r.get(t[0]) || !r.get(t[1]) || !r.get(count) ||
+      !r.get(checksum)) {
+    return corrupt("shorter than its header");
+  }
+  if (version != kVersion) return corrupt("version " + std::to_string(version));
+  if (r.left() != std::size_t{count} * 6) return corrupt("truncated or padded");
+  if (fnv1a(bytes.subspan(kStaticHeaderBytes)) != checksum) return corrupt("checksum mismatch");
+  if (bits(voxel) != bits(voxel_size_m)) {
+    return Error{"static_tile.mismatch", "written for another voxel size"};
+  }
+  if (StaticTileIndex(t[0], t[1]) != expected) {
+    return Error{"static_tile.mismatch", "holds another tile"};
+  }
+  StaticTile tile;
+  tile.index = expected;
+  tile.voxels.reserve(count);
+  const auto order = [](const Eigen::Vector3i& a) { return std::tuple(a.z(), a.y(), a.x()); };
+  for (std::uint32_t i = 0; i < count; ++i) {
+    std::uint8_t dx = 0, dy = 0;
+    std::int32_t z = 0;
+    r.get(dx);
+    r.get(dy);
+    r.get(z);
+    if (dx >= kStaticTileEdge || dy >= kStaticTileEdge) return corrupt("voxel out of its tile");
+    const Eigen::Vector3i v(expected.x() * kStaticTileEdge + dx,
+                            expected.y() * kStaticTileEdge + dy, z);
+    if (!tile.voxels.empty() && !(order(tile.voxels.back()) < order(v))) {
+      return corrupt("voxels out of order");
+    }
+    tile.voxels.push_back(v);
+  }
+  return tile;
 }
 
 }  // namespace tarmac::core

@@ -26,7 +26,9 @@ const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud, const Eigen:
   r.filtered = mapper_.ingest(cloud, T_W_B, T_B_S, runner_, motion);
   const core::FilteredScan& filtered = r.filtered;
   const auto t1 = Clock::now();
+  if (pager_ != nullptr) pager_->before_occupancy(mapper_.tsdf(), filtered.T_W_B.translation());
   r.occupancy = mapper_.integrate(filtered, runner_);
+  if (pager_ != nullptr) pager_->after_occupancy();
   const auto t2 = Clock::now();
   r.ingest_ms = ms_between(t0, t1);
   r.integrate_ms = ms_between(t1, t2);
@@ -57,6 +59,8 @@ const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud, const Eigen:
       pager_->before_rebuild(mapper_.tsdf(), rebuild_sensors_);
     }
     r.rebuild = mapper_.rebuild_step(runner_);
+    // The window and static layer re-derived from the retained scans are the map now.
+    if (r.rebuild.completed && pager_ != nullptr) pager_->occupancy_replaced();
     r.rebuild_ms = ms_between(t3, Clock::now());
     tick_.scans_reintegrated += r.rebuild.scans;
     tick_.rebuilds_completed += r.rebuild.completed ? 1 : 0;

@@ -647,4 +647,8 @@ const core::TsdfLayer& Executor::tsdf() const {
   return impl_->mapper.tsdf();
 }
 
+const core::OccupancyMap& Executor::occupancy() const {
+  return impl_->mapper.occupancy();
+}
+
 }  // namespace tarmac::daemon

@@ -50,7 +50,8 @@ core::TsdfMapInfo MapStore::tsdf_info(std::int64_t newest_stamp_ns) const {
 core::StaticOccupancy MapStore::static_occupancy(const core::Mapper& mapper) const {
   core::StaticOccupancy s;
   s.voxel_size_m = static_voxel_size_m_;
-  mapper.occupancy().export_static(s.voxels);
+  // Paged, the static layer is in the tile store (the pager's store_all / store_changed).
+  if (!pager_) mapper.occupancy().export_static(s.voxels);
   return s;
 }
 
@@ -121,15 +122,16 @@ core::Status MapStore::open_pager(core::Mapper& mapper) {
                                                   std::filesystem::path(state_.dir) / "tsdf_tiles");
   // tarmacd never waits for a tile: a late one is counted (its samples refused), not waited for.
   p.wait_for_loads = false;
-  const bool loaded_blocks = mapper.tsdf().block_count() > 0;
+  const bool loaded_blocks =
+      mapper.tsdf().block_count() > 0 || mapper.occupancy().static_count() > 0;
   p.resume = state_.load_on_start && !loaded_blocks;
   if (loaded_blocks) {
     spdlog::warn(
-        "state: {} holds a TSDF (saved without tsdf.resident_limit_mb): it is the map, the tile "
-        "store {} is emptied",
+        "state: {} holds a TSDF or static occupancy (saved without tsdf.resident_limit_mb): it "
+        "is the map, the tile store {} is emptied",
         tsdf_path().string(), p.dir.string());
   }
-  auto opened = TsdfPager::open(p, mapper.tsdf());
+  auto opened = TsdfPager::open(p, mapper.tsdf(), &mapper.occupancy());
   if (!opened) return opened.error();
   pager_ = std::move(opened).value();
   const TsdfPagerStats st = pager_->stats();

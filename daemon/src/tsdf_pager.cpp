@@ -15,6 +15,7 @@
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include <fcntl.h>
@@ -41,6 +42,24 @@ std::optional<TileIndex> parse_tile_name(const std::string& name) {
   if (static_cast<std::size_t>(n) != name.size()) return std::nullopt;
   if (tile_name(TileIndex(x, y, z)) != name) return std::nullopt;  // one spelling per tile
   return TileIndex(x, y, z);
+}
+
+std::string static_name(const core::StaticTileIndex& t) {
+  return "static_" + std::to_string(t.x()) + "_" + std::to_string(t.y()) + ".occs";
+}
+
+std::optional<core::StaticTileIndex> parse_static_name(const std::string& name) {
+  int x = 0, y = 0, n = 0;
+  if (std::sscanf(name.c_str(), "static_%d_%d.occs%n", &x, &y, &n) != 2) return std::nullopt;
+  if (static_cast<std::size_t>(n) != name.size()) return std::nullopt;
+  if (static_name(core::StaticTileIndex(x, y)) != name) return std::nullopt;
+  return core::StaticTileIndex(x, y);
+}
+
+/// A static tile's key: (y, x), the order OccupancyMap::static_tiles gives.
+using StaticKey = std::pair<int, int>;
+StaticKey static_key(const core::StaticTileIndex& t) {
+  return {t.y(), t.x()};
 }
 
 bool sync_fd_path(const std::filesystem::path& p, bool dir) {
@@ -83,6 +102,17 @@ core::Result<TsdfTile> read_tile(const std::filesystem::path& file, const TsdfPa
   return tile;
 }
 
+core::Result<core::StaticTile> read_static(const std::filesystem::path& file, float voxel_size_m,
+                                           const core::StaticTileIndex& t) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return core::Error{"static_tile.open", file.string() + ": cannot open"};
+  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                                        std::istreambuf_iterator<char>());
+  core::Result<core::StaticTile> tile = core::StaticTile::decode(bytes, voxel_size_m, t);
+  if (!tile) return core::Error{tile.error().code, file.string() + ": " + tile.error().message};
+  return tile;
+}
+
 /// Distance in (x, y) from a point to a tile's footprint, m.
 double xy_distance(const TileIndex& t, const Eigen::Vector3d& p, double tile_m) {
   const auto axis = [&](int a) {
@@ -103,13 +133,38 @@ struct Entry {
   std::uint64_t version = 0;       // changes seen: a copy written is current only if unchanged
 };
 
+/// A static tile the pager knows of: on disk, or resident with a file (or once written).
+struct StaticEntry {
+  core::StaticTileIndex tile = core::StaticTileIndex::Zero();
+  State state = State::kResident;
+  bool stored = false;       // a file holds digest's voxels
+  std::uint64_t digest = 0;  // of the voxels last read or written
+  bool load_after_write = false;
+};
+
 struct Job {
   bool write = false;
   bool copy = false;  // write: a copy of a resident tile (store_changed), not an evicted one
   TileIndex tile = TileIndex::Zero();
   std::uint64_t version = 0;
   std::optional<TsdfTile> data;  // write: the tile
+  // A static tile's job instead (data empty): its voxels to write, or to read.
+  std::optional<core::StaticTile> static_data;
+  bool is_static = false;
+  bool drop_statics = false;  // removes every static tile file (the occupancy was replaced)
+  std::uint64_t generation = 0;
 };
+
+Job tsdf_job(bool write, bool copy, const TileIndex& tile, std::uint64_t version,
+             std::optional<TsdfTile> data) {
+  Job job;
+  job.write = write;
+  job.copy = copy;
+  job.tile = tile;
+  job.version = version;
+  job.data = std::move(data);
+  return job;
+}
 
 struct Done {
   bool write = false;
@@ -119,6 +174,10 @@ struct Done {
   std::optional<TsdfTile> data;  // read: the tile; failed write: the tile back
   std::optional<core::Error> error;
   std::uint64_t bytes = 0;
+  std::optional<core::StaticTile> static_data;  // read: the voxels; failed write: back
+  bool is_static = false;
+  bool drop_statics = false;
+  std::uint64_t generation = 0;
 };
 
 }  // namespace
@@ -139,6 +198,14 @@ struct TsdfPager::Impl {
     TileIndex tile;
   };
   std::vector<Candidate> candidates;
+
+  // The occupancy's static layer, paged when open() was given the map (null: not paged).
+  core::OccupancyMap* map = nullptr;
+  std::map<StaticKey, StaticEntry> statics;
+  std::map<StaticKey, std::uint64_t> static_file_bytes;
+  std::uint64_t generation = 0;  // bumped when the map's static layer is replaced
+  std::vector<Eigen::Vector2i> static_resident;
+  std::vector<Eigen::Vector3i> voxels;
 
   std::mutex mutex;
   std::condition_variable wake_worker, wake_scan;
@@ -164,31 +231,77 @@ struct TsdfPager::Impl {
       jobs.pop_front();
       ++busy;
       lock.unlock();
-      Done d{job.write, job.copy, job.tile, job.version, std::nullopt, std::nullopt, 0};
-      if (job.write) {
-        const std::vector<std::uint8_t> bytes =
-            job.data->encode(params.voxel_size_m, params.truncation_m);
-        d.bytes = bytes.size();
-        if (const core::Status s = write_atomic(file_of(job.tile), bytes); !s) {
-          d.error = s.error();
-          d.data = std::move(job.data);  // back to the layer: nothing is lost
-        }
-        job.data.reset();  // written: the memory goes back now, on this thread
-      } else {
-        core::Result<TsdfTile> t = read_tile(file_of(job.tile), params, job.tile);
-        if (t) {
-          d.data = std::move(t).value();
-        } else {
-          d.error = t.error();
-          std::error_code ec;
-          std::filesystem::rename(file_of(job.tile), file_of(job.tile).string() + ".refused", ec);
-        }
-      }
+      Done d =
+          job.is_static || job.drop_statics ? work_static(std::move(job)) : work(std::move(job));
       lock.lock();
       --busy;
       done.push_back(std::move(d));
       wake_scan.notify_all();
     }
+  }
+
+  Done work(Job job) {
+    Done d;
+    d.write = job.write;
+    d.copy = job.copy;
+    d.tile = job.tile;
+    d.version = job.version;
+    if (job.write) {
+      const std::vector<std::uint8_t> bytes =
+          job.data->encode(params.voxel_size_m, params.truncation_m);
+      d.bytes = bytes.size();
+      if (const core::Status s = write_atomic(file_of(job.tile), bytes); !s) {
+        d.error = s.error();
+        d.data = std::move(job.data);  // back to the layer: nothing is lost
+      }
+      job.data.reset();  // written: the memory goes back now, on this thread
+    } else {
+      core::Result<TsdfTile> t = read_tile(file_of(job.tile), params, job.tile);
+      if (t) {
+        d.data = std::move(t).value();
+      } else {
+        d.error = t.error();
+        std::error_code ec;
+        std::filesystem::rename(file_of(job.tile), file_of(job.tile).string() + ".refused", ec);
+      }
+    }
+    return d;
+  }
+
+  Done work_static(Job job) {
+    Done d;
+    d.is_static = true;
+    d.drop_statics = job.drop_statics;
+    d.write = job.write;
+    d.copy = job.copy;
+    d.generation = job.generation;
+    std::error_code ec;
+    if (job.drop_statics) {
+      for (const auto& f : std::filesystem::directory_iterator(params.dir, ec)) {
+        if (parse_static_name(f.path().filename().string())) std::filesystem::remove(f.path(), ec);
+      }
+      return d;
+    }
+    const core::StaticTileIndex t = job.static_data->index;
+    const std::filesystem::path file = params.dir / static_name(t);
+    if (job.write) {
+      const std::vector<std::uint8_t> bytes = job.static_data->encode(params.occupancy_voxel_m);
+      d.bytes = bytes.size();
+      if (const core::Status s = write_atomic(file, bytes); !s) {
+        d.error = s.error();
+      }
+      d.static_data = std::move(job.static_data);  // failed: back to the map; else its index
+      return d;
+    }
+    core::Result<core::StaticTile> read = read_static(file, params.occupancy_voxel_m, t);
+    if (read) {
+      d.static_data = std::move(read).value();
+    } else {
+      d.error = read.error();
+      d.static_data = core::StaticTile{t, {}};
+      std::filesystem::rename(file, file.string() + ".refused", ec);
+    }
+    return d;
   }
 
   void submit(Job job) {
@@ -202,15 +315,137 @@ struct TsdfPager::Impl {
   void request_load(Entry& e) {
     if (e.state == State::kStored) {
       e.state = State::kLoading;
-      submit(Job{false, false, e.tile, e.version, std::nullopt});
+      submit(tsdf_job(false, false, e.tile, e.version, std::nullopt));
     } else if (e.state == State::kWriting) {
       e.load_after_write = true;
+    }
+  }
+
+  void request_static_load(StaticEntry& e) {
+    if (e.state == State::kStored) {
+      e.state = State::kLoading;
+      Job job;
+      job.is_static = true;
+      job.static_data = core::StaticTile{e.tile, {}};
+      job.generation = generation;
+      submit(std::move(job));
+    } else if (e.state == State::kWriting) {
+      e.load_after_write = true;
+    }
+  }
+
+  void submit_static_write(core::StaticTile tile, bool copy) {
+    Job job;
+    job.is_static = true;
+    job.write = true;
+    job.copy = copy;
+    job.static_data = std::move(tile);
+    job.generation = generation;
+    submit(std::move(job));
+  }
+
+  /// A static tile's job done (scan thread).
+  void collect_static(Done& d) {
+    if (d.drop_statics || d.generation != generation) return;  // for a replaced layer
+    const StaticKey key = static_key(d.static_data->index);
+    StaticEntry& e = statics[key];
+    e.tile = d.static_data->index;
+    if (d.write) {
+      if (d.error) {
+        ++stats.write_errors;
+        evict_stopped = true;
+        if (!d.copy) {
+          map->put_static(d.static_data->voxels);
+          e.state = State::kResident;
+        }
+        return;
+      }
+      ++stats.static_written;
+      static_file_bytes[key] = d.bytes;
+      e.stored = true;
+      e.digest = core::static_voxels_digest(d.static_data->voxels);
+      if (!d.copy) e.state = State::kStored;
+      if (e.load_after_write) {
+        e.load_after_write = false;
+        request_static_load(e);
+      }
+    } else if (d.error) {
+      ++stats.load_errors;
+      static_file_bytes.erase(key);
+      statics.erase(key);
+    } else {
+      ++stats.static_loaded;
+      map->put_static(d.static_data->voxels);
+      e.state = State::kResident;
+      e.stored = true;
+      e.digest = core::static_voxels_digest(d.static_data->voxels);
+    }
+  }
+
+  /// Static tiles [lo, hi] (inclusive) covering the window placed at `min` (voxels), widened by
+  /// `margin` tiles.
+  [[nodiscard]] std::pair<Eigen::Vector2i, Eigen::Vector2i> static_footprint(
+      const core::VoxelIndex& min, int margin) const {
+    const auto tile = [](int v) {
+      return v >= 0 ? v / core::kStaticTileEdge
+                    : -((-v + core::kStaticTileEdge - 1) / core::kStaticTileEdge);
+    };
+    const Eigen::Vector3i top = min + map->window_size() - Eigen::Vector3i::Ones();
+    return {Eigen::Vector2i(tile(min.x()) - margin, tile(min.y()) - margin),
+            Eigen::Vector2i(tile(top.x()) + margin, tile(top.y()) + margin)};
+  }
+
+  [[nodiscard]] bool static_needed_not_resident(const core::VoxelIndex& min) const {
+    const auto [lo, hi] = static_footprint(min, 0);
+    for (int y = lo.y(); y <= hi.y(); ++y) {
+      for (int x = lo.x(); x <= hi.x(); ++x) {
+        const auto it = statics.find(StaticKey{y, x});
+        if (it != statics.end() && it->second.state != State::kResident) return true;
+      }
+    }
+    return false;
+  }
+
+  /// Static tiles beyond two tiles of the window leave the map: written when their voxels are
+  /// not what their file holds.
+  void evict_static() {
+    if (evict_stopped) return;
+    const auto [lo, hi] = static_footprint(map->window_min(), 2);
+    map->static_tiles(core::kStaticTileEdge, static_resident);
+    for (const Eigen::Vector2i& t : static_resident) {
+      if (t.x() >= lo.x() && t.x() <= hi.x() && t.y() >= lo.y() && t.y() <= hi.y()) continue;
+      voxels.clear();
+      const int e0x = t.x() * core::kStaticTileEdge, e0y = t.y() * core::kStaticTileEdge;
+      if (!map->take_static_columns(e0x, e0y, e0x + core::kStaticTileEdge - 1,
+                                    e0y + core::kStaticTileEdge - 1, voxels)) {
+        continue;  // meets the window (not reached: the window is within the footprint)
+      }
+      const StaticKey key = static_key(t);
+      const auto it = statics.find(key);
+      const bool has_file = static_file_bytes.contains(key);
+      if (voxels.empty() && !has_file) {
+        if (it != statics.end()) statics.erase(it);
+        continue;
+      }
+      StaticEntry& e = statics[key];
+      e.tile = t;
+      ++stats.static_evicted;
+      if (e.stored && has_file && e.digest == core::static_voxels_digest(voxels)) {
+        e.state = State::kStored;  // the file holds these voxels: dropped, not rewritten
+        continue;
+      }
+      e.state = State::kWriting;
+      submit_static_write(core::StaticTile{t, voxels}, false);
     }
   }
 
   /// Takes what the worker finished back into the layer (scan thread).
   void collect(core::TsdfLayer& layer, std::deque<Done>& finished) {
     for (Done& d : finished) {
+      if (d.is_static) {
+        collect_static(d);
+        continue;
+      }
       Entry& e = tiles[TileKey::of(d.tile)];
       if (d.write) {
         if (d.error) {
@@ -328,7 +563,7 @@ struct TsdfPager::Impl {
         e.state = State::kStored;  // unchanged since read or written: dropped, not rewritten
       } else {
         e.state = State::kWriting;
-        submit(Job{true, false, c.tile, e.version, std::move(tile)});
+        submit(tsdf_job(true, false, c.tile, e.version, std::move(tile)));
       }
     }
     if (bytes > params.limit_bytes) ++stats.over_limit;
@@ -346,6 +581,7 @@ TsdfPagerParams TsdfPagerParams::for_mapper(const core::MapperParams& mapping,
   p.truncation_m = tsdf.truncation_m;
   p.need_radius_m = static_cast<double>(tsdf.max_range_m) + static_cast<double>(tsdf.truncation_m);
   p.load_radius_m = p.need_radius_m + core::kTsdfTileEdge * static_cast<double>(tsdf.voxel_size_m);
+  p.occupancy_voxel_m = static_cast<float>(mapping.occupancy.voxel_size_m);
   // A rebuild erases the blocks of every retained scan: their tiles stay (two scans of slack).
   p.keep_scans = mapping.corrections.enabled
                      ? static_cast<std::size_t>(mapping.corrections.retain_scans) + 2
@@ -366,7 +602,8 @@ TsdfPager::~TsdfPager() {
 }
 
 core::Result<std::unique_ptr<TsdfPager>> TsdfPager::open(const TsdfPagerParams& params,
-                                                         core::TsdfLayer& layer) {
+                                                         core::TsdfLayer& layer,
+                                                         core::OccupancyMap* occupancy) {
   if (params.limit_bytes == 0)
     return core::Error{"tsdf_pager.config", "a limit of 0 pages nothing"};
   std::error_code ec;
@@ -378,9 +615,25 @@ core::Result<std::unique_ptr<TsdfPager>> TsdfPager::open(const TsdfPagerParams& 
   Impl& impl = *pager->impl_;
   for (const auto& f : std::filesystem::directory_iterator(params.dir, ec)) {
     const std::string name = f.path().filename().string();
+    if (const auto st = parse_static_name(name)) {
+      if (occupancy == nullptr) continue;  // not paged here: left as they are
+      if (!params.resume) {
+        std::filesystem::remove(f.path(), ec);
+        continue;
+      }
+      StaticEntry e;
+      e.tile = *st;
+      e.state = State::kStored;
+      e.stored = true;
+      impl.statics[static_key(*st)] = e;
+      impl.static_file_bytes[static_key(*st)] = std::filesystem::file_size(f.path(), ec);
+      continue;
+    }
     const std::optional<TileIndex> t = parse_tile_name(name);
     if (!t) {
-      if (name.ends_with(".tsdft.tmp")) std::filesystem::remove(f.path(), ec);  // a cut write
+      if (name.ends_with(".tsdft.tmp") || name.ends_with(".occs.tmp")) {
+        std::filesystem::remove(f.path(), ec);  // a cut write
+      }
       continue;
     }
     if (!params.resume) {
@@ -397,6 +650,7 @@ core::Result<std::unique_ptr<TsdfPager>> TsdfPager::open(const TsdfPagerParams& 
   }
   if (ec) return core::Error{"tsdf_pager.dir", params.dir.string() + ": " + ec.message()};
   layer.track_touched_tiles(true);
+  impl.map = occupancy;
   impl.worker = std::thread([&impl] { impl.run(); });
   return pager;
 }
@@ -437,6 +691,41 @@ void TsdfPager::after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor
   impl.evict(layer, sensor_W, hold);
 }
 
+void TsdfPager::before_occupancy(core::TsdfLayer& layer, const Eigen::Vector3d& base_W) {
+  Impl& impl = *impl_;
+  if (impl.map == nullptr) return;
+  impl.poll(layer);
+  const core::VoxelIndex min = impl.map->window_min_at(base_W);
+  const auto [lo, hi] = impl.static_footprint(min, 1);
+  for (int y = lo.y(); y <= hi.y(); ++y) {
+    for (int x = lo.x(); x <= hi.x(); ++x) {
+      const auto it = impl.statics.find(StaticKey{y, x});
+      if (it != impl.statics.end()) impl.request_static_load(it->second);
+    }
+  }
+  if (params_.wait_for_loads) {
+    impl.wait_until(layer, [&] { return !impl.static_needed_not_resident(min); });
+  } else if (impl.static_needed_not_resident(min)) {
+    ++impl.stats.loads_late;  // its voxels read static once it is in (put_static)
+  }
+}
+
+void TsdfPager::after_occupancy() {
+  if (impl_->map != nullptr) impl_->evict_static();
+}
+
+void TsdfPager::occupancy_replaced() {
+  Impl& impl = *impl_;
+  if (impl.map == nullptr) return;
+  ++impl.generation;
+  impl.statics.clear();
+  impl.static_file_bytes.clear();
+  Job job;
+  job.drop_statics = true;
+  job.generation = impl.generation;
+  impl.submit(std::move(job));
+}
+
 void TsdfPager::flush(core::TsdfLayer& layer) {
   impl_->wait_until(layer, [] { return false; });
 }
@@ -460,8 +749,29 @@ std::size_t TsdfPager::store_changed(core::TsdfLayer& layer) {
     if (e.state != State::kResident || e.stored) continue;
     // A copy goes to the worker; the layer keeps the tile. Marked stored once written, if the
     // tile has not changed meanwhile.
-    impl.submit(Job{true, true, info.tile, e.version, layer.copy_tile(info.tile)});
+    impl.submit(tsdf_job(true, true, info.tile, e.version, layer.copy_tile(info.tile)));
     ++copies;
+  }
+  if (impl.map != nullptr) {
+    impl.map->static_tiles(core::kStaticTileEdge, impl.static_resident);
+    for (const Eigen::Vector2i& t : impl.static_resident) {
+      impl.voxels.clear();
+      const int x0 = t.x() * core::kStaticTileEdge, y0 = t.y() * core::kStaticTileEdge;
+      impl.map->copy_static_columns(x0, y0, x0 + core::kStaticTileEdge - 1,
+                                    y0 + core::kStaticTileEdge - 1, impl.voxels);
+      const StaticKey key = static_key(t);
+      const auto it = impl.statics.find(key);
+      const bool has_file = impl.static_file_bytes.contains(key);
+      if (impl.voxels.empty() && !has_file) continue;
+      if (it != impl.statics.end() && it->second.stored && has_file &&
+          it->second.digest == core::static_voxels_digest(impl.voxels)) {
+        continue;  // its file holds these voxels
+      }
+      StaticEntry& e = impl.statics[key];
+      e.tile = t;
+      impl.submit_static_write(core::StaticTile{t, impl.voxels}, true);
+      ++copies;
+    }
   }
   return copies;
 }
@@ -549,6 +859,27 @@ core::Status TsdfPager::mesh_site(
   return core::Ok{};
 }
 
+bool TsdfPager::static_site_voxels(std::vector<Eigen::Vector3i>& out) const {
+  out.clear();
+  if (impl_->map == nullptr) return true;
+  impl_->map->export_static(out);
+  bool ok = true;
+  for (const auto& [key, e] : impl_->statics) {
+    if (e.state == State::kResident) continue;
+    core::Result<core::StaticTile> read =
+        read_static(params_.dir / static_name(e.tile), params_.occupancy_voxel_m, e.tile);
+    if (!read) {
+      ok = false;
+      continue;
+    }
+    out.insert(out.end(), read.value().voxels.begin(), read.value().voxels.end());
+  }
+  std::sort(out.begin(), out.end(), [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+    return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+  });
+  return ok;
+}
+
 std::uint64_t TsdfPager::site_digest(const core::TsdfLayer& layer) const {
   core::TsdfDigest digest;
   for_each_site_block(layer, [&digest](const core::TsdfBlockView& b) { digest.add(b); });
@@ -562,6 +893,12 @@ TsdfPagerStats TsdfPager::stats() const {
   }
   s.stored_tiles = impl_->file_bytes.size();
   for (const auto& [key, bytes] : impl_->file_bytes) s.stored_bytes += bytes;
+  if (impl_->map != nullptr) {
+    s.static_resident_bytes = impl_->map->static_bytes();
+    s.static_resident_voxels = impl_->map->static_count();
+    s.static_tiles_stored = impl_->static_file_bytes.size();
+    for (const auto& [key, bytes] : impl_->static_file_bytes) s.static_stored_bytes += bytes;
+  }
   {
     std::lock_guard lock(impl_->mutex);
     s.io_queued = impl_->jobs.size() + impl_->busy;

@@ -2,10 +2,14 @@
 // while it is away nothing is built in it; a digest taken tile by tile is the layer's.
 #include "tarmac/core/tsdf_tiles.hpp"
 
+#include <algorithm>
 #include <map>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "tarmac/core/occupancy_map.hpp"
 
 namespace tarmac::core {
 namespace {
@@ -140,6 +144,97 @@ TEST(TsdfTiles, DigestTileByTileInKeyOrder_EqualsTheLayers) {
   for (const auto& [key, tile] : away)
     tile.for_each_block([&d](const TsdfBlockView& b) { d.add(b); });
   EXPECT_EQ(d.value(), layer.digest());
+}
+
+TEST(StaticTiles, EncodeDecode_SameVoxels_DamageAndForeignTilesRefused) {
+  StaticTile tile{StaticTileIndex(-2, 3), {}};
+  for (int z = -3; z < 4; ++z) {
+    for (int y = 3 * kStaticTileEdge; y < 4 * kStaticTileEdge; y += 7) {
+      tile.voxels.emplace_back(-2 * kStaticTileEdge + (y % kStaticTileEdge), y, z);
+    }
+  }
+  const std::vector<std::uint8_t> bytes = tile.encode(0.2f);
+  const Result<StaticTile> back = StaticTile::decode(bytes, 0.2f, tile.index);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back.value().voxels, tile.voxels);
+  EXPECT_EQ(static_voxels_digest(back.value().voxels), static_voxels_digest(tile.voxels));
+
+  std::vector<std::uint8_t> flipped = bytes;
+  flipped.back() ^= 1;
+  EXPECT_EQ(StaticTile::decode(flipped, 0.2f, tile.index).error().code, "static_tile.corrupt");
+  const std::vector<std::uint8_t> cut(bytes.begin(), bytes.end() - 3);
+  EXPECT_EQ(StaticTile::decode(cut, 0.2f, tile.index).error().code, "static_tile.corrupt");
+  EXPECT_EQ(StaticTile::decode(bytes, 0.1f, tile.index).error().code, "static_tile.mismatch");
+  EXPECT_EQ(StaticTile::decode(bytes, 0.2f, StaticTileIndex(0, 0)).error().code,
+            "static_tile.mismatch");
+  StaticTile unsorted = tile;
+  std::swap(unsorted.voxels[0], unsorted.voxels[1]);
+  EXPECT_EQ(StaticTile::decode(unsorted.encode(0.2f), 0.2f, tile.index).error().code,
+            "static_tile.corrupt");
+}
+
+/// A window of 64 x 64 x 16 voxels with a static layer spread over many blocks and columns
+/// (static voxels join when they leave the window: the window drives along a wall).
+TEST(StaticTiles, TakeAndPutColumns_LayerUnchanged_RefusedInTheWindow) {
+  OccupancyParams p;
+  p.window_x_vox = 64;
+  p.window_y_vox = 64;
+  p.window_z_vox = 16;
+  ASSERT_TRUE(p.validate().ok());
+  OccupancyMap map(p);
+  std::vector<VoxelIndex> statics;
+  for (int x = -300; x < 300; x += 3) {
+    for (int z = 0; z < 12; z += 2) statics.emplace_back(x, 17 + (x & 7), z);
+  }
+  map.import_static(statics);
+  map.recenter(Eigen::Vector3d(0.0, 0.0, 0.0));
+  std::vector<VoxelIndex> all;
+  map.export_static(all);
+  ASSERT_EQ(all.size(), statics.size());
+
+  std::vector<VoxelIndex> taken;
+  // The window (voxels -32..31) meets column tile 0: refused, nothing taken.
+  EXPECT_FALSE(map.take_static_columns(0, 0, 63, 63, taken));
+  EXPECT_TRUE(taken.empty());
+  std::vector<Eigen::Vector2i> tiles;
+  map.static_tiles(kStaticTileEdge, tiles);
+  EXPECT_GE(tiles.size(), 8u);
+  std::vector<std::vector<VoxelIndex>> away;
+  for (const Eigen::Vector2i& t : tiles) {
+    const int x0 = t.x() * kStaticTileEdge, y0 = t.y() * kStaticTileEdge;
+    std::vector<VoxelIndex> v;
+    if (map.take_static_columns(x0, y0, x0 + kStaticTileEdge - 1, y0 + kStaticTileEdge - 1, v)) {
+      EXPECT_TRUE(std::is_sorted(v.begin(), v.end(), [](const VoxelIndex& a, const VoxelIndex& b) {
+        return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+      }));
+      away.push_back(std::move(v));
+    }
+  }
+  ASSERT_GE(away.size(), 6u);
+  EXPECT_LT(map.static_count(), statics.size());
+  for (const VoxelIndex& v : away.front()) EXPECT_FALSE(map.is_static(v));
+  // Every other voxel is still found (removal keeps the table's probe chains intact).
+  std::vector<VoxelIndex> left;
+  map.export_static(left);
+  for (const VoxelIndex& v : left) EXPECT_TRUE(map.is_static(v));
+  for (const auto& v : away) map.put_static(v);
+  std::vector<VoxelIndex> again;
+  map.export_static(again);
+  EXPECT_EQ(again, all);
+  // A tile put back under the window reads static there at once.
+  map.recenter(Eigen::Vector3d(0.2 * 128, 0.0, 0.0));
+  std::vector<VoxelIndex> under;
+  const int x0 = 128, y0 = 0;
+  EXPECT_FALSE(map.take_static_columns(x0, y0, x0 + 63, y0 + 63, under));
+  map.recenter(Eigen::Vector3d(0.0, 0.0, 0.0));
+  ASSERT_TRUE(map.take_static_columns(x0, y0, x0 + 63, y0 + 63, under));
+  ASSERT_FALSE(under.empty());
+  EXPECT_EQ(map.log_odds(under.front()), OccupancyMap::kUnknown);
+  map.recenter(Eigen::Vector3d(0.2 * 128, 0.0, 0.0));  // the window reaches the tile first
+  EXPECT_LT(map.log_odds(under.front()), 0.0f);
+  map.put_static(under);
+  EXPECT_TRUE(map.is_static(under.front()));
+  EXPECT_GT(map.log_odds(under.front()), 0.0f);
 }
 
 }  // namespace

@@ -546,8 +546,9 @@ TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
 }
 
 TEST_F(Daemon, Paging_TheTileStoreIsTheMapAfterSaveAndRestart) {
-  // tsdf.resident_limit_mb > 0 in tarmacd: the TSDF goes to state.dir/tsdf_tiles on save; the
-  // .vdb keeps the static occupancy only; a restart resumes from the tiles (absent until near).
+  // tsdf.resident_limit_mb > 0 in tarmacd: the TSDF and the static occupancy go to
+  // state.dir/tsdf_tiles on save; the .vdb holds neither; a restart resumes from the tiles
+  // (absent until near).
   auto cfg = test_config(test::kDomainDaemonPaging, 2);
   const auto dir =
       std::filesystem::temp_directory_path() / ("tarmac-paging-" + std::to_string(::getpid()));
@@ -555,25 +556,35 @@ TEST_F(Daemon, Paging_TheTileStoreIsTheMapAfterSaveAndRestart) {
   cfg.state.dir = dir.string();
   cfg.state.save_period_s = 0.0;
   cfg.mapping.tsdf.resident_limit_mb = 1;
+  cfg.mapping.occupancy.static_promote_scans = 2;  // four scans build a static layer
   std::uint64_t digest = 0;
+  std::vector<core::VoxelIndex> statics;
   {
     RunningExecutor executor(cfg);
     ASSERT_NO_FATAL_FAILURE(replay_four_scans(executor, cfg));
     executor.stop();
     digest = executor.get().tsdf().digest();
+    executor.get().occupancy().export_static(statics);
     ASSERT_NE(executor.get().tsdf().block_count(), 0u);
+    ASSERT_FALSE(statics.empty());
     ASSERT_TRUE(executor.get().save_tsdf().ok());
   }
   const auto saved = core::load_tsdf(dir / cfg.state.tsdf_file);
   ASSERT_TRUE(saved.ok()) << saved.error().message;
-  EXPECT_EQ(saved.value().layer.block_count(), 0u);  // the TSDF is in the tiles
+  EXPECT_EQ(saved.value().layer.block_count(), 0u);     // the TSDF is in the tiles
+  EXPECT_TRUE(saved.value().occupancy.voxels.empty());  // and so is the static layer
   // The store alone holds the map.
   core::TsdfLayer layer(cfg.mapping.tsdf.voxel_size_m, cfg.mapping.tsdf.truncation_m);
+  core::OccupancyMap occupancy(cfg.mapping.occupancy);
   auto pager = daemon::TsdfPager::open(
-      daemon::TsdfPagerParams::for_mapper(cfg.mapping, dir / "tsdf_tiles"), layer);
+      daemon::TsdfPagerParams::for_mapper(cfg.mapping, dir / "tsdf_tiles"), layer, &occupancy);
   ASSERT_TRUE(pager.ok()) << pager.error().message;
   EXPECT_GT(pager.value()->stats().stored_tiles, 0u);
+  EXPECT_GT(pager.value()->stats().static_tiles_stored, 0u);
   EXPECT_EQ(pager.value()->site_digest(layer), digest);
+  std::vector<core::VoxelIndex> stored;
+  ASSERT_TRUE(pager.value()->static_site_voxels(stored));
+  EXPECT_EQ(stored, statics);
   pager.value().reset();
   // tarmacd restarted over it: the tiles are absent until the vehicle is near, the map the same.
   {

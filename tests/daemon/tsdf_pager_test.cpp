@@ -93,6 +93,7 @@ class TsdfPaging : public ::testing::Test {
       cycle.begin();
       cycle.scan(d.clouds[i], d.T_W_B[i], d.T_B_S);
     }
+    cycle.update_costmap({}, d.clouds.back().stamp_ns);
     if (pager != nullptr) pager->flush(mapper.tsdf());
   }
 
@@ -127,6 +128,51 @@ TEST_F(TsdfPaging, SmallLimit_SameMapBitForBit_TilesLeaveAndComeBack) {
   EXPECT_EQ(restarted.tsdf().block_count(), 0u);
   EXPECT_GT(restarted.tsdf().absent_count(), 0u);
   EXPECT_EQ(reopened.value()->site_digest(restarted.tsdf()), expected);
+}
+
+/// The static occupancy paged in column tiles with the TSDF: a window of 32 m drives the 60 m
+/// loop, so the far side's static tiles leave and come back; the site's static layer, the
+/// window and the costmap are the unlimited run's, and the store restarts the same layer.
+TEST_F(TsdfPaging, StaticLayer_PagedInColumns_SameLayerWindowAndCostmap) {
+  core::MapperParams mp = params();
+  mp.occupancy.window_x_vox = 160;
+  mp.occupancy.window_y_vox = 160;
+  core::Mapper whole(mp);
+  map(whole, nullptr);
+  std::vector<core::VoxelIndex> expected;
+  whole.occupancy().export_static(expected);
+  ASSERT_GT(expected.size(), 1000u);
+
+  TsdfPagerParams pp = pager_params(true);
+  core::Mapper paged(mp);
+  auto pager = TsdfPager::open(pp, paged.tsdf(), &paged.occupancy());
+  ASSERT_TRUE(pager.ok()) << pager.error().message;
+  map(paged, pager.value().get());
+  const TsdfPagerStats st = pager.value()->stats();
+  EXPECT_GT(st.static_evicted, 3u);
+  EXPECT_GT(st.static_loaded, 1u);  // the second lap brings the far side's static tiles back
+  EXPECT_GT(st.static_tiles_stored, 0u);
+  EXPECT_EQ(st.loads_late, 0u);
+  EXPECT_EQ(st.write_errors + st.load_errors, 0u);
+  EXPECT_LT(paged.occupancy().static_count(), expected.size());
+  std::vector<core::VoxelIndex> site;
+  ASSERT_TRUE(pager.value()->static_site_voxels(site));
+  EXPECT_EQ(site, expected);
+  std::vector<float> a, b;
+  whole.occupancy().export_log_odds(a);
+  paged.occupancy().export_log_odds(b);
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(whole.costmap().costmap.cells(), paged.costmap().costmap.cells());
+
+  // The store alone holds the site's static layer for a restart.
+  ASSERT_TRUE(pager.value()->store_all(paged.tsdf()).ok());
+  pager.value().reset();
+  core::Mapper restarted(mp);
+  auto reopened = TsdfPager::open(pp, restarted.tsdf(), &restarted.occupancy());
+  ASSERT_TRUE(reopened.ok()) << reopened.error().message;
+  EXPECT_EQ(restarted.occupancy().static_count(), 0u);
+  ASSERT_TRUE(reopened.value()->static_site_voxels(site));
+  EXPECT_EQ(site, expected);
 }
 
 /// A mesh's triangles as sorted tuples of their corners' coordinates (each triangle rotated to

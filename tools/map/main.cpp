@@ -476,10 +476,20 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     timing["tsdf_save_ms"] = tsdf_out.save_ms;
     if (in.prior) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
   }
-  std::printf("static layer: %zu voxels at the end (%llu promotions, %llu demotions)\n",
-              mapper.occupancy().static_count(), static_cast<unsigned long long>(run.promotions),
-              static_cast<unsigned long long>(run.demotions));
-  timing["static_voxels"] = mapper.occupancy().static_count();
+  // The site's static layer: with paging, the map's part and the stored tiles'.
+  std::vector<Eigen::Vector3i> static_site;
+  if (run.pager != nullptr) {
+    run.pager->static_site_voxels(static_site);
+  } else {
+    mapper.occupancy().export_static(static_site);
+  }
+  std::printf(
+      "static layer: %zu voxels at the end (%llu promotions, %llu demotions); in memory %zu "
+      "voxels, table %.1f MiB\n",
+      static_site.size(), static_cast<unsigned long long>(run.promotions),
+      static_cast<unsigned long long>(run.demotions), mapper.occupancy().static_count(),
+      static_cast<double>(mapper.occupancy().static_bytes()) / (1024.0 * 1024.0));
+  timing["static_voxels"] = static_site.size();
   timing["static_promotions"] = run.promotions;
   timing["static_demotions"] = run.demotions;
   if (in.clearing) {
@@ -561,6 +571,14 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
         static_cast<unsigned long long>(st.loaded), static_cast<unsigned long long>(st.over_limit),
         static_cast<unsigned long long>(st.write_errors),
         static_cast<unsigned long long>(st.load_errors), run.distance_m);
+    std::printf(
+        "static paging: %zu voxels in memory (table %.1f MiB); %zu tiles stored, %.2f MiB; %llu "
+        "evicted, %llu written, %llu loaded\n",
+        st.static_resident_voxels, static_cast<double>(st.static_resident_bytes) / kMiB,
+        st.static_tiles_stored, static_cast<double>(st.static_stored_bytes) / kMiB,
+        static_cast<unsigned long long>(st.static_evicted),
+        static_cast<unsigned long long>(st.static_written),
+        static_cast<unsigned long long>(st.static_loaded));
   } else if (params.tsdf.enabled) {
     std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
                 "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
@@ -621,6 +639,8 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
       static_cast<unsigned long long>(run.pager != nullptr ? run.pager->site_digest(mapper.tsdf())
                                                            : mapper.tsdf().digest()));
+  std::printf("digest: static %016llx\n",
+              static_cast<unsigned long long>(core::static_voxels_digest(static_site)));
   if (window_out.have_band) {
     std::printf("digest: esdf_band %s\n",
                 tools::digest(bytes(mapper.esdf_band().field.distance_m)).c_str());
@@ -692,7 +712,7 @@ int main(int argc, char** argv) {
         in.cfg.mapping, std::filesystem::path(opt.out) / "tsdf_tiles");
     pp.wait_for_loads = true;
     pp.resume = false;
-    auto opened = daemon::TsdfPager::open(pp, mapper.tsdf());
+    auto opened = daemon::TsdfPager::open(pp, mapper.tsdf(), &mapper.occupancy());
     if (!opened) {
       std::fprintf(stderr, "tarmac-map: %s\n", opened.error().message.c_str());
       return kExitIo;

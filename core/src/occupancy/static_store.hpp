@@ -2,6 +2,7 @@
 /// @file The occupancy map's site-wide static layer (internal to core/src/occupancy).
 
 #include <array>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -45,9 +46,12 @@ struct StaticStore {
   static std::uint64_t key_of(const VoxelIndex& v) {
     return key(v.x() >> kShift, v.y() >> kShift, v.z() >> kShift);
   }
+  static std::size_t home(std::uint64_t k, std::size_t mask) {
+    return static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ull) >> 20) & mask;
+  }
   [[nodiscard]] std::size_t probe(std::uint64_t k) const {
     const std::size_t mask = keys.size() - 1;
-    std::size_t i = static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ull) >> 20) & mask;
+    std::size_t i = home(k, mask);
     while (keys[i] != kEmpty && keys[i] != k) i = (i + 1) & mask;
     return i;
   }
@@ -78,6 +82,32 @@ struct StaticStore {
       keys[i] = old_keys[j];
       masks[i] = old_masks[j];
     }
+  }
+  /// Removes block `k` and its voxels (a tile paged out). Backward-shift deletion keeps every
+  /// other key reachable from its home slot without tombstones.
+  void erase_block(std::uint64_t k) {
+    std::size_t i = probe(k);
+    if (keys[i] != k) return;
+    for (const std::uint64_t w : masks[i]) count -= static_cast<std::size_t>(std::popcount(w));
+    const std::size_t mask = keys.size() - 1;
+    for (std::size_t j = (i + 1) & mask; keys[j] != kEmpty; j = (j + 1) & mask) {
+      // Key j may fill the hole at i unless its home lies cyclically in (i, j].
+      if (((j - home(keys[j], mask)) & mask) >= ((j - i) & mask)) {
+        keys[i] = keys[j];
+        masks[i] = masks[j];
+        i = j;
+      }
+    }
+    keys[i] = kEmpty;
+    masks[i] = Mask{};
+    --used;
+  }
+  static int block_x(std::uint64_t k) { return field(k, 0); }
+  static int block_y(std::uint64_t k) { return field(k, 21); }
+  static int block_z(std::uint64_t k) { return field(k, 42); }
+  static int field(std::uint64_t k, int shift) {
+    return static_cast<int>(static_cast<std::int64_t>((k >> shift) & ((1u << 21) - 1)) -
+                            (std::int64_t{1} << 20));
   }
   void clear() {
     std::fill(keys.begin(), keys.end(), kEmpty);

@@ -191,6 +191,25 @@ class OccupancyMap {
   [[nodiscard]] std::size_t static_count() const;
   /// The static layer's voxels, sorted by (z, y, x), into `out` (for persistence and tests).
   void export_static(std::vector<VoxelIndex>& out) const;
+  /// Site paging (daemon/tsdf_pager.hpp): takes the static voxels of the columns x in
+  /// [lo_x, hi_x], y in [lo_y, hi_y] (world voxel indices, inclusive, whole 8-voxel blocks) out
+  /// of the layer, appending them to `out` sorted by (z, y, x). Refused (false, nothing taken)
+  /// when the columns meet the window: its voxels hold the static state too. No allocation once
+  /// its scratch has grown.
+  bool take_static_columns(int lo_x, int lo_y, int hi_x, int hi_y, std::vector<VoxelIndex>& out);
+  /// The same voxels copied, the layer unchanged (a save).
+  void copy_static_columns(int lo_x, int lo_y, int hi_x, int hi_y, std::vector<VoxelIndex>& out);
+  /// The (x, y) squares of `edge` voxels (a multiple of 8) that hold static blocks: square t
+  /// covers [edge·t, edge·t + edge); sorted by (y, x), each once.
+  void static_tiles(int edge, std::vector<Eigen::Vector2i>& out) const;
+  /// Puts static voxels back (a tile read from the store); those inside the window read static
+  /// at once, as if it had been there when the window reached them.
+  void put_static(std::span<const VoxelIndex> voxels);
+  /// Bytes the static layer's table holds (it never shrinks: its size is its peak).
+  [[nodiscard]] std::size_t static_bytes() const;
+  /// The window's lowest corner were it centred on `position_W` (where recenter() puts it).
+  [[nodiscard]] VoxelIndex window_min_at(const Eigen::Vector3d& position_W) const;
+
   /// Replaces the static layer by `voxels` (a loaded map): those inside the window read occupied
   /// at once, the others when the window reaches them. Forgets the dynamic content of voxels that
   /// left the static layer by this call.
@@ -211,6 +230,8 @@ class OccupancyMap {
   /// window) read static.
   void restore_static(const VoxelIndex& lo, const VoxelIndex& hi);
   [[nodiscard]] VoxelIndex voxel_of_slot(std::size_t slot) const;
+  bool static_columns(int lo_x, int lo_y, int hi_x, int hi_y, std::vector<VoxelIndex>& out,
+                      bool take);
   /// Ring index of the window's first voxel, per axis.
   [[nodiscard]] std::array<int, 3> ring_origin() const;
   /// integrate()'s hit pass: each return's slot, column, height and rise above the scan's ground,
@@ -256,6 +277,7 @@ class OccupancyMap {
   std::vector<std::vector<std::uint32_t>> candidates_;
   std::vector<std::uint8_t> miss_decision_;
   std::vector<std::vector<std::uint32_t>> kept_;  ///< per slab task, leaving slots kept as static
+  std::vector<std::uint64_t> taken_keys_;         ///< take_static_columns' scratch
   /// Per scan: lowest return height per window column (m along the up axis, +inf where none)
   /// and the columns that hold one (reset next scan).
   std::vector<float> scan_ground_z_;

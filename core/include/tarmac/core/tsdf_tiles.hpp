@@ -104,4 +104,29 @@ class TsdfDigest {
   std::uint64_t h_ = 1469598103934665603ull;
 };
 
+/// Columns of the occupancy map's static layer (OccupancyMap::take_static_columns): the site cut
+/// in (x, y) into squares of 64 × 64 occupancy voxels (12.8 m at 0.2 m), every height, paged
+/// with the TSDF's tiles. Static tile t holds voxels [64·t, 64·t + 64) in x and y.
+inline constexpr int kStaticTileEdge = 64;
+using StaticTileIndex = Eigen::Vector2i;
+
+/// FNV-1a 64 over the voxels' coordinates (32-bit words, x y z) in the given order: of a static
+/// layer sorted by (z, y, x), a digest independent of how it was held (whole or in tiles).
+[[nodiscard]] std::uint64_t static_voxels_digest(std::span<const Eigen::Vector3i> voxels);
+
+/// The static voxels of one column tile, sorted by (z, y, x): encoded to bytes (compact,
+/// checksummed) and back.
+struct StaticTile {
+  StaticTileIndex index = StaticTileIndex::Zero();
+  std::vector<Eigen::Vector3i> voxels;
+
+  /// A header (magic, version, voxel size, tile, count, FNV-1a 64 of the payload), then per voxel
+  /// its x and y in the tile (uint8 each) and its z (int32).
+  [[nodiscard]] std::vector<std::uint8_t> encode(float voxel_size_m) const;
+  /// Refuses (static_tile.corrupt / static_tile.mismatch) a truncated or altered file, one of
+  /// another voxel size or tile, or voxels out of the tile or out of order.
+  static Result<StaticTile> decode(std::span<const std::uint8_t> bytes, float voxel_size_m,
+                                   const StaticTileIndex& expected);
+};
+
 }  // namespace tarmac::core

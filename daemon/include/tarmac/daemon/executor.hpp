@@ -116,6 +116,8 @@ class Executor {
   TsdfLoadResult load_tsdf();
   /// The TSDF layer, for tests: only while run() is not running.
   [[nodiscard]] const core::TsdfLayer& tsdf() const;
+  /// The occupancy map (window and static layer), for tests: only while run() is not running.
+  [[nodiscard]] const core::OccupancyMap& occupancy() const;
 
   [[nodiscard]] ExecutorTotals totals() const;
   /// One line for systemd's STATUS= and the logs.

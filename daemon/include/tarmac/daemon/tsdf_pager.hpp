@@ -26,10 +26,12 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
 #include "tarmac/core/tsdf_mesh.hpp"
@@ -42,11 +44,12 @@ struct TsdfPagerParams {
   std::filesystem::path dir;    ///< the tile store: one file per tile
   float voxel_size_m = 0.1f;
   float truncation_m = 0.3f;
-  double need_radius_m = 50.3;  ///< tiles a scan can touch: within this of the sensor (x, y)
-  double load_radius_m = 63.1;  ///< tiles on disk within this are asked back (>= need_radius_m)
-  std::size_t keep_scans = 52;  ///< tiles touched by the last this many scans stay
-  bool wait_for_loads = false;  ///< a scan waits for the tiles it can touch (tarmac-map)
-  bool resume = true;           ///< false: tiles left in `dir` by an earlier run are removed
+  double need_radius_m = 50.3;     ///< tiles a scan can touch: within this of the sensor (x, y)
+  double load_radius_m = 63.1;     ///< tiles on disk within this are asked back (>= need_radius_m)
+  std::size_t keep_scans = 52;     ///< tiles touched by the last this many scans stay
+  bool wait_for_loads = false;     ///< a scan waits for the tiles it can touch (tarmac-map)
+  bool resume = true;              ///< false: tiles left in `dir` by an earlier run are removed
+  float occupancy_voxel_m = 0.2f;  ///< the occupancy's voxel: static tiles are written for it
 
   /// For a mapper: need and load radius from the TSDF's max range and truncation; keep_scans
   /// covers the scans retained for a pose-correction rebuild (it erases their blocks).
@@ -67,14 +70,27 @@ struct TsdfPagerStats {
   std::uint64_t write_errors = 0;  ///< writes that failed (the tile stayed in memory)
   std::uint64_t load_errors = 0;   ///< tiles refused on reading (renamed .refused)
   std::size_t io_queued = 0;       ///< writes and reads not done yet
+  // The occupancy's static layer (paged when open() was given the map).
+  std::size_t static_resident_bytes = 0;   ///< OccupancyMap::static_bytes()
+  std::size_t static_resident_voxels = 0;  ///< its voxels in memory
+  std::size_t static_tiles_stored = 0;     ///< static tiles with a file in the store
+  std::uint64_t static_stored_bytes = 0;
+  std::uint64_t static_evicted = 0;  ///< static tiles taken out of memory
+  std::uint64_t static_written = 0;
+  std::uint64_t static_loaded = 0;
 };
 
 class TsdfPager {
  public:
   /// Opens (creates) the tile store; with `resume`, its tiles are marked absent in `layer` and
-  /// come back as the vehicle nears them.
+  /// come back as the vehicle nears them. With `occupancy`, the static layer of that map is paged
+  /// too, in column tiles of core::kStaticTileEdge voxels (x, y): a tile leaves the map beyond
+  /// two tiles of the window and is asked back within one, and a scan waits for (or, when it
+  /// may not wait, counts late in `loads_late`) those the window covers. `layer` and
+  /// `occupancy` must outlive the pager.
   static core::Result<std::unique_ptr<TsdfPager>> open(const TsdfPagerParams& params,
-                                                       core::TsdfLayer& layer);
+                                                       core::TsdfLayer& layer,
+                                                       core::OccupancyMap* occupancy = nullptr);
   ~TsdfPager();
   TsdfPager(const TsdfPager&) = delete;
   TsdfPager& operator=(const TsdfPager&) = delete;
@@ -90,6 +106,15 @@ class TsdfPager {
   /// (a pose-correction rebuild is running: it erases and rewrites the retained scans' blocks,
   /// wherever their corrected poses put them).
   void after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W, bool hold = false);
+  /// Before a scan's occupancy integration, which places the window at `base_W`: asks back the
+  /// static tiles within one tile of that window and (wait_for_loads) waits for those it covers.
+  void before_occupancy(core::TsdfLayer& layer, const Eigen::Vector3d& base_W);
+  /// After it: static tiles beyond two tiles of the window leave the map.
+  void after_occupancy();
+  /// The map's static layer was replaced (a pose-correction rebuild completed: the layer is the
+  /// one re-derived from the retained scans): the stored static tiles are of the old one, and
+  /// are removed.
+  void occupancy_replaced();
   /// Waits until the worker has done every queued write and read (and takes the reads back).
   void flush(core::TsdfLayer& layer);
   /// Hands a copy of every resident tile changed since it was last stored to the worker (the
@@ -110,6 +135,10 @@ class TsdfPager {
   /// whole map's. Stops at the first error `piece` returns, or a tile that cannot be read.
   core::Status mesh_site(const core::TsdfLayer& layer, float min_weight,
                          const std::function<core::Status(const core::TriangleMesh&)>& piece) const;
+  /// The site's static voxels (the map's and the stored tiles'), sorted by (z, y, x): what
+  /// OccupancyMap::export_static gives of the same layer held whole. Call flush() first. False
+  /// when a stored tile cannot be read.
+  bool static_site_voxels(std::vector<Eigen::Vector3i>& out) const;
   /// The site's digest: equal to TsdfLayer::digest() of the same map held whole.
   [[nodiscard]] std::uint64_t site_digest(const core::TsdfLayer& layer) const;
 
