@@ -17,6 +17,43 @@ Status ChangeParams::validate() const {
   return Ok{};
 }
 
+void compare_blocks(const TsdfBlockView& before, const TsdfBlockView& now,
+                    const ChangeParams& params, double v, const Eigen::Vector2i& origin,
+                    std::uint32_t width, std::span<float> raster, ChangeCounts& counts) {
+  const float band = params.surface_band_m, off = params.off_surface_m;
+  for (int i = 0; i < kTsdfBlockEdge; ++i) {
+    for (int j = 0; j < kTsdfBlockEdge; ++j) {
+      const int x = now.block.x() * kTsdfBlockEdge + i - origin.x();
+      const int y = now.block.y() * kTsdfBlockEdge + j - origin.y();
+      float& cell = raster[static_cast<std::size_t>(y) * width + static_cast<std::size_t>(x)];
+      for (int k = 0; k < kTsdfBlockEdge; ++k) {
+        const double z_m = (now.block.z() * kTsdfBlockEdge + k + 0.5) * v;
+        if (z_m < params.min_z_m || z_m > params.max_z_m) continue;
+        const int n = tsdf_voxel_offset(i, j, k);
+        const float wn = now.voxels[n].weight, wp = before.voxels[n].weight;
+        if (!(wn >= params.min_weight && wp >= params.min_weight)) continue;
+        ++counts.compared_voxels;
+        if (std::isnan(cell)) cell = 0.0f;
+        const float dn = std::abs(now.voxels[n].distance_m);
+        const float dp = std::abs(before.voxels[n].distance_m);
+        const float confidence = std::min(1.0f, std::min(wn, wp) / params.confident_weight);
+        float signed_change = 0.0f;
+        if (dn <= band && dp >= off) {
+          ++counts.new_voxels;
+          signed_change = confidence;
+        } else if (dp <= band && dn >= off) {
+          ++counts.removed_voxels;
+          signed_change = -confidence;
+        } else {
+          continue;
+        }
+        const float a = std::abs(signed_change), c = std::abs(cell);
+        if (a > c || (a == c && signed_change > 0.0f)) cell = signed_change;
+      }
+    }
+  }
+}
+
 Status detect_changes(const TsdfLayer& prior, const TsdfLayer& current, const ChangeParams& params,
                       ChangeMap& out) {
   if (auto s = params.validate(); !s) return s;
@@ -43,42 +80,14 @@ Status detect_changes(const TsdfLayer& prior, const TsdfLayer& current, const Ch
   out.geometry.height = static_cast<std::uint32_t>(hi.y() - lo.y());
   out.change.assign(out.geometry.cell_count(), std::nanf(""));
 
-  const float band = params.surface_band_m, off = params.off_surface_m;
+  ChangeCounts counts;
   current.for_each_block([&](const TsdfBlockView& now) {
     const auto before = prior.find_block(now.block);
-    if (!before) return;
-    for (int i = 0; i < kTsdfBlockEdge; ++i) {
-      for (int j = 0; j < kTsdfBlockEdge; ++j) {
-        const int x = now.block.x() * kTsdfBlockEdge + i - lo.x();
-        const int y = now.block.y() * kTsdfBlockEdge + j - lo.y();
-        float& cell = out.change[static_cast<std::size_t>(y) * out.geometry.width + x];
-        for (int k = 0; k < kTsdfBlockEdge; ++k) {
-          const double z_m = (now.block.z() * kTsdfBlockEdge + k + 0.5) * v;
-          if (z_m < params.min_z_m || z_m > params.max_z_m) continue;
-          const int n = tsdf_voxel_offset(i, j, k);
-          const float wn = now.voxels[n].weight, wp = before->voxels[n].weight;
-          if (!(wn >= params.min_weight && wp >= params.min_weight)) continue;
-          ++out.compared_voxels;
-          if (std::isnan(cell)) cell = 0.0f;
-          const float dn = std::abs(now.voxels[n].distance_m);
-          const float dp = std::abs(before->voxels[n].distance_m);
-          const float confidence = std::min(1.0f, std::min(wn, wp) / params.confident_weight);
-          float signed_change = 0.0f;
-          if (dn <= band && dp >= off) {
-            ++out.new_voxels;
-            signed_change = confidence;
-          } else if (dp <= band && dn >= off) {
-            ++out.removed_voxels;
-            signed_change = -confidence;
-          } else {
-            continue;
-          }
-          const float a = std::abs(signed_change), c = std::abs(cell);
-          if (a > c || (a == c && signed_change > 0.0f)) cell = signed_change;
-        }
-      }
-    }
+    if (before) compare_blocks(*before, now, params, v, lo, out.geometry.width, out.change, counts);
   });
+  out.compared_voxels = counts.compared_voxels;
+  out.new_voxels = counts.new_voxels;
+  out.removed_voxels = counts.removed_voxels;
   return Ok{};
 }
 

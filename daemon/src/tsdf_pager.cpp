@@ -4,6 +4,7 @@
 #include "tarmac/daemon/tsdf_pager.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
@@ -855,6 +856,115 @@ core::Status TsdfPager::mesh_site(
     const Eigen::Vector3i hi = lo + Eigen::Vector3i::Constant(core::kTsdfTileEdge);
     if (auto s = core::extract_mesh(piece_layer, min_weight, lo, hi, mesh); !s) return s;
     if (auto s = piece(mesh); !s) return s;
+  }
+  return core::Ok{};
+}
+
+core::Status TsdfPager::changes_site(
+    const core::TsdfLayer& layer, const std::filesystem::path& prior_dir,
+    const core::ChangeParams& params, core::ChangeCounts& counts,
+    const std::function<core::Status(const core::GridGeometry2D&)>& begin,
+    const std::function<core::Status(int y0, int rows, std::span<const float> cells)>& strip)
+    const {
+  if (auto s = params.validate(); !s) return s;
+  counts = core::ChangeCounts{};
+  // Both sites' tiles: the current one's (resident or stored) and the prior store's.
+  std::map<TileKey, bool> site;  // true: resident
+  layer.resident_tiles(impl_->resident);
+  for (const core::TsdfTileInfo& info : impl_->resident) site[TileKey::of(info.tile)] = true;
+  for (const auto& [key, e] : impl_->tiles) {
+    if (e.state != State::kResident) site.emplace(key, false);
+  }
+  std::map<TileKey, TileIndex> prior;
+  std::error_code ec;
+  for (const auto& f : std::filesystem::directory_iterator(prior_dir, ec)) {
+    if (const auto t = parse_tile_name(f.path().filename().string())) prior[TileKey::of(*t)] = *t;
+  }
+  if (ec) return core::Error{"tsdf_changes.prior", prior_dir.string() + ": " + ec.message()};
+  const auto read_prior = [&](const TileIndex& t) {
+    return read_tile(prior_dir / tile_name(t), params_, t);
+  };
+  // A current tile's blocks, resident or read back: fn(view) for each.
+  const auto current_blocks = [&](const TileIndex& t, bool resident,
+                                  const std::function<void(const core::TsdfBlockView&)>& fn) {
+    if (!resident) {
+      core::Result<TsdfTile> tile = read_tile(impl_->file_of(t), params_, t);
+      if (!tile) return core::Status(tile.error());
+      tile.value().for_each_block(fn);
+      return core::Status(core::Ok{});
+    }
+    const int b = core::kTsdfTileBlocks;
+    for (int x = 0; x < b; ++x) {
+      for (int y = 0; y < b; ++y) {
+        for (int z = 0; z < b; ++z) {
+          const core::BlockIndex bi(t.x() * b + x, t.y() * b + y, t.z() * b + z);
+          if (const auto view = layer.find_block(bi)) fn(*view);
+        }
+      }
+    }
+    return core::Status(core::Ok{});
+  };
+
+  // The raster's extent, as detect_changes takes it: the union of both maps' blocks (x, y).
+  Eigen::Vector2i lo(std::numeric_limits<int>::max(), std::numeric_limits<int>::max());
+  Eigen::Vector2i hi(std::numeric_limits<int>::min(), std::numeric_limits<int>::min());
+  const auto extend = [&](const core::TsdfBlockView& b) {
+    lo = lo.cwiseMin(b.block.head<2>() * core::kTsdfBlockEdge);
+    hi = hi.cwiseMax(b.block.head<2>() * core::kTsdfBlockEdge +
+                     Eigen::Vector2i::Constant(core::kTsdfBlockEdge));
+  };
+  for (const auto& [key, resident] : site) {
+    const TileIndex t(key.tile[0], key.tile[1], key.tile[2]);
+    if (auto s = current_blocks(t, resident, extend); !s) return s;
+  }
+  for (const auto& [key, t] : prior) {
+    core::Result<TsdfTile> tile = read_prior(t);
+    if (!tile) return tile.error();
+    tile.value().for_each_block(extend);
+  }
+  core::GridGeometry2D g;
+  if (lo.x() >= hi.x()) return begin(g);
+  const double v = params_.voxel_size_m;
+  g.origin_x_m = lo.x() * v;
+  g.origin_y_m = lo.y() * v;
+  g.resolution_m = v;
+  g.width = static_cast<std::uint32_t>(hi.x() - lo.x());
+  g.height = static_cast<std::uint32_t>(hi.y() - lo.y());
+  if (auto s = begin(g); !s) return s;
+
+  // Strip by strip, one tile row (ty) at a time from the top down; in each, the current tiles
+  // of that row that the prior also holds, compared block by block.
+  const auto tile_of = [](int voxel) {
+    return voxel >= 0 ? voxel / core::kTsdfTileEdge
+                      : -((-voxel + core::kTsdfTileEdge - 1) / core::kTsdfTileEdge);
+  };
+  std::vector<float> cells;
+  std::map<std::array<int, 3>, core::TsdfBlockView> before;
+  for (int ty = tile_of(hi.y() - 1); ty >= tile_of(lo.y()); --ty) {
+    const int y0 = std::max(lo.y(), ty * core::kTsdfTileEdge);
+    const int y1 = std::min(hi.y(), (ty + 1) * core::kTsdfTileEdge);
+    cells.assign(static_cast<std::size_t>(y1 - y0) * g.width, std::nanf(""));
+    const Eigen::Vector2i origin(lo.x(), y0);
+    for (const auto& [key, resident] : site) {
+      if (key.tile[1] != ty) continue;
+      const TileIndex t(key.tile[0], key.tile[1], key.tile[2]);
+      const auto p = prior.find(key);
+      if (p == prior.end()) continue;
+      core::Result<TsdfTile> prior_tile = read_prior(t);
+      if (!prior_tile) return prior_tile.error();
+      before.clear();
+      prior_tile.value().for_each_block([&before](const core::TsdfBlockView& b) {
+        before.emplace(std::array<int, 3>{b.block.x(), b.block.y(), b.block.z()}, b);
+      });
+      const auto compare = [&](const core::TsdfBlockView& now) {
+        const auto it = before.find({now.block.x(), now.block.y(), now.block.z()});
+        if (it != before.end()) {
+          core::compare_blocks(it->second, now, params, v, origin, g.width, cells, counts);
+        }
+      };
+      if (auto s = current_blocks(t, resident, compare); !s) return s;
+    }
+    if (auto s = strip(y0 - lo.y(), y1 - y0, cells); !s) return s;
   }
   return core::Ok{};
 }

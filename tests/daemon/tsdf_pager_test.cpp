@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <vector>
@@ -13,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "tarmac/core/mapper.hpp"
+#include "tarmac/core/tsdf_changes.hpp"
 #include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
@@ -83,15 +85,18 @@ class TsdfPaging : public ::testing::Test {
     return pp;
   }
 
-  /// Maps the drive; with a pager when given.
-  static void map(core::Mapper& mapper, TsdfPager* pager) {
+  /// Maps the drive; with a pager when given; `shift_W` moves every pose (a drifted map).
+  static void map(core::Mapper& mapper, TsdfPager* pager,
+                  const Eigen::Vector3d& shift_W = Eigen::Vector3d::Zero()) {
     ThreadPool pool(2);
     Cycle cycle(mapper, pool, Cycle::Quotas{});
     cycle.page_tsdf(pager);
     const Drive& d = drive();
     for (std::size_t i = 0; i < d.clouds.size(); ++i) {
       cycle.begin();
-      cycle.scan(d.clouds[i], d.T_W_B[i], d.T_B_S);
+      Eigen::Isometry3d T = d.T_W_B[i];
+      T.translation() += shift_W;
+      cycle.scan(d.clouds[i], T, d.T_B_S);
     }
     cycle.update_costmap({}, d.clouds.back().stamp_ns);
     if (pager != nullptr) pager->flush(mapper.tsdf());
@@ -173,6 +178,67 @@ TEST_F(TsdfPaging, StaticLayer_PagedInColumns_SameLayerWindowAndCostmap) {
   EXPECT_EQ(restarted.occupancy().static_count(), 0u);
   ASSERT_TRUE(reopened.value()->static_site_voxels(site));
   EXPECT_EQ(site, expected);
+}
+
+/// Change detection against a prior held as a tile store, strip by strip: the same raster and
+/// counts as core::detect_changes over the two maps held whole.
+TEST_F(TsdfPaging, ChangesAgainstATileStorePrior_SameLayerAsTheWholeMaps) {
+  const Eigen::Vector3d drift(0.35, -0.2, 0.0);
+  core::Mapper prior_whole(params()), whole(params());
+  map(prior_whole, nullptr, drift);
+  map(whole, nullptr);
+  core::ChangeMap expected;
+  ASSERT_TRUE(core::detect_changes(prior_whole.tsdf(), whole.tsdf(), {}, expected).ok());
+  ASSERT_GT(expected.new_voxels, 100u);
+  ASSERT_GT(expected.removed_voxels, 100u);
+
+  TsdfPagerParams prior_params = pager_params(true);
+  prior_params.dir = dir_ / "prior";
+  {
+    core::Mapper prior(params());
+    auto pager = TsdfPager::open(prior_params, prior.tsdf());
+    ASSERT_TRUE(pager.ok()) << pager.error().message;
+    map(prior, pager.value().get(), drift);
+    ASSERT_TRUE(pager.value()->store_all(prior.tsdf()).ok());
+  }
+  core::Mapper paged(params());
+  auto pager = TsdfPager::open(pager_params(true), paged.tsdf());
+  ASSERT_TRUE(pager.ok()) << pager.error().message;
+  map(paged, pager.value().get());
+  ASSERT_GT(pager.value()->stats().evicted, 0u);
+
+  core::GridGeometry2D geometry;
+  std::vector<float> raster;
+  std::vector<int> strips;
+  core::ChangeCounts counts;
+  const core::Status done = pager.value()->changes_site(
+      paged.tsdf(), prior_params.dir, {}, counts,
+      [&](const core::GridGeometry2D& g) {
+        geometry = g;
+        raster.assign(g.cell_count(), -7.0f);  // every cell is written once
+        return core::Status(core::Ok{});
+      },
+      [&](int y0, int rows, std::span<const float> cells) {
+        EXPECT_EQ(cells.size(), static_cast<std::size_t>(rows) * geometry.width);
+        if (!strips.empty()) {
+          EXPECT_LT(y0, strips.back());  // from the top down
+        }
+        strips.push_back(y0);
+        std::copy(cells.begin(), cells.end(),
+                  raster.begin() + static_cast<std::ptrdiff_t>(y0) * geometry.width);
+        return core::Status(core::Ok{});
+      });
+  ASSERT_TRUE(done.ok()) << done.error().message;
+  EXPECT_GT(strips.size(), 1u);
+  EXPECT_EQ(geometry.width, expected.geometry.width);
+  EXPECT_EQ(geometry.height, expected.geometry.height);
+  EXPECT_EQ(geometry.origin_x_m, expected.geometry.origin_x_m);
+  EXPECT_EQ(geometry.origin_y_m, expected.geometry.origin_y_m);
+  EXPECT_EQ(counts.compared_voxels, expected.compared_voxels);
+  EXPECT_EQ(counts.new_voxels, expected.new_voxels);
+  EXPECT_EQ(counts.removed_voxels, expected.removed_voxels);
+  ASSERT_EQ(raster.size(), expected.change.size());
+  EXPECT_EQ(std::memcmp(raster.data(), expected.change.data(), raster.size() * sizeof(float)), 0);
 }
 
 /// A mesh's triangles as sorted tuples of their corners' coordinates (each triangle rotated to

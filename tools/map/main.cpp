@@ -134,14 +134,20 @@ int load_inputs(const Options& opt, Inputs& in) {
     return kExitIo;
   }
 
-  if (!opt.prior.empty() && params.tsdf.resident_limit_mb > 0) {
+  // With a limit the prior is a tile store, compared tile by tile; without, a .vdb held whole.
+  const bool prior_is_store = !opt.prior.empty() && std::filesystem::is_directory(opt.prior, ec);
+  if (!opt.prior.empty() && (params.tsdf.resident_limit_mb > 0) != prior_is_store) {
     std::fprintf(stderr,
-                 "tarmac-map: --prior needs the whole TSDF in memory: set tsdf.resident_limit_mb "
-                 "to 0 (change detection over tiles is not there yet)\n");
+                 params.tsdf.resident_limit_mb > 0
+                     ? "tarmac-map: with tsdf.resident_limit_mb, --prior is an earlier run's tile "
+                       "store (its out/tsdf_tiles directory), not a .vdb held whole\n"
+                     : "tarmac-map: --prior %s is a tile store: set tsdf.resident_limit_mb to "
+                       "compare tile by tile, or give a tsdf.vdb\n",
+                 opt.prior.c_str());
     return kExitConfig;
   }
   // The prior map for change detection, checked before any work is done.
-  if (!opt.prior.empty()) {
+  if (!opt.prior.empty() && !prior_is_store) {
     auto loaded = core::load_tsdf(opt.prior);
     if (loaded.ok()) {
       if (auto m = core::check_tsdf_matches(loaded.value().info, map_tool::kTsdfFrame,
@@ -474,7 +480,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
   if (params.tsdf.enabled) {
     timing["tsdf_mesh_ms"] = tsdf_out.mesh_ms;
     timing["tsdf_save_ms"] = tsdf_out.save_ms;
-    if (in.prior) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
+    if (!opt.prior.empty()) timing["tsdf_changes_ms"] = tsdf_out.changes_ms;
   }
   // The site's static layer: with paging, the map's part and the stored tiles'.
   std::vector<Eigen::Vector3i> static_site;
@@ -594,13 +600,14 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
         run.points_used > 0
             ? static_cast<double>(run.tsdf_updates) / static_cast<double>(run.points_used)
             : 0.0);
-    if (in.prior) {
-      std::printf(
-          "changes vs %s: %llu voxels compared, %llu new, %llu removed (%.1f ms)\n",
-          opt.prior.c_str(), static_cast<unsigned long long>(tsdf_out.changes.compared_voxels),
-          static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
-          static_cast<unsigned long long>(tsdf_out.changes.removed_voxels), tsdf_out.changes_ms);
-    }
+  }
+  if (params.tsdf.enabled && !opt.prior.empty()) {
+    std::printf("changes vs %s: %llu voxels compared, %llu new, %llu removed (%.1f ms%s)\n",
+                opt.prior.c_str(),
+                static_cast<unsigned long long>(tsdf_out.changes.compared_voxels),
+                static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
+                static_cast<unsigned long long>(tsdf_out.changes.removed_voxels),
+                tsdf_out.changes_ms, tsdf_out.paged ? ", tile by tile" : "");
   }
 
   if (params.tsdf.enabled) print_tsdf_footprint(mapper, run);
@@ -651,7 +658,9 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
       "timing.json%s%s}\n",
       opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
-      tsdf_out.paged        ? ",tsdf_tiles/,mesh.ply"
+      tsdf_out.paged
+          ? (opt.prior.empty() ? ",tsdf_tiles/,tsdf.json,mesh.ply"
+                               : ",tsdf_tiles/,tsdf.json,mesh.ply,changes.npy,changes.png")
       : params.tsdf.enabled ? (in.prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
                                         : ",tsdf.vdb,tsdf.json,mesh.ply")
                             : "");
@@ -679,8 +688,10 @@ int main(int argc, char** argv) {
       ->transform(cli::number<std::size_t>());
   app.add_option("--sensor-height", opt.sensor_height_m, "sensor above the vehicle base, m")
       ->transform(cli::number<double>());
-  app.add_option("--prior", opt.prior, "a tsdf.vdb from an earlier run: writes changes.npy/.png")
-      ->check(CLI::ExistingFile);
+  app.add_option("--prior", opt.prior,
+                 "an earlier run's map: writes changes.npy/.png; its tsdf.vdb, or with "
+                 "tsdf.resident_limit_mb its tsdf_tiles directory (compared tile by tile)")
+      ->check(CLI::ExistingPath);
   app.add_option("--fleet-period", opt.fleet_period_s,
                  "encode this vehicle's fleet summary every S seconds of scan time (a keyframe "
                  "every 10th) and report its bytes per second (docs/fleet.md); 0: off")
@@ -747,22 +758,15 @@ int main(int argc, char** argv) {
   }
   map_tool::TsdfOutputs tsdf_out;
   if (pager) {
-    // The site is the tile store; its mesh is written tile by tile (at most 27 tiles in memory
-    // besides the resident ones).
-    tsdf_out.paged = true;
-    tools::PlyPieces ply(out / "mesh.ply");
-    core::Status meshed = core::Ok{};
-    tsdf_out.mesh_ms = timed_ms([&] {
-      meshed = pager->mesh_site(mapper.tsdf(), 1.0f,
-                                [&ply](const core::TriangleMesh& piece) { return ply.add(piece); });
-      if (meshed) meshed = ply.finish();
-    });
-    if (!meshed) {
-      std::fprintf(stderr, "tarmac-map: %s\n", meshed.error().message.c_str());
+    // The site is the tile store: its products are made tile by tile.
+    const std::filesystem::path prior_dir = opt.prior;
+    if (auto w = map_tool::write_tsdf_site_outputs(
+            out, *pager, mapper.tsdf(), config::config_hash(in.cfg), run.last_stamp_ns,
+            opt.prior.empty() ? nullptr : &prior_dir, tsdf_out);
+        !w) {
+      std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
       return kExitIo;
     }
-    tsdf_out.vertices = ply.vertices();
-    tsdf_out.triangles = ply.triangles();
   } else if (in.cfg.mapping.tsdf.enabled) {
     if (auto w = map_tool::write_tsdf_outputs(out, mapper.tsdf(), config::config_hash(in.cfg),
                                               run.last_stamp_ns,

@@ -81,28 +81,52 @@ double decimal(float value) {
   return d;
 }
 
+/// One row of the change layer's image (`cells`: the layer's row) into `rgb`, 3 bytes per cell.
+void render_change_row(std::span<const float> cells, std::uint8_t* rgb) {
+  for (std::size_t x = 0; x < cells.size(); ++x) {
+    std::uint8_t* px = rgb + x * 3;
+    const float c = cells[x];
+    const auto fade = [&](int full) {  // from white at confidence 0 to `full` at 1
+      return static_cast<std::uint8_t>(245 - (245 - full) * std::min(1.0f, std::abs(c)));
+    };
+    if (std::isnan(c)) {
+      px[0] = 70, px[1] = 80, px[2] = 110;  // not observed in both: slate
+    } else if (c > 0) {
+      px[0] = 230, px[1] = fade(0), px[2] = fade(0);  // new: red
+    } else if (c < 0) {
+      px[0] = fade(0), px[1] = fade(90), px[2] = 230;  // removed: blue
+    } else {
+      px[0] = px[1] = px[2] = 245;  // unchanged: white
+    }
+  }
+}
+
 std::vector<std::uint8_t> render_changes(const core::ChangeMap& m) {
   const std::uint32_t w = m.geometry.width, h = m.geometry.height;
   std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
-  for (std::uint32_t y = 0; y < h; ++y) {
-    for (std::uint32_t x = 0; x < w; ++x) {
-      std::uint8_t* px = &rgb[(std::size_t{h - 1 - y} * w + x) * 3];  // north up
-      const float c = m.change[std::size_t{y} * w + x];
-      const auto fade = [&](int full) {  // from white at confidence 0 to `full` at 1
-        return static_cast<std::uint8_t>(245 - (245 - full) * std::min(1.0f, std::abs(c)));
-      };
-      if (std::isnan(c)) {
-        px[0] = 70, px[1] = 80, px[2] = 110;  // not observed in both: slate
-      } else if (c > 0) {
-        px[0] = 230, px[1] = fade(0), px[2] = fade(0);  // new: red
-      } else if (c < 0) {
-        px[0] = fade(0), px[1] = fade(90), px[2] = 230;  // removed: blue
-      } else {
-        px[0] = px[1] = px[2] = 245;  // unchanged: white
-      }
-    }
+  for (std::uint32_t y = 0; y < h; ++y) {  // north up
+    render_change_row(std::span<const float>(m.change).subspan(std::size_t{y} * w, w),
+                      &rgb[std::size_t{h - 1 - y} * w * 3]);
   }
   return rgb;
+}
+
+/// tsdf.json's part on the change layer.
+void describe_changes(const core::ChangeMap& m, nlohmann::ordered_json& j,
+                      nlohmann::ordered_json& files) {
+  const auto& g = m.geometry;
+  j["changes"] = {{"origin_m", {g.origin_x_m, g.origin_y_m}},
+                  {"resolution_m", g.resolution_m},
+                  {"shape", {g.height, g.width}},
+                  {"compared_voxels", m.compared_voxels},
+                  {"new_voxels", m.new_voxels},
+                  {"removed_voxels", m.removed_voxels}};
+  files["changes.npy"] =
+      "float32 (ny, nx) per voxel column: +c new surface, -c removed, confidence c in (0, 1]; "
+      "0 unchanged; NaN not observed in both maps";
+  files["changes.png"] =
+      "red new, blue removed (fainter = less confident), white unchanged, slate unknown; north "
+      "up";
 }
 
 }  // namespace
@@ -247,18 +271,71 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
         !w) {
       return w;
     }
-    j["changes"] = {{"origin_m", {g.origin_x_m, g.origin_y_m}},
-                    {"resolution_m", g.resolution_m},
-                    {"shape", {g.height, g.width}},
-                    {"compared_voxels", result.changes.compared_voxels},
-                    {"new_voxels", result.changes.new_voxels},
-                    {"removed_voxels", result.changes.removed_voxels}};
-    files["changes.npy"] =
-        "float32 (ny, nx) per voxel column: +c new surface, -c removed, confidence c in (0, 1]; "
-        "0 unchanged; NaN not observed in both maps";
-    files["changes.png"] =
-        "red new, blue removed (fainter = less confident), white unchanged, slate unknown; north "
-        "up";
+    describe_changes(result.changes, j, files);
+  }
+  j["files"] = std::move(files);
+  return tools::write_json(out / "tsdf.json", j);
+}
+
+core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
+                                     const daemon::TsdfPager& pager, const core::TsdfLayer& layer,
+                                     const std::string& config_hash, std::int64_t stamp_ns,
+                                     const std::filesystem::path* prior_dir, TsdfOutputs& result) {
+  result.paged = true;
+  // The mesh tile by tile (at most 27 tiles in memory besides the resident ones).
+  tools::PlyPieces ply(out / "mesh.ply");
+  core::Status meshed = core::Ok{};
+  result.mesh_ms = timed_ms([&] {
+    meshed = pager.mesh_site(layer, 1.0f,
+                             [&ply](const core::TriangleMesh& piece) { return ply.add(piece); });
+    if (meshed) meshed = ply.finish();
+  });
+  if (!meshed) return meshed;
+  result.vertices = ply.vertices();
+  result.triangles = ply.triangles();
+  nlohmann::ordered_json j = {{"frame", kTsdfFrame},
+                              {"voxel_size_m", decimal(layer.voxel_size_m())},
+                              {"truncation_m", decimal(layer.truncation_m())},
+                              {"config_hash", config_hash},
+                              {"stamp_ns", stamp_ns}};
+  nlohmann::ordered_json files = {
+      {"tsdf_tiles/",
+       "the site TSDF as tiles (tile_X_Y_Z.tsdft) and the static occupancy "
+       "(static_X_Y.occs); docs/mapping.md \"Site-scale maps\""},
+      {"mesh.ply", "binary PLY of the zero level set, world frame, m (built tile by tile)"}};
+  if (prior_dir != nullptr) {
+    // The change layer strip by strip: neither map nor the raster is whole in memory.
+    tools::NpyBands npy;
+    tools::PngRows png;
+    std::vector<std::uint8_t> rgb;
+    core::ChangeCounts counts;
+    core::Status detected = core::Ok{};
+    result.changes_ms = timed_ms([&] {
+      detected = pager.changes_site(
+          layer, *prior_dir, core::ChangeParams{}, counts,
+          [&](const core::GridGeometry2D& g) {
+            result.changes.geometry = g;
+            if (auto s = npy.open(out / "changes.npy", g.height, g.width); !s) return s;
+            return png.open(out / "changes.png", g.width, g.height);
+          },
+          [&](int y0, int rows, std::span<const float> cells) {
+            const std::size_t w = result.changes.geometry.width;
+            if (auto s = npy.band(static_cast<std::size_t>(y0), cells); !s) return s;
+            rgb.resize(w * 3);
+            for (int r = rows - 1; r >= 0; --r) {  // north up
+              render_change_row(cells.subspan(static_cast<std::size_t>(r) * w, w), rgb.data());
+              if (auto s = png.row(rgb); !s) return s;
+            }
+            return core::Status(core::Ok{});
+          });
+      if (detected) detected = npy.finish();
+      if (detected) detected = png.finish();
+    });
+    if (!detected) return detected;
+    result.changes.compared_voxels = counts.compared_voxels;
+    result.changes.new_voxels = counts.new_voxels;
+    result.changes.removed_voxels = counts.removed_voxels;
+    describe_changes(result.changes, j, files);
   }
   j["files"] = std::move(files);
   return tools::write_json(out / "tsdf.json", j);

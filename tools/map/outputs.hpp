@@ -14,6 +14,7 @@
 #include "tarmac/core/task_runner.hpp"
 #include "tarmac/core/tsdf_changes.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
+#include "tarmac/daemon/tsdf_pager.hpp"
 
 namespace tarmac::map_tool {
 
@@ -45,5 +46,14 @@ struct TsdfOutputs {
 core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::TsdfLayer& tsdf,
                                 const std::string& config_hash, std::int64_t stamp_ns,
                                 const core::TsdfLayer* prior, TsdfOutputs& result);
+
+/// With tsdf.resident_limit_mb: mesh.ply tile by tile, tsdf.json and, with `prior_dir` (a tile
+/// store of an earlier run), changes.npy + changes.png strip by strip
+/// (daemon::TsdfPager::changes_site): the same files as write_tsdf_outputs gives for the maps
+/// held whole. result.changes gets the geometry and counts; its raster stays empty.
+core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
+                                     const daemon::TsdfPager& pager, const core::TsdfLayer& layer,
+                                     const std::string& config_hash, std::int64_t stamp_ns,
+                                     const std::filesystem::path* prior_dir, TsdfOutputs& result);
 
 }  // namespace tarmac::map_tool

@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <vector>
 
 #include "tarmac/core/grid2d.hpp"
@@ -47,6 +48,22 @@ struct ChangeMap {
   std::uint64_t new_voxels = 0;
   std::uint64_t removed_voxels = 0;
 };
+
+/// Counts of a comparison (ChangeMap's).
+struct ChangeCounts {
+  std::uint64_t compared_voxels = 0;
+  std::uint64_t new_voxels = 0;
+  std::uint64_t removed_voxels = 0;
+};
+
+/// Compares one block of the current map with the prior's block of the same index into
+/// `raster`: row-major, `width` columns, its cell (0, 0) the voxel column `origin` (x, y); the
+/// block's columns must lie in it. The same rules as detect_changes, which calls it per block:
+/// a map held in tiles is compared block by block into strips of the raster
+/// (daemon::TsdfPager::changes_site). `params` must be valid.
+void compare_blocks(const TsdfBlockView& prior, const TsdfBlockView& current,
+                    const ChangeParams& params, double voxel_size_m, const Eigen::Vector2i& origin,
+                    std::uint32_t width, std::span<float> raster, ChangeCounts& counts);
 
 /// Compares `prior` and `current` over the union of their blocks' x/y extent.
 /// Errors: "tsdf_changes.mismatch" (different voxel sizes), "tsdf_changes.invalid".

@@ -33,6 +33,7 @@
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/result.hpp"
+#include "tarmac/core/tsdf_changes.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
 #include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/core/tsdf_tiles.hpp"
@@ -135,6 +136,18 @@ class TsdfPager {
   /// whole map's. Stops at the first error `piece` returns, or a tile that cannot be read.
   core::Status mesh_site(const core::TsdfLayer& layer, float min_weight,
                          const std::function<core::Status(const core::TriangleMesh&)>& piece) const;
+  /// The change layer against a prior site held as a tile store (`prior_dir`: another run's
+  /// tsdf_tiles, same voxel size and truncation), the same cells and counts core::detect_changes
+  /// gives for the two maps held whole, delivered in strips so that neither map nor the raster is
+  /// ever whole in memory: `begin` gets the raster's geometry (the union of both sites' blocks),
+  /// then `strip(y0, rows, cells)` each band of up to one tile (128 rows; raster rows y0 ..
+  /// y0 + rows - 1, row-major), from the top (north) down, every row once. Call flush() first.
+  core::Status changes_site(
+      const core::TsdfLayer& layer, const std::filesystem::path& prior_dir,
+      const core::ChangeParams& params, core::ChangeCounts& counts,
+      const std::function<core::Status(const core::GridGeometry2D&)>& begin,
+      const std::function<core::Status(int y0, int rows, std::span<const float> cells)>& strip)
+      const;
   /// The site's static voxels (the map's and the stored tiles'), sorted by (z, y, x): what
   /// OccupancyMap::export_static gives of the same layer held whole. Call flush() first. False
   /// when a stored tile cannot be read.

@@ -3,6 +3,8 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -21,6 +23,40 @@ core::Status write_npy(const std::filesystem::path& file, std::span<const std::i
 /// Writes an RGB image, rows top to bottom, 3 bytes per pixel.
 core::Status write_png(const std::filesystem::path& file, std::span<const std::uint8_t> rgb,
                        std::uint32_t width, std::uint32_t height);
+
+/// A float32 .npy of shape (rows, cols) too large to hold, written in bands of whole rows, in
+/// any order (the file is sized at open()).
+class NpyBands {
+ public:
+  core::Status open(const std::filesystem::path& file, std::size_t rows, std::size_t cols);
+  /// Rows row0 .. row0 + cells.size() / cols - 1.
+  core::Status band(std::size_t row0, std::span<const float> cells);
+  core::Status finish();
+
+ private:
+  std::filesystem::path file_;
+  std::ofstream out_;
+  std::size_t cols_ = 0;
+  std::size_t data_at_ = 0;
+};
+
+/// An RGB PNG too large to hold, written row by row, top to bottom.
+class PngRows {
+ public:
+  PngRows();
+  ~PngRows();
+  PngRows(const PngRows&) = delete;
+  PngRows& operator=(const PngRows&) = delete;
+  core::Status open(const std::filesystem::path& file, std::uint32_t width, std::uint32_t height);
+  /// The next row: 3 bytes per pixel.
+  core::Status row(std::span<const std::uint8_t> rgb);
+  core::Status finish();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  std::uint32_t width_ = 0;
+};
 
 /// Writes `value` as JSON, indented by two spaces, keys in their insertion order.
 core::Status write_json(const std::filesystem::path& file, const nlohmann::ordered_json& value);
