@@ -220,6 +220,13 @@ struct TsdfPager::Impl {
 
   std::filesystem::path file_of(const TileIndex& t) const { return params.dir / tile_name(t); }
 
+  /// A copy of a site tile: of the resident one, or read back from the store.
+  core::Result<TsdfTile> site_tile(const core::TsdfLayer& layer, const TileIndex& t,
+                                   bool resident) const {
+    if (resident) return std::move(*layer.copy_tile(t));
+    return read_tile(file_of(t), params, t);
+  }
+
   void run() {
     // The cycle's threads may run SCHED_FIFO; the disk work must never compete with them.
     sched_param sp{};
@@ -842,13 +849,9 @@ core::Status TsdfPager::mesh_site(
           const TileIndex n = t + TileIndex(dx, dy, dz);
           const auto it = site.find(TileKey::of(n));
           if (it == site.end()) continue;
-          if (it->second) {
-            piece_layer.attach_tile(std::move(*layer.copy_tile(n)));
-            continue;
-          }
-          core::Result<TsdfTile> read = read_tile(impl_->file_of(n), params_, n);
-          if (!read) return read.error();
-          piece_layer.attach_tile(std::move(read).value());
+          core::Result<TsdfTile> copy = impl_->site_tile(layer, n, it->second);
+          if (!copy) return copy.error();
+          piece_layer.attach_tile(std::move(copy).value());
         }
       }
     }
@@ -856,6 +859,37 @@ core::Status TsdfPager::mesh_site(
     const Eigen::Vector3i hi = lo + Eigen::Vector3i::Constant(core::kTsdfTileEdge);
     if (auto s = core::extract_mesh(piece_layer, min_weight, lo, hi, mesh); !s) return s;
     if (auto s = piece(mesh); !s) return s;
+  }
+  return core::Ok{};
+}
+
+core::Status TsdfPager::export_site(
+    const core::TsdfLayer& layer, int region_tiles,
+    const std::function<core::Status(const Eigen::Vector2i& region, const core::TsdfLayer& part)>&
+        part) const {
+  if (region_tiles < 1) return core::Error{"tsdf_pager.config", "region_tiles must be >= 1"};
+  const auto region_of = [region_tiles](int t) {
+    return t >= 0 ? t / region_tiles : -((-t + region_tiles - 1) / region_tiles);
+  };
+  // Every tile of the site, by region (y, x) then in key order.
+  std::map<std::pair<int, int>, std::map<TileKey, bool>> regions;  // tile -> resident
+  layer.resident_tiles(impl_->resident);
+  for (const core::TsdfTileInfo& info : impl_->resident) {
+    regions[{region_of(info.tile.y()), region_of(info.tile.x())}][TileKey::of(info.tile)] = true;
+  }
+  for (const auto& [key, e] : impl_->tiles) {
+    if (e.state == State::kResident) continue;
+    regions[{region_of(e.tile.y()), region_of(e.tile.x())}].emplace(key, false);
+  }
+  for (const auto& [r, tiles] : regions) {
+    core::TsdfLayer piece(params_.voxel_size_m, params_.truncation_m);
+    for (const auto& [key, resident] : tiles) {
+      const TileIndex t(key.tile[0], key.tile[1], key.tile[2]);
+      core::Result<TsdfTile> copy = impl_->site_tile(layer, t, resident);
+      if (!copy) return copy.error();
+      piece.attach_tile(std::move(copy).value());
+    }
+    if (auto s = part(Eigen::Vector2i(r.second, r.first), piece); !s) return s;
   }
   return core::Ok{};
 }

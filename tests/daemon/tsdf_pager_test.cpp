@@ -15,6 +15,7 @@
 
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/tsdf_changes.hpp"
+#include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
@@ -178,6 +179,37 @@ TEST_F(TsdfPaging, StaticLayer_PagedInColumns_SameLayerWindowAndCostmap) {
   EXPECT_EQ(restarted.occupancy().static_count(), 0u);
   ASSERT_TRUE(reopened.value()->static_site_voxels(site));
   EXPECT_EQ(site, expected);
+}
+
+/// The .vdb export in parts: each part a tsdf_io file, together every block of the site once.
+TEST_F(TsdfPaging, VdbExportInParts_TogetherTheWholeMap) {
+  core::Mapper whole(params());
+  map(whole, nullptr);
+  core::Mapper paged(params());
+  auto pager = TsdfPager::open(pager_params(true), paged.tsdf());
+  ASSERT_TRUE(pager.ok()) << pager.error().message;
+  map(paged, pager.value().get());
+  ASSERT_GT(pager.value()->stats().evicted, 0u);
+  std::vector<fs::path> files;
+  const core::Status exported = pager.value()->export_site(
+      paged.tsdf(), 2, [&](const Eigen::Vector2i& r, const core::TsdfLayer& part) {
+        EXPECT_GT(part.block_count(), 0u);
+        files.push_back(dir_ /
+                        ("part_" + std::to_string(r.x()) + "_" + std::to_string(r.y()) + ".vdb"));
+        return core::save_tsdf(files.back(), part, core::TsdfMapInfo{});
+      });
+  ASSERT_TRUE(exported.ok()) << exported.error().message;
+  ASSERT_GT(files.size(), 2u);
+  core::TsdfLayer merged(whole.tsdf().voxel_size_m(), whole.tsdf().truncation_m());
+  for (const fs::path& f : files) {
+    auto loaded = core::load_tsdf(f);
+    ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+    for (const core::TsdfTileInfo& t : loaded.value().layer.resident_tiles()) {
+      EXPECT_FALSE(merged.copy_tile(t.tile).has_value());  // each tile in one part only
+      merged.attach_tile(std::move(*loaded.value().layer.copy_tile(t.tile)));
+    }
+  }
+  EXPECT_EQ(merged.digest(), whole.tsdf().digest());
 }
 
 /// Change detection against a prior held as a tile store, strip by strip: the same raster and

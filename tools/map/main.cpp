@@ -658,9 +658,9 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
       "timing.json%s%s}\n",
       opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
-      tsdf_out.paged
-          ? (opt.prior.empty() ? ",tsdf_tiles/,tsdf.json,mesh.ply"
-                               : ",tsdf_tiles/,tsdf.json,mesh.ply,changes.npy,changes.png")
+      tsdf_out.paged        ? (opt.prior.empty()
+                                   ? ",tsdf_tiles/,tsdf_vdb/,tsdf.json,mesh.ply"
+                                   : ",tsdf_tiles/,tsdf_vdb/,tsdf.json,mesh.ply,changes.npy,changes.png")
       : params.tsdf.enabled ? (in.prior ? ",tsdf.vdb,tsdf.json,mesh.ply,changes.npy,changes.png"
                                         : ",tsdf.vdb,tsdf.json,mesh.ply")
                             : "");

@@ -293,15 +293,43 @@ core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
   if (!meshed) return meshed;
   result.vertices = ply.vertices();
   result.triangles = ply.triangles();
+  // The .vdb export in parts of kVdbRegionTiles² tile columns, one part in memory at a time.
+  core::TsdfMapInfo info;
+  info.frame_id = kTsdfFrame;
+  info.config_hash = config_hash;
+  info.stamp_ns = stamp_ns;
+  const std::filesystem::path vdb_dir = out / "tsdf_vdb";
+  std::error_code ec;
+  std::filesystem::remove_all(vdb_dir, ec);
+  std::filesystem::create_directories(vdb_dir, ec);
+  if (ec) return core::Error{"io.write", vdb_dir.string() + ": " + ec.message()};
+  std::size_t parts = 0;
+  core::Status exported = core::Ok{};
+  result.save_ms = timed_ms([&] {
+    exported = pager.export_site(
+        layer, kVdbRegionTiles, [&](const Eigen::Vector2i& r, const core::TsdfLayer& part) {
+          ++parts;
+          const std::string name =
+              "tsdf_" + std::to_string(r.x()) + "_" + std::to_string(r.y()) + ".vdb";
+          return core::save_tsdf(vdb_dir / name, part, info);
+        });
+  });
+  if (!exported) return exported;
+  const double region_m = kVdbRegionTiles * core::kTsdfTileEdge * decimal(layer.voxel_size_m());
   nlohmann::ordered_json j = {{"frame", kTsdfFrame},
                               {"voxel_size_m", decimal(layer.voxel_size_m())},
                               {"truncation_m", decimal(layer.truncation_m())},
                               {"config_hash", config_hash},
-                              {"stamp_ns", stamp_ns}};
+                              {"stamp_ns", stamp_ns},
+                              {"vdb_parts", parts},
+                              {"vdb_region_m", region_m}};
   nlohmann::ordered_json files = {
       {"tsdf_tiles/",
        "the site TSDF as tiles (tile_X_Y_Z.tsdft) and the static occupancy "
        "(static_X_Y.occs); docs/mapping.md \"Site-scale maps\""},
+      {"tsdf_vdb/",
+       "the site TSDF in parts, tsdf_RX_RY.vdb: the tiles whose x, y lie in the square "
+       "[RX, RX + 1) x [RY, RY + 1) * vdb_region_m; each as tsdf.vdb"},
       {"mesh.ply", "binary PLY of the zero level set, world frame, m (built tile by tile)"}};
   if (prior_dir != nullptr) {
     // The change layer strip by strip: neither map nor the raster is whole in memory.

@@ -47,7 +47,11 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
                                 const std::string& config_hash, std::int64_t stamp_ns,
                                 const core::TsdfLayer* prior, TsdfOutputs& result);
 
-/// With tsdf.resident_limit_mb: mesh.ply tile by tile, tsdf.json and, with `prior_dir` (a tile
+/// Tile columns per side of a part of the .vdb export with a limit (51.2 m at 0.1 m).
+inline constexpr int kVdbRegionTiles = 4;
+
+/// With tsdf.resident_limit_mb: tsdf_vdb/ (the site's .vdb in parts of kVdbRegionTiles² tile
+/// columns), mesh.ply tile by tile, tsdf.json and, with `prior_dir` (a tile
 /// store of an earlier run), changes.npy + changes.png strip by strip
 /// (daemon::TsdfPager::changes_site): the same files as write_tsdf_outputs gives for the maps
 /// held whole. result.changes gets the geometry and counts; its raster stays empty.

@@ -136,6 +136,15 @@ class TsdfPager {
   /// whole map's. Stops at the first error `piece` returns, or a tile that cannot be read.
   core::Status mesh_site(const core::TsdfLayer& layer, float min_weight,
                          const std::function<core::Status(const core::TriangleMesh&)>& piece) const;
+  /// The site in parts for export: the tiles of each square of `region_tiles` × `region_tiles`
+  /// tile columns (every height), copied or read back into a layer of their own, handed to
+  /// `part` with the square's index (tile x, y floor-divided by region_tiles), squares by (y, x).
+  /// At most one part is in memory besides the layer. Together the parts hold every block of the
+  /// site once. Call flush() first.
+  core::Status export_site(
+      const core::TsdfLayer& layer, int region_tiles,
+      const std::function<core::Status(const Eigen::Vector2i& region, const core::TsdfLayer& part)>&
+          part) const;
   /// The change layer against a prior site held as a tile store (`prior_dir`: another run's
   /// tsdf_tiles, same voxel size and truncation), the same cells and counts core::detect_changes
   /// gives for the two maps held whole, delivered in strips so that neither map nor the raster is
