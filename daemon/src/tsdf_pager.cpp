@@ -15,6 +15,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <thread>
 #include <tuple>
 #include <vector>
@@ -190,6 +191,10 @@ struct TsdfPager::Impl {
   bool evict_stopped = false;
   TsdfPagerStats stats;
   std::map<TileKey, std::uint64_t> file_bytes;
+  std::uint64_t file_bytes_total = 0;
+  /// The tiles not resident (stored, being written or loading), by (x, y, z): the scans' queries
+  /// look up the columns near the sensor, not the whole site.
+  std::set<std::array<int, 3>> away;
   // Reused between scans (no allocation once grown).
   std::vector<TileIndex> touched;
   std::vector<core::TsdfTileInfo> resident;
@@ -204,6 +209,7 @@ struct TsdfPager::Impl {
   core::OccupancyMap* map = nullptr;
   std::map<StaticKey, StaticEntry> statics;
   std::map<StaticKey, std::uint64_t> static_file_bytes;
+  std::uint64_t static_file_bytes_total = 0;
   std::uint64_t generation = 0;  // bumped when the map's static layer is replaced
   std::vector<Eigen::Vector2i> static_resident;
   std::vector<Eigen::Vector3i> voxels;
@@ -320,9 +326,57 @@ struct TsdfPager::Impl {
     wake_worker.notify_one();
   }
 
+  /// Every TSDF entry's state changes here, so that `away` follows.
+  void set_state(Entry& e, State state) {
+    e.state = state;
+    const std::array<int, 3> k{e.tile.x(), e.tile.y(), e.tile.z()};
+    if (state == State::kResident) {
+      away.erase(k);
+    } else {
+      away.insert(k);
+    }
+  }
+
+  void set_file_bytes(const TileKey& key, std::uint64_t bytes) {
+    auto [it, fresh] = file_bytes.emplace(key, 0);
+    file_bytes_total -= it->second;
+    it->second = bytes;
+    file_bytes_total += bytes;
+  }
+
+  void erase_file_bytes(const TileKey& key) {
+    if (const auto it = file_bytes.find(key); it != file_bytes.end()) {
+      file_bytes_total -= it->second;
+      file_bytes.erase(it);
+    }
+  }
+
+  /// fn(entry) for each tile away within `radius` (x, y) of one of `sensors_W`; an entry may
+  /// come more than once.
+  template <typename Fn>
+  void for_each_away_near(std::span<const Eigen::Vector3d> sensors_W, double radius, Fn&& fn) {
+    const double tile_m = core::kTsdfTileEdge * static_cast<double>(params.voxel_size_m);
+    for (const Eigen::Vector3d& p : sensors_W) {
+      const int x0 = static_cast<int>(std::floor((p.x() - radius) / tile_m));
+      const int x1 = static_cast<int>(std::floor((p.x() + radius) / tile_m));
+      const int y0 = static_cast<int>(std::floor((p.y() - radius) / tile_m));
+      const int y1 = static_cast<int>(std::floor((p.y() + radius) / tile_m));
+      for (int x = x0; x <= x1; ++x) {
+        const auto end = away.upper_bound({x, y1, std::numeric_limits<int>::max()});
+        for (auto it = away.lower_bound({x, y0, std::numeric_limits<int>::min()}); it != end;
+             ++it) {
+          const TileIndex t((*it)[0], (*it)[1], (*it)[2]);
+          if (xy_distance(t, p, tile_m) <= radius) {
+            if (fn(tiles.at(TileKey::of(t)))) return;
+          }
+        }
+      }
+    }
+  }
+
   void request_load(Entry& e) {
     if (e.state == State::kStored) {
-      e.state = State::kLoading;
+      set_state(e, State::kLoading);
       submit(tsdf_job(false, false, e.tile, e.version, std::nullopt));
     } else if (e.state == State::kWriting) {
       e.load_after_write = true;
@@ -369,6 +423,7 @@ struct TsdfPager::Impl {
         return;
       }
       ++stats.static_written;
+      static_file_bytes_total += d.bytes - static_file_bytes[key];
       static_file_bytes[key] = d.bytes;
       e.stored = true;
       e.digest = core::static_voxels_digest(d.static_data->voxels);
@@ -379,6 +434,7 @@ struct TsdfPager::Impl {
       }
     } else if (d.error) {
       ++stats.load_errors;
+      static_file_bytes_total -= static_file_bytes[key];
       static_file_bytes.erase(key);
       statics.erase(key);
     } else {
@@ -461,14 +517,14 @@ struct TsdfPager::Impl {
           evict_stopped = true;  // the disk is not to be trusted: nothing more leaves memory
           if (!d.copy) {         // an evicted tile: back into the layer
             layer.attach_tile(std::move(*d.data));
-            e.state = State::kResident;
+            set_state(e, State::kResident);
           }  // a copy (store_changed): the layer, or a later eviction's write, holds the tile
           continue;
         }
         ++stats.written;
-        file_bytes[TileKey::of(d.tile)] = d.bytes;
+        set_file_bytes(TileKey::of(d.tile), d.bytes);
         if (!d.copy) {
-          e.state = State::kStored;
+          set_state(e, State::kStored);
           e.stored = true;
         } else if (e.state == State::kResident && e.version == d.version) {
           e.stored = true;  // a copy of a tile that has not changed since
@@ -480,12 +536,13 @@ struct TsdfPager::Impl {
       } else if (d.error) {
         ++stats.load_errors;
         layer.forget_absent(d.tile);
-        file_bytes.erase(TileKey::of(d.tile));
+        erase_file_bytes(TileKey::of(d.tile));
+        set_state(e, State::kResident);  // out of `away`; the entry goes
         tiles.erase(TileKey::of(d.tile));
       } else {
         ++stats.loaded;
         layer.attach_tile(std::move(*d.data));
-        e.state = State::kResident;
+        set_state(e, State::kResident);
         e.stored = true;
       }
     }
@@ -517,22 +574,13 @@ struct TsdfPager::Impl {
     }
   }
 
-  /// Distance in (x, y) from the nearest of `sensors_W` to a tile's footprint, m.
-  [[nodiscard]] double distance(const TileIndex& t,
-                                std::span<const Eigen::Vector3d> sensors_W) const {
-    const double tile_m = core::kTsdfTileEdge * static_cast<double>(params.voxel_size_m);
-    double d = std::numeric_limits<double>::infinity();
-    for (const Eigen::Vector3d& p : sensors_W) d = std::min(d, xy_distance(t, p, tile_m));
-    return d;
-  }
-
-  [[nodiscard]] bool needed_not_resident(std::span<const Eigen::Vector3d> sensors_W) const {
-    for (const auto& [key, e] : tiles) {
-      if (e.state != State::kResident && distance(e.tile, sensors_W) <= params.need_radius_m) {
-        return true;
-      }
-    }
-    return false;
+  [[nodiscard]] bool needed_not_resident(std::span<const Eigen::Vector3d> sensors_W) {
+    bool found = false;
+    for_each_away_near(sensors_W, params.need_radius_m, [&found](const Entry&) {
+      found = true;
+      return true;
+    });
+    return found;
   }
 
   void evict(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W, bool hold) {
@@ -568,9 +616,9 @@ struct TsdfPager::Impl {
       Entry& e = tiles[c.key];
       e.tile = c.tile;
       if (e.stored) {
-        e.state = State::kStored;  // unchanged since read or written: dropped, not rewritten
+        set_state(e, State::kStored);  // unchanged since read or written: dropped, not rewritten
       } else {
-        e.state = State::kWriting;
+        set_state(e, State::kWriting);
         submit(tsdf_job(true, false, c.tile, e.version, std::move(tile)));
       }
     }
@@ -634,7 +682,9 @@ core::Result<std::unique_ptr<TsdfPager>> TsdfPager::open(const TsdfPagerParams& 
       e.state = State::kStored;
       e.stored = true;
       impl.statics[static_key(*st)] = e;
-      impl.static_file_bytes[static_key(*st)] = std::filesystem::file_size(f.path(), ec);
+      const std::uint64_t bytes = std::filesystem::file_size(f.path(), ec);
+      impl.static_file_bytes[static_key(*st)] = bytes;
+      impl.static_file_bytes_total += bytes;
       continue;
     }
     const std::optional<TileIndex> t = parse_tile_name(name);
@@ -648,12 +698,11 @@ core::Result<std::unique_ptr<TsdfPager>> TsdfPager::open(const TsdfPagerParams& 
       std::filesystem::remove(f.path(), ec);
       continue;
     }
-    Entry e;
+    Entry& e = impl.tiles[TileKey::of(*t)];
     e.tile = *t;
-    e.state = State::kStored;
+    impl.set_state(e, State::kStored);
     e.stored = true;
-    impl.tiles[TileKey::of(*t)] = e;
-    impl.file_bytes[TileKey::of(*t)] = std::filesystem::file_size(f.path(), ec);
+    impl.set_file_bytes(TileKey::of(*t), std::filesystem::file_size(f.path(), ec));
     layer.mark_absent(*t);
   }
   if (ec) return core::Error{"tsdf_pager.dir", params.dir.string() + ": " + ec.message()};
@@ -671,12 +720,10 @@ void TsdfPager::before_rebuild(core::TsdfLayer& layer, std::span<const Eigen::Ve
   Impl& impl = *impl_;
   impl.poll(layer);
   if (sensors_W.empty()) return;
-  for (auto& [key, e] : impl.tiles) {
-    if ((e.state == State::kStored || e.state == State::kWriting) &&
-        impl.distance(e.tile, sensors_W) <= params_.load_radius_m) {
-      impl.request_load(e);
-    }
-  }
+  impl.for_each_away_near(sensors_W, params_.load_radius_m, [&impl](Entry& e) {
+    impl.request_load(e);  // a tile already loading stays so
+    return false;
+  });
   if (params_.wait_for_loads) {
     impl.wait_until(layer, [&] { return !impl.needed_not_resident(sensors_W); });
   } else if (impl.needed_not_resident(sensors_W)) {
@@ -691,7 +738,7 @@ void TsdfPager::after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor
   for (const TileIndex& t : impl.touched) {
     Entry& e = impl.tiles[TileKey::of(t)];
     e.tile = t;
-    e.state = State::kResident;
+    impl.set_state(e, State::kResident);
     e.stored = false;  // the file, if any, is stale now
     ++e.version;
     e.last_touched = impl.scans;
@@ -728,6 +775,7 @@ void TsdfPager::occupancy_replaced() {
   ++impl.generation;
   impl.statics.clear();
   impl.static_file_bytes.clear();
+  impl.static_file_bytes_total = 0;
   Job job;
   job.drop_statics = true;
   job.generation = impl.generation;
@@ -745,7 +793,7 @@ std::size_t TsdfPager::store_changed(core::TsdfLayer& layer) {
   for (const TileIndex& t : impl.touched) {
     Entry& e = impl.tiles[TileKey::of(t)];
     e.tile = t;
-    e.state = State::kResident;
+    impl.set_state(e, State::kResident);
     e.stored = false;
     ++e.version;
   }
@@ -1032,16 +1080,14 @@ std::uint64_t TsdfPager::site_digest(const core::TsdfLayer& layer) const {
 
 TsdfPagerStats TsdfPager::stats() const {
   TsdfPagerStats s = impl_->stats;
-  for (const auto& [key, e] : impl_->tiles) {
-    s.resident_tiles += e.state == State::kResident ? 1 : 0;
-  }
+  s.resident_tiles = impl_->tiles.size() - impl_->away.size();
   s.stored_tiles = impl_->file_bytes.size();
-  for (const auto& [key, bytes] : impl_->file_bytes) s.stored_bytes += bytes;
+  s.stored_bytes = impl_->file_bytes_total;
   if (impl_->map != nullptr) {
     s.static_resident_bytes = impl_->map->static_bytes();
     s.static_resident_voxels = impl_->map->static_count();
     s.static_tiles_stored = impl_->static_file_bytes.size();
-    for (const auto& [key, bytes] : impl_->static_file_bytes) s.static_stored_bytes += bytes;
+    s.static_stored_bytes = impl_->static_file_bytes_total;
   }
   {
     std::lock_guard lock(impl_->mutex);
