@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <tuple>
@@ -446,6 +447,12 @@ Result<StaticTile> StaticTile::decode(std::span<const std::uint8_t> bytes, float
   if (StaticTileIndex(t[0], t[1]) != expected) {
     return Error{"static_tile.mismatch", "holds another tile"};
   }
+  // The static layer keys voxels by 21-bit coordinates (|v| < 2^20 voxels, 200 km at 0.2 m).
+  constexpr int kReach = 1 << 20;
+  if (std::abs(expected.x()) >= kReach / kStaticTileEdge ||
+      std::abs(expected.y()) >= kReach / kStaticTileEdge) {
+    return corrupt("tile out of range");
+  }
   StaticTile tile;
   tile.index = expected;
   tile.voxels.reserve(count);
@@ -457,6 +464,7 @@ Result<StaticTile> StaticTile::decode(std::span<const std::uint8_t> bytes, float
     r.get(dy);
     r.get(z);
     if (dx >= kStaticTileEdge || dy >= kStaticTileEdge) return corrupt("voxel out of its tile");
+    if (z <= -kReach || z >= kReach) return corrupt("voxel out of range");
     const Eigen::Vector3i v(expected.x() * kStaticTileEdge + dx,
                             expected.y() * kStaticTileEdge + dy, z);
     if (!tile.voxels.empty() && !(order(tile.voxels.back()) < order(v))) {

@@ -211,6 +211,7 @@ struct TsdfPager::Impl {
   std::map<StaticKey, std::uint64_t> static_file_bytes;
   std::uint64_t static_file_bytes_total = 0;
   std::uint64_t generation = 0;  // bumped when the map's static layer is replaced
+  Eigen::Vector2i static_ring_lo = Eigen::Vector2i::Zero(), static_ring_hi{-1, -1};
   std::vector<Eigen::Vector2i> static_resident;
   std::vector<Eigen::Vector3i> voxels;
 
@@ -475,6 +476,11 @@ struct TsdfPager::Impl {
   void evict_static() {
     if (evict_stopped) return;
     const auto [lo, hi] = static_footprint(map->window_min(), 2);
+    // Only the window's moving into other tiles sends tiles beyond the ring (loads land within
+    // it): a pass per footprint, not per scan.
+    if (lo == static_ring_lo && hi == static_ring_hi) return;
+    static_ring_lo = lo;
+    static_ring_hi = hi;
     map->static_tiles(core::kStaticTileEdge, static_resident);
     for (const Eigen::Vector2i& t : static_resident) {
       if (t.x() >= lo.x() && t.x() <= hi.x() && t.y() >= lo.y() && t.y() <= hi.y()) continue;
@@ -773,6 +779,7 @@ void TsdfPager::occupancy_replaced() {
   Impl& impl = *impl_;
   if (impl.map == nullptr) return;
   ++impl.generation;
+  impl.static_ring_hi = impl.static_ring_lo - Eigen::Vector2i::Ones();  // a pass on the next scan
   impl.statics.clear();
   impl.static_file_bytes.clear();
   impl.static_file_bytes_total = 0;

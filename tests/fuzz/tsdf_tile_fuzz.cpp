@@ -1,17 +1,22 @@
-// libFuzzer target: core::TsdfTile::decode, the reader of the tile store (state.dir/tsdf_tiles,
-// tsdf.resident_limit_mb) that tarmacd reads back as the vehicle returns. The first byte picks
-// how the rest is used:
-//   even: the rest is a tile file as found on disk: truncated, bit-flipped, foreign. Refused
-//         ("tsdf_tile.*"), never a crash.
-//   odd:  a u32 block count, then the rest is the payload; a valid header with the right
-//         checksum is put in front, so the block parser behind the checksum sees fuzzed content.
+// libFuzzer target: core::TsdfTile::decode and core::StaticTile::decode, the readers of the tile
+// store (state.dir/tsdf_tiles, tsdf.resident_limit_mb) that tarmacd reads back as the vehicle
+// returns. The first byte picks how the rest is used (mod 4):
+//   0: the rest is a TSDF tile file as found on disk: truncated, bit-flipped, foreign. Refused
+//      ("tsdf_tile.*"), never a crash.
+//   1: a u32 block count, then the rest is the payload; a valid header with the right
+//      checksum is put in front, so the block parser behind the checksum sees fuzzed content.
+//   2, 3: the same for a static occupancy tile (a u32 voxel count for 3).
 // Properties: a decode either fails with a "tsdf_tile.*" code or yields a tile of at most 4096
-// blocks that encodes to bytes which decode to the same blocks, and which a layer takes back.
+// blocks that encodes to bytes which decode to the same blocks, and which a layer takes back;
+// a static tile fails with a "static_tile.*" code or yields voxels inside its columns, sorted,
+// that encode and decode to the same voxels and that an occupancy map takes back.
 
 #include <cstring>
 #include <string>
+#include <tuple>
 
 #include "fuzz_bytes.hpp"
+#include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/task_runner.hpp"
 #include "tarmac/core/tsdf_tiles.hpp"
 
@@ -43,6 +48,49 @@ Bytes sealed(std::uint32_t blocks, std::span<const std::uint8_t> payload) {
   w.put(fnv1a(payload));
   w.bytes(payload);
   return w.take();
+}
+
+/// A header as StaticTile::encode writes it for column tile (0, 0), then `payload`.
+Bytes sealed_static(std::uint32_t voxels, std::span<const std::uint8_t> payload) {
+  ByteWriter w;
+  for (const char c : std::string("TMSTATC1")) w.put(c);
+  w.put<std::uint32_t>(1);
+  w.put(0.2f);
+  w.put<std::int32_t>(0);
+  w.put<std::int32_t>(0);
+  w.put(voxels);
+  w.put(fnv1a(payload));
+  w.bytes(payload);
+  return w.take();
+}
+
+void check_static(std::span<const std::uint8_t> file) {
+  const core::StaticTileIndex zero = core::StaticTileIndex::Zero();
+  core::Result<core::StaticTile> tile = core::StaticTile::decode(file, 0.2f, zero);
+  if (!tile) {
+    TARMAC_FUZZ_CHECK(tile.error().code.rfind("static_tile.", 0) == 0);
+    return;
+  }
+  const std::vector<Eigen::Vector3i>& v = tile.value().voxels;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    TARMAC_FUZZ_CHECK(v[i].x() >= 0 && v[i].x() < core::kStaticTileEdge);
+    TARMAC_FUZZ_CHECK(v[i].y() >= 0 && v[i].y() < core::kStaticTileEdge);
+    if (i > 0) {
+      TARMAC_FUZZ_CHECK(std::tie(v[i - 1].z(), v[i - 1].y(), v[i - 1].x()) <
+                        std::tie(v[i].z(), v[i].y(), v[i].x()));
+    }
+  }
+  core::Result<core::StaticTile> back =
+      core::StaticTile::decode(tile.value().encode(0.2f), 0.2f, zero);
+  TARMAC_FUZZ_CHECK(back.ok() && back.value().voxels == v);
+  core::OccupancyParams p;
+  p.window_x_vox = p.window_y_vox = 16;
+  p.window_z_vox = 16;
+  core::OccupancyMap map(p);
+  map.put_static(v);
+  std::vector<core::VoxelIndex> out;
+  map.export_static(out);
+  TARMAC_FUZZ_CHECK(out == v);
 }
 
 std::uint64_t digest(const core::TsdfTile& tile) {
@@ -103,6 +151,20 @@ const std::vector<Bytes>& seeds() {
     w.put(blocks);
     w.bytes(std::span<const std::uint8_t>(bytes).subspan(kHeaderBytes));
     out.push_back(w.take());
+    // A static tile: a wall along y, three heights.
+    core::StaticTile st{core::StaticTileIndex::Zero(), {}};
+    for (int z = -1; z < 2; ++z) {
+      for (int y = 0; y < core::kStaticTileEdge; y += 3) st.voxels.emplace_back(7, y, z);
+    }
+    const std::vector<std::uint8_t> sb = st.encode(0.2f);
+    Bytes whole_static{2};
+    whole_static.insert(whole_static.end(), sb.begin(), sb.end());
+    out.push_back(whole_static);
+    ByteWriter ws;
+    ws.put<std::uint8_t>(3);
+    ws.put(static_cast<std::uint32_t>(st.voxels.size()));
+    ws.bytes(std::span<const std::uint8_t>(sb).subspan(36));
+    out.push_back(ws.take());
     return out;
   }();
   return all;
@@ -112,7 +174,7 @@ const std::vector<Bytes>& seeds() {
 }  // namespace tarmac::fuzz
 
 extern "C" int LLVMFuzzerInitialize(int* argc, char*** argv) {
-  tarmac::fuzz::handle_make_seeds(argc, argv, &tarmac::fuzz::seeds, {"TMTSDFT1"});
+  tarmac::fuzz::handle_make_seeds(argc, argv, &tarmac::fuzz::seeds, {"TMTSDFT1", "TMSTATC1"});
   return 0;
 }
 
@@ -120,11 +182,16 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   using namespace tarmac::fuzz;
   ByteReader in(data, size);
   const auto mode = in.get<std::uint8_t>();
-  if (mode % 2 == 0) {
+  if (mode % 4 == 0) {
     check(in.rest());
-  } else {
+  } else if (mode % 4 == 1) {
     const auto blocks = in.get<std::uint32_t>();
     check(sealed(blocks, in.rest()));
+  } else if (mode % 4 == 2) {
+    check_static(in.rest());
+  } else {
+    const auto voxels = in.get<std::uint32_t>();
+    check_static(sealed_static(voxels, in.rest()));
   }
   return 0;
 }
