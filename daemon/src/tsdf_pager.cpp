@@ -227,6 +227,42 @@ struct TsdfPager::Impl {
 
   std::filesystem::path file_of(const TileIndex& t) const { return params.dir / tile_name(t); }
 
+  /// Every tile of the site, resident (true) or in the store (false), in TileKey order:
+  /// OpenVDB's iteration order of the whole.
+  [[nodiscard]] std::map<TileKey, bool> site_tiles(const core::TsdfLayer& layer) const {
+    std::map<TileKey, bool> site;
+    for (const core::TsdfTileInfo& info : layer.resident_tiles()) {
+      site[TileKey::of(info.tile)] = true;
+    }
+    for (const auto& [key, e] : tiles) {
+      if (e.state != State::kResident) site.emplace(key, false);
+    }
+    return site;
+  }
+
+  /// fn(view) for each block of a site tile, in the layer's order: found in the layer when
+  /// resident (for_each_block would walk the whole tree), else read back.
+  core::Status for_each_tile_block(
+      const core::TsdfLayer& layer, const TileIndex& t, bool resident,
+      const std::function<void(const core::TsdfBlockView&)>& fn) const {
+    if (!resident) {
+      core::Result<TsdfTile> tile = read_tile(file_of(t), params, t);
+      if (!tile) return tile.error();
+      tile.value().for_each_block(fn);
+      return core::Ok{};
+    }
+    const int b = core::kTsdfTileBlocks;
+    for (int x = 0; x < b; ++x) {
+      for (int y = 0; y < b; ++y) {
+        for (int z = 0; z < b; ++z) {
+          const core::BlockIndex bi(t.x() * b + x, t.y() * b + y, t.z() * b + z);
+          if (const auto view = layer.find_block(bi)) fn(*view);
+        }
+      }
+    }
+    return core::Ok{};
+  }
+
   /// A copy of a site tile: of the resident one, or read back from the store.
   core::Result<TsdfTile> site_tile(const core::TsdfLayer& layer, const TileIndex& t,
                                    bool resident) const {
@@ -852,35 +888,10 @@ core::Status TsdfPager::store_all(core::TsdfLayer& layer) {
 
 bool TsdfPager::for_each_site_block(
     const core::TsdfLayer& layer, const std::function<void(const core::TsdfBlockView&)>& fn) const {
-  // Resident tiles and stored ones, in TileKey order: OpenVDB's iteration order of the whole.
-  std::map<TileKey, bool> order;  // true: resident
-  for (const core::TsdfTileInfo& info : layer.resident_tiles())
-    order[TileKey::of(info.tile)] = true;
-  for (const auto& [key, e] : impl_->tiles) {
-    if (e.state != State::kResident) order.emplace(key, false);
-  }
   bool ok = true;
-  for (const auto& [key, resident] : order) {
+  for (const auto& [key, resident] : impl_->site_tiles(layer)) {
     const TileIndex t(key.tile[0], key.tile[1], key.tile[2]);
-    if (resident) {
-      const int b = core::kTsdfTileBlocks;
-      // The tile's blocks in the layer's order: for_each_block would walk the whole tree.
-      for (int x = 0; x < b; ++x) {
-        for (int y = 0; y < b; ++y) {
-          for (int z = 0; z < b; ++z) {
-            const core::BlockIndex bi(t.x() * b + x, t.y() * b + y, t.z() * b + z);
-            if (const auto view = layer.find_block(bi)) fn(*view);
-          }
-        }
-      }
-      continue;
-    }
-    core::Result<TsdfTile> tile = read_tile(impl_->file_of(t), params_, t);
-    if (!tile) {
-      ok = false;
-      continue;
-    }
-    tile.value().for_each_block(fn);
+    if (!impl_->for_each_tile_block(layer, t, resident, fn)) ok = false;
   }
   return ok;
 }
@@ -888,12 +899,7 @@ bool TsdfPager::for_each_site_block(
 core::Status TsdfPager::mesh_site(
     const core::TsdfLayer& layer, float min_weight,
     const std::function<core::Status(const core::TriangleMesh&)>& piece) const {
-  std::map<TileKey, bool> site;  // true: resident
-  layer.resident_tiles(impl_->resident);
-  for (const core::TsdfTileInfo& info : impl_->resident) site[TileKey::of(info.tile)] = true;
-  for (const auto& [key, e] : impl_->tiles) {
-    if (e.state != State::kResident) site.emplace(key, false);
-  }
+  const std::map<TileKey, bool> site = impl_->site_tiles(layer);  // true: resident
   core::TriangleMesh mesh;
   for (const auto& [key, resident] : site) {
     const TileIndex t(key.tile[0], key.tile[1], key.tile[2]);
@@ -928,13 +934,8 @@ core::Status TsdfPager::export_site(
   };
   // Every tile of the site, by region (y, x) then in key order.
   std::map<std::pair<int, int>, std::map<TileKey, bool>> regions;  // tile -> resident
-  layer.resident_tiles(impl_->resident);
-  for (const core::TsdfTileInfo& info : impl_->resident) {
-    regions[{region_of(info.tile.y()), region_of(info.tile.x())}][TileKey::of(info.tile)] = true;
-  }
-  for (const auto& [key, e] : impl_->tiles) {
-    if (e.state == State::kResident) continue;
-    regions[{region_of(e.tile.y()), region_of(e.tile.x())}].emplace(key, false);
+  for (const auto& [key, resident] : impl_->site_tiles(layer)) {
+    regions[{region_of(key.tile[1]), region_of(key.tile[0])}][key] = resident;
   }
   for (const auto& [r, tiles] : regions) {
     core::TsdfLayer piece(params_.voxel_size_m, params_.truncation_m);
@@ -958,12 +959,7 @@ core::Status TsdfPager::changes_site(
   if (auto s = params.validate(); !s) return s;
   counts = core::ChangeCounts{};
   // Both sites' tiles: the current one's (resident or stored) and the prior store's.
-  std::map<TileKey, bool> site;  // true: resident
-  layer.resident_tiles(impl_->resident);
-  for (const core::TsdfTileInfo& info : impl_->resident) site[TileKey::of(info.tile)] = true;
-  for (const auto& [key, e] : impl_->tiles) {
-    if (e.state != State::kResident) site.emplace(key, false);
-  }
+  const std::map<TileKey, bool> site = impl_->site_tiles(layer);  // true: resident
   std::map<TileKey, TileIndex> prior;
   std::error_code ec;
   for (const auto& f : std::filesystem::directory_iterator(prior_dir, ec)) {
@@ -973,27 +969,6 @@ core::Status TsdfPager::changes_site(
   const auto read_prior = [&](const TileIndex& t) {
     return read_tile(prior_dir / tile_name(t), params_, t);
   };
-  // A current tile's blocks, resident or read back: fn(view) for each.
-  const auto current_blocks = [&](const TileIndex& t, bool resident,
-                                  const std::function<void(const core::TsdfBlockView&)>& fn) {
-    if (!resident) {
-      core::Result<TsdfTile> tile = read_tile(impl_->file_of(t), params_, t);
-      if (!tile) return core::Status(tile.error());
-      tile.value().for_each_block(fn);
-      return core::Status(core::Ok{});
-    }
-    const int b = core::kTsdfTileBlocks;
-    for (int x = 0; x < b; ++x) {
-      for (int y = 0; y < b; ++y) {
-        for (int z = 0; z < b; ++z) {
-          const core::BlockIndex bi(t.x() * b + x, t.y() * b + y, t.z() * b + z);
-          if (const auto view = layer.find_block(bi)) fn(*view);
-        }
-      }
-    }
-    return core::Status(core::Ok{});
-  };
-
   // The raster's extent, as detect_changes takes it: the union of both maps' blocks (x, y).
   Eigen::Vector2i lo(std::numeric_limits<int>::max(), std::numeric_limits<int>::max());
   Eigen::Vector2i hi(std::numeric_limits<int>::min(), std::numeric_limits<int>::min());
@@ -1004,7 +979,7 @@ core::Status TsdfPager::changes_site(
   };
   for (const auto& [key, resident] : site) {
     const TileIndex t(key.tile[0], key.tile[1], key.tile[2]);
-    if (auto s = current_blocks(t, resident, extend); !s) return s;
+    if (auto s = impl_->for_each_tile_block(layer, t, resident, extend); !s) return s;
   }
   for (const auto& [key, t] : prior) {
     core::Result<TsdfTile> tile = read_prior(t);
@@ -1051,7 +1026,7 @@ core::Status TsdfPager::changes_site(
           core::compare_blocks(it->second, now, params, v, origin, g.width, cells, counts);
         }
       };
-      if (auto s = current_blocks(t, resident, compare); !s) return s;
+      if (auto s = impl_->for_each_tile_block(layer, t, resident, compare); !s) return s;
     }
     if (auto s = strip(y0 - lo.y(), y1 - y0, cells); !s) return s;
   }
