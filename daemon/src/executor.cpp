@@ -16,6 +16,7 @@
 
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
+#include <tbb/parallel_for.h>
 
 #include "fleet_share.hpp"
 #include "map_store.hpp"
@@ -486,6 +487,11 @@ void Executor::prepare(const RunHooks& hooks) {
     spdlog::error("state: TSDF paging off, the TSDF is not bounded: {} [{}]", paged.error().message,
                   paged.error().code);
   }
+  // OpenVDB deep-copies trees with TBB (the periodic save's copy, the pager's copies of tiles),
+  // whose worker threads start at first use and inherit the starting thread's scheduling and
+  // CPU set. Started here, before the real-time setup, they are ordinary threads, and no
+  // thread is created mid-run (a soak saw one appear at the first periodic save).
+  tbb::parallel_for(0, 1024, [](int) {});
   d.pool = real_time_setup(d.config.executor, hooks.on_thread_start);
   d.cycle = std::make_unique<Cycle>(d.mapper, *d.pool,
                                     Cycle::Quotas{d.config.quotas.tsdf_points_per_cycle});
