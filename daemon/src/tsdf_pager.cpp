@@ -150,8 +150,9 @@ struct Job {
   TileIndex tile = TileIndex::Zero();
   std::uint64_t version = 0;
   std::optional<TsdfTile> data;  // write: the tile
-  // A static tile's job instead (data empty): its voxels to write, or to read.
-  std::optional<core::StaticTile> static_data;
+  // A static tile's job instead (data empty): its voxels to write, or its index to read. Not an
+  // optional: GCC's -O1 (the ASan build) warned of its move as maybe uninitialised.
+  core::StaticTile static_data;
   bool is_static = false;
   bool drop_statics = false;  // removes every static tile file (the occupancy was replaced)
   std::uint64_t generation = 0;
@@ -176,7 +177,7 @@ struct Done {
   std::optional<TsdfTile> data;  // read: the tile; failed write: the tile back
   std::optional<core::Error> error;
   std::uint64_t bytes = 0;
-  std::optional<core::StaticTile> static_data;  // read: the voxels; failed write: back
+  core::StaticTile static_data;  // read: the voxels; failed write: back
   bool is_static = false;
   bool drop_statics = false;
   std::uint64_t generation = 0;
@@ -333,10 +334,10 @@ struct TsdfPager::Impl {
       }
       return d;
     }
-    const core::StaticTileIndex t = job.static_data->index;
+    const core::StaticTileIndex t = job.static_data.index;
     const std::filesystem::path file = params.dir / static_name(t);
     if (job.write) {
-      const std::vector<std::uint8_t> bytes = job.static_data->encode(params.occupancy_voxel_m);
+      const std::vector<std::uint8_t> bytes = job.static_data.encode(params.occupancy_voxel_m);
       d.bytes = bytes.size();
       if (const core::Status s = write_atomic(file, bytes); !s) {
         d.error = s.error();
@@ -446,15 +447,15 @@ struct TsdfPager::Impl {
   /// A static tile's job done (scan thread).
   void collect_static(Done& d) {
     if (d.drop_statics || d.generation != generation) return;  // for a replaced layer
-    const StaticKey key = static_key(d.static_data->index);
+    const StaticKey key = static_key(d.static_data.index);
     StaticEntry& e = statics[key];
-    e.tile = d.static_data->index;
+    e.tile = d.static_data.index;
     if (d.write) {
       if (d.error) {
         ++stats.write_errors;
         evict_stopped = true;
         if (!d.copy) {
-          map->put_static(d.static_data->voxels);
+          map->put_static(d.static_data.voxels);
           e.state = State::kResident;
         }
         return;
@@ -463,7 +464,7 @@ struct TsdfPager::Impl {
       static_file_bytes_total += d.bytes - static_file_bytes[key];
       static_file_bytes[key] = d.bytes;
       e.stored = true;
-      e.digest = core::static_voxels_digest(d.static_data->voxels);
+      e.digest = core::static_voxels_digest(d.static_data.voxels);
       if (!d.copy) e.state = State::kStored;
       if (e.load_after_write) {
         e.load_after_write = false;
@@ -476,10 +477,10 @@ struct TsdfPager::Impl {
       statics.erase(key);
     } else {
       ++stats.static_loaded;
-      map->put_static(d.static_data->voxels);
+      map->put_static(d.static_data.voxels);
       e.state = State::kResident;
       e.stored = true;
-      e.digest = core::static_voxels_digest(d.static_data->voxels);
+      e.digest = core::static_voxels_digest(d.static_data.voxels);
     }
   }
 
