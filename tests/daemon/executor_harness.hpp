@@ -117,6 +117,49 @@ class RunningExecutor {
   std::thread thread_;
 };
 
+/// `c` made to take input at the pace the test feeds it rather than at the clock's: a replay
+/// paced by paced_by() may fall behind its schedule on a loaded machine, and its scans and
+/// poses then arrive late, their stamps unchanged. Scans are not judged stale for a minute and
+/// wait up to 10 s for their pose, so the maps depend on the samples alone (the determinism
+/// contract), never on how busy the machine was. Not for tests about staleness or pose waits.
+inline void take_late_input(config::Config& c) {
+  for (auto& sensor : c.sensors) sensor.max_age_ms = 60'000.0 * kTimeScale;
+  c.executor.pose_wait_ms = 10'000.0 * kTimeScale;
+}
+
+/// A tools::ReplayOptions::pace that holds scan k back until `executor` has integrated
+/// `needed(k)` scans in all (its total, whatever the sensor), and gives up after a minute
+/// (× kTimeScale) without progress.
+inline std::function<bool(std::size_t, std::int64_t)> paced_by(
+    const daemon::Executor& executor, std::function<std::uint64_t(std::size_t)> needed) {
+  return [&executor, needed = std::move(needed)](std::size_t k, std::int64_t) {
+    const std::uint64_t want = needed(k);
+    std::uint64_t last = executor.totals().scans_integrated;
+    auto deadline = std::chrono::steady_clock::now() + kTimeScale * std::chrono::seconds(60);
+    while (last < want) {
+      if (std::chrono::steady_clock::now() > deadline) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      const std::uint64_t now = executor.totals().scans_integrated;
+      if (now != last) {  // progress: the minute starts again
+        last = now;
+        deadline = std::chrono::steady_clock::now() + kTimeScale * std::chrono::seconds(60);
+      }
+    }
+    return true;
+  };
+}
+
+/// The same for one sensor's replay: at most `ahead` scans beyond what `executor` has
+/// integrated since `integrated_before` (its total when the replay starts). With `ahead` below
+/// the executor's queue depth (8) no scan is ever shed from a full queue, however the machine
+/// stalls.
+inline std::function<bool(std::size_t, std::int64_t)> paced_by(
+    const daemon::Executor& executor, std::size_t ahead = 4, std::uint64_t integrated_before = 0) {
+  return paced_by(executor, [ahead, integrated_before](std::size_t k) -> std::uint64_t {
+    return k < ahead ? integrated_before : integrated_before + (k - ahead) + 1;
+  });
+}
+
 inline transport::Participant peer(std::uint32_t domain) {
   transport::ParticipantConfig pc;
   pc.domain_id = domain;

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <functional>
@@ -127,6 +128,7 @@ class Daemon : public test::LoopbackOnly {
                               const std::function<void(tools::ReplayOptions&)>& replay_tweak = {}) {
     const auto n_scans = static_cast<std::uint64_t>(seq.scans.size());
     auto cfg = test_config(domain, workers);
+    test::take_late_input(cfg);  // paced below: the map must not depend on the machine's load
     if (tweak) tweak(cfg);
     RunningExecutor executor(cfg);
     auto participant = peer(domain);
@@ -138,6 +140,7 @@ class Daemon : public test::LoopbackOnly {
     options.rate_scale = rate_scale / kTimeScale;
     options.jitter_ms = jitter_ms * kTimeScale;
     options.seed = 7;
+    options.pace = test::paced_by(executor.get());
     if (replay_tweak) replay_tweak(options);
     auto stats = tools::replay(participant, seq, options);
     EXPECT_TRUE(stats.ok()) << (stats.ok() ? "" : stats.error().message);
@@ -449,6 +452,9 @@ transport::CycleReport Daemon::replay_until_report(
   options.rate_scale = 2.0 / kTimeScale;
   options.max_scans = max_scans;
   options.pose_count = pose_count;
+  // At most four scans ahead of the executor: scans without a pose are never integrated, so
+  // the tests using this give every scan from the fifth on a pose, or send at most eight.
+  options.pace = test::paced_by(executor.get());
   auto stats = tools::replay(participant, sequence(), options);
   EXPECT_TRUE(stats.ok()) << (stats.ok() ? "" : stats.error().message);
   const auto last = wait_for_report(*reports.value(), done);
@@ -457,7 +463,9 @@ transport::CycleReport Daemon::replay_until_report(
 }
 
 TEST_F(Daemon, ScanWithoutPose_IsDroppedAndCounted) {
-  const auto cfg = test_config(test::kDomainDaemonNoPose, 2);
+  auto cfg = test_config(test::kDomainDaemonNoPose, 2);
+  // Scans with poses reach a stalled executor late, stamps unchanged: never stale here.
+  cfg.sensors[0].max_age_ms = 60'000.0 * kTimeScale;
   // Scans 5, 6, 7 never get a pose.
   const auto last = replay_until_report(cfg, 8, 5, [](const transport::CycleReport& r) {
     return total_of(r.drops, "scan.pose_timeout") >= 3;
@@ -508,6 +516,7 @@ void replay_four_scans(RunningExecutor& executor, const config::Config& cfg) {
   options.lidar_qos = cfg.dds.qos.lidar;
   options.rate_scale = 2.0 / kTimeScale;
   options.max_scans = 4;
+  options.pace = test::paced_by(executor.get());
   ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
   for (int i = 0; i < 100 * kTimeScale && executor.get().totals().scans_integrated < 4; ++i) {
     std::this_thread::sleep_for(20ms);
@@ -517,6 +526,7 @@ void replay_four_scans(RunningExecutor& executor, const config::Config& cfg) {
 
 TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
   auto cfg = test_config(test::kDomainDaemonPeriodicSave, 2);
+  test::take_late_input(cfg);  // replay_four_scans paces its input
   const auto dir = std::filesystem::temp_directory_path() /
                    ("tarmac-periodic-save-" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
@@ -550,6 +560,7 @@ TEST_F(Daemon, Paging_TheTileStoreIsTheMapAfterSaveAndRestart) {
   // state.dir/tsdf_tiles on save; the .vdb holds neither; a restart resumes from the tiles
   // (absent until near).
   auto cfg = test_config(test::kDomainDaemonPaging, 2);
+  test::take_late_input(cfg);  // replay_four_scans paces its input
   const auto dir =
       std::filesystem::temp_directory_path() / ("tarmac-paging-" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
@@ -609,6 +620,7 @@ std::int8_t cell_at(const transport::OccupancyGridMsg& g, double x_m, double y_m
 
 TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   auto cfg = test_config(test::kDomainDaemonZones, 2);
+  test::take_late_input(cfg);  // every scan integrated, however late on a loaded machine
   // After four scans of the 16-beam test LiDAR (3 deg between beams) few envelopes are observed
   // whole: the any-voxel rule gives the free space this test needs to see inflation.
   cfg.mapping.costmap.free_rule = core::FreeRule::kAnyVoxel;
@@ -676,23 +688,26 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   zone.min_z(-100.0);
   zone.max_z(100.0);
   msg.obstacles().push_back(zone);
+  // No scan comes after the four: the executor publishes a costmap only when something changed,
+  // so the next costmap is the one of the tick that drained the zone, and it must hold it.
+  // Judged by that order, not by the time it took (which depends on the machine).
+  std::vector<transport::OccupancyGridMsg> batch;
+  grids.value()->take_all(batch);
+  ASSERT_TRUE(batch.empty()) << "a costmap after the last scan's, before any zone";
   const auto t_sent = std::chrono::steady_clock::now();
   ASSERT_TRUE(zones.value()->write(msg));
-  // The next tick drains the zone and republishes the costmap (same stamp: no new scan).
-  const auto deadline = t_sent + kTimeScale * 5s;
-  bool lethal = false;
-  std::vector<transport::OccupancyGridMsg> batch;
-  while (!lethal && std::chrono::steady_clock::now() < deadline) {
+  const auto deadline = t_sent + kTimeScale * 30s;
+  while (batch.empty() && std::chrono::steady_clock::now() < deadline) {
     grids.value()->wait_for_sample(50ms);
-    batch.clear();
     grids.value()->take_all(batch);
-    for (const auto& g : batch) lethal = lethal || cell_at(g, ahead.x(), ahead.y()) == 100;
   }
   const double elapsed_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_sent).count();
-  EXPECT_TRUE(lethal) << "zone cell never became lethal";
-  // One period to the next tick plus that tick's own work, with slack for a loaded machine.
-  EXPECT_LT(elapsed_ms, 1000.0 / cfg.executor.rate_hz + cfg.budgets.cycle_ms + 150.0 * kTimeScale);
+  ASSERT_FALSE(batch.empty()) << "no costmap after the zone";
+  EXPECT_EQ(cell_at(batch.front(), ahead.x(), ahead.y()), 100)
+      << "the first costmap after the zone does not hold it";
+  std::printf("zone: lethal in the first costmap after it, %.1f ms after it was sent\n",
+              elapsed_ms);
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -102,7 +103,11 @@ inline constexpr std::chrono::milliseconds kExitDelay{0};
 #endif
 
 /// For a tarmacd process: the shipped timing in slow motion by kTimeScale, as YAML. Both parts
-/// are empty when kTimeScale is 1 (the shipped values apply).
+/// are empty when kTimeScale is 1 (the shipped values apply) and `late_input` is false.
+/// `late_input`: the process takes input however late it comes (scans stale only after a
+/// minute, a pose waited for up to 10 s), for tests that pace their input by what it
+/// acknowledged (tarmac-replay --pace-costmap): on a busy machine such input arrives late,
+/// stamps unchanged (docs/testing.md, "The suite under load").
 struct ScaledTimingYaml {
   /// ", rate_hz: …, input_delay_ms: …, pose_wait_ms: …, max_future_ms: …": to go inside
   /// `executor: {…}` after its other keys.
@@ -111,17 +116,34 @@ struct ScaledTimingYaml {
   std::string sections;
 };
 
-inline ScaledTimingYaml scaled_timing_yaml() {
+inline ScaledTimingYaml scaled_timing_yaml(bool late_input = false) {
   ScaledTimingYaml y;
-  if (kTimeScale == 1) return y;
+  if (kTimeScale == 1 && !late_input) return y;
   const auto num = [](double v) { return std::to_string(v * kTimeScale); };
   y.executor_keys = ", rate_hz: " + std::to_string(10.0 / kTimeScale) +
-                    ", input_delay_ms: " + num(20.0) + ", pose_wait_ms: " + num(100.0) +
+                    ", input_delay_ms: " + num(20.0) +
+                    ", pose_wait_ms: " + (late_input ? std::string("10000") : num(100.0)) +
                     ", max_future_ms: " + num(200.0);
-  y.sections = "sensors: [{id: front, max_age_ms: " + num(500.0) + "}]\n" +
-               "pose: {max_gap_ms: " + num(250.0) + ", max_age_ms: " + num(1000.0) + "}\n" +
-               "budgets: {cycle_ms: " + num(90.0) + "}\n";
+  y.sections =
+      "sensors: [{id: front, max_age_ms: " + (late_input ? std::string("60000") : num(500.0)) +
+      "}]\n" + "pose: {max_gap_ms: " + num(250.0) + ", max_age_ms: " + num(1000.0) + "}\n" +
+      "budgets: {cycle_ms: " + num(90.0) + "}\n";
   return y;
+}
+
+/// How long a test waits for an event that must come: long enough that only a hang or a defect
+/// reaches it, whatever else loads the machine. A wait that ends early costs nothing.
+inline constexpr std::chrono::seconds kPatience{30 * kTimeScale};
+
+/// Polls `done` every 20 ms until it holds or `patience` has passed; returns its last value.
+template <typename Done>
+bool eventually(Done&& done, std::chrono::milliseconds patience = kPatience) {
+  const auto deadline = std::chrono::steady_clock::now() + patience;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > deadline) return done();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
 }
 
 inline bool running_in_ci() {

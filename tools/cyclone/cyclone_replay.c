@@ -172,7 +172,9 @@ typedef struct {
   long scans;
   long costmaps;
   uint64_t points_integrated;
-  uint64_t lost, rejected, overflow; /* tarmacd's transport.scan_lost.*, _rejected.*, queue */
+  /* tarmacd's transport.scan_lost.*, transport.scan_rejected.*, and scans it shed while its
+     cycle lagged: queue.scan_overflow and scan.shed_pending_full */
+  uint64_t lost, rejected, overflow;
   long reports;
 } Seen;
 
@@ -214,7 +216,10 @@ static void take_reports(dds_entity_t reader, Seen* seen) {
         const uint64_t total = r->drops._buffer[j].total;
         if (strncmp(reason, "transport.scan_lost.", 20) == 0) lost += total;
         if (strncmp(reason, "transport.scan_rejected.", 24) == 0) rejected += total;
-        if (strcmp(reason, "queue.scan_overflow") == 0) overflow += total;
+        if (strcmp(reason, "queue.scan_overflow") == 0 ||
+            strcmp(reason, "scan.shed_pending_full") == 0) {
+          overflow += total;
+        }
       }
       seen->lost = lost;
       seen->rejected = rejected;

@@ -5,6 +5,8 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -75,6 +77,16 @@ int main(int argc, char** argv) {
                  "wait for N matched readers of the poses before the first message (1: tarmacd; "
                  "2 with tarmac-audit --score)")
       ->transform(cli::positive<std::size_t>());
+  std::size_t pace_ahead = 0;
+  double pace_patience_s = 60.0;
+  app.add_option("--pace-costmap", pace_ahead,
+                 "send scan K only once tarmacd's costmap (the config's outputs.costmap_topic) "
+                 "holds scan K-N or a later one: as fast as the daemon takes the input, never "
+                 "faster than the schedule; stamps unchanged (0: the schedule alone)")
+      ->transform(cli::number<std::size_t>());
+  app.add_option("--pace-patience-s", pace_patience_s,
+                 "with --pace-costmap: give up (exit 69) when no newer costmap came for S seconds")
+      ->transform(cli::positive<double>());
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
   config::Config cfg;
   cfg.dds.participant.name = "tarmac-replay";
@@ -128,6 +140,16 @@ int main(int argc, char** argv) {
   if (!participant) {
     std::fprintf(stderr, "tarmac-replay: %s\n", participant.error().message.c_str());
     return kExitUnavailable;
+  }
+  if (pace_ahead > 0) {
+    auto pace = tools::pace_by_costmap(
+        participant.value(), cfg.outputs.costmap_topic, cfg.dds.qos.costmap, pace_ahead,
+        std::chrono::milliseconds(std::llround(pace_patience_s * 1000.0)));
+    if (!pace) {
+      std::fprintf(stderr, "tarmac-replay: %s\n", pace.error().message.c_str());
+      return kExitUnavailable;
+    }
+    options.pace = std::move(pace).value();
   }
   struct sigaction sa {};
   sa.sa_handler = [](int) { g_stop = true; };

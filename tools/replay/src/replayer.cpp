@@ -6,6 +6,8 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
+#include <memory>
 #include <random>
 #include <vector>
 
@@ -53,6 +55,45 @@ std::int64_t replay_stamp(std::int64_t t_ns, const KittiSequence& seq, std::size
 
 Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometry3d& T_B_S) {
   return T_W_S * T_B_S.inverse();
+}
+
+core::Result<std::function<bool(std::size_t, std::int64_t)>> pace_by_costmap(
+    const transport::Participant& participant, const std::string& costmap_topic,
+    const transport::QosSpec& costmap_qos, std::size_t ahead, std::chrono::milliseconds patience) {
+  using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
+  auto created = GridReader::create(participant, costmap_topic, costmap_qos, 8);
+  if (!created) return created.error();
+  struct State {
+    std::unique_ptr<GridReader> reader;
+    std::vector<std::int64_t> stamps;  ///< of the scans paced so far, by index
+    std::int64_t newest_ns = INT64_MIN;
+    std::vector<transport::OccupancyGridMsg> batch;
+  };
+  auto state = std::make_shared<State>();
+  state->reader = std::move(created).value();
+  return std::function<bool(std::size_t, std::int64_t)>(
+      [state, ahead, patience](std::size_t k, std::int64_t stamp_ns) {
+        State& st = *state;
+        st.stamps.resize(k + 1);
+        st.stamps[k] = stamp_ns;
+        if (k < ahead) return true;
+        const std::int64_t needed = st.stamps[k - ahead];
+        auto deadline = std::chrono::steady_clock::now() + patience;
+        while (st.newest_ns < needed) {
+          if (std::chrono::steady_clock::now() > deadline) return false;
+          st.reader->wait_for_sample(std::chrono::milliseconds(50));
+          st.batch.clear();
+          st.reader->take_all(st.batch);
+          for (const auto& g : st.batch) {
+            const std::int64_t stamp = transport::from_time_msg(g.header().stamp());
+            if (stamp > st.newest_ns) {
+              st.newest_ns = stamp;
+              deadline = std::chrono::steady_clock::now() + patience;  // progress
+            }
+          }
+        }
+        return true;
+      });
 }
 
 core::Result<ReplayStats> replay(const transport::Participant& participant,
@@ -117,12 +158,15 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   std::vector<Event> events;
   events.reserve(2 * total);
   for (std::size_t k = 0; k < total; ++k) {
-    events.push_back({stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kScan});
+    const Event scan{stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kScan};
     const bool in_gap =
         k >= options.pose_gap_first && k < options.pose_gap_first + options.pose_gap_count;
     if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count) && !in_gap) {
+      // Without jitter the pose leaves first (the sort below is stable): a scan that reaches a
+      // busy daemon late then finds its pose there, rather than waiting for it.
       events.push_back({stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kPose});
     }
+    events.push_back(scan);
   }
   // After its scan whatever the jitter: a localiser corrects what it has seen.
   const auto jitter_bound = static_cast<std::int64_t>(std::ceil(jitter.max())) + 1;
@@ -142,8 +186,17 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
 
   core::PointCloud cloud;
   std::size_t published_scans = 0;
+  std::size_t next_to_pace = 0;  // the first scan whose messages have not been paced yet
   for (const Event& e : events) {
     if (stop != nullptr && stop->load()) break;
+    if (options.pace && e.kind != EventKind::kCorrection && e.index >= next_to_pace) {
+      for (; next_to_pace <= e.index; ++next_to_pace) {
+        if (!options.pace(next_to_pace, stamps[next_to_pace])) {
+          return core::Error{"replay.pace", "the consumer did not take scan " +
+                                                std::to_string(next_to_pace) + " in time"};
+        }
+      }
+    }
     if (e.kind == EventKind::kPose) {
       transport::PoseStampedMsg msg;
       msg.header().stamp(transport::to_time_msg(stamps[e.index]));

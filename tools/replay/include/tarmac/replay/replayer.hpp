@@ -10,6 +10,7 @@
 /// stamp (plus an optional random jitter, for determinism tests; minus clock_offset_ns).
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -70,6 +71,14 @@ struct ReplayOptions {
   double correction_lead_s = 0.0;
   /// Called after each scan is published (index, count); e.g. a progress bar.
   std::function<void(std::size_t, std::size_t)> progress;
+  /// Empty: the schedule alone sets the pace. Otherwise called before the first message (pose
+  /// or scan) of scan `k` (0-based, counted over loops; `stamp_ns` its stamp; called for every
+  /// k in order) and must return once the consumer can take it — e.g. when it has taken scan
+  /// k − 4 — or false when it gave up waiting (the replay then fails with "replay.pace"). A
+  /// message is never sent before its scheduled time; a consumer slower than the schedule makes
+  /// later messages leave late, stamps unchanged. Tests feed a daemon this way at the pace it
+  /// acknowledges, whatever else loads the machine.
+  std::function<bool(std::size_t k, std::int64_t stamp_ns)> pace;
 };
 
 struct ReplayStats {
@@ -82,6 +91,15 @@ struct ReplayStats {
 
 /// T_world_base for a scan whose sensor pose is T_W_S.
 Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometry3d& T_B_S);
+
+/// A ReplayOptions::pace for a daemon in another process: scan k goes once a costmap stamped
+/// at or after scan k − `ahead` has arrived on `costmap_topic` (tarmacd stamps its costmap with
+/// the newest scan it integrated), so at most `ahead` scans are on their way to it. Gives up
+/// when no newer costmap came for `patience`. The reader is created here, with `costmap_qos`
+/// (the daemon's dds.qos.costmap).
+core::Result<std::function<bool(std::size_t, std::int64_t)>> pace_by_costmap(
+    const transport::Participant& participant, const std::string& costmap_topic,
+    const transport::QosSpec& costmap_qos, std::size_t ahead, std::chrono::milliseconds patience);
 
 /// Publishes `seq` and returns when the last message is out (or `stop` became true).
 core::Result<ReplayStats> replay(const transport::Participant& participant,
