@@ -190,7 +190,10 @@ ScanScheduler::TickStats ScanScheduler::select(std::int64_t tick_ns, const PoseB
     double t0_s = 0.0, t1_s = 0.0;
     if (found == PoseBuffer::Lookup::kOk && s.sensor < params_.deskew.size() &&
         params_.deskew[s.sensor] && s.cloud.has_time() && time_span(s.cloud, t0_s, t1_s)) {
-      if (static_cast<std::int64_t>((t1_s - t0_s) * 1e9) > params_.max_sweep_ns) {
+      // Compared as doubles: a time field in the wrong unit (e.g. absolute nanoseconds read as
+      // seconds) would overflow an integer. Points far from the stamp are as bad as a long span.
+      const double max_sweep_s = static_cast<double>(params_.max_sweep_ns) * 1e-9;
+      if (t1_s - t0_s > max_sweep_s || std::max(std::abs(t0_s), std::abs(t1_s)) > max_sweep_s) {
         drops.add("scan.deskew_span");
       } else {
         sel.deskew = true;

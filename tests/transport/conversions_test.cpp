@@ -112,6 +112,100 @@ TEST(PointCloud2, ParsesForeignLayoutBigEndianWithPadding) {
   EXPECT_EQ(cloud.frame_id, "lidar_rear");
 }
 
+/// Four points x = 1..4 stamped `stamp_ns`, little endian, with one more field `name` of
+/// `type` holding `times[i]` (written as that type), at offset 12 (packed, unaligned after it:
+/// point_step 12 + size).
+template <typename T>
+PointCloud2Msg timed_msg(const char* name, std::uint8_t type, std::int64_t stamp_ns,
+                         const std::vector<T>& times) {
+  PointCloud2Msg msg;
+  msg.header().frame_id("lidar");
+  msg.header().stamp(to_time_msg(stamp_ns));
+  add_field(msg, "x", 0, pf::FLOAT32);
+  add_field(msg, "y", 4, pf::FLOAT32);
+  add_field(msg, "z", 8, pf::FLOAT32);
+  add_field(msg, name, 12, type);
+  msg.height(1);
+  msg.width(static_cast<std::uint32_t>(times.size()));
+  msg.point_step(12 + sizeof(T));
+  msg.row_step(msg.point_step() * msg.width());
+  msg.data().assign(msg.row_step(), 0);
+  for (std::size_t i = 0; i < times.size(); ++i) {
+    const float x = 1.0f + i;
+    std::memcpy(msg.data().data() + i * msg.point_step(), &x, 4);
+    std::memcpy(msg.data().data() + i * msg.point_step() + 12, &times[i], sizeof(T));
+  }
+  return msg;
+}
+
+constexpr std::int64_t kStampNs = 1'767'225'600'123'456'789;  // 2026-01-01, ns since the epoch
+
+// Each driver's per-point time, from the field table and its first value: docs/ros2.md.
+TEST(PointCloud2, PointTimes_EachDriversUnitAndOrigin_SecondsFromTheStamp) {
+  const std::vector<float> want = {0.0f, 0.025f, 0.05f, 0.0999f};
+  const auto expect_times = [&](const PointCloud2Msg& msg, const std::vector<float>& expected,
+                                float tolerance) {
+    core::PointCloud cloud;
+    CloudNotes notes;
+    ASSERT_TRUE(from_point_cloud2(msg, cloud, &notes).ok());
+    EXPECT_FALSE(notes.time_unrelated);
+    ASSERT_EQ(cloud.time_offset_s.size(), expected.size());
+    for (std::size_t i = 0; i < expected.size(); ++i) {
+      EXPECT_NEAR(cloud.time_offset_s[i], expected[i], tolerance) << i;
+    }
+  };
+  // ouster-ros `t`, Autoware `time_stamp`: uint32 ns from the stamp.
+  const std::vector<std::uint32_t> ns = {0, 25'000'000, 50'000'000, 99'900'000};
+  expect_times(timed_msg("t", pf::UINT32, kStampNs, ns), want, 1e-9f);
+  expect_times(timed_msg("time_stamp", pf::UINT32, kStampNs, ns), want, 1e-9f);
+  // velodyne `time`: float32 s from the stamp, which is the last packet's: negative.
+  const std::vector<float> velodyne = {-0.0999f, -0.05f, -0.025f, 0.0f};
+  expect_times(timed_msg("time", pf::FLOAT32, kStampNs, velodyne), velodyne, 0.0f);
+  // rslidar_sdk / HesaiLidar_ROS_2.0 `timestamp`: float64 absolute s.
+  const double stamp_s = static_cast<double>(kStampNs) * 1e-9;
+  std::vector<double> absolute_s, absolute_ns;
+  for (const float t : want) {
+    absolute_s.push_back(stamp_s + t);
+    absolute_ns.push_back(static_cast<double>(kStampNs) + t * 1e9);
+  }
+  expect_times(timed_msg("timestamp", pf::FLOAT64, kStampNs, absolute_s), want, 1e-6f);
+  // livox_ros_driver2 `timestamp`: float64 absolute ns (not seconds since 1e9 epoch-seconds).
+  expect_times(timed_msg("timestamp", pf::FLOAT64, kStampNs, absolute_ns), want, 1e-6f);
+}
+
+TEST(PointCloud2, PointTimesThatCannotBeRelatedToTheStamp_DroppedAndNoted) {
+  // A sensor clock not synchronised (seconds since power-on) reads neither relative nor absolute:
+  // no deskew rather than a wrong one, and the caller counts it.
+  core::PointCloud cloud;
+  CloudNotes notes;
+  const std::vector<double> since_boot = {3600.0, 3600.05};
+  ASSERT_TRUE(
+      from_point_cloud2(timed_msg("timestamp", pf::FLOAT64, kStampNs, since_boot), cloud, &notes)
+          .ok());
+  EXPECT_TRUE(notes.time_unrelated);
+  EXPECT_FALSE(cloud.has_time());
+  EXPECT_EQ(cloud.size(), 2u);
+  // One broken point among good ones reads NaN (taken as the stamp), the others keep theirs.
+  const std::vector<float> one_broken = {0.01f, 1e6f, 0.02f};
+  ASSERT_TRUE(
+      from_point_cloud2(timed_msg("time", pf::FLOAT32, kStampNs, one_broken), cloud, &notes).ok());
+  EXPECT_FALSE(notes.time_unrelated);
+  EXPECT_EQ(cloud.time_offset_s[0], 0.01f);
+  EXPECT_TRUE(std::isnan(cloud.time_offset_s[1]));
+  EXPECT_EQ(cloud.time_offset_s[2], 0.02f);
+}
+
+TEST(PointCloud2, AutowareChannelIsTheRing_LivoxLineIsNot) {
+  core::PointCloud cloud;
+  const std::vector<std::uint16_t> channels = {3, 7};
+  ASSERT_TRUE(from_point_cloud2(timed_msg("channel", pf::UINT16, kStampNs, channels), cloud).ok());
+  EXPECT_EQ(cloud.ring, channels);
+  // Livox's `line` is the point's index in its packet modulo 4 or 6, not a beam.
+  const std::vector<std::uint8_t> lines = {0, 1};
+  ASSERT_TRUE(from_point_cloud2(timed_msg("line", pf::UINT8, kStampNs, lines), cloud).ok());
+  EXPECT_FALSE(cloud.has_ring());
+}
+
 PointCloud2Msg valid_xyz_msg() {
   return to_point_cloud2(sample_cloud(false));
 }

@@ -35,16 +35,31 @@ struct FieldSlot {
   std::uint8_t datatype = 0;
 };
 
-/// A per-point time as seconds from the scan stamp, whatever the driver's convention: integer
-/// fields are nanoseconds from the stamp (Ouster's uint32 `t`); floating-point fields are
-/// seconds, from the stamp (Velodyne's `time`) or, when they are epoch times (Hesai's and
-/// Livox's float64 `timestamp`, > 1e8 s), absolute.
-float time_offset_s(double value, std::uint8_t datatype, double stamp_s) {
-  if (datatype != pf::FLOAT32 && datatype != pf::FLOAT64) return static_cast<float>(value * 1e-9);
-  if (std::abs(value) > 1e8) return static_cast<float>(value - stamp_s);
-  return static_cast<float>(value);
-}
+/// How a cloud's per-point time field relates to its stamp, decided once per cloud from its
+/// first finite value (drivers differ: docs/ros2.md, "LiDAR drivers"): Ouster's `t` and
+/// Autoware's `time_stamp` are integer nanoseconds from the stamp, Velodyne's `time` float
+/// seconds from it (mostly negative: its stamp is the last packet's), RoboSense's and Hesai's
+/// `timestamp` float64 absolute seconds, Livox's `timestamp` float64 absolute nanoseconds.
+struct TimeBase {
+  double origin = 0.0;  ///< subtracted from the value
+  double scale = 0.0;   ///< then multiplied: seconds; 0: the field cannot be related (dropped)
+};
 
+/// A point's time is within this of the stamp for any sweep a mapper takes; further means the
+/// guessed unit or origin is wrong.
+constexpr double kNearStampS = 10.0;
+
+TimeBase time_base(double first, std::uint8_t datatype, std::int64_t stamp_ns) {
+  const double stamp_s = static_cast<double>(stamp_ns) * 1e-9;
+  const auto near = [](double offset_s) { return std::abs(offset_s) <= kNearStampS; };
+  const bool floating = datatype == pf::FLOAT32 || datatype == pf::FLOAT64;
+  if (floating && near(first)) return {0.0, 1.0};                // seconds from the stamp
+  if (!floating && near(first * 1e-9)) return {0.0, 1e-9};       // nanoseconds from it
+  if (floating && near(first - stamp_s)) return {stamp_s, 1.0};  // absolute seconds
+  const double stamp_as_ns = static_cast<double>(stamp_ns);
+  if (near((first - stamp_as_ns) * 1e-9)) return {stamp_as_ns, 1e-9};  // absolute nanoseconds
+  return {};
+}
 /// Reads a numeric field of any datatype as double, honouring the message's endianness.
 double read_as_double(const std::uint8_t* p, std::uint8_t datatype, bool swap) {
   std::uint8_t raw[8];
@@ -211,18 +226,24 @@ PointCloud2Msg to_point_cloud2(const core::PointCloud& cloud) {
   return msg;
 }
 
-core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out) {
+core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
+                               CloudNotes* notes) {
   out.clear();
+  if (notes != nullptr) *notes = CloudNotes{};
   out.frame_id = msg.header().frame_id();
   out.stamp_ns = from_time_msg(msg.header().stamp());
-  const double stamp_s = static_cast<double>(out.stamp_ns) * 1e-9;
 
   std::optional<FieldSlot> x, y, z, intensity, ring, time;
   for (const auto& f : msg.fields()) {
     const std::size_t size = datatype_size(f.datatype());
     const std::string& name = f.name();
-    const bool wanted = name == "x" || name == "y" || name == "z" || name == "intensity" ||
-                        name == "ring" || name == "time" || name == "t" || name == "timestamp";
+    // The ring (beam index): `ring`, or Autoware's `channel`. Not Livox's `line`: the driver
+    // makes it from the point's place in its packet, not from a beam.
+    const bool is_ring = name == "ring" || name == "channel";
+    const bool is_time =
+        name == "t" || name == "time" || name == "timestamp" || name == "time_stamp";
+    const bool wanted =
+        name == "x" || name == "y" || name == "z" || name == "intensity" || is_ring || is_time;
     if (!wanted) continue;  // other fields (normals, reflectivity, ...) are ignored
     if (size == 0) {
       return reject("bad_datatype",
@@ -245,10 +266,10 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
       z = slot;
     else if (name == "intensity")
       intensity = slot;
-    else if (name == "ring")
-      ring = slot;
-    else if (!time)
-      time = slot;  // first of time / t / timestamp wins
+    else if (is_ring && !ring)
+      ring = slot;  // the first of ring / channel wins
+    else if (is_time && !time)
+      time = slot;  // the first of t / time / timestamp / time_stamp wins
   }
   if (!x || !y || !z) return reject("missing_xyz", "fields x, y and z are required");
 
@@ -276,11 +297,28 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
   const auto grow = [n](auto& v) {
     if (v.capacity() < n) v.reserve(std::max(n, v.capacity() + v.capacity() / 2));
   };
+  const std::uint8_t* base = msg.data().data();
+  TimeBase times{0.0, 1.0};  // no finite time at all: nothing to relate, all read NaN
+  if (time) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint8_t* p = base + (i / width) * row_step + (i % width) * point_step;
+      const double v = read_as_double(p + time->offset, time->datatype, swap);
+      if (!std::isfinite(v)) continue;
+      times = time_base(v, time->datatype, out.stamp_ns);  // the first finite value decides
+      break;
+    }
+    if (times.scale == 0.0) {
+      // no deskew for this cloud, counted
+      if (notes != nullptr) notes->time_unrelated = true;
+    }
+  }
   grow(out.points_S);
   if (intensity) grow(out.intensity);
   if (ring) grow(out.ring);
-  if (time) grow(out.time_offset_s);
-  const std::uint8_t* base = msg.data().data();
+  // The slot copied out of the optional, for the loop (GCC 12 warns on the optional there).
+  const bool use_time = time.has_value() && times.scale != 0.0;
+  const FieldSlot time_at = time.value_or(FieldSlot{});
+  if (use_time) grow(out.time_offset_s);
   const bool native_float_xyz = !swap && x->datatype == pf::FLOAT32 && y->datatype == pf::FLOAT32 &&
                                 z->datatype == pf::FLOAT32;
   const bool native_float_intensity = !swap && intensity && intensity->datatype == pf::FLOAT32;
@@ -312,9 +350,14 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out)
         const double r = read_as_double(p + ring->offset, ring->datatype, swap);
         out.ring.push_back(r >= 0.0 && r <= 65535.0 ? static_cast<std::uint16_t>(r) : 0);
       }
-      if (time) {
-        out.time_offset_s.push_back(time_offset_s(
-            read_as_double(p + time->offset, time->datatype, swap), time->datatype, stamp_s));
+      if (use_time) {
+        const double t_s =
+            (read_as_double(p + time_at.offset, time_at.datatype, swap) - times.origin) *
+            times.scale;
+        // Far from the stamp: a broken point time, taken as the stamp (not deskewed).
+        out.time_offset_s.push_back(std::abs(t_s) <= kNearStampS
+                                        ? static_cast<float>(t_s)
+                                        : std::numeric_limits<float>::quiet_NaN());
       }
     }
   }
