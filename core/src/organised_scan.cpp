@@ -1,6 +1,7 @@
 #include "tarmac/core/organised_scan.hpp"
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include <algorithm>
@@ -83,7 +84,206 @@ bool fill_columns(std::vector<double>& v, const std::vector<std::uint32_t>& n) {
   return true;
 }
 
+/// Keeps the returns of `cloud` in place, in their order, with their channels; calls
+/// `missing(i)` for each cell i without a return (in order) before it leaves. Returns the
+/// number kept.
+template <typename Missing>
+std::size_t keep_returns(PointCloud& cloud, Missing&& missing) {
+  const std::size_t n = cloud.size();
+  const bool intensity = cloud.has_intensity();
+  const bool ring = cloud.has_ring();
+  const bool time = cloud.has_time();
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!is_return(cloud.points_S[i])) {
+      missing(i);
+      continue;
+    }
+    if (kept != i) {
+      cloud.points_S[kept] = cloud.points_S[i];
+      if (intensity) cloud.intensity[kept] = cloud.intensity[i];
+      if (ring) cloud.ring[kept] = cloud.ring[i];
+      if (time) cloud.time_offset_s[kept] = cloud.time_offset_s[i];
+    }
+    ++kept;
+  }
+  cloud.points_S.resize(kept);
+  if (intensity) cloud.intensity.resize(kept);
+  if (ring) cloud.ring.resize(kept);
+  if (time) cloud.time_offset_s.resize(kept);
+  return kept;
+}
+
+double elevation_of(const Eigen::Vector3f& p) {
+  return std::atan2(static_cast<double>(p.z()),
+                    std::hypot(static_cast<double>(p.x()), static_cast<double>(p.y())));
+}
+
+/// The share of rows (`by_row`) or of columns along which the ring channel is constant.
+double ring_constant_share(const PointCloud& cloud, std::size_t rows, std::size_t cols,
+                           bool by_row) {
+  const std::size_t lines = by_row ? rows : cols;
+  const std::size_t along = by_row ? cols : rows;
+  std::size_t constant = 0;
+  for (std::size_t l = 0; l < lines; ++l) {
+    const auto at = [&](std::size_t k) { return by_row ? l * cols + k : k * cols + l; };
+    const std::uint16_t first = cloud.ring[at(0)];
+    bool same = true;
+    for (std::size_t k = 1; k < along && same; ++k) same = cloud.ring[at(k)] == first;
+    constant += same ? 1 : 0;
+  }
+  return static_cast<double>(constant) / static_cast<double>(lines);
+}
+
+/// Σ over lines of the squared deviations of their returns' elevations from the line's mean,
+/// over the returns: the mean spread of elevation within a line (rad²).
+double within_spread(const std::vector<double>& sum, const std::vector<double>& sq,
+                     const std::vector<std::uint32_t>& n) {
+  double spread = 0.0;
+  std::uint64_t count = 0;
+  for (std::size_t l = 0; l < n.size(); ++l) {
+    if (n[l] == 0) continue;
+    spread += sq[l] - sum[l] * sum[l] / n[l];
+    count += n[l];
+  }
+  return count > 0 ? spread / static_cast<double>(count) : 0.0;
+}
+
+/// Rebuilds `cloud` as `beams` × `firings` cells: beam b is the source beam order[b] (a row of
+/// the source grid, or its column when `transposed`). Channels follow; capacity is kept.
+void regrid(PointCloud& cloud, std::size_t cols, bool transposed, std::size_t firings,
+            const std::vector<std::uint32_t>& order, PointCloud& moved) {
+  const bool intensity = cloud.has_intensity();
+  const bool ring = cloud.has_ring();
+  const bool time = cloud.has_time();
+  moved.points_S.clear();
+  moved.intensity.clear();
+  moved.ring.clear();
+  moved.time_offset_s.clear();
+  for (const std::uint32_t b : order) {
+    for (std::size_t f = 0; f < firings; ++f) {
+      const std::size_t i = transposed ? f * cols + b : b * cols + f;
+      moved.points_S.push_back(cloud.points_S[i]);
+      if (intensity) moved.intensity.push_back(cloud.intensity[i]);
+      if (ring) moved.ring.push_back(cloud.ring[i]);
+      if (time) moved.time_offset_s.push_back(cloud.time_offset_s[i]);
+    }
+  }
+  cloud.points_S.swap(moved.points_S);
+  cloud.intensity.swap(moved.intensity);
+  cloud.ring.swap(moved.ring);
+  cloud.time_offset_s.swap(moved.time_offset_s);
+}
+
 }  // namespace
+
+SweepLayout sweep_layout(const PointCloud& cloud, std::size_t rows, std::size_t cols,
+                         OrganisedScratch& scratch) {
+  TARMAC_ASSERT(rows * cols == cloud.size() && cloud.consistent(),
+                "sweep_layout: rows * cols must equal the point count");
+  if (rows < 2 || cols < 2) return SweepLayout::kUndecided;
+  // A ring constant along the rows and not along the columns names the beam axis.
+  constexpr double kMost = 0.9, kFew = 0.5;
+  if (cloud.has_ring()) {
+    const double along_rows = ring_constant_share(cloud, rows, cols, true);
+    const double along_cols = ring_constant_share(cloud, rows, cols, false);
+    if (along_rows >= kMost && along_cols < kFew) return SweepLayout::kRowsAreBeams;
+    if (along_cols >= kMost && along_rows < kFew) return SweepLayout::kRowsAreFirings;
+  }
+  // Else the returns' elevation: nearly constant along a beam, spread across the beams.
+  auto& s = scratch;
+  s.row_sum.assign(rows, 0.0);
+  s.row_sq.assign(rows, 0.0);
+  s.row_n.assign(rows, 0);
+  s.col_sum.assign(cols, 0.0);
+  s.col_sq.assign(cols, 0.0);
+  s.col_n.assign(cols, 0);
+  for (std::size_t r = 0; r < rows; ++r) {
+    for (std::size_t c = 0; c < cols; ++c) {
+      const Eigen::Vector3f& p = cloud.points_S[r * cols + c];
+      if (!is_return(p)) continue;
+      const double e = elevation_of(p);
+      s.row_sum[r] += e;
+      s.row_sq[r] += e * e;
+      ++s.row_n[r];
+      s.col_sum[c] += e;
+      s.col_sq[c] += e * e;
+      ++s.col_n[c];
+    }
+  }
+  if (count_defined(s.row_n) < 2 || count_defined(s.col_n) < 2) return SweepLayout::kUndecided;
+  const double in_rows = within_spread(s.row_sum, s.row_sq, s.row_n);
+  const double in_cols = within_spread(s.col_sum, s.col_sq, s.col_n);
+  constexpr double kRatio = 0.1;
+  if (in_rows < kRatio * in_cols) return SweepLayout::kRowsAreBeams;
+  if (in_cols < kRatio * in_rows) return SweepLayout::kRowsAreFirings;
+  return SweepLayout::kUndecided;
+}
+
+OrganisedCounts organise_sweep(PointCloud& cloud, std::size_t rows, std::size_t cols,
+                               OrganisedScratch& scratch) {
+  TARMAC_ASSERT(rows * cols == cloud.size() && cloud.consistent(),
+                "organise_sweep: rows * cols must equal the point count");
+  const SweepLayout layout = sweep_layout(cloud, rows, cols, scratch);
+  if (layout == SweepLayout::kUndecided) {
+    OrganisedCounts counts;
+    counts.layout = layout;
+    cloud.no_return_S.clear();
+    counts.returns = keep_returns(cloud, [&](std::size_t) { ++counts.underivable; });
+    return counts;
+  }
+  const bool transposed = layout == SweepLayout::kRowsAreFirings;
+  const std::size_t beams = transposed ? cols : rows;
+  const std::size_t firings = transposed ? rows : cols;
+  const auto cell = [&](std::size_t b, std::size_t f) {
+    return transposed ? f * cols + b : b * cols + f;
+  };
+  // Each beam's key: its ring (the first return's, else its first cell's), else its returns'
+  // mean elevation (NaN without any).
+  auto& s = scratch;
+  s.key.assign(beams, std::numeric_limits<double>::quiet_NaN());
+  const bool by_ring = cloud.has_ring();
+  for (std::size_t b = 0; b < beams; ++b) {
+    double sum = 0.0;
+    std::uint32_t n = 0;
+    for (std::size_t f = 0; f < firings; ++f) {
+      const Eigen::Vector3f& p = cloud.points_S[cell(b, f)];
+      if (!is_return(p)) continue;
+      if (by_ring && n == 0) s.key[b] = cloud.ring[cell(b, f)];
+      sum += elevation_of(p);
+      ++n;
+    }
+    if (by_ring && n == 0) s.key[b] = cloud.ring[cell(b, 0)];
+    if (!by_ring && n > 0) s.key[b] = sum / n;
+  }
+  // Monotonic either way (ring 0 at the top or the bottom) over the defined keys: kept.
+  bool rising = true, falling = true;
+  double last = std::numeric_limits<double>::quiet_NaN();
+  for (const double k : s.key) {
+    if (std::isnan(k)) continue;
+    if (!std::isnan(last)) {
+      rising = rising && k >= last;
+      falling = falling && k <= last;
+    }
+    last = k;
+  }
+  const bool reorder = !rising && !falling;
+  s.order.clear();
+  for (std::uint32_t b = 0; b < beams; ++b) {
+    if (!reorder || !std::isnan(s.key[b])) s.order.push_back(b);
+  }
+  if (reorder) {
+    std::stable_sort(s.order.begin(), s.order.end(),
+                     [&](std::uint32_t a, std::uint32_t b) { return s.key[a] < s.key[b]; });
+  }
+  const std::uint64_t dropped_cells = (beams - s.order.size()) * firings;
+  if (transposed || reorder) regrid(cloud, cols, transposed, firings, s.order, s.moved);
+  OrganisedCounts counts = split_organised(cloud, s.order.size(), firings, scratch);
+  counts.underivable += dropped_cells;
+  counts.layout = layout;
+  counts.beams_reordered = reorder;
+  return counts;
+}
 
 OrganisedCounts split_organised(PointCloud& cloud, std::size_t rows, std::size_t cols,
                                 OrganisedScratch& scratch) {
@@ -124,38 +324,19 @@ OrganisedCounts split_organised(PointCloud& cloud, std::size_t rows, std::size_t
 
   // Compact the returns in place (order kept) and rebuild the others' directions.
   cloud.no_return_S.clear();
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < rows * cols; ++i) {
-    if (!is_return(cloud.points_S[i])) {
-      if (!derivable) {
-        ++counts.underivable;
-        continue;
-      }
-      const double elevation =
-          std::clamp(s.row_angle[i / cols], -std::numbers::pi / 2, std::numbers::pi / 2);
-      const double azimuth = s.col_angle[i % cols];
-      cloud.no_return_S.emplace_back(static_cast<float>(std::cos(elevation) * std::cos(azimuth)),
-                                     static_cast<float>(std::cos(elevation) * std::sin(azimuth)),
-                                     static_cast<float>(std::sin(elevation)));
-      ++counts.no_returns;
-      continue;
+  counts.returns = keep_returns(cloud, [&](std::size_t i) {
+    if (!derivable) {
+      ++counts.underivable;
+      return;
     }
-    if (kept != i) {
-      cloud.points_S[kept] = cloud.points_S[i];
-      if (cloud.has_intensity()) cloud.intensity[kept] = cloud.intensity[i];
-      if (cloud.has_ring()) cloud.ring[kept] = cloud.ring[i];
-      if (cloud.has_time()) cloud.time_offset_s[kept] = cloud.time_offset_s[i];
-    }
-    ++kept;
-  }
-  const bool intensity = cloud.has_intensity();
-  const bool ring = cloud.has_ring();
-  const bool time = cloud.has_time();
-  cloud.points_S.resize(kept);
-  if (intensity) cloud.intensity.resize(kept);
-  if (ring) cloud.ring.resize(kept);
-  if (time) cloud.time_offset_s.resize(kept);
-  counts.returns = kept;
+    const double elevation =
+        std::clamp(s.row_angle[i / cols], -std::numbers::pi / 2, std::numbers::pi / 2);
+    const double azimuth = s.col_angle[i % cols];
+    cloud.no_return_S.emplace_back(static_cast<float>(std::cos(elevation) * std::cos(azimuth)),
+                                   static_cast<float>(std::cos(elevation) * std::sin(azimuth)),
+                                   static_cast<float>(std::sin(elevation)));
+    ++counts.no_returns;
+  });
   return counts;
 }
 

@@ -54,6 +54,7 @@ class Executor::Impl {
     core::PointCloud& slot() override { return owner_.scheduler.slot(owner_.drops); }
     void commit() override { owner_.scheduler.commit(sensor_, owner_.tick_ns, owner_.rejections); }
     void reject(std::string_view reason) override { owner_.rejections.add(reason); }
+    void count(std::string_view reason) override { owner_.drops.add(reason); }
 
    private:
     Impl& owner_;

@@ -78,7 +78,8 @@ void TickReport::declare_reasons(ReasonCounters& drops, ReasonCounters& rejectio
        {"queue.scan_overflow", "queue.pose_overflow", "scan.shed_pending_full", "scan.pose_timeout",
         "scan.pose_before_buffer", "scan.pose_gap", "points.non_finite", "points.too_close",
         "points.ego_vehicle", "points.isolated", "points.no_return_refused", "scan.tsdf_shed_quota",
-        "scan.deskew_span", "pose.clock_step", "transport.pose_lost"}) {
+        "scan.deskew_span", "scan.layout_undecided", "scan.time_unrelated", "pose.clock_step",
+        "transport.pose_lost"}) {
     drops.declare(r);
   }
   for (const char* r : {"scan.unknown_frame",

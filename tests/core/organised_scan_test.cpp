@@ -1,5 +1,6 @@
 #include "tarmac/core/organised_scan.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -101,6 +102,175 @@ TEST(OrganisedScan, TooFewReturnsToRebuildDirections_CountedNotGuessed) {
   EXPECT_EQ(counts.underivable, 24u);
   EXPECT_TRUE(cloud.no_return_S.empty());
   EXPECT_EQ(cloud.size(), 8u);
+}
+
+// ---- organise_sweep: each driver's layout back to beams x firings ----
+
+/// The reference sweep of these tests, beams × firings (rows = beams, lowest first), as
+/// ouster-ros would send it but for its ring order: 16 beams over -15..15 deg, 90 firings; the
+/// top 4 beams see sky, every 7th cell below drops its return; ring = beam index when `ring`.
+PointCloud reference_sweep(bool ring) {
+  const auto hit = [](int r, int c) { return r < 12 && (r * 90 + c) % 7 != 3; };
+  PointCloud cloud = sweep(16, 90, -15.0, 15.0, hit);
+  if (ring) {
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      cloud.ring.push_back(static_cast<std::uint16_t>(i / 90));
+    }
+  }
+  return cloud;
+}
+
+/// `cloud` (rows × cols) with its grid rearranged: cell (r, c) of the result is cell
+/// `from(r, c)` of the source; the result has `rows` × `cols` cells too.
+template <typename From>
+PointCloud rearranged(const PointCloud& cloud, std::size_t rows, std::size_t cols, From from) {
+  PointCloud out;
+  for (std::size_t r = 0; r < rows; ++r) {
+    for (std::size_t c = 0; c < cols; ++c) {
+      const std::size_t i = from(r, c);
+      out.points_S.push_back(cloud.points_S[i]);
+      out.intensity.push_back(cloud.intensity[i]);
+      if (cloud.has_ring()) out.ring.push_back(cloud.ring[i]);
+    }
+  }
+  return out;
+}
+
+/// Expects `got` (organised by organise_sweep) to hold exactly what split_organised makes of
+/// the reference sweep: the same returns with their channels, the same rebuilt directions.
+void expect_as_reference(const PointCloud& got, const OrganisedCounts& counts, bool ring) {
+  PointCloud want = reference_sweep(ring);
+  OrganisedScratch scratch;
+  const OrganisedCounts want_counts = split_organised(want, 16, 90, scratch);
+  EXPECT_EQ(counts.returns, want_counts.returns);
+  EXPECT_EQ(counts.no_returns, want_counts.no_returns);
+  EXPECT_EQ(counts.underivable, want_counts.underivable);
+  ASSERT_EQ(got.size(), want.size());
+  EXPECT_EQ(got.points_S, want.points_S);
+  EXPECT_EQ(got.intensity, want.intensity);
+  EXPECT_EQ(got.ring, want.ring);
+  ASSERT_EQ(got.no_return_S.size(), want.no_return_S.size());
+  for (std::size_t k = 0; k < want.no_return_S.size(); ++k) {
+    ASSERT_LT((got.no_return_S[k] - want.no_return_S[k]).norm(), 1e-6f) << "no-return " << k;
+  }
+}
+
+TEST(OrganiseSweep, RowsAreBeams_OusterTopFirst_SameAsSplitOrganised) {
+  // ouster-ros: ring 0 is the top beam, so the rows come highest first.
+  for (const bool ring : {true, false}) {
+    SCOPED_TRACE(ring ? "with ring" : "without ring");
+    const PointCloud ref = reference_sweep(ring);
+    PointCloud cloud =
+        rearranged(ref, 16, 90, [](std::size_t r, std::size_t c) { return (15 - r) * 90 + c; });
+    OrganisedScratch scratch;
+    const OrganisedCounts counts = organise_sweep(cloud, 16, 90, scratch);
+    EXPECT_EQ(counts.layout, SweepLayout::kRowsAreBeams);
+    EXPECT_FALSE(counts.beams_reordered);  // monotonic, top first
+    // The same cells, beams in the other order: the same returns and directions, beam by beam
+    // from the top.
+    PointCloud want =
+        rearranged(ref, 16, 90, [](std::size_t r, std::size_t c) { return (15 - r) * 90 + c; });
+    split_organised(want, 16, 90, scratch);
+    EXPECT_EQ(cloud.points_S, want.points_S);
+    ASSERT_EQ(cloud.no_return_S.size(), want.no_return_S.size());
+    EXPECT_GT(counts.no_returns, 4u * 90u);  // the sky beams are rebuilt (extrapolated)
+    EXPECT_EQ(counts.underivable, 0u);
+  }
+}
+
+TEST(OrganiseSweep, RowsAreFirings_VelodyneColumnsInRingOrder_Transposed) {
+  // velodyne organize_cloud: one row per firing, one column per laser (ring order).
+  for (const bool ring : {true, false}) {
+    SCOPED_TRACE(ring ? "with ring" : "without ring (elevation spread)");
+    const PointCloud ref = reference_sweep(ring);
+    PointCloud cloud =
+        rearranged(ref, 90, 16, [](std::size_t r, std::size_t c) { return c * 90 + r; });
+    OrganisedScratch scratch;
+    EXPECT_EQ(sweep_layout(cloud, 90, 16, scratch), SweepLayout::kRowsAreFirings);
+    const OrganisedCounts counts = organise_sweep(cloud, 90, 16, scratch);
+    EXPECT_EQ(counts.layout, SweepLayout::kRowsAreFirings);
+    EXPECT_FALSE(counts.beams_reordered);
+    expect_as_reference(cloud, counts, ring);
+  }
+}
+
+/// The reference sweep as rslidar_sdk sends it (ros_send_by_rows: false): one row per firing,
+/// columns in the raw channel order, interleaved in elevation; XYZIRT's ring is the elevation
+/// rank, XYZI (`ring` false) has none.
+PointCloud robosense_sweep(bool ring) {
+  constexpr std::size_t kChannel[16] = {0, 8, 1, 9, 2, 10, 3, 11, 4, 12, 5, 13, 6, 14, 7, 15};
+  return rearranged(reference_sweep(ring), 90, 16,
+                    [&](std::size_t r, std::size_t c) { return kChannel[c] * 90 + r; });
+}
+
+TEST(OrganiseSweep, RowsAreFirings_RoboSenseRawChannelOrder_BeamsSortedByRing) {
+  PointCloud cloud = robosense_sweep(true);
+  OrganisedScratch scratch;
+  const OrganisedCounts counts = organise_sweep(cloud, 90, 16, scratch);
+  EXPECT_EQ(counts.layout, SweepLayout::kRowsAreFirings);
+  EXPECT_TRUE(counts.beams_reordered);
+  expect_as_reference(cloud, counts, true);
+}
+
+TEST(OrganiseSweep, RawChannelOrderWithoutRing_SortedByElevation_BeamsWithoutReturnDropped) {
+  // The same without a ring (rslidar_sdk's default XYZI): the beams that returned are sorted
+  // by their measured elevation; the four sky beams cannot be placed and clear nothing.
+  const PointCloud ref = reference_sweep(false);
+  PointCloud cloud = robosense_sweep(false);
+  OrganisedScratch scratch;
+  const OrganisedCounts counts = organise_sweep(cloud, 90, 16, scratch);
+  EXPECT_EQ(counts.layout, SweepLayout::kRowsAreFirings);
+  EXPECT_TRUE(counts.beams_reordered);
+  EXPECT_EQ(counts.underivable, 4u * 90u);
+  // The twelve beams that returned: what split_organised makes of them alone.
+  PointCloud want =
+      rearranged(ref, 12, 90, [](std::size_t r, std::size_t c) { return r * 90 + c; });
+  split_organised(want, 12, 90, scratch);
+  EXPECT_EQ(cloud.points_S, want.points_S);
+  ASSERT_EQ(cloud.no_return_S.size(), want.no_return_S.size());
+  for (std::size_t k = 0; k < want.no_return_S.size(); ++k) {
+    ASSERT_LT((cloud.no_return_S[k] - want.no_return_S[k]).norm(), 1e-6f) << k;
+  }
+}
+
+TEST(OrganiseSweep, RingThatSaysNothing_ElevationDecides) {
+  // A driver that fills ring with 0: the elevation spread still tells firings from beams.
+  PointCloud ref = reference_sweep(true);
+  std::fill(ref.ring.begin(), ref.ring.end(), std::uint16_t{0});
+  PointCloud cloud =
+      rearranged(ref, 90, 16, [](std::size_t r, std::size_t c) { return c * 90 + r; });
+  OrganisedScratch scratch;
+  EXPECT_EQ(sweep_layout(cloud, 90, 16, scratch), SweepLayout::kRowsAreFirings);
+}
+
+TEST(OrganiseSweep, LayoutThatCannotBeTold_IntegratedAsUnorganised_NoReturnsDropped) {
+  // Returns at random elevations in both directions of the grid (no beam axis), NaN between.
+  PointCloud cloud;
+  std::uint32_t state = 12345;
+  const auto next = [&] {
+    state = state * 1664525u + 1013904223u;
+    return static_cast<double>(state >> 8) / static_cast<double>(1u << 24);
+  };
+  std::size_t returns = 0;
+  for (int i = 0; i < 32 * 32; ++i) {
+    if (i % 5 == 0) {
+      cloud.points_S.push_back(Eigen::Vector3f::Constant(kNaN));
+      continue;
+    }
+    const double el = (next() - 0.5) * 0.6, az = next() * 6.28;
+    cloud.points_S.emplace_back(static_cast<float>(10 * std::cos(el) * std::cos(az)),
+                                static_cast<float>(10 * std::cos(el) * std::sin(az)),
+                                static_cast<float>(10 * std::sin(el)));
+    ++returns;
+  }
+  OrganisedScratch scratch;
+  const OrganisedCounts counts = organise_sweep(cloud, 32, 32, scratch);
+  EXPECT_EQ(counts.layout, SweepLayout::kUndecided);
+  EXPECT_EQ(counts.returns, returns);
+  EXPECT_EQ(counts.underivable, 32u * 32u - returns);
+  EXPECT_EQ(counts.no_returns, 0u);
+  EXPECT_TRUE(cloud.no_return_S.empty());
+  EXPECT_EQ(cloud.size(), returns);
 }
 
 }  // namespace

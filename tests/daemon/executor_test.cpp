@@ -213,6 +213,22 @@ TEST_F(Daemon, Replay_CostmapEqualsOfflineCore_WithRandomPublishJitter) {
   EXPECT_EQ(tsdf_digest_, offline_tsdf_digest(test_config(0, 2), kScans));
 }
 
+TEST_F(Daemon, Replay_RowsAreFirings_CostmapEqualsOfflineCore) {
+  // The sweeps as velodyne's driver (organize_cloud) sends them: one row per firing, one column
+  // per laser; with a ring field, then without (the elevation spread tells the layout). tarmacd
+  // puts them back as beams: the same map as the rows = beams sweeps offline, bit for bit.
+  for (const bool ring : {true, false}) {
+    SCOPED_TRACE(ring ? "with ring" : "without ring");
+    const std::string got =
+        replayed_digest(ring ? test::kDomainDaemonLayoutRing : test::kDomainDaemonLayoutElevation,
+                        2, 0.0, {}, sequence(), 2.0, [ring](tools::ReplayOptions& o) {
+                          o.layout = tools::ReplayOptions::Layout::kRowsAreFirings;
+                          o.ring_field = ring;
+                        });
+    EXPECT_EQ(got, offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_));
+  }
+}
+
 TEST_F(Daemon, EsdfBand_PublishedBoxEqualsOfflineCore) {
   const auto band_config = [](config::Config& c) {
     c.mapping.esdf_band.enabled = true;

@@ -55,6 +55,8 @@ enum Domain : std::uint32_t {
   kDomainDaemonStopReady = 151,
   kDomainDaemonStopSlowRate = 152,
   kDomainDaemonPaging = 153,
+  kDomainDaemonLayoutRing = 154,
+  kDomainDaemonLayoutElevation = 155,
   // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 160..169
   kDomainCycloneUdpClouds = 160,
   kDomainCycloneTinyBuffer = 161,

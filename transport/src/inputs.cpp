@@ -63,13 +63,19 @@ std::size_t ScanInput::drain(ScanSink& sink) {
       return;
     }
     core::PointCloud& cloud = sink.slot();
-    if (auto parsed = from_point_cloud2(msg, cloud); !parsed) {
+    CloudNotes notes;
+    if (auto parsed = from_point_cloud2(msg, cloud, &notes); !parsed) {
       sink.reject(parsed.error().code);
       return;
     }
-    // An organised cloud (height > 1) is a spinning LiDAR's sweep, rows = beams: its cells
-    // without a return become beams that clear free space (organised_scan.hpp).
-    if (msg.height() > 1) core::split_organised(cloud, msg.height(), msg.width(), impl_->organised);
+    if (notes.time_unrelated) sink.count("scan.time_unrelated");
+    // An organised cloud (height > 1) is a spinning LiDAR's sweep, rows = beams or rows =
+    // firings: its cells without a return become beams that clear free space
+    // (organised_scan.hpp); a layout the data cannot tell is integrated as unorganised.
+    if (msg.height() > 1) {
+      const auto counts = core::organise_sweep(cloud, msg.height(), msg.width(), impl_->organised);
+      if (counts.layout == core::SweepLayout::kUndecided) sink.count("scan.layout_undecided");
+    }
     sink.commit();
   });
 }

@@ -106,7 +106,7 @@ core::Status read_organised_scan(const std::filesystem::path& file, std::size_t 
                                            " cells, organised/shape.txt says " +
                                            std::to_string(rows) + " x " + std::to_string(cols)};
   }
-  core::split_organised(cloud, rows, cols, scratch);
+  core::organise_sweep(cloud, rows, cols, scratch);
   return core::Ok{};
 }
 

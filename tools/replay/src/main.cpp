@@ -77,6 +77,14 @@ int main(int argc, char** argv) {
                  "wait for N matched readers of the poses before the first message (1: tarmacd; "
                  "2 with tarmac-audit --score)")
       ->transform(cli::positive<std::size_t>());
+  std::string layout = "beams";
+  app.add_option("--layout", layout,
+                 "an organised sequence's sweeps as 'beams' (rows = beams, as ouster-ros) or "
+                 "'firings' (rows = firings, one column per laser, as velodyne's "
+                 "organize_cloud and rslidar_sdk)")
+      ->check(CLI::IsMember({"beams", "firings"}));
+  app.add_flag("--ring", options.ring_field,
+               "an organised sequence's sweeps carry a ring field (uint16, 0 = lowest beam)");
   std::size_t pace_ahead = 0;
   double pace_patience_s = 60.0;
   app.add_option("--pace-costmap", pace_ahead,
@@ -88,6 +96,7 @@ int main(int argc, char** argv) {
                  "with --pace-costmap: give up (exit 69) when no newer costmap came for S seconds")
       ->transform(cli::positive<double>());
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
+  if (layout == "firings") options.layout = tools::ReplayOptions::Layout::kRowsAreFirings;
   config::Config cfg;
   cfg.dds.participant.name = "tarmac-replay";
   if (!config_path.empty()) {

@@ -51,6 +51,24 @@ std::int64_t replay_stamp(std::int64_t t_ns, const KittiSequence& seq, std::size
          std::llround((static_cast<double>(t_ns) / 1e9 - seq.times_s[0]) * 1e9 / rate_scale);
 }
 
+/// `cloud` (rows × cols, row-major, channels with it) transposed to cols × rows, in place
+/// (`scratch` holds the other copy).
+void transpose(core::PointCloud& cloud, std::size_t rows, std::size_t cols,
+               core::PointCloud& scratch) {
+  const auto swap_in = [&](auto& channel, auto& spare) {
+    if (channel.empty()) return;
+    spare.resize(channel.size());
+    for (std::size_t r = 0; r < rows; ++r) {
+      for (std::size_t c = 0; c < cols; ++c) spare[c * rows + r] = channel[r * cols + c];
+    }
+    channel.swap(spare);
+  };
+  swap_in(cloud.points_S, scratch.points_S);
+  swap_in(cloud.intensity, scratch.intensity);
+  swap_in(cloud.ring, scratch.ring);
+  swap_in(cloud.time_offset_s, scratch.time_offset_s);
+}
+
 }  // namespace
 
 Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometry3d& T_B_S) {
@@ -184,7 +202,7 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   std::stable_sort(events.begin(), events.end(),
                    [](const Event& a, const Event& b) { return a.publish_ns < b.publish_ns; });
 
-  core::PointCloud cloud;
+  core::PointCloud cloud, transposed;
   std::size_t published_scans = 0;
   std::size_t next_to_pace = 0;  // the first scan whose messages have not been paced yet
   for (const Event& e : events) {
@@ -236,10 +254,23 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
       }
       cloud.frame_id = options.frame_id;
       cloud.stamp_ns = stamps[e.index];
+      std::size_t height = seq.rows, width = seq.cols;
+      if (organised) {
+        if (options.ring_field) {
+          cloud.ring.resize(cloud.size());
+          for (std::size_t i = 0; i < cloud.size(); ++i) {
+            cloud.ring[i] = static_cast<std::uint16_t>(i / seq.cols);
+          }
+        }
+        if (options.layout == ReplayOptions::Layout::kRowsAreFirings) {
+          transpose(cloud, seq.rows, seq.cols, transposed);
+          std::swap(height, width);
+        }
+      }
       auto msg = transport::to_point_cloud2(cloud);
       if (organised) {
-        msg.height(static_cast<std::uint32_t>(seq.rows));
-        msg.width(static_cast<std::uint32_t>(seq.cols));
+        msg.height(static_cast<std::uint32_t>(height));
+        msg.width(static_cast<std::uint32_t>(width));
         msg.row_step(msg.point_step() * msg.width());
         msg.is_dense(false);
       }

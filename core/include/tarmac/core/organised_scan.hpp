@@ -21,20 +21,62 @@
 
 namespace tarmac::core {
 
-/// What split_organised found.
+/// How an organised cloud's grid lies. Drivers differ: ouster-ros publishes one row per beam
+/// (columns in firing order); the Velodyne driver (`organize_cloud: true`) and rslidar_sdk
+/// (`ros_send_by_rows: false`) one row per firing, one column per laser.
+enum class SweepLayout : std::uint8_t {
+  kRowsAreBeams,
+  kRowsAreFirings,
+  kUndecided,  ///< neither could be told from the data
+};
+
+/// What split_organised (organise_sweep) found.
 struct OrganisedCounts {
   std::uint64_t returns = 0;     ///< cells with a return (kept as points)
   std::uint64_t no_returns = 0;  ///< cells without a return, direction rebuilt (no_return_S)
   /// Cells without a return whose direction could not be rebuilt (fewer than two rows or no
-  /// column with returns in the scan): dropped, they clear nothing.
+  /// column with returns in the scan; a beam without any return whose place among the others
+  /// is unknown; any cell of an undecided layout): dropped, they clear nothing.
   std::uint64_t underivable = 0;
+  SweepLayout layout = SweepLayout::kRowsAreBeams;  ///< organise_sweep: the layout found
+  bool beams_reordered = false;  ///< organise_sweep: the beams were not in elevation order
 };
 
-/// Buffers for split_organised, kept by the caller so that steady-state calls do not allocate.
+/// Buffers for split_organised and organise_sweep, kept by the caller so that steady-state
+/// calls do not allocate.
 struct OrganisedScratch {
   std::vector<double> row_sum, col_x, col_y, row_angle, col_angle;
   std::vector<std::uint32_t> row_n, col_n;
+  std::vector<double> row_sq, col_sum, col_sq;  ///< elevation moments (layout)
+  std::vector<std::uint32_t> order;             ///< beams in elevation order
+  std::vector<double> key;                      ///< each beam's sort key
+  PointCloud moved;                             ///< the grid transposed or its rows permuted
 };
+
+/// Decides the layout of the organised `cloud` (rows × cols cells, row-major). With a ring
+/// channel: rows are beams when the ring is constant along (nearly) every row and not along the
+/// columns, firings in the converse case. Otherwise, or when the ring decides nothing (e.g.
+/// always 0): the axis along which the returns' elevation stays put is the beam's — rows are
+/// beams when the mean spread of elevation within a row is under a tenth of that within a
+/// column, firings in the converse case. kUndecided otherwise, or with fewer than two rows,
+/// two columns, or returns in fewer than two rows and two columns.
+/// @pre rows * cols == cloud.size() and cloud.consistent()
+SweepLayout sweep_layout(const PointCloud& cloud, std::size_t rows, std::size_t cols,
+                         OrganisedScratch& scratch);
+
+/// Organises the organised `cloud` (rows × cols cells, row-major, as the driver sent it) as
+/// beams × firings and splits it (split_organised):
+/// 1. its layout (sweep_layout); rows = firings are transposed;
+/// 2. the beams in elevation order (split_organised interpolates between neighbouring beams):
+///    by ring when the cloud has one (ring 0 at the top or at the bottom, both monotonic); else
+///    kept when the beams' measured elevations are already monotonic, else sorted by them, and
+///    the cells of a beam without any return are dropped (its place is unknown);
+/// 3. an undecided layout is never guessed: the returns are kept as an unorganised cloud's,
+///    the cells without a return dropped (underivable).
+/// The channels follow their points. RT-safe once the scratch has grown to the sweep's size.
+/// @pre rows * cols == cloud.size() and cloud.consistent()
+OrganisedCounts organise_sweep(PointCloud& cloud, std::size_t rows, std::size_t cols,
+                               OrganisedScratch& scratch);
 
 /// Splits the organised `cloud` (rows × cols cells, row-major; its channels as long as its
 /// points) in place: the returns stay in `points_S` (and the channels) in their order, the

@@ -31,6 +31,9 @@ class ScanSink {
   virtual void commit() = 0;
   /// A scan was rejected; `reason` is a stable code, e.g. "pointcloud.bad_size".
   virtual void reject(std::string_view reason) = 0;
+  /// The scan being parsed is taken, with something worth counting: `reason` is a stable code,
+  /// e.g. "scan.layout_undecided" (an organised cloud integrated as unorganised).
+  virtual void count(std::string_view reason) = 0;
 };
 
 /// One LiDAR's PointCloud2 topic.

@@ -69,6 +69,13 @@ struct ReplayOptions {
   /// Each correction is sent this long before its scan instead (its stamp unchanged): tests
   /// that tarmacd applies it by stamp, not on arrival.
   double correction_lead_s = 0.0;
+  /// How an organised sequence (tarmac-sim's organised/ sweeps, beams × azimuths) goes out, as
+  /// the drivers publish theirs (docs/ros2.md, "LiDAR drivers"): rows = beams (ouster-ros), or
+  /// rows = firings with one column per laser (velodyne's organize_cloud, rslidar_sdk).
+  enum class Layout : std::uint8_t { kRowsAreBeams, kRowsAreFirings };
+  Layout layout = Layout::kRowsAreBeams;
+  /// With an organised sequence: a `ring` field (uint16, the beam's index, 0 = lowest) too.
+  bool ring_field = false;
   /// Called after each scan is published (index, count); e.g. a progress bar.
   std::function<void(std::size_t, std::size_t)> progress;
   /// Empty: the schedule alone sets the pace. Otherwise called before the first message (pose
