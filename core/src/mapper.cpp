@@ -27,6 +27,56 @@ void rotate_directions(const Eigen::Isometry3d& T_W_S, std::span<const Eigen::Ve
   for (std::size_t i = 0; i < dirs_S.size(); ++i) dirs_W[i] = R_W_S * dirs_S[i];
 }
 
+/// The ground's height relative to the sensor (along `up`, so negative), from the scan's own
+/// returns: the median height of the returns of descending beams between 2 and 30 m away
+/// horizontally, most of which, on an apron or a road, are the ground; obstacles among them
+/// only raise it (a conservative error below). Without 32 such returns: the base frame's plane.
+/// Deterministic: a function of the scan and its pose.
+double ground_below_sensor(const Eigen::Isometry3d& T_W_B, const Eigen::Vector3d& sensor_W,
+                           std::span<const Eigen::Vector3f> points_W, std::vector<float>& heights) {
+  const Eigen::Vector3d up = T_W_B.linear().col(2);
+  heights.clear();
+  for (const Eigen::Vector3f& p : points_W) {
+    if (!p.allFinite()) continue;
+    const Eigen::Vector3d rel = p.cast<double>() - sensor_W;
+    const double h = up.dot(rel);
+    const double planar_sq = rel.squaredNorm() - h * h;
+    if (h < 0.0 && planar_sq >= 4.0 && planar_sq <= 900.0) heights.push_back(static_cast<float>(h));
+  }
+  if (heights.size() < 32) return up.dot(T_W_B.translation() - sensor_W);
+  const auto mid = heights.begin() + static_cast<std::ptrdiff_t>(heights.size() / 2);
+  std::nth_element(heights.begin(), mid, heights.end());
+  return *mid;
+}
+
+/// A beam without a return that descends towards the ground crossed it, or something dark
+/// before it: it shows free air only down to one voxel above the ground, never the ground or
+/// what lies under it (which would lower the costmap's ground estimate and make the real ground
+/// read as an obstacle above it). The ground here is a plane normal to the base frame's z axis
+/// ("up" for the costmap too) at `ground_h` along it from the sensor (ground_below_sensor).
+/// Each such direction is scaled to the fraction of `clear_range_m` it clears
+/// (OccupancyMap::integrate); one that would clear less than a voxel is dropped. Returns the
+/// number of beams shortened or dropped.
+std::uint64_t clip_at_ground(const Eigen::Vector3d& up, double ground_h, double clear_range_m,
+                             double voxel_m, std::vector<Eigen::Vector3f>& dirs_W) {
+  if (!(clear_range_m > 0.0)) return 0;
+  const double above = -ground_h - voxel_m;  // the sensor's height over the plane, less a voxel
+  std::uint64_t clipped = 0;
+  std::size_t kept = 0;
+  for (const Eigen::Vector3f& d : dirs_W) {
+    const double descent = -up.dot(d.cast<double>());  // per metre along the (unit) beam
+    double length = clear_range_m;
+    if (descent > 0.0 && above < descent * clear_range_m) length = above / descent;
+    if (length < clear_range_m) {
+      ++clipped;
+      if (length < voxel_m) continue;
+    }
+    dirs_W[kept++] = d * static_cast<float>(length / clear_range_m);
+  }
+  dirs_W.resize(kept);
+  return clipped;
+}
+
 /// Keeps the usable directions of beams without return, normalised, in `out`; counts both.
 void accept_no_returns(std::span<const Eigen::Vector3f> dirs_S, std::vector<Eigen::Vector3f>& out,
                        FilterCounts& counts) {
@@ -82,6 +132,7 @@ Mapper::Mapper(const MapperParams& params)
   points_W_.clear();
   clearing_W_.reserve(kWarmUpPoints / 2);  // an organised 64 x 1024 sweep into the open sky
   no_return_scratch_S_.reserve(kWarmUpPoints / 2);
+  ground_heights_.reserve(kWarmUpPoints);
   SerialRunner serial;
   build_costmap(map_, params_.costmap, T_W_B_, {}, 0, layers_, serial);
   // The 3D band likewise (about 50 MB of states, scratch and field at the default window).
@@ -121,6 +172,9 @@ FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
       retained_.empty() ? no_return_scratch_S_ : retained(next_seq_).no_return_S;
   accept_no_returns(cloud.no_return_S, no_return_S, counts);
   rotate_directions(T_W_S, no_return_S, clearing_W_);
+  counts.no_returns_grounded = clip_at_ground(
+      T_W_B.linear().col(2), ground_below_sensor(T_W_B, sensor_W_, points_W_, ground_heights_),
+      params_.occupancy.clearing_range_m, params_.occupancy.voxel_size_m, clearing_W_);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&
         cursor_seq_ <= next_seq_ - retained_.size()) {
@@ -352,6 +406,10 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
     const Eigen::Isometry3d T_W_S = r.T_W_B * r.T_B_S;
     transform_points(T_W_S, r.points_S, rebuild_points_W_);
     rotate_directions(T_W_S, r.no_return_S, rebuild_clearing_W_);
+    clip_at_ground(
+        r.T_W_B.linear().col(2),
+        ground_below_sensor(r.T_W_B, T_W_S.translation(), rebuild_points_W_, ground_heights_),
+        params_.occupancy.clearing_range_m, params_.occupancy.voxel_size_m, rebuild_clearing_W_);
     spare_->recenter(r.T_W_B.translation());
     spare_->set_observation_stamp(r.stamp_ns);
     spare_->integrate(T_W_S.translation(), rebuild_points_W_, rebuild_clearing_W_, runner,

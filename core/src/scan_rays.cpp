@@ -66,7 +66,7 @@ void ScanRays::build(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vec
   for (const Eigen::Vector3f& d : dirs_W) {
     const double norm = d.cast<double>().norm();
     if (!d.allFinite() || norm == 0.0 || clear_range_m <= 0.0) continue;
-    add(d.cast<double>() * (clear_range_m / norm), false, false);
+    add(d.cast<double>() * (clear_range_m * std::min(norm, 1.0) / norm), false, false);
   }
   // Counting sort by bin (stable: the rays of a bin keep the scan's order).
   bin_first_.assign(static_cast<std::size_t>(kAzBins) * kElBins + 1, 0);

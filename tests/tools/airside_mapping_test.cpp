@@ -52,10 +52,12 @@ struct Drive {
 /// Maps the drive up to the vehicle reaching x = stop_x_m, in a map frame tilted by tilt_deg.
 /// base_at_sensor: the poses are the sensor's and the extrinsic is identity (the shipped
 /// config's default), so the "base" is 2 m above the ground.
-Drive drive(double tilt_deg, double stop_x_m, bool base_at_sensor = false) {
+/// dropout: the share of returns the LiDAR loses at random (sim::LidarParams::dropout).
+Drive drive(double tilt_deg, double stop_x_m, bool base_at_sensor = false, double dropout = 0.0) {
   const sim::Scene scene = sim::Scene::airside_default();
   sim::SequenceParams seq;
   seq.tilt_deg = tilt_deg;
+  seq.lidar.dropout = dropout;
   const sim::Lidar lidar(seq.lidar);
   core::Mapper mapper(core::MapperParams{});
   daemon::ThreadPool pool(2);
@@ -146,6 +148,43 @@ TEST(AirsideMapping, BaseFrameAtTheSensor_GroundStillFoundFromTheData) {
   // The ground prior takes only its tilt from the base frame; its height comes from the data, so
   // a base frame 2 m up (identity extrinsic) does not put the envelope into the wing.
   expect_envelope_rule(drive(0.0, 38.0, true));
+}
+
+TEST(AirsideMapping, ReturnsDroppedAtRandom_SameEnvelopeAnswers_NoGroundTurnsLethal) {
+  // Real sensors lose returns on dark, wet or specular spots: the beam then reports none. One
+  // that descends would otherwise clear the ground it crossed and everything under it, and
+  // the ground would read as an obstacle hovering over that free space.
+  const Drive reference = drive(0.0, 38.0);
+  const auto& ref = reference.layers.column_class;
+  for (const double dropout : {0.01, 0.05, 0.10}) {
+    SCOPED_TRACE("dropout " + std::to_string(dropout));
+    const Drive d = drive(0.0, 38.0, false, dropout);
+    expect_envelope_rule(d);
+    // Every obstacle column of the run with dropouts is one of the reference's, or next to one.
+    const auto& got = d.layers.column_class;
+    ASSERT_EQ(got.geometry(), ref.geometry());
+    const auto obstacle = [](const auto& grid, int x, int y) {
+      return x >= 0 && y >= 0 && x < static_cast<int>(grid.width()) &&
+             y < static_cast<int>(grid.height()) &&
+             static_cast<ColumnClass>(
+                 grid.at(static_cast<std::uint32_t>(x), static_cast<std::uint32_t>(y))) ==
+                 ColumnClass::kObstacle;
+    };
+    std::size_t obstacles = 0, new_obstacles = 0;
+    for (int y = 0; y < static_cast<int>(got.height()); ++y) {
+      for (int x = 0; x < static_cast<int>(got.width()); ++x) {
+        if (!obstacle(got, x, y)) continue;
+        ++obstacles;
+        bool near = false;
+        for (int dy = -1; dy <= 1 && !near; ++dy)
+          for (int dx = -1; dx <= 1 && !near; ++dx) near = obstacle(ref, x + dx, y + dy);
+        new_obstacles += near ? 0 : 1;
+      }
+    }
+    std::printf("dropout %.0f %%: %zu obstacle columns, %zu not next to the reference's\n",
+                100.0 * dropout, obstacles, new_obstacles);
+    EXPECT_EQ(new_obstacles, 0u);
+  }
 }
 
 /// Drives the default sequence in the level frame for `scans` scans. `perturb` may edit each

@@ -82,7 +82,9 @@ class TaskRayCursor {
         const Eigen::Vector3f& dir = rays_.dirs[i - n_points_];
         const double norm = dir.cast<double>().norm();
         if (!dir.allFinite() || norm == 0.0 || rays_.clear_range <= 0.0) continue;
-        end_W = origin_W + dir.cast<double>() * (rays_.clear_range / norm);
+        // A direction shorter than unit clears that fraction of the range (OccupancyMap::
+        // integrate); ScanRays::build ends it at the same point.
+        end_W = origin_W + dir.cast<double>() * (rays_.clear_range * std::min(norm, 1.0) / norm);
         include_end = true;
         return true;
       }

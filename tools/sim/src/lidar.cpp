@@ -4,6 +4,7 @@
 #include <bit>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -112,6 +113,10 @@ std::string readme(const SequenceParams& p) {
   s += "  max range         " + number(l.max_range_m) + " m\n";
   s += "  range noise       " + number(l.range_noise_m) + " m (1 sigma), seed " +
        std::to_string(p.seed) + "\n";
+  if (l.dropout > 0.0) {
+    s += "  dropout           " + number(100.0 * l.dropout) +
+         " % of returns lost at random, seed " + std::to_string(l.dropout_seed) + "\n";
+  }
   s += "  rate              " + number(p.rate_hz) + " Hz, " + std::to_string(p.scan_count()) +
        " scans\n";
   s += "  tilt              " + number(p.tilt_deg) + " deg about x (world = Rx(tilt) * scene)\n";
@@ -159,6 +164,7 @@ std::string LidarParams::validate() const {
   }
   if (!(max_range_m > 0.0) || !std::isfinite(max_range_m)) return "max range must be > 0 m";
   if (!(range_noise_m >= 0.0) || !std::isfinite(range_noise_m)) return "noise must be >= 0 m";
+  if (!(dropout >= 0.0 && dropout <= 1.0)) return "dropout must be in [0, 1]";
   return {};
 }
 
@@ -180,6 +186,25 @@ Lidar::Lidar(const LidarParams& params) : params_(params) {
   }
 }
 
+namespace {
+
+/// A uniform number in [0, 1) from (seed, beam, step, time): splitmix64 over the four.
+double dropped(std::uint64_t seed, int beam, int step, double t_s) {
+  std::uint64_t t_bits = 0;
+  std::memcpy(&t_bits, &t_s, sizeof t_bits);
+  std::uint64_t x = seed;
+  for (const std::uint64_t v :
+       {static_cast<std::uint64_t>(beam), static_cast<std::uint64_t>(step), t_bits}) {
+    x += 0x9e3779b97f4a7c15ULL ^ v;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+    x ^= x >> 31;
+  }
+  return static_cast<double>(x >> 11) * 0x1.0p-53;
+}
+
+}  // namespace
+
 void Lidar::scan(const Scene& scene, const Eigen::Isometry3d& T_W_S, double t_s,
                  GaussianNoise* noise, std::vector<LidarReturn>& returns) const {
   returns.clear();
@@ -192,6 +217,9 @@ void Lidar::scan(const Scene& scene, const Eigen::Isometry3d& T_W_S, double t_s,
       const std::optional<Hit> hit =
           scene.raycast(origin_W, R_W_S * dir_S, params_.max_range_m, t_s, &candidates);
       if (!hit) continue;
+      if (params_.dropout > 0.0 && dropped(params_.dropout_seed, b, j, t_s) < params_.dropout) {
+        continue;  // the return was lost (a dark or specular spot): the beam reports none
+      }
       LidarReturn r;
       r.true_range_m = hit->range_m;
       r.range_m = hit->range_m;

@@ -45,6 +45,12 @@ int main(int argc, char** argv) {
   app.add_option("--noise-m", params.lidar.range_noise_m, "Gaussian range noise, 1 sigma, m")
       ->transform(cli::non_negative<double>());
   app.add_option("--seed", params.seed, "noise seed")->transform(cli::number<std::uint64_t>());
+  app.add_option("--dropout", params.lidar.dropout,
+                 "share of returns lost at random (0..1; a real sensor's dark, wet and specular "
+                 "spots): NaN in the organised sweep")
+      ->transform(cli::in_range(0.0, 1.0));
+  app.add_option("--dropout-seed", params.lidar.dropout_seed, "which returns --dropout loses")
+      ->transform(cli::number<std::uint64_t>());
   app.add_option("--tilt-deg", params.tilt_deg, "rotate the poses' world frame about x, deg")
       ->transform(cli::in_range(-180.0, 180.0));
   app.add_option("--scene", scene_name,

@@ -55,7 +55,9 @@ struct FilteredScan {
   Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();  ///< vehicle base pose at the stamp
   Eigen::Vector3d sensor_W = Eigen::Vector3d::Zero();       ///< the sensor's origin
   std::span<const Eigen::Vector3f> points_W;                ///< filtered returns
-  std::span<const Eigen::Vector3f> clearing_W;  ///< beams without return, unit directions
+  /// Beams without return, directions scaled to the fraction of the clearing range they
+  /// clear (unit: all of it; shorter: clipped above the vehicle's ground plane).
+  std::span<const Eigen::Vector3f> clearing_W;
   FilterCounts counts;
 };
 
@@ -227,6 +229,7 @@ class Mapper {
   std::vector<Eigen::Vector3f> clearing_W_;  ///< the last scan's beams without return, world
   std::vector<Eigen::Vector3f> rebuild_clearing_W_;
   std::vector<Eigen::Vector3f> no_return_scratch_S_;  ///< accepted directions when not retained
+  std::vector<float> ground_heights_;  ///< returns' heights for the ground under the sensor
   FilterScratch filter_scratch_;
   PointCloud deskewed_;  ///< the scan after deskew (points only), reused
   Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();

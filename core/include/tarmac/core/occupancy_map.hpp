@@ -124,8 +124,9 @@ class OccupancyMap {
   /// (rays grazing under an aircraft's belly cross the empty bottom of the voxel that holds
   /// the belly surface; they have not shown the surface gone). Non-finite points are skipped
   /// (filters count them). Returns beyond max_range_m clear up to clearing_range_m.
-  /// `clearing_dirs_W` are unit directions of beams with no return: they clear up to
-  /// clearing_range_m. Deterministic for any runner.
+  /// `clearing_dirs_W` are directions of beams with no return: they clear up to
+  /// clearing_range_m times their length when it is below 1 (a beam the mapper clipped at the
+  /// ground plane), up to clearing_range_m otherwise. Deterministic for any runner.
   /// `up_W` is the vehicle's up axis (its base frame's z in the world frame): heights of returns
   /// above the scan's ground (ring_layer_rise_cm) are measured along it, so a world frame that
   /// is not gravity-aligned does not tilt them. A zero or non-finite `up_W` is taken as +z.

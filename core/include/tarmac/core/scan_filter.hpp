@@ -40,6 +40,9 @@ struct FilterCounts {
   std::uint64_t kept = 0;
   std::uint64_t no_returns = 0;          ///< beams without return kept (clear free space)
   std::uint64_t no_returns_refused = 0;  ///< their directions not finite or not ~unit length
+  /// Of the kept, those that descend to the vehicle's ground plane within the clearing range:
+  /// they clear only down to a voxel above it (the shortest not at all).
+  std::uint64_t no_returns_grounded = 0;
 };
 
 /// Buffers of the filter, reused across scans (no allocation after warm-up).

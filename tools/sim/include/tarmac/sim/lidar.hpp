@@ -53,6 +53,12 @@ struct LidarParams {
   int azimuth_steps = 1024;          ///< firings per revolution, >= 1
   double max_range_m = 100.0;        ///< returns beyond this are dropped (> 0)
   double range_noise_m = 0.0;        ///< standard deviation of Gaussian range noise (>= 0)
+  /// Share of returns lost at random (0..1), as real sensors lose them on dark, wet or specular
+  /// surfaces and at grazing angles: the beam then reports no return (NaN in an organised
+  /// sweep). Decided per (beam, azimuth step, scan time) by a hash of `dropout_seed`, so a
+  /// sequence is the same whatever else is simulated.
+  double dropout = 0.0;
+  std::uint64_t dropout_seed = 1;
 
   /// Empty when valid, else what is wrong.
   std::string validate() const;
