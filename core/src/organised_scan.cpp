@@ -156,10 +156,17 @@ void regrid(PointCloud& cloud, std::size_t cols, bool transposed, std::size_t fi
   const bool intensity = cloud.has_intensity();
   const bool ring = cloud.has_ring();
   const bool time = cloud.has_time();
+  // Room for the whole sweep once: the buffers are swapped with the scan slots' below, so
+  // every buffer that circulates holds a sweep after the first.
+  const std::size_t n = order.size() * firings;
   moved.points_S.clear();
+  moved.points_S.reserve(n);
   moved.intensity.clear();
   moved.ring.clear();
   moved.time_offset_s.clear();
+  if (intensity) moved.intensity.reserve(n);
+  if (ring) moved.ring.reserve(n);
+  if (time) moved.time_offset_s.reserve(n);
   for (const std::uint32_t b : order) {
     for (std::size_t f = 0; f < firings; ++f) {
       const std::size_t i = transposed ? f * cols + b : b * cols + f;
@@ -238,23 +245,39 @@ OrganisedCounts organise_sweep(PointCloud& cloud, std::size_t rows, std::size_t 
   const auto cell = [&](std::size_t b, std::size_t f) {
     return transposed ? f * cols + b : b * cols + f;
   };
-  // Each beam's key: its ring (the first return's, else its first cell's), else its returns'
-  // mean elevation (NaN without any).
+  // Each beam's key: its ring (the first return's, else its first cell's) when the beams' rings
+  // are distinct, else its returns' mean elevation (NaN without any). A ring that does not
+  // tell the beams apart (a driver that fills it with 0) must not order them.
   auto& s = scratch;
   s.key.assign(beams, std::numeric_limits<double>::quiet_NaN());
-  const bool by_ring = cloud.has_ring();
-  for (std::size_t b = 0; b < beams; ++b) {
-    double sum = 0.0;
-    std::uint32_t n = 0;
-    for (std::size_t f = 0; f < firings; ++f) {
-      const Eigen::Vector3f& p = cloud.points_S[cell(b, f)];
-      if (!is_return(p)) continue;
-      if (by_ring && n == 0) s.key[b] = cloud.ring[cell(b, f)];
-      sum += elevation_of(p);
-      ++n;
+  bool by_ring = cloud.has_ring();
+  if (by_ring) {
+    for (std::size_t b = 0; b < beams; ++b) {
+      std::size_t first = cell(b, 0);
+      for (std::size_t f = 0; f < firings; ++f) {
+        if (is_return(cloud.points_S[cell(b, f)])) {
+          first = cell(b, f);
+          break;
+        }
+      }
+      s.key[b] = cloud.ring[first];
     }
-    if (by_ring && n == 0) s.key[b] = cloud.ring[cell(b, 0)];
-    if (!by_ring && n > 0) s.key[b] = sum / n;
+    s.row_angle.assign(s.key.begin(), s.key.end());  // a scratch copy, sorted to find repeats
+    std::sort(s.row_angle.begin(), s.row_angle.end());
+    by_ring = std::adjacent_find(s.row_angle.begin(), s.row_angle.end()) == s.row_angle.end();
+  }
+  if (!by_ring) {
+    for (std::size_t b = 0; b < beams; ++b) {
+      double sum = 0.0;
+      std::uint32_t n = 0;
+      for (std::size_t f = 0; f < firings; ++f) {
+        const Eigen::Vector3f& p = cloud.points_S[cell(b, f)];
+        if (!is_return(p)) continue;
+        sum += elevation_of(p);
+        ++n;
+      }
+      s.key[b] = n > 0 ? sum / n : std::numeric_limits<double>::quiet_NaN();
+    }
   }
   // Monotonic either way (ring 0 at the top or the bottom) over the defined keys: kept.
   bool rising = true, falling = true;
@@ -273,8 +296,11 @@ OrganisedCounts organise_sweep(PointCloud& cloud, std::size_t rows, std::size_t 
     if (!reorder || !std::isnan(s.key[b])) s.order.push_back(b);
   }
   if (reorder) {
-    std::stable_sort(s.order.begin(), s.order.end(),
-                     [&](std::uint32_t a, std::uint32_t b) { return s.key[a] < s.key[b]; });
+    // std::sort with the index as tie-break: the order of std::stable_sort without the
+    // temporary buffer it allocates (this runs in the cycle).
+    std::sort(s.order.begin(), s.order.end(), [&](std::uint32_t a, std::uint32_t b) {
+      return s.key[a] < s.key[b] || (s.key[a] == s.key[b] && a < b);
+    });
   }
   const std::uint64_t dropped_cells = (beams - s.order.size()) * firings;
   if (transposed || reorder) regrid(cloud, cols, transposed, firings, s.order, s.moved);

@@ -233,14 +233,21 @@ TEST(OrganiseSweep, RawChannelOrderWithoutRing_SortedByElevation_BeamsWithoutRet
   }
 }
 
-TEST(OrganiseSweep, RingThatSaysNothing_ElevationDecides) {
-  // A driver that fills ring with 0: the elevation spread still tells firings from beams.
-  PointCloud ref = reference_sweep(true);
-  std::fill(ref.ring.begin(), ref.ring.end(), std::uint16_t{0});
-  PointCloud cloud =
-      rearranged(ref, 90, 16, [](std::size_t r, std::size_t c) { return c * 90 + r; });
+TEST(OrganiseSweep, RingThatSaysNothing_ElevationDecidesLayoutAndOrder) {
+  // A driver that fills ring with 0, columns in raw channel order: the elevation spread tells
+  // firings from beams, and the beams are ordered by their measured elevation, not by the ring.
+  PointCloud cloud = robosense_sweep(true);
+  std::fill(cloud.ring.begin(), cloud.ring.end(), std::uint16_t{0});
   OrganisedScratch scratch;
   EXPECT_EQ(sweep_layout(cloud, 90, 16, scratch), SweepLayout::kRowsAreFirings);
+  const OrganisedCounts counts = organise_sweep(cloud, 90, 16, scratch);
+  EXPECT_TRUE(counts.beams_reordered);
+  EXPECT_EQ(counts.underivable, 4u * 90u);  // the sky beams: their place is unknown
+  PointCloud want = rearranged(reference_sweep(false), 12, 90,
+                               [](std::size_t r, std::size_t c) { return r * 90 + c; });
+  split_organised(want, 12, 90, scratch);
+  EXPECT_EQ(cloud.points_S, want.points_S);
+  EXPECT_EQ(cloud.no_return_S.size(), want.no_return_S.size());
 }
 
 TEST(OrganiseSweep, LayoutThatCannotBeTold_IntegratedAsUnorganised_NoReturnsDropped) {

@@ -151,10 +151,7 @@ class Daemon : public test::LoopbackOnly {
         << "no costmap stamped with the last scan";
     EXPECT_EQ(grid.header().frame_id(), "map");
     // The totals are updated right after the tick publishes: give it a moment.
-    for (int i = 0; i < 50 * kTimeScale && executor.get().totals().scans_integrated < n_scans;
-         ++i) {
-      std::this_thread::sleep_for(20ms);
-    }
+    test::eventually([&] { return executor.get().totals().scans_integrated >= n_scans; });
     EXPECT_EQ(executor.get().totals().scans_integrated, n_scans);
     first_stamp_ns_ = stats.value().first_stamp_ns;
     last_stamp_ns_ = stats.value().last_stamp_ns;
@@ -534,9 +531,7 @@ void replay_four_scans(RunningExecutor& executor, const config::Config& cfg) {
   options.max_scans = 4;
   options.pace = test::paced_by(executor.get());
   ASSERT_TRUE(tools::replay(participant, sequence(), options).ok());
-  for (int i = 0; i < 100 * kTimeScale && executor.get().totals().scans_integrated < 4; ++i) {
-    std::this_thread::sleep_for(20ms);
-  }
+  test::eventually([&] { return executor.get().totals().scans_integrated >= 4; });
   ASSERT_EQ(executor.get().totals().scans_integrated, 4u);
 }
 
@@ -553,10 +548,7 @@ TEST_F(Daemon, PeriodicSave_WritesTheTsdfFromASnapshotWhileTheCycleRuns) {
     ASSERT_NO_FATAL_FAILURE(replay_four_scans(executor, cfg));
     // One save may be in flight with a snapshot from before the last scan: wait for two more.
     const std::uint64_t saves_then = executor.get().totals().tsdf_saves;
-    for (int i = 0; i < 100 * kTimeScale && executor.get().totals().tsdf_saves < saves_then + 2;
-         ++i) {
-      std::this_thread::sleep_for(50ms);
-    }
+    test::eventually([&] { return executor.get().totals().tsdf_saves >= saves_then + 2; });
     executor.stop();
     const auto t = executor.get().totals();
     EXPECT_GE(t.tsdf_saves, saves_then + 2);
@@ -690,7 +682,7 @@ TEST_F(Daemon, VirtualObstacle_IsLethalInTheNextCostmap) {
   auto zones = ZoneWriter::create(participant, cfg.outputs.virtual_obstacles_topic,
                                   cfg.dds.qos.virtual_obstacles);
   ASSERT_TRUE(zones.ok());
-  ASSERT_TRUE(zones.value()->wait_for_readers(1, 10s));
+  ASSERT_TRUE(zones.value()->wait_for_readers(1, test::kPatience));
   transport::VirtualObstacleArrayMsg msg;
   tarmac_msgs::msg::dds_::VirtualObstacle_ zone;
   zone.id("fuel-spill-1");

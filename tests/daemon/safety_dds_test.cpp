@@ -112,13 +112,13 @@ TEST_F(SafetyDds, AircraftLoop_CostmapsOverDdsScoredLikeTarmacMap) {
         << ", save_on_exit: false}\n";
   }
   const pid_t daemon = spawn({TARMAC_TARMACD, "--config", config.string()}, dir / "tarmacd.log");
-  ASSERT_TRUE(wait_for_line(dir / "tarmacd.log", "tarmacd: ready", 20s))
+  ASSERT_TRUE(wait_for_line(dir / "tarmacd.log", "tarmacd: ready", tarmac::test::kPatience))
       << read_text(dir / "tarmacd.log");
   const pid_t audit = spawn({TARMAC_AUDIT, "--config", config.string(), "--score", data.string(),
                              "--idle-s", std::to_string(10 * kS), "--timeout-s",
                              std::to_string(120 * kS), "--json", (dir / "audit.json").string()},
                             dir / "audit.log");
-  EXPECT_TRUE(wait_for_line(dir / "audit.log", "tarmac-audit: matched", 20s));
+  EXPECT_TRUE(wait_for_line(dir / "audit.log", "tarmac-audit: matched", tarmac::test::kPatience));
   const int replay_rc = wait_exit(
       spawn({TARMAC_REPLAY, "--dataset", data.string(), "--config", config.string(), "--rate-scale",
              std::to_string(1.0 / kS), "--align-ms", std::to_string(100 * kS), "--pose-readers",

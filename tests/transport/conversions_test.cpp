@@ -195,6 +195,23 @@ TEST(PointCloud2, PointTimesThatCannotBeRelatedToTheStamp_DroppedAndNoted) {
   EXPECT_EQ(cloud.time_offset_s[2], 0.02f);
 }
 
+TEST(PointCloud2, PointTimes_AJunkFirstCellDecidesNothing) {
+  // Absolute seconds (rslidar_sdk) with a zero-filled first cell: the median decides, the junk
+  // cell reads NaN (taken as the stamp), the others keep their times.
+  const double stamp_s = static_cast<double>(kStampNs) * 1e-9;
+  const std::vector<double> times = {0.0, stamp_s + 0.01, stamp_s + 0.02, stamp_s + 0.03};
+  core::PointCloud cloud;
+  CloudNotes notes;
+  ASSERT_TRUE(
+      from_point_cloud2(timed_msg("timestamp", pf::FLOAT64, kStampNs, times), cloud, &notes).ok());
+  EXPECT_FALSE(notes.time_unrelated);
+  ASSERT_EQ(cloud.time_offset_s.size(), 4u);
+  EXPECT_TRUE(std::isnan(cloud.time_offset_s[0]));
+  for (std::size_t i = 1; i < 4; ++i) {
+    EXPECT_NEAR(cloud.time_offset_s[i], 0.01f * static_cast<float>(i), 1e-6f) << i;
+  }
+}
+
 TEST(PointCloud2, AutowareChannelIsTheRing_LivoxLineIsNot) {
   core::PointCloud cloud;
   const std::vector<std::uint16_t> channels = {3, 7};

@@ -1,6 +1,7 @@
 #include "conversions.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -35,11 +36,11 @@ struct FieldSlot {
   std::uint8_t datatype = 0;
 };
 
-/// How a cloud's per-point time field relates to its stamp, decided once per cloud from its
-/// first finite value (drivers differ: docs/ros2.md, "LiDAR drivers"): Ouster's `t` and
-/// Autoware's `time_stamp` are integer nanoseconds from the stamp, Velodyne's `time` float
-/// seconds from it (mostly negative: its stamp is the last packet's), RoboSense's and Hesai's
-/// `timestamp` float64 absolute seconds, Livox's `timestamp` float64 absolute nanoseconds.
+/// How a cloud's per-point time field relates to its stamp, decided once per cloud from the
+/// median of a sample of its finite values (drivers differ: docs/ros2.md, "LiDAR drivers"):
+/// Ouster's `t` and Autoware's `time_stamp` are integer nanoseconds from the stamp, Velodyne's
+/// `time` float seconds from it (mostly negative: its stamp is the last packet's), RoboSense's and
+/// Hesai's `timestamp` float64 absolute seconds, Livox's `timestamp` float64 absolute nanoseconds.
 struct TimeBase {
   double origin = 0.0;  ///< subtracted from the value
   double scale = 0.0;   ///< then multiplied: seconds; 0: the field cannot be related (dropped)
@@ -300,12 +301,20 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
   const std::uint8_t* base = msg.data().data();
   TimeBase times{0.0, 1.0};  // no finite time at all: nothing to relate, all read NaN
   if (time) {
-    for (std::size_t i = 0; i < n; ++i) {
+    // The median of up to 31 finite values spread over the cloud decides: a few junk cells (a
+    // driver's zero fill) cannot.
+    std::array<double, 31> sample{};
+    std::size_t taken = 0;
+    const std::size_t stride = std::max<std::size_t>(1, n / sample.size());
+    for (std::size_t i = 0; i < n && taken < sample.size(); i += stride) {
       const std::uint8_t* p = base + (i / width) * row_step + (i % width) * point_step;
       const double v = read_as_double(p + time->offset, time->datatype, swap);
-      if (!std::isfinite(v)) continue;
-      times = time_base(v, time->datatype, out.stamp_ns);  // the first finite value decides
-      break;
+      if (std::isfinite(v)) sample[taken++] = v;
+    }
+    if (taken > 0) {
+      const auto mid = sample.begin() + static_cast<std::ptrdiff_t>(taken / 2);
+      std::nth_element(sample.begin(), mid, sample.begin() + static_cast<std::ptrdiff_t>(taken));
+      times = time_base(*mid, time->datatype, out.stamp_ns);
     }
     if (times.scale == 0.0) {
       // no deskew for this cloud, counted

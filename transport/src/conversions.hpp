@@ -61,19 +61,19 @@ PointCloud2Msg to_point_cloud2(const core::PointCloud& cloud);
 
 /// What from_point_cloud2 took from a cloud without rejecting it, worth counting.
 struct CloudNotes {
-  /// The per-point time field could not be related to the stamp (its first finite value is
-  /// more than 10 s from it in every unit and origin drivers use): dropped, no deskew.
+  /// The per-point time field could not be related to the stamp (its values' median is more
+  /// than 10 s from it in every unit and origin drivers use): dropped, no deskew.
   bool time_unrelated = false;
 };
 
 /// Parses a PointCloud2 into `out` (cleared first, capacity kept). x, y, z are required and may
 /// be any numeric datatype; `intensity`, the ring (`ring`, or Autoware's `channel`) and the
 /// point time (`t`, `time`, `timestamp` or `time_stamp`) are optional. The time's unit and
-/// origin are told from its datatype and first finite value: integer nanoseconds or floating
-/// seconds from the stamp, or floating absolute seconds or nanoseconds (docs/ros2.md, "LiDAR
-/// drivers"); a point time more than 10 s from the stamp reads NaN (taken as the stamp). Either
-/// endianness, any offsets and padding, row padding honoured. Points whose x, y or z is not
-/// finite are kept (filters count them); the caller decides. Rejections carry a code
+/// origin are told from its datatype and the median of a sample of its finite values: integer
+/// nanoseconds or floating seconds from the stamp, or floating absolute seconds or nanoseconds
+/// (docs/ros2.md, "LiDAR drivers"); a point time more than 10 s from the stamp reads NaN (taken as
+/// the stamp). Either endianness, any offsets and padding, row padding honoured. Points whose x, y
+/// or z is not finite are kept (filters count them); the caller decides. Rejections carry a code
 /// "pointcloud.<reason>" and a message naming the offending field or size.
 core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
                                CloudNotes* notes = nullptr);

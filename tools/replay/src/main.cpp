@@ -153,7 +153,7 @@ int main(int argc, char** argv) {
   if (pace_ahead > 0) {
     auto pace = tools::pace_by_costmap(
         participant.value(), cfg.outputs.costmap_topic, cfg.dds.qos.costmap, pace_ahead,
-        std::chrono::milliseconds(std::llround(pace_patience_s * 1000.0)));
+        std::chrono::milliseconds(std::llround(pace_patience_s * 1000.0)), &g_stop);
     if (!pace) {
       std::fprintf(stderr, "tarmac-replay: %s\n", pace.error().message.c_str());
       return kExitUnavailable;

@@ -77,7 +77,8 @@ Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometr
 
 core::Result<std::function<bool(std::size_t, std::int64_t)>> pace_by_costmap(
     const transport::Participant& participant, const std::string& costmap_topic,
-    const transport::QosSpec& costmap_qos, std::size_t ahead, std::chrono::milliseconds patience) {
+    const transport::QosSpec& costmap_qos, std::size_t ahead, std::chrono::milliseconds patience,
+    const std::atomic<bool>* stop) {
   using GridReader = transport::Reader<nav_msgs::msg::dds_::OccupancyGrid_PubSubType>;
   auto created = GridReader::create(participant, costmap_topic, costmap_qos, 8);
   if (!created) return created.error();
@@ -90,7 +91,7 @@ core::Result<std::function<bool(std::size_t, std::int64_t)>> pace_by_costmap(
   auto state = std::make_shared<State>();
   state->reader = std::move(created).value();
   return std::function<bool(std::size_t, std::int64_t)>(
-      [state, ahead, patience](std::size_t k, std::int64_t stamp_ns) {
+      [state, ahead, patience, stop](std::size_t k, std::int64_t stamp_ns) {
         State& st = *state;
         st.stamps.resize(k + 1);
         st.stamps[k] = stamp_ns;
@@ -99,6 +100,7 @@ core::Result<std::function<bool(std::size_t, std::int64_t)>> pace_by_costmap(
         auto deadline = std::chrono::steady_clock::now() + patience;
         while (st.newest_ns < needed) {
           if (std::chrono::steady_clock::now() > deadline) return false;
+          if (stop != nullptr && stop->load()) return false;
           st.reader->wait_for_sample(std::chrono::milliseconds(50));
           st.batch.clear();
           st.reader->take_all(st.batch);
@@ -210,10 +212,12 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
     if (options.pace && e.kind != EventKind::kCorrection && e.index >= next_to_pace) {
       for (; next_to_pace <= e.index; ++next_to_pace) {
         if (!options.pace(next_to_pace, stamps[next_to_pace])) {
+          if (stop != nullptr && stop->load()) break;  // stopped while waiting: not a failure
           return core::Error{"replay.pace", "the consumer did not take scan " +
                                                 std::to_string(next_to_pace) + " in time"};
         }
       }
+      if (stop != nullptr && stop->load()) break;
     }
     if (e.kind == EventKind::kPose) {
       transport::PoseStampedMsg msg;

@@ -102,11 +102,12 @@ Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometr
 /// A ReplayOptions::pace for a daemon in another process: scan k goes once a costmap stamped
 /// at or after scan k − `ahead` has arrived on `costmap_topic` (tarmacd stamps its costmap with
 /// the newest scan it integrated), so at most `ahead` scans are on their way to it. Gives up
-/// when no newer costmap came for `patience`. The reader is created here, with `costmap_qos`
-/// (the daemon's dds.qos.costmap).
+/// when no newer costmap came for `patience`, or at once when `stop` becomes true. The reader
+/// is created here, with `costmap_qos` (the daemon's dds.qos.costmap).
 core::Result<std::function<bool(std::size_t, std::int64_t)>> pace_by_costmap(
     const transport::Participant& participant, const std::string& costmap_topic,
-    const transport::QosSpec& costmap_qos, std::size_t ahead, std::chrono::milliseconds patience);
+    const transport::QosSpec& costmap_qos, std::size_t ahead, std::chrono::milliseconds patience,
+    const std::atomic<bool>* stop = nullptr);
 
 /// Publishes `seq` and returns when the last message is out (or `stop` became true).
 core::Result<ReplayStats> replay(const transport::Participant& participant,
