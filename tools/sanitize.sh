@@ -9,6 +9,8 @@
 #                               tests in tools/sanitizers/long-tests.txt (each over a minute
 #                               under ASan on 2 cores). The tools' own tests (tarmac-map, -bench,
 #                               -audit, -echo command lines) run in the full suites.
+#   tools/sanitize.sh MODE [--quick] --build-only
+#                               configures and builds only (.ci/run builds beside the main suite).
 # Ends with ctest's summary line. Third-party libraries (Fast DDS, OpenVDB, TBB, yaml-cpp) come
 # from Debian uninstrumented; tools/sanitizers/*.supp hide only reports inside them, each with
 # its reason. Tests get TARMAC_TEST_TIMEOUT_S (default 600 s here) because sanitized code runs
@@ -17,16 +19,21 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
 
+usage() {
+  echo "usage: tools/sanitize.sh address|thread [--quick] [--build-only]" >&2
+  exit 2
+}
 mode=${1:-}
+[ $# -gt 0 ] && shift
 quick=0
-case "${2:-}" in
-  "") ;;
-  --quick) quick=1 ;;
-  *)
-    echo "usage: tools/sanitize.sh address|thread [--quick]" >&2
-    exit 2
-    ;;
-esac
+build_only=0
+for arg in "$@"; do
+  case "$arg" in
+    --quick) quick=1 ;;
+    --build-only) build_only=1 ;;
+    *) usage ;;
+  esac
+done
 case "$mode" in
   address)
     build=build-asan
@@ -37,10 +44,7 @@ case "$mode" in
     build=build-tsan
     flags="-fsanitize=thread -fno-omit-frame-pointer"
     ;;
-  *)
-    echo "usage: tools/sanitize.sh address|thread [--quick]" >&2
-    exit 2
-    ;;
+  *) usage ;;
 esac
 
 supp="$root/tools/sanitizers"
@@ -80,5 +84,6 @@ if [ "$quick" -eq 1 ]; then
 else
   cmake --build "$build" -j "$(nproc)"
 fi
+[ "$build_only" -eq 1 ] && exit 0
 # DDS tests use distinct domains and stay on loopback (support/test_env.hpp, STACK.md).
 cd "$build" && ctest -j "$(nproc)" --output-on-failure "${select[@]}"

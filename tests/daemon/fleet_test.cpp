@@ -105,8 +105,14 @@ config::Config vehicle(std::uint32_t domain, const std::string& id, bool share) 
   c.mapping.corrections.enabled = false;
   c.fleet.enabled = share;
   c.fleet.vehicle_id = id;
-  c.fleet.publish_period_s = 1.0 * kTimeScale;
-  c.fleet.max_age_s = 10.0 * kTimeScale;  // the replays' stamps are slowed down by kTimeScale
+  // A summary every tick (10 Hz): a summary carries the sender's costmap window, so with one a
+  // second what B sent of its drive depended on where the wall clock's summaries caught it
+  // (4 to 6 of them, 922 to 1305 cells gained). Every tick, each of B's windows is sent.
+  c.fleet.publish_period_s = 0.1 * kTimeScale;
+  // Ages are taken at the summary's tick, on the wall clock, while a busy machine makes the
+  // acknowledged-pace replays run late: a bound no run reaches keeps every cell B saw. The
+  // expiry itself is PeerCellsExpire's.
+  c.fleet.max_age_s = 120.0 * kTimeScale;
   // Fed at the pace each vehicle acknowledges (replay_options): every scan integrated, however
   // busy the machine, so what A gains from B is the same in every run.
   test::take_late_input(c);
