@@ -157,10 +157,19 @@ FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   // Filters in the sensor frame (none of them depends on the pose), so the survivors can be
   // retained for a rebuild and re-integrated with the same float transform (transform_points).
   // With a motion, the sweep is first deskewed into the sensor frame at the stamp.
-  const PointCloud* input = &cloud;
-  if (motion != nullptr && cloud.has_time() && cloud.consistent() && motion->t1_s > motion->t0_s) {
+  // First the sweep as beams (organise()), on a copy: the caller's cloud stays as it came.
+  const PointCloud* source = &cloud;
+  SweepLayout layout = SweepLayout::kUnorganised;
+  if (!cloud.organised && (cloud.grid_rows > 0 || cloud.has_ring()) && cloud.consistent()) {
+    organised_ = cloud;
+    layout = organise(organised_, organise_scratch_).layout;
+    source = &organised_;
+  }
+  const PointCloud* input = source;
+  if (motion != nullptr && source->has_time() && source->consistent() &&
+      motion->t1_s > motion->t0_s) {
     deskewed_.stamp_ns = cloud.stamp_ns;
-    deskew_points(cloud, *motion, T_W_B, T_B_S, deskewed_.points_S);
+    deskew_points(*source, *motion, T_W_B, T_B_S, deskewed_.points_S);
     input = &deskewed_;
   }
   // The survivors in the world frame, and, when scans are retained, straight into the slot this
@@ -170,7 +179,8 @@ FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
                   retained_.empty() ? nullptr : &retained(next_seq_).points_S);
   std::vector<Eigen::Vector3f>& no_return_S =
       retained_.empty() ? no_return_scratch_S_ : retained(next_seq_).no_return_S;
-  accept_no_returns(cloud.no_return_S, no_return_S, counts);
+  accept_no_returns(source->no_return_S, no_return_S, counts);
+  counts.layout_undecided = layout == SweepLayout::kUndecided ? 1 : 0;
   rotate_directions(T_W_S, no_return_S, clearing_W_);
   counts.no_returns_grounded = clip_at_ground(
       T_W_B.linear().col(2), ground_below_sensor(T_W_B, sensor_W_, points_W_, ground_heights_),

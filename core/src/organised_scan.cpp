@@ -182,6 +182,169 @@ void regrid(PointCloud& cloud, std::size_t cols, bool transposed, std::size_t fi
   cloud.time_offset_s.swap(moved.time_offset_s);
 }
 
+// ---- bin_by_ring ----
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+constexpr std::size_t kMaxRings = 1024;           // beyond any sensor: a ring field that is not one
+constexpr std::size_t kMaxAzimuthBins = 1 << 16;  // a 0.0055° resolution
+constexpr double kMinGapRad = 1e-5;               // closer: the same firing (dual returns)
+
+/// Per ring index: whether any cell names it, its returns' count and elevation moments; then
+/// the returns' azimuths grouped by ring (a counting sort: cloud order within a ring). False
+/// when a ring index is beyond kMaxRings.
+bool gather_rings(const PointCloud& cloud, OrganisedScratch& s) {
+  const std::uint16_t top = *std::max_element(cloud.ring.begin(), cloud.ring.end());
+  if (top >= kMaxRings) return false;
+  const std::size_t rings = std::size_t{top} + 1;
+  s.ring_seen.assign(rings, 0);
+  s.ring_n.assign(rings, 0);
+  s.ring_sum.assign(rings, 0.0);
+  s.ring_sq.assign(rings, 0.0);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const std::uint16_t r = cloud.ring[i];
+    s.ring_seen[r] = 1;
+    const Eigen::Vector3f& p = cloud.points_S[i];
+    if (!is_return(p) || (p.x() == 0.0f && p.y() == 0.0f)) continue;
+    const double e = elevation_of(p);
+    s.ring_sum[r] += e;
+    s.ring_sq[r] += e * e;
+    ++s.ring_n[r];
+  }
+  s.ring_start.assign(rings + 1, 0);
+  for (std::size_t r = 0; r < rings; ++r) s.ring_start[r + 1] = s.ring_start[r] + s.ring_n[r];
+  s.azimuth.resize(s.ring_start[rings]);
+  s.order.assign(s.ring_start.begin(), s.ring_start.end() - 1);  // each ring's next slot
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const Eigen::Vector3f& p = cloud.points_S[i];
+    if (!is_return(p) || (p.x() == 0.0f && p.y() == 0.0f)) continue;
+    s.azimuth[s.order[cloud.ring[i]]++] =
+        static_cast<float>(std::atan2(static_cast<double>(p.y()), static_cast<double>(p.x())));
+  }
+  return true;
+}
+
+/// Sorts a[0, n) when it rises but for at most one wrap (a spinning sensor's firing order) by
+/// rotating it; false, untouched, otherwise.
+bool rotate_if_wrapped(float* a, std::size_t n) {
+  std::size_t descents = 0, at = 0;
+  for (std::size_t k = 1; k < n && descents < 2; ++k) {
+    if (a[k] < a[k - 1]) {
+      ++descents;
+      at = k;
+    }
+  }
+  if (descents == 0) return true;
+  if (descents > 1 || a[n - 1] > a[0]) return false;
+  std::rotate(a, a + at, a + n);
+  return true;
+}
+
+/// Each ring's azimuths in ascending order: drivers list a ring in firing order, clockwise or
+/// counter-clockwise, which a rotation (and a reversal) sorts without a sort.
+void sort_ring_azimuths(OrganisedScratch& s) {
+  for (std::size_t r = 0; r + 1 < s.ring_start.size(); ++r) {
+    float* a = s.azimuth.data() + s.ring_start[r];
+    const std::size_t n = s.ring_n[r];
+    if (n < 2 || rotate_if_wrapped(a, n)) continue;
+    std::reverse(a, a + n);
+    if (!rotate_if_wrapped(a, n)) std::sort(a, a + n);
+  }
+}
+
+/// The median gap between azimuth-neighbouring returns of a ring (rad), NaN with fewer than 16
+/// gaps or a resolution finer than kMaxAzimuthBins allows.
+double ring_resolution(OrganisedScratch& s) {
+  s.gaps.clear();
+  for (std::size_t r = 0; r + 1 < s.ring_start.size(); ++r) {
+    const float* a = s.azimuth.data() + s.ring_start[r];
+    for (std::size_t k = 1; k < s.ring_n[r]; ++k) {
+      if (a[k] - a[k - 1] > kMinGapRad) s.gaps.push_back(a[k] - a[k - 1]);
+    }
+  }
+  constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+  if (s.gaps.size() < 16) return nan;
+  const auto mid = s.gaps.begin() + static_cast<std::ptrdiff_t>(s.gaps.size() / 2);
+  std::nth_element(s.gaps.begin(), mid, s.gaps.end());
+  const double resolution = *mid;
+  return kTwoPi / resolution <= static_cast<double>(kMaxAzimuthBins) ? resolution : nan;
+}
+
+std::size_t azimuth_bin(double azimuth, double resolution, std::size_t bins) {
+  const auto b = static_cast<std::ptrdiff_t>(std::floor((azimuth + std::numbers::pi) / resolution));
+  return static_cast<std::size_t>(
+      std::clamp<std::ptrdiff_t>(b, 0, static_cast<std::ptrdiff_t>(bins) - 1));
+}
+
+/// Each ring's elevation: its returns' mean; for a ring without returns, interpolated by ring
+/// index (fill_rows) when the returning rings' elevations follow their indices. False when the
+/// cloud is no single sensor's sweep: fewer than two rings with returns, or elevations spread
+/// within the rings by more than a tenth of their spread across them (variances).
+bool ring_elevations(OrganisedScratch& s, bool& fill_empty) {
+  const std::size_t rings = s.ring_n.size();
+  s.ring_elevation.assign(rings, 0.0);
+  double across_sum = 0.0, across_sq = 0.0;
+  std::size_t with_returns = 0;
+  bool rising = true, falling = true;
+  double last = std::numeric_limits<double>::quiet_NaN();
+  for (std::size_t r = 0; r < rings; ++r) {
+    if (s.ring_n[r] == 0) continue;
+    const double mean = s.ring_sum[r] / s.ring_n[r];
+    s.ring_elevation[r] = mean;
+    across_sum += mean;
+    across_sq += mean * mean;
+    ++with_returns;
+    if (!std::isnan(last)) {
+      rising = rising && mean > last;
+      falling = falling && mean < last;
+    }
+    last = mean;
+  }
+  if (with_returns < 2) return false;
+  const double within = within_spread(s.ring_sum, s.ring_sq, s.ring_n);
+  const double across = (across_sq - across_sum * across_sum / static_cast<double>(with_returns)) /
+                        static_cast<double>(with_returns);
+  if (!(within < 0.1 * across)) return false;
+  fill_empty = rising || falling;
+  if (fill_empty) fill_rows(s.ring_elevation, s.ring_n);
+  return true;
+}
+
+/// Some ring returned in azimuth bin b and in both its neighbours: well inside what the
+/// driver sent. At the edge of a sector it cut away, a beam's own azimuth offset can put it a
+/// bin beyond the last return of the other rings; that bin is left out.
+bool inside_coverage(const std::vector<float>& covered, std::size_t b) {
+  const std::size_t n = covered.size();
+  return !std::isnan(covered[b]) && !std::isnan(covered[(b + 1) % n]) &&
+         !std::isnan(covered[(b + n - 1) % n]);
+}
+
+Eigen::Vector3f direction(double elevation, double azimuth) {
+  return {static_cast<float>(std::cos(elevation) * std::cos(azimuth)),
+          static_cast<float>(std::cos(elevation) * std::sin(azimuth)),
+          static_cast<float>(std::sin(elevation))};
+}
+
+/// Appends ring r's beams without return to `out`: the gaps between its azimuth-neighbouring
+/// returns (round the circle), at azimuths some ring returned in.
+void ring_gaps(const OrganisedScratch& s, std::size_t r, double resolution,
+               std::vector<Eigen::Vector3f>& out) {
+  const float* a = s.azimuth.data() + s.ring_start[r];
+  const std::size_t n = s.ring_n[r];
+  const std::size_t bins = s.covered.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    const double from = a[k];
+    const double gap = n == 1 ? kTwoPi : (k + 1 < n ? a[k + 1] : a[0] + kTwoPi) - from;
+    const long steps = std::lround(gap / resolution);
+    for (long j = 1; j < steps; ++j) {
+      double azimuth = from + gap * static_cast<double>(j) / static_cast<double>(steps);
+      if (azimuth > std::numbers::pi) azimuth -= kTwoPi;
+      if (inside_coverage(s.covered, azimuth_bin(azimuth, resolution, bins))) {
+        out.push_back(direction(s.ring_elevation[r], azimuth));
+      }
+    }
+  }
+}
+
 }  // namespace
 
 SweepLayout sweep_layout(const PointCloud& cloud, std::size_t rows, std::size_t cols,
@@ -308,6 +471,72 @@ OrganisedCounts organise_sweep(PointCloud& cloud, std::size_t rows, std::size_t 
   counts.underivable += dropped_cells;
   counts.layout = layout;
   counts.beams_reordered = reorder;
+  return counts;
+}
+
+OrganisedCounts bin_by_ring(PointCloud& cloud, OrganisedScratch& scratch) {
+  TARMAC_ASSERT(cloud.consistent(), "bin_by_ring: channels must match the points");
+  OrganisedCounts counts;
+  counts.layout = SweepLayout::kUndecided;
+  cloud.no_return_S.clear();
+  auto& s = scratch;
+  bool fill_empty = false;
+  const bool sweep = cloud.has_ring() && gather_rings(cloud, s) && ring_elevations(s, fill_empty);
+  const double resolution = sweep ? (sort_ring_azimuths(s), ring_resolution(s))
+                                  : std::numeric_limits<double>::quiet_NaN();
+  if (std::isnan(resolution)) {
+    counts.returns = keep_returns(cloud, [&](std::size_t) { ++counts.underivable; });
+    return counts;
+  }
+  counts.layout = SweepLayout::kRingBinned;
+  const auto bins = static_cast<std::size_t>(std::ceil(kTwoPi / resolution));
+  s.covered.assign(bins, std::numeric_limits<float>::quiet_NaN());
+  for (const float azimuth : s.azimuth) {  // grouped by ring, lowest index first
+    float& bin = s.covered[azimuth_bin(azimuth, resolution, bins)];
+    if (std::isnan(bin)) bin = azimuth;
+  }
+  // Rings without returns lie between the lowest and highest ring index with returns, or were
+  // named by a marker.
+  std::size_t low = s.ring_n.size(), high = 0;
+  for (std::size_t r = 0; r < s.ring_n.size(); ++r) {
+    if (s.ring_n[r] == 0) continue;
+    low = std::min(low, r);
+    high = r;
+  }
+  for (std::size_t r = 0; r < s.ring_n.size(); ++r) {
+    if (s.ring_n[r] > 0) {
+      ring_gaps(s, r, resolution, cloud.no_return_S);
+    } else if (fill_empty && (s.ring_seen[r] != 0 || (r > low && r < high))) {
+      for (std::size_t b = 0; b < bins; ++b) {
+        if (!inside_coverage(s.covered, b)) continue;
+        cloud.no_return_S.push_back(direction(s.ring_elevation[r], s.covered[b]));
+      }
+    }
+  }
+  counts.no_returns = cloud.no_return_S.size();
+  counts.returns = keep_returns(cloud, [](std::size_t) {});
+  return counts;
+}
+
+OrganisedCounts organise(PointCloud& cloud, OrganisedScratch& scratch) {
+  TARMAC_ASSERT(cloud.consistent(), "organise: channels must match the points");
+  OrganisedCounts counts;
+  counts.layout = SweepLayout::kUnorganised;
+  if (cloud.organised) return counts;
+  const std::size_t rows = cloud.grid_rows;
+  if (rows > 0 && cloud.size() % rows == 0) {
+    counts = organise_sweep(cloud, rows, cloud.size() / rows, scratch);
+  } else if (rows > 0) {  // not a grid after all: integrated as unorganised
+    counts.layout = SweepLayout::kUndecided;
+    cloud.no_return_S.clear();
+    counts.returns = keep_returns(cloud, [&](std::size_t) { ++counts.underivable; });
+  } else if (cloud.has_ring() && std::any_of(cloud.ring.begin(), cloud.ring.end(),
+                                             [&](auto r) { return r != cloud.ring.front(); })) {
+    // One ring value for all (a driver filling 0) names no beam: a plain list of points.
+    counts = bin_by_ring(cloud, scratch);
+  }
+  cloud.grid_rows = 0;
+  cloud.organised = true;
   return counts;
 }
 

@@ -14,6 +14,8 @@ void PointCloud::clear() {
   ring.clear();
   time_offset_s.clear();
   no_return_S.clear();
+  grid_rows = 0;
+  organised = false;
 }
 
 }  // namespace tarmac::core

@@ -245,6 +245,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     drops.add("points.ego_vehicle", r.filtered.counts.ego_vehicle);
     drops.add("points.isolated", r.filtered.counts.isolated);
     drops.add("points.no_return_refused", r.filtered.counts.no_returns_refused);
+    drops.add("scan.layout_undecided", r.filtered.counts.layout_undecided);
     newest_stamp_ns = std::max(newest_stamp_ns, cloud.stamp_ns);
     scheduler.release(sel.slot);
   }

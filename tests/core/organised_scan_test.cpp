@@ -280,5 +280,194 @@ TEST(OrganiseSweep, LayoutThatCannotBeTold_IntegratedAsUnorganised_NoReturnsDrop
   EXPECT_EQ(cloud.size(), returns);
 }
 
+// ---- bin_by_ring: unorganised sweeps that carry a ring ----
+
+/// A spinning LiDAR's sweep as a driver that publishes lists sends it: the returns only, in
+/// firing order (for each azimuth step, every beam), each with its ring (0 = lowest). Beam r
+/// has its own azimuth offset (as Velodyne's and Hesai's lasers do); `hit(r, c)` says which
+/// cells return; `marker(r, c)` which of the others are sent as NaN with their ring.
+struct RingSweep {
+  int rows = 16, cols = 360;
+  double lo_deg = -15.0, hi_deg = 15.0;
+  double offset_deg(int r) const { return 0.3 * ((r * 7) % 5 - 2); }  // ±0.6°
+  Eigen::Vector3f dir(int r, int c) const {
+    const double el = (lo_deg + (hi_deg - lo_deg) * r / (rows - 1)) * std::numbers::pi / 180.0;
+    const double az =
+        std::remainder(2.0 * std::numbers::pi * c / cols + offset_deg(r) * std::numbers::pi / 180.0,
+                       2.0 * std::numbers::pi);
+    return Eigen::Vector3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el))
+        .cast<float>();
+  }
+  template <typename Hit, typename Marker>
+  PointCloud cloud(Hit hit, Marker marker) const {
+    PointCloud out;
+    for (int c = 0; c < cols; ++c) {
+      for (int r = 0; r < rows; ++r) {
+        if (hit(r, c)) {
+          out.points_S.push_back((10.0f + 0.1f * static_cast<float>(c % 7)) * dir(r, c));
+        } else if (marker(r, c)) {
+          out.points_S.push_back(Eigen::Vector3f::Constant(kNaN));
+        } else {
+          continue;
+        }
+        out.ring.push_back(static_cast<std::uint16_t>(r));
+        out.intensity.push_back(static_cast<float>(r * cols + c));
+      }
+    }
+    return out;
+  }
+};
+
+/// The largest angle (deg) between a rebuilt direction and the nearest of `want`.
+double worst_match_deg(const std::vector<Eigen::Vector3f>& got,
+                       const std::vector<Eigen::Vector3f>& want) {
+  double worst = 0.0;
+  for (const auto& g : got) {
+    double best = 180.0;
+    for (const auto& w : want) {
+      const double cosine = std::clamp(static_cast<double>(g.normalized().dot(w)), -1.0, 1.0);
+      best = std::min(best, std::acos(cosine) * 180.0 / std::numbers::pi);
+    }
+    worst = std::max(worst, best);
+  }
+  return worst;
+}
+
+TEST(BinByRing, DroppedReturnsSkyRingAndMarkers_BecomeBeamsWithinATenthOfADegree) {
+  // Rings 0..9 hit the ground but every 7th cell is lost; ring 12 returns nothing (its cells
+  // absent, not even markers) between rings that return; rings 13..15 return only where an
+  // aircraft stands (columns 40..80) and send NaN markers elsewhere; ring 10 and 11 return
+  // everywhere. Columns 300..359 are cut away by the driver (no ring returned there).
+  const RingSweep s;
+  const auto covered = [](int c) { return c < 300; };
+  const auto hit = [&](int r, int c) {
+    if (!covered(c)) return false;
+    if (r <= 9) return (r * 360 + c) % 7 != 0;
+    if (r <= 11) return true;
+    if (r == 12) return false;
+    return c >= 40 && c <= 80;
+  };
+  const auto marker = [&](int r, int c) { return covered(c) && r >= 13; };
+  PointCloud cloud = s.cloud(hit, marker);
+  std::vector<Eigen::Vector3f> want;
+  std::size_t returns = 0;
+  for (int r = 0; r < s.rows; ++r) {
+    for (int c = 0; c < s.cols; ++c) {
+      if (hit(r, c)) {
+        ++returns;
+      } else if (covered(c)) {
+        want.push_back(s.dir(r, c));
+      }
+    }
+  }
+  OrganisedScratch scratch;
+  const OrganisedCounts counts = bin_by_ring(cloud, scratch);
+  EXPECT_EQ(counts.layout, SweepLayout::kRingBinned);
+  EXPECT_EQ(counts.returns, returns);
+  ASSERT_EQ(cloud.size(), returns);
+  ASSERT_EQ(cloud.ring.size(), returns);
+  ASSERT_EQ(cloud.intensity.size(), returns);
+  for (std::size_t i = 0; i < cloud.size(); ++i) ASSERT_TRUE(cloud.points_S[i].allFinite());
+  // Each rebuilt direction is a true one: the ring's elevation, the gap's azimuth. The empty
+  // ring has no azimuths of its own in the data: it takes those where other rings returned, one
+  // per 1° bin, so within the lasers' offsets (±0.6°) of its own. At the cut's edges, a bin is
+  // left out: a ring may lose a beam there, never gain one in the cut.
+  const std::vector<Eigen::Vector3f> sky(cloud.no_return_S.begin(), cloud.no_return_S.end());
+  std::vector<Eigen::Vector3f> ring12, others;
+  for (const auto& d : sky) {
+    const double el =
+        std::asin(std::clamp(static_cast<double>(d.z()), -1.0, 1.0)) * 180.0 / std::numbers::pi;
+    (std::abs(el - s.lo_deg - 12 * 2.0) < 0.5 ? ring12 : others).push_back(d);
+  }
+  EXPECT_LT(worst_match_deg(others, want), 0.1);
+  EXPECT_LT(worst_match_deg(ring12, want), 1.2);
+  EXPECT_NEAR(static_cast<double>(ring12.size()), 300.0, 2.0);
+  // One per missing cell of the covered sectors; none in the cut-away one.
+  EXPECT_EQ(counts.no_returns, sky.size());
+  EXPECT_LE(sky.size(), want.size());
+  EXPECT_GE(sky.size(), want.size() - 2 * static_cast<std::size_t>(s.rows));
+  for (const auto& d : sky) {
+    const double az = std::atan2(d.y(), d.x()) * 180.0 / std::numbers::pi;
+    const double az360 = az < 0.0 ? az + 360.0 : az;
+    EXPECT_TRUE(az360 < 299.7) << "a beam in the cut-away sector at " << az360;
+  }
+}
+
+TEST(BinByRing, OneRingValueOrMergedClouds_NotASweep_NothingInvented) {
+  const RingSweep s;
+  const auto all = [](int, int) { return true; };
+  const auto none = [](int, int) { return false; };
+  OrganisedScratch scratch;
+  {
+    // ring 0 everywhere (a driver that fills it with 0): a plain list, left as it came.
+    PointCloud cloud = s.cloud([](int r, int c) { return (r + c) % 3 != 0; }, none);
+    std::fill(cloud.ring.begin(), cloud.ring.end(), 0);
+    const std::size_t n = cloud.size();
+    const OrganisedCounts counts = organise(cloud, scratch);
+    EXPECT_EQ(counts.layout, SweepLayout::kUnorganised);
+    EXPECT_EQ(cloud.size(), n);
+    EXPECT_TRUE(cloud.no_return_S.empty());
+    EXPECT_TRUE(cloud.organised);
+  }
+  {
+    // The ring field is not the beam (shuffled): elevations spread within the rings as much as
+    // across them. Undecided: the returns stay, the markers go, no beam is invented.
+    PointCloud cloud = s.cloud(all, none);
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      cloud.ring[i] = static_cast<std::uint16_t>(((i * 2654435761u) >> 11) % 16);
+    }
+    cloud.points_S.push_back(Eigen::Vector3f::Constant(kNaN));
+    cloud.ring.push_back(3);
+    cloud.intensity.push_back(0.0f);
+    const OrganisedCounts counts = organise(cloud, scratch);
+    EXPECT_EQ(counts.layout, SweepLayout::kUndecided);
+    EXPECT_EQ(counts.underivable, 1u);
+    EXPECT_EQ(cloud.size(), static_cast<std::size_t>(s.rows * s.cols));
+    EXPECT_TRUE(cloud.no_return_S.empty());
+  }
+}
+
+TEST(BinByRing, EveryBeamReturned_NoBeamWithoutReturn_AndOrganiseRunsOnce) {
+  const RingSweep s;
+  PointCloud cloud = s.cloud([](int, int) { return true; }, [](int, int) { return false; });
+  OrganisedScratch scratch;
+  const OrganisedCounts counts = organise(cloud, scratch);
+  EXPECT_EQ(counts.layout, SweepLayout::kRingBinned);
+  EXPECT_EQ(counts.no_returns, 0u);
+  EXPECT_TRUE(cloud.no_return_S.empty());
+  // Organised already: a second call leaves it.
+  cloud.no_return_S.push_back(Eigen::Vector3f::UnitZ());
+  EXPECT_EQ(organise(cloud, scratch).layout, SweepLayout::kUnorganised);
+  EXPECT_EQ(cloud.no_return_S.size(), 1u);
+}
+
+TEST(BinByRing, CounterClockwiseOrShuffledLists_SameBeams) {
+  // The order within a ring does not matter: firing order either way round, or none.
+  const RingSweep s;
+  const auto hit = [](int r, int c) { return r < 12 && (r * 31 + c) % 11 != 0; };
+  const auto none = [](int, int) { return false; };
+  OrganisedScratch scratch;
+  PointCloud forward = s.cloud(hit, none);
+  bin_by_ring(forward, scratch);
+  PointCloud backward = s.cloud(hit, none);
+  std::reverse(backward.points_S.begin(), backward.points_S.end());
+  std::reverse(backward.ring.begin(), backward.ring.end());
+  std::reverse(backward.intensity.begin(), backward.intensity.end());
+  bin_by_ring(backward, scratch);
+  PointCloud shuffled = s.cloud(hit, none);
+  for (std::size_t i = 0; i + 1 < shuffled.size(); i += 2) {
+    const std::size_t j = (i * 48271) % shuffled.size();
+    std::swap(shuffled.points_S[i], shuffled.points_S[j]);
+    std::swap(shuffled.ring[i], shuffled.ring[j]);
+    std::swap(shuffled.intensity[i], shuffled.intensity[j]);
+  }
+  bin_by_ring(shuffled, scratch);
+  ASSERT_FALSE(forward.no_return_S.empty());
+  EXPECT_EQ(backward.no_return_S.size(), forward.no_return_S.size());
+  EXPECT_EQ(shuffled.no_return_S.size(), forward.no_return_S.size());
+  EXPECT_LT(worst_match_deg(backward.no_return_S, forward.no_return_S), 1e-3);
+  EXPECT_LT(worst_match_deg(shuffled.no_return_S, forward.no_return_S), 1e-3);
+}
+
 }  // namespace
 }  // namespace tarmac::core

@@ -290,6 +290,9 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
 
   const bool swap = msg.is_bigendian() != (std::endian::native == std::endian::big);
   const std::size_t n = width * height;
+  // A grid (height > 1) is a sweep to organise, its cells without a return kept: core's ingest
+  // decides its layout (organised_scan.hpp).
+  out.grid_rows = height > 1 ? static_cast<std::uint32_t>(height) : 0;
   // An empty cloud is done: its other dimension is unbounded by the data (0 x 4e9 with no
   // bytes passes the size checks) and walking its rows would stall the cycle for seconds.
   if (n == 0) return core::Ok{};

@@ -8,7 +8,6 @@
 #include "geometry_msgsPubSubTypes.h"
 #include "nav_msgsPubSubTypes.h"
 #include "sensor_msgsPubSubTypes.h"
-#include "tarmac/core/organised_scan.hpp"
 #include "tarmac_msgsPubSubTypes.h"
 
 namespace tarmac::transport {
@@ -36,7 +35,6 @@ class ScanInput::Impl {
   std::unique_ptr<Reader> reader;
   std::string frame_id;
   std::vector<PointCloud2Msg> batch;  // capacity kept across drains
-  core::OrganisedScratch organised;   // organised sweeps: per-row/column sums, reused
 };
 
 core::Result<std::unique_ptr<ScanInput>> ScanInput::create(const Participant& participant,
@@ -69,13 +67,7 @@ std::size_t ScanInput::drain(ScanSink& sink) {
       return;
     }
     if (notes.time_unrelated) sink.count("scan.time_unrelated");
-    // An organised cloud (height > 1) is a spinning LiDAR's sweep, rows = beams or rows =
-    // firings: its cells without a return become beams that clear free space
-    // (organised_scan.hpp); a layout the data cannot tell is integrated as unorganised.
-    if (msg.height() > 1) {
-      const auto counts = core::organise_sweep(cloud, msg.height(), msg.width(), impl_->organised);
-      if (counts.layout == core::SweepLayout::kUndecided) sink.count("scan.layout_undecided");
-    }
+    // Converted only: the mapper organises the sweep (core::organise, from grid_rows and ring).
     sink.commit();
   });
 }

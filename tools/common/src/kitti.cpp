@@ -106,7 +106,8 @@ core::Status read_organised_scan(const std::filesystem::path& file, std::size_t 
                                            " cells, organised/shape.txt says " +
                                            std::to_string(rows) + " x " + std::to_string(cols)};
   }
-  core::organise_sweep(cloud, rows, cols, scratch);
+  cloud.grid_rows = static_cast<std::uint32_t>(rows);
+  core::organise(cloud, scratch);
   return core::Ok{};
 }
 

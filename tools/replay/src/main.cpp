@@ -81,8 +81,9 @@ int main(int argc, char** argv) {
   app.add_option("--layout", layout,
                  "an organised sequence's sweeps as 'beams' (rows = beams, as ouster-ros) or "
                  "'firings' (rows = firings, one column per laser, as velodyne's "
-                 "organize_cloud and rslidar_sdk)")
-      ->check(CLI::IsMember({"beams", "firings"}));
+                 "organize_cloud and rslidar_sdk) or 'list' (height 1, the returns only, in "
+                 "firing order, as HesaiLidar_ROS_2.0)")
+      ->check(CLI::IsMember({"beams", "firings", "list"}));
   app.add_flag("--ring", options.ring_field,
                "an organised sequence's sweeps carry a ring field (uint16, 0 = lowest beam)");
   std::size_t pace_ahead = 0;
@@ -97,6 +98,7 @@ int main(int argc, char** argv) {
       ->transform(cli::positive<double>());
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
   if (layout == "firings") options.layout = tools::ReplayOptions::Layout::kRowsAreFirings;
+  if (layout == "list") options.layout = tools::ReplayOptions::Layout::kUnorganised;
   config::Config cfg;
   cfg.dds.participant.name = "tarmac-replay";
   if (!config_path.empty()) {

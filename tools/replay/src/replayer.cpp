@@ -69,6 +69,25 @@ void transpose(core::PointCloud& cloud, std::size_t rows, std::size_t cols,
   swap_in(cloud.time_offset_s, scratch.time_offset_s);
 }
 
+/// Keeps the returns of `cloud` (finite, not 0,0,0) and their channels, in order: what a
+/// driver that publishes unorganised clouds sends (it drops the beams without return).
+void drop_no_returns(core::PointCloud& cloud) {
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const Eigen::Vector3f& p = cloud.points_S[i];
+    if (!p.allFinite() || p.isZero(0.0f)) continue;
+    cloud.points_S[kept] = p;
+    if (cloud.has_intensity()) cloud.intensity[kept] = cloud.intensity[i];
+    if (cloud.has_ring()) cloud.ring[kept] = cloud.ring[i];
+    if (cloud.has_time()) cloud.time_offset_s[kept] = cloud.time_offset_s[i];
+    ++kept;
+  }
+  cloud.points_S.resize(kept);
+  if (cloud.has_intensity()) cloud.intensity.resize(kept);
+  if (cloud.has_ring()) cloud.ring.resize(kept);
+  if (cloud.has_time()) cloud.time_offset_s.resize(kept);
+}
+
 }  // namespace
 
 Eigen::Isometry3d base_pose(const Eigen::Isometry3d& T_W_S, const Eigen::Isometry3d& T_B_S) {
@@ -266,13 +285,17 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
             cloud.ring[i] = static_cast<std::uint16_t>(i / seq.cols);
           }
         }
-        if (options.layout == ReplayOptions::Layout::kRowsAreFirings) {
+        if (options.layout != ReplayOptions::Layout::kRowsAreBeams) {
           transpose(cloud, seq.rows, seq.cols, transposed);
           std::swap(height, width);
         }
+        if (options.layout == ReplayOptions::Layout::kUnorganised) {
+          drop_no_returns(cloud);  // in firing order, as Hesai's and Velodyne's lists come
+          height = 1;
+        }
       }
       auto msg = transport::to_point_cloud2(cloud);
-      if (organised) {
+      if (organised && height > 1) {
         msg.height(static_cast<std::uint32_t>(height));
         msg.width(static_cast<std::uint32_t>(width));
         msg.row_step(msg.point_step() * msg.width());

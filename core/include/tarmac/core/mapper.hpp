@@ -16,6 +16,7 @@
 #include "tarmac/core/deskew.hpp"
 #include "tarmac/core/esdf_band.hpp"
 #include "tarmac/core/occupancy_map.hpp"
+#include "tarmac/core/organised_scan.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/pose_correction.hpp"
 #include "tarmac/core/scan_filter.hpp"
@@ -73,7 +74,10 @@ class Mapper {
   /// @pre params.validate().ok()
   explicit Mapper(const MapperParams& params);
 
-  /// Stage 1: filters `cloud` (sensor frame) and keeps the survivors in the world frame.
+  /// Stage 1: organises `cloud` (organise(): an organised sweep's cells without a return, an
+  /// unorganised sweep's gaps in its rings become beams without return; a layout the data
+  /// cannot tell is counted in FilterCounts::layout_undecided), filters it (sensor frame) and
+  /// keeps the survivors in the world frame.
   /// T_W_B is the vehicle base pose at the scan stamp, T_B_S the sensor's extrinsic. With
   /// `motion` and per-point times in `cloud`, the points are first motion-compensated into the
   /// sensor frame at the stamp (deskew_points); without either, the sweep is taken as rigid.
@@ -231,7 +235,9 @@ class Mapper {
   std::vector<Eigen::Vector3f> no_return_scratch_S_;  ///< accepted directions when not retained
   std::vector<float> ground_heights_;  ///< returns' heights for the ground under the sensor
   FilterScratch filter_scratch_;
-  PointCloud deskewed_;  ///< the scan after deskew (points only), reused
+  PointCloud deskewed_;   ///< the scan after deskew (points only), reused
+  PointCloud organised_;  ///< the scan organised (organise()), when it needed it; reused
+  OrganisedScratch organise_scratch_;
   Eigen::Vector3d sensor_W_ = Eigen::Vector3d::Zero();
   Eigen::Isometry3d T_W_B_ = Eigen::Isometry3d::Identity();  ///< of the last ingested scan
   TsdfIntegrator tsdf_integrator_;

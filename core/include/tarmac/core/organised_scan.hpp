@@ -24,10 +24,14 @@ namespace tarmac::core {
 /// How an organised cloud's grid lies. Drivers differ: ouster-ros publishes one row per beam
 /// (columns in firing order); the Velodyne driver (`organize_cloud: true`) and rslidar_sdk
 /// (`ros_send_by_rows: false`) one row per firing, one column per laser.
+/// An unorganised cloud that carries a ring (Hesai, Velodyne with `organize_cloud: false`,
+/// Autoware's PointXYZIRC) is binned by ring and azimuth instead (bin_by_ring).
 enum class SweepLayout : std::uint8_t {
   kRowsAreBeams,
   kRowsAreFirings,
-  kUndecided,  ///< neither could be told from the data
+  kUndecided,    ///< neither could be told from the data (or, with rings, no sweep found)
+  kRingBinned,   ///< unorganised, organised by ring and azimuth (bin_by_ring)
+  kUnorganised,  ///< a list of points without rings: nothing to organise
 };
 
 /// What split_organised (organise_sweep) found.
@@ -51,6 +55,14 @@ struct OrganisedScratch {
   std::vector<std::uint32_t> order;             ///< beams in elevation order
   std::vector<double> key;                      ///< each beam's sort key
   PointCloud moved;                             ///< the grid transposed or its rows permuted
+  // bin_by_ring: per ring index, then the returns' azimuths grouped by ring
+  std::vector<std::uint32_t> ring_n, ring_start;
+  std::vector<std::uint8_t> ring_seen;
+  std::vector<double> ring_sum, ring_sq, ring_elevation;
+  std::vector<float> azimuth, gaps;
+  /// Per azimuth bin: the azimuth of a return there (the lowest ring's), NaN where no ring
+  /// returned.
+  std::vector<float> covered;
 };
 
 /// Decides the layout of the organised `cloud` (rows × cols cells, row-major). With a ring
@@ -77,6 +89,35 @@ SweepLayout sweep_layout(const PointCloud& cloud, std::size_t rows, std::size_t 
 /// @pre rows * cols == cloud.size() and cloud.consistent()
 OrganisedCounts organise_sweep(PointCloud& cloud, std::size_t rows, std::size_t cols,
                                OrganisedScratch& scratch);
+
+/// Organises an unorganised sweep that carries a ring channel: the returns binned by ring and,
+/// within a ring, by azimuth, so that a gap in a ring's azimuths becomes beams without return.
+/// 1. the horizontal resolution is the median gap between azimuth-neighbouring returns of a
+///    ring (dropped returns and dual returns do not move a median);
+/// 2. within each ring, a gap of k resolutions between neighbouring returns (round the circle)
+///    holds k − 1 beams without return, evenly spaced, at the ring's mean elevation — but only
+///    in azimuth bins (of the resolution) where some ring returned, as in both neighbouring
+///    bins: the sectors a driver cuts away (a field of view crop, its range filter on every
+///    ring at once) are not beams without return, nor is the bin at their edge, where a
+///    laser's own azimuth offset could put a beam beyond the others' last return;
+/// 3. a ring with no return at all between rings that have some (its cells were all NaN or
+///    absent) lies at the elevation interpolated by ring index, when the rings' elevations
+///    follow their indices, and has a beam in every azimuth bin where some ring returned, at
+///    that return's azimuth;
+/// 4. explicit markers (NaN, 0,0,0) leave the points: their cells are gaps like the others.
+/// Not a sweep — fewer than two rings with returns, rings whose elevations spread as much
+/// within as across them (a cloud merged from several sensors, a ring field that is not the
+/// beam), no resolution to be found — leaves the returns unorganised, the markers dropped
+/// (underivable), layout kUndecided. The channels follow their points; the directions the
+/// sensor took are what the data shows (a driver's per-beam azimuth offsets included).
+/// @pre cloud.consistent()
+OrganisedCounts bin_by_ring(PointCloud& cloud, OrganisedScratch& scratch);
+
+/// What Mapper::ingest runs on every cloud: an organised sweep (`grid_rows` > 0) by
+/// organise_sweep, an unorganised one with a ring by bin_by_ring, any other left as it is; then
+/// `organised` is set and `grid_rows` 0. Once `organised`, it does nothing.
+/// @pre cloud.consistent()
+OrganisedCounts organise(PointCloud& cloud, OrganisedScratch& scratch);
 
 /// Splits the organised `cloud` (rows × cols cells, row-major; its channels as long as its
 /// points) in place: the returns stay in `points_S` (and the channels) in their order, the

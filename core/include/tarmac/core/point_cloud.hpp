@@ -22,6 +22,12 @@ struct PointCloud {
   /// sensor's range. They clear free space like returns beyond range (OccupancyParams::
   /// clearing_range_m); organised_scan.hpp rebuilds them from an organised scan. Any length.
   std::vector<Eigen::Vector3f> no_return_S;
+  /// As the source sent it: > 0, an organised sweep of `grid_rows` rows × size() / grid_rows
+  /// columns, row-major, its cells without a return kept (NaN or 0,0,0), as a PointCloud2 with
+  /// height > 1; 0, a list of points. core::organise (organised_scan.hpp), which Mapper::ingest
+  /// runs, turns either into returns plus `no_return_S` and sets `organised`.
+  std::uint32_t grid_rows = 0;
+  bool organised = false;  ///< core::organise has run: `no_return_S` says all there is
 
   [[nodiscard]] std::size_t size() const { return points_S.size(); }
   [[nodiscard]] bool has_intensity() const { return !intensity.empty(); }

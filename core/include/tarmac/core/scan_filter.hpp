@@ -43,6 +43,9 @@ struct FilterCounts {
   /// Of the kept, those that descend to the vehicle's ground plane within the clearing range:
   /// they clear only down to a voxel above it (the shortest not at all).
   std::uint64_t no_returns_grounded = 0;
+  /// 1 when the scan came as a grid, or as a list with rings, whose layout could not be told
+  /// (Mapper::ingest, organise()): integrated as a list of points, no beam without return.
+  std::uint64_t layout_undecided = 0;
 };
 
 /// Buffers of the filter, reused across scans (no allocation after warm-up).

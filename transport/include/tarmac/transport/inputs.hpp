@@ -32,7 +32,7 @@ class ScanSink {
   /// A scan was rejected; `reason` is a stable code, e.g. "pointcloud.bad_size".
   virtual void reject(std::string_view reason) = 0;
   /// The scan being parsed is taken, with something worth counting: `reason` is a stable code,
-  /// e.g. "scan.layout_undecided" (an organised cloud integrated as unorganised).
+  /// e.g. "scan.time_unrelated" (point times that relate to no stamp, not used).
   virtual void count(std::string_view reason) = 0;
 };
 

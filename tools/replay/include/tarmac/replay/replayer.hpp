@@ -71,8 +71,10 @@ struct ReplayOptions {
   double correction_lead_s = 0.0;
   /// How an organised sequence (tarmac-sim's organised/ sweeps, beams × azimuths) goes out, as
   /// the drivers publish theirs (docs/ros2.md, "LiDAR drivers"): rows = beams (ouster-ros), or
-  /// rows = firings with one column per laser (velodyne's organize_cloud, rslidar_sdk).
-  enum class Layout : std::uint8_t { kRowsAreBeams, kRowsAreFirings };
+  /// rows = firings with one column per laser (velodyne's organize_cloud, rslidar_sdk), or a
+  /// list of the returns in firing order, the beams without return left out (HesaiLidar_ROS_2.0,
+  /// velodyne without organize_cloud; with ring_field, as they carry the ring).
+  enum class Layout : std::uint8_t { kRowsAreBeams, kRowsAreFirings, kUnorganised };
   Layout layout = Layout::kRowsAreBeams;
   /// With an organised sequence: a `ring` field (uint16, the beam's index, 0 = lowest) too.
   bool ring_field = false;
