@@ -7,9 +7,16 @@
 # costmap after every scan. Prints both "safety (...)" lines and whether they agree.
 #
 #   tools/safety-dds.sh [--dataset DIR] [--beams N] [--scans N] [--sensor-height M]
+#                       [--dropout P] [--cyclone LAYOUT [--ring] [--marker nan|zero]]
 #
 # Without --dataset the parked-aircraft loop is simulated (tarmac-sim --scene aircraft, 64 beams
-# unless --beams; --scans N: the first N scans only).
+# unless --beams; --scans N: the first N scans only; --dropout P: that share of the returns lost
+# at random, as real sensors lose them).
+# --cyclone LAYOUT: the scans come from tarmac-cyclone-replay instead, a Cyclone DDS client over
+# UDP as a LiDAR driver in another process: the simulator's organised sweeps sent as 'beams'
+# (ouster-ros), 'firings' (velodyne's organize_cloud) or 'list' (the returns only, as Hesai's
+# driver), with a ring field (--ring), a beam without return as NaN or (0, 0, 0) (--marker). It
+# sends on the period's grid without waiting for the daemon.
 # --sensor-height M puts the sensor M above the vehicle base: sensors[0].extrinsic z for tarmacd,
 # --sensor-height for tarmac-map (default 0: the shipped identity extrinsic, the "base" is the
 # sensor; the simulator's sensor is 2 m above its base).
@@ -18,19 +25,23 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-dataset="" beams=64 scans="" sensor_height=0
+dataset="" beams=64 scans="" sensor_height=0 dropout=0 cyclone="" ring=() marker=()
 while [ $# -gt 0 ]; do
   case "$1" in
+    --dropout) dropout=$2; shift 2 ;;
+    --cyclone) cyclone=$2; shift 2 ;;
+    --ring) ring=(--ring); shift ;;
+    --marker) marker=(--marker "$2"); shift 2 ;;
     --dataset) dataset=$2; shift 2 ;;
     --beams) beams=$2; shift 2 ;;
     --scans) scans=$2; shift 2 ;;
     --sensor-height) sensor_height=$2; shift 2 ;;
-    -h|--help) sed -n 2,18p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,26p "$0"; exit 0 ;;
     *) echo "safety-dds: unknown option $1" >&2; exit 64 ;;
   esac
 done
 bin=build/bin
-for b in tarmacd tarmac-replay tarmac-audit tarmac-map tarmac-sim; do
+for b in tarmacd tarmac-replay tarmac-audit tarmac-map tarmac-sim tarmac-cyclone-replay; do
   [ -x "$bin/$b" ] || { echo "safety-dds: $bin/$b missing: build first (tools/test.sh)" >&2; exit 1; }
 done
 out=out/safety-dds
@@ -38,7 +49,7 @@ rm -rf "$out" && mkdir -p "$out"
 if [ -z "$dataset" ]; then
   dataset=$out/sim
   "$bin/tarmac-sim" --out "$dataset" --scene aircraft --beams "$beams" ${scans:+--scans "$scans"} \
-    > "$out/sim.log"
+    --dropout "$dropout" > "$out/sim.log"
 fi
 [ -f "$dataset/obstacle_columns.txt" ] || { echo "safety-dds: $dataset has no obstacle_columns.txt (not a tarmac-sim dataset?)" >&2; exit 65; }
 domain=${TARMAC_DOMAIN:-78}
@@ -62,8 +73,16 @@ audit_pid=$!
 # The replay starts once the audit has matched tarmacd, and waits until the audit reads the pose
 # topic too (--pose-readers 2): the audit learns each scan's stamp from its pose.
 for _ in $(seq 100); do grep -q "tarmac-audit: matched" "$out/audit.log" && break; sleep 0.1; done
-"$bin/tarmac-replay" --dataset "$dataset" --config "$out/tarmac.yaml" --align-ms 100 \
-  --pose-readers 2 ${scans:+--scans "$scans"} > "$out/replay.txt" 2> "$out/replay.log"
+if [ -n "$cyclone" ]; then
+  # Cyclone on loopback only (config/cyclonedds_localhost.xml), over UDP as another process's.
+  CYCLONEDDS_URI="file://$PWD/config/cyclonedds_localhost.xml" "$bin/tarmac-cyclone-replay" \
+    --dataset "$dataset" --domain "$domain" --rate-hz 10 --layout "$cyclone" "${ring[@]}" \
+    "${marker[@]}" --pose-readers 2 ${scans:+--scans "$scans"} --idle-s 3 \
+    --json "$out/cyclone.json" > "$out/replay.txt" 2> "$out/replay.log"
+else
+  "$bin/tarmac-replay" --dataset "$dataset" --config "$out/tarmac.yaml" --align-ms 100 \
+    --pose-readers 2 ${scans:+--scans "$scans"} > "$out/replay.txt" 2> "$out/replay.log"
+fi
 audit_rc=0; wait "$audit_pid" || audit_rc=$?
 kill -TERM "$daemon_pid"
 daemon_rc=0; wait "$daemon_pid" || daemon_rc=$?
@@ -74,7 +93,12 @@ trap - EXIT
   --sensor-height "$sensor_height" ${scans:+--scans "$scans"} --out "$out/offline" > "$out/offline.txt" 2>&1
 
 echo "dataset: $dataset ($(wc -l < "$dataset/poses.txt") scans), sensor $sensor_height m above the base"
-sed -n 's/^tarmac-replay: //p' "$out/replay.txt"
+if [ -n "$cyclone" ]; then
+  echo "tarmac-cyclone-replay --layout $cyclone ${ring[*]} ${marker[*]}:"
+  sed 's/^/  /' "$out/replay.txt"
+else
+  sed -n 's/^tarmac-replay: //p' "$out/replay.txt"
+fi
 echo "tarmacd (exit $daemon_rc): $(sed -n 's/.*stopped after \(.*\)$/\1/p' "$out/tarmacd.log")"
 echo
 echo "== tarmacd over DDS (tarmac-audit --score) =="

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -28,6 +29,7 @@
 #include "tarmac/daemon/cycle.hpp"
 #include "tarmac/daemon/executor.hpp"
 #include "tarmac/daemon/tsdf_pager.hpp"
+#include "tarmac/replay/driver_message.hpp"
 #include "tarmac/replay/replayer.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
@@ -80,14 +82,19 @@ void read_ring_list(const tools::KittiSequence& seq, std::size_t k, core::PointC
 /// (quaternions), with the TSDF stage when `tsdf` (no quota shedding); the sweeps as lists with
 /// rings when `ring_lists`.
 void run_offline(core::Mapper& mapper, const config::Config& cfg, std::size_t scans, bool tsdf,
-                 bool ring_lists = false) {
+                 bool ring_lists = false, std::optional<sim::Driver> driver = std::nullopt) {
   core::SerialRunner runner;
   const auto& seq = sequence();
   const Eigen::Isometry3d& T_B_S = cfg.sensors[0].T_base_sensor;
   core::PointCloud cloud;
   core::OrganisedScratch scratch;
   for (std::size_t k = 0; k < scans; ++k) {
-    if (ring_lists) {
+    if (driver) {  // the driver's message of the sweep, read by tarmac's transport
+      core::PointCloud grid;
+      ASSERT_TRUE(tools::read_kitti_scan(seq.organised[k], grid).ok());
+      const auto msg = tools::driver_sweep_message(grid, seq.rows, seq.cols, *driver, 0, 0.0, "s");
+      ASSERT_TRUE(transport::from_point_cloud2(msg, cloud).ok());
+    } else if (ring_lists) {
       read_ring_list(seq, k, cloud);
     } else {
       EXPECT_TRUE(tools::read_sequence_scan(seq, k, cloud, scratch).ok());
@@ -99,9 +106,10 @@ void run_offline(core::Mapper& mapper, const config::Config& cfg, std::size_t sc
 }
 
 std::string offline_costmap_digest(const config::Config& cfg, std::size_t scans,
-                                   std::int64_t last_stamp_ns, bool ring_lists = false) {
+                                   std::int64_t last_stamp_ns, bool ring_lists = false,
+                                   std::optional<sim::Driver> driver = std::nullopt) {
   core::Mapper mapper(cfg.mapping);
-  run_offline(mapper, cfg, scans, false, ring_lists);
+  run_offline(mapper, cfg, scans, false, ring_lists, driver);
   core::SerialRunner runner;
   mapper.update_costmap({}, last_stamp_ns, runner);
   const auto& cells = mapper.costmap().costmap.cells();
@@ -260,6 +268,23 @@ TEST_F(Daemon, Replay_ListsWithRings_CostmapEqualsOfflineCore) {
                                           });
   EXPECT_EQ(got, offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_, true));
   EXPECT_EQ(totals_.scans_integrated, static_cast<std::uint64_t>(kScans));
+}
+
+TEST_F(Daemon, Replay_DriversMessages_CostmapEqualsOfflineCore) {
+  // tarmac-replay --driver: the sweeps as velodyne's driver (organised, 22-byte points, rows =
+  // firings), Hesai's (a list with (0, 0, 0) markers, f64 absolute times) and Autoware's
+  // PointXYZIRCAEDT (a list, u8 intensity, u32 ns times) publish them. tarmacd reads each into
+  // the map the core makes offline of the same messages, bit for bit, every scan integrated.
+  for (const auto driver :
+       {sim::Driver::kVelodyne, sim::Driver::kHesai, sim::Driver::kAutowareXYZIRCAEDT}) {
+    SCOPED_TRACE(std::string(sim::driver_name(driver)));
+    const std::string got =
+        replayed_digest(test::kDomainDaemonLayoutDriver, 2, 0.0, {}, sequence(), 2.0,
+                        [driver](tools::ReplayOptions& o) { o.driver = driver; });
+    EXPECT_EQ(got,
+              offline_costmap_digest(test_config(0, 2), kScans, last_stamp_ns_, false, driver));
+    EXPECT_EQ(totals_.scans_integrated, static_cast<std::uint64_t>(kScans));
+  }
 }
 
 TEST_F(Daemon, EsdfBand_PublishedBoxEqualsOfflineCore) {

@@ -58,6 +58,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonLayoutRing = 154,
   kDomainDaemonLayoutElevation = 155,
   kDomainDaemonLayoutList = 156,
+  kDomainDaemonLayoutDriver = 157,
   // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 160..169
   kDomainCycloneUdpClouds = 160,
   kDomainCycloneTinyBuffer = 161,

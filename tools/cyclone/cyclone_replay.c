@@ -3,6 +3,12 @@
  * (scans/NNNNNN.bin float32 x,y,z,intensity in the sensor frame, poses.txt T_world_sensor,
  * times.txt) over UDP with ROS 2 types and QoS, and subscribes to what tarmacd publishes:
  *
+ *   - with --layout, tarmac-sim's organised sweeps (organised/NNNNNN.bin, rows = beams, lowest
+ *     first) go out as a spinning LiDAR's driver sends them: rows = beams (ouster-ros), rows =
+ *     firings with one column per laser (velodyne's organize_cloud), or a list of the returns in
+ *     firing order (HesaiLidar_ROS_2.0, velodyne without organize_cloud); NaN or (0, 0, 0) where
+ *     a beam returned nothing (--marker), a uint16 `ring` with --ring; the point laid out as
+ *     velodyne's PointXYZIR (x, y, z at 0, intensity at 16, ring at 20, 32 bytes with padding);
  *   - sensor_msgs/PointCloud2 on the LiDAR topic, best effort, keep last 5 (rclcpp's
  *     SensorDataQoS), stamped with the wall clock on a grid of 1/rate;
  *   - geometry_msgs/PoseWithCovarianceStamped on the pose topic, reliable, keep last 100, one per
@@ -55,6 +61,10 @@ typedef struct {
   double wait_s;
   long tail_scans;
   long head_scans;
+  const char* layout; /* NULL: scans/ as they are; "beams", "firings", "list": organised/ */
+  int ring;
+  int zero_marker;
+  long pose_readers;
 } Options;
 
 static void usage(FILE* out) {
@@ -75,6 +85,12 @@ static void usage(FILE* out) {
           "  --tail-scans N           then N short scans (the last cloud's first 2000 points, one\n"
           "                           datagram each): a receiver sees losses at the end of the\n"
           "                           stream as a gap in sequence numbers (default 0)\n"
+          "  --layout L               send organised/ (tarmac-sim) as 'beams' (rows = beams),\n"
+          "                           'firings' (rows = firings) or 'list' (the returns only)\n"
+          "  --ring                   with --layout: a uint16 ring field (0 = lowest beam)\n"
+          "  --marker nan|zero        with --layout beams|firings: a beam without return as NaN\n"
+          "                           (default) or (0, 0, 0)\n"
+          "  --pose-readers N         wait until N readers match the pose topic (default 1)\n"
           "  --wait-s S               wait for tarmacd's readers to match (default 20)\n"
           "  --json FILE              the summary as JSON\n");
 }
@@ -241,6 +257,112 @@ static void serve_until(int64_t deadline_ns, dds_entity_t costmaps, dds_entity_t
   }
 }
 
+/* One scan as the LiDAR topic carries it. */
+typedef struct {
+  sensor_msgs_msg_dds__PointField_ fields[5];
+  uint32_t field_count;
+  uint8_t* data; /* malloc'd */
+  uint32_t height, width, point_step;
+  uint32_t points; /* the returns in it */
+} Scan;
+
+static void set_field(Scan* s, const char* name, uint32_t offset, uint8_t datatype) {
+  sensor_msgs_msg_dds__PointField_* f = &s->fields[s->field_count++];
+  f->name = (char*)name;
+  f->offset = offset;
+  f->datatype = datatype;
+  f->count = 1;
+}
+
+/* scans/NNNNNN.bin as it is: height 1, float32 x, y, z, intensity; a short scan keeps the first
+ * 2000 points. */
+static void load_list_scan(const Options* o, long scan, int short_scan, Scan* out) {
+  char path[4096];
+  snprintf(path, sizeof path, "%s/scans/%06ld.bin", o->dataset, scan);
+  uint32_t size = 0;
+  out->data = read_file(path, &size);
+  if (!out->data) FAIL("cannot read %s", path);
+  uint32_t n = size / 16u;
+  if (short_scan && n > 2000) n = 2000;
+  static const char* names[4] = {"x", "y", "z", "intensity"};
+  out->field_count = 0;
+  for (uint32_t f = 0; f < 4; ++f) {
+    set_field(out, names[f], 4 * f, sensor_msgs_msg_PointField_Constants_FLOAT32);
+  }
+  out->height = 1;
+  out->width = n;
+  out->point_step = 16;
+  out->points = n;
+}
+
+static int is_return(const float* cell) {
+  return isfinite(cell[0]) && isfinite(cell[1]) && isfinite(cell[2]) &&
+         !(cell[0] == 0.0f && cell[1] == 0.0f && cell[2] == 0.0f);
+}
+
+/* organised/NNNNNN.bin (rows = beams, lowest first, by columns = firings) in o->layout, each
+ * point laid out as velodyne's PointXYZIR: x, y, z at 0, 4, 8, intensity at 16, ring at 20,
+ * 32 bytes. rows = beams goes out top first with ring 0 at the top (ouster-ros); rows = firings
+ * with the lasers lowest first, ring 0 the lowest (velodyne); the list in firing order, each
+ * firing top first, ring 0 at the top (Hesai). A short scan is the list of the first 2000
+ * returns. */
+static void load_organised_scan(const Options* o, long rows, long cols, long scan, int short_scan,
+                                Scan* out) {
+  char path[4096];
+  snprintf(path, sizeof path, "%s/organised/%06ld.bin", o->dataset, scan);
+  uint32_t size = 0;
+  float* grid = (float*)read_file(path, &size);
+  if (!grid || size != (uint32_t)(rows * cols * 16))
+    FAIL("%s: not %ld x %ld cells", path, rows, cols);
+  const int list = short_scan || strcmp(o->layout, "list") == 0;
+  const int firings = !list && strcmp(o->layout, "firings") == 0;
+  out->field_count = 0;
+  set_field(out, "x", 0, sensor_msgs_msg_PointField_Constants_FLOAT32);
+  set_field(out, "y", 4, sensor_msgs_msg_PointField_Constants_FLOAT32);
+  set_field(out, "z", 8, sensor_msgs_msg_PointField_Constants_FLOAT32);
+  set_field(out, "intensity", 16, sensor_msgs_msg_PointField_Constants_FLOAT32);
+  if (o->ring) set_field(out, "ring", 20, sensor_msgs_msg_PointField_Constants_UINT16);
+  out->point_step = 32;
+  out->data = calloc((size_t)(rows * cols), 32);
+  if (!out->data) FAIL("out of memory");
+  uint32_t n = 0;
+  out->points = 0;
+  const long lines = firings || list ? cols : rows, along = firings || list ? rows : cols;
+  for (long a = 0; a < lines; ++a) {
+    for (long b = 0; b < along; ++b) {
+      /* the source cell (beam, column) and its ring */
+      const long beam = firings ? b : list ? rows - 1 - b : rows - 1 - a;
+      const long col = firings || list ? a : b;
+      const uint16_t ring = (uint16_t)(firings ? beam : rows - 1 - beam);
+      const float* cell = &grid[(beam * cols + col) * 4];
+      const int back = is_return(cell);
+      if (list && (!back || (short_scan && out->points >= 2000))) continue;
+      uint8_t* p = out->data + (size_t)n * 32;
+      const float none = o->zero_marker ? 0.0f : NAN;
+      const float xyz[3] = {back ? cell[0] : none, back ? cell[1] : none, back ? cell[2] : none};
+      memcpy(p, xyz, 12);
+      memcpy(p + 16, &cell[3], 4);
+      if (o->ring) memcpy(p + 20, &ring, 2);
+      ++n;
+      out->points += back ? 1u : 0u;
+    }
+  }
+  out->height = list ? 1u : (uint32_t)lines;
+  out->width = list ? n : (uint32_t)along;
+  free(grid);
+}
+
+static void organised_shape(const char* dataset, long* rows, long* cols) {
+  char path[4096];
+  snprintf(path, sizeof path, "%s/organised/shape.txt", dataset);
+  FILE* f = fopen(path, "r");
+  if (!f || fscanf(f, "%ld %ld", rows, cols) != 2 || *rows < 2 || *cols < 2 ||
+      *rows * *cols > (1L << 24)) {
+    FAIL("--layout needs a tarmac-sim dataset: cannot read rows and cols from %s", path);
+  }
+  fclose(f);
+}
+
 static dds_entity_t make_topic(dds_entity_t participant, const dds_topic_descriptor_t* desc,
                                const char* name) {
   const dds_entity_t topic = dds_create_topic(participant, desc, name, NULL, NULL);
@@ -255,6 +377,10 @@ static void parse(int argc, char** argv, Options* o) {
     if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
       usage(stdout);
       exit(0);
+    }
+    if (strcmp(a, "--ring") == 0) {
+      o->ring = 1;
+      continue;
     }
     if (!v) {
       fprintf(stderr, "tarmac-cyclone-replay: %s needs a value\n", a);
@@ -292,6 +418,13 @@ static void parse(int argc, char** argv, Options* o) {
       o->tail_scans = strtol(v, &end, 10);
     else if (strcmp(a, "--head-scans") == 0)
       o->head_scans = strtol(v, &end, 10);
+    else if (strcmp(a, "--pose-readers") == 0)
+      o->pose_readers = strtol(v, &end, 10);
+    else if (strcmp(a, "--layout") == 0 &&
+             (strcmp(v, "beams") == 0 || strcmp(v, "firings") == 0 || strcmp(v, "list") == 0))
+      o->layout = v;
+    else if (strcmp(a, "--marker") == 0 && (strcmp(v, "nan") == 0 || strcmp(v, "zero") == 0))
+      o->zero_marker = strcmp(v, "zero") == 0;
     else {
       fprintf(stderr, "tarmac-cyclone-replay: unknown option %s\n", a);
       usage(stderr);
@@ -309,7 +442,8 @@ static void parse(int argc, char** argv, Options* o) {
   }
   if (!(o->rate_hz > 0.0 && o->rate_hz <= 1000.0) || o->domain < 0 || o->domain > 232 ||
       !(o->idle_s >= 0.0) || !(o->wait_s >= 0.0) || o->max_scans < 0 || o->tail_scans < 0 ||
-      o->tail_scans > 1000 || o->head_scans < 0 || o->head_scans > 1000) {
+      o->tail_scans > 1000 || o->head_scans < 0 || o->head_scans > 1000 || o->pose_readers < 1 ||
+      ((o->ring || o->zero_marker) && !o->layout)) {
     fprintf(stderr, "tarmac-cyclone-replay: a value is out of range\n");
     exit(64);
   }
@@ -330,7 +464,11 @@ int main(int argc, char** argv) {
                2.0,
                20.0,
                0,
-               0};
+               0,
+               NULL,
+               0,
+               0,
+               1};
   parse(argc, argv, &o);
 
   /* poses.txt: one row-major 3x4 T_world_sensor per scan. */
@@ -357,6 +495,8 @@ int main(int argc, char** argv) {
   fclose(pf);
   if (o.max_scans > 0 && o.max_scans < scans) scans = o.max_scans;
   if (scans == 0) FAIL("no poses in %s", path);
+  long rows = 0, cols = 0;
+  if (o.layout) organised_shape(o.dataset, &rows, &cols);
 
   const dds_entity_t participant = dds_create_participant(o.domain, NULL, NULL);
   if (participant < 0) FAIL("create participant: %s", dds_strretcode(-participant));
@@ -402,7 +542,7 @@ int main(int argc, char** argv) {
     dds_get_publication_matched_status(cloud_writer, &c);
     dds_get_publication_matched_status(pose_writer, &p);
     dds_get_subscription_matched_status(grid_reader, &g);
-    if (c.current_count > 0 && p.current_count > 0 && g.current_count > 0) break;
+    if (c.current_count > 0 && p.current_count >= o.pose_readers && g.current_count > 0) break;
     if (now_ns() > wait_until) {
       fprintf(stderr, "tarmac-cyclone-replay: tarmacd did not match within %.0f s (domain %d)\n",
               o.wait_s, o.domain);
@@ -429,12 +569,12 @@ int main(int argc, char** argv) {
     const long j = k - o.head_scans;
     const int short_scan = j < 0 || j >= scans;
     const long scan = j < 0 ? 0 : j < scans ? j : scans - 1;
-    snprintf(path, sizeof path, "%s/scans/%06ld.bin", o.dataset, scan);
-    uint32_t size = 0;
-    uint8_t* data = read_file(path, &size);
-    if (!data) FAIL("cannot read %s", path);
-    uint32_t n = size / 16u;
-    if (short_scan && n > 2000) n = 2000;
+    Scan data = {0};
+    if (o.layout) {
+      load_organised_scan(&o, rows, cols, scan, short_scan, &data);
+    } else {
+      load_list_scan(&o, scan, short_scan, &data);
+    }
     const int64_t stamp = start_ns + k * period_ns;
 
     geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose;
@@ -453,28 +593,20 @@ int main(int argc, char** argv) {
     pose.pose.pose.orientation.z = q[2];
     pose.pose.pose.orientation.w = q[3];
 
-    static sensor_msgs_msg_dds__PointField_ fields[4];
-    static char* names[4] = {"x", "y", "z", "intensity"};
-    for (uint32_t f = 0; f < 4; ++f) {
-      fields[f].name = names[f];
-      fields[f].offset = 4 * f;
-      fields[f].datatype = sensor_msgs_msg_PointField_Constants_FLOAT32;
-      fields[f].count = 1;
-    }
     sensor_msgs_msg_dds__PointCloud2_ cloud;
     memset(&cloud, 0, sizeof cloud);
     cloud.header.stamp = to_time(stamp);
     cloud.header.frame_id = (char*)o.frame_id;
-    cloud.height = 1;
-    cloud.width = n;
-    cloud.fields._length = cloud.fields._maximum = 4;
-    cloud.fields._buffer = fields;
+    cloud.height = data.height;
+    cloud.width = data.width;
+    cloud.fields._length = cloud.fields._maximum = data.field_count;
+    cloud.fields._buffer = data.fields;
     cloud.is_bigendian = false;
-    cloud.point_step = 16;
-    cloud.row_step = 16 * n;
-    cloud.data._length = cloud.data._maximum = 16 * n;
-    cloud.data._buffer = data;
-    cloud.is_dense = true;
+    cloud.point_step = data.point_step;
+    cloud.row_step = data.point_step * data.width;
+    cloud.data._length = cloud.data._maximum = cloud.row_step * data.height;
+    cloud.data._buffer = data.data;
+    cloud.is_dense = data.points == data.height * data.width;
 
     seen.stamps[k] = stamp;
     seen.scans = k + 1;
@@ -482,9 +614,9 @@ int main(int argc, char** argv) {
     if (dds_write(pose_writer, &pose) != DDS_RETCODE_OK) ++write_errors;
     if (dds_write(cloud_writer, &cloud) != DDS_RETCODE_OK) ++write_errors;
     ++sent;
-    points_sent += n;
-    if (!short_scan) bytes_sent += 16u * n; /* the sequence's clouds, for their mean size */
-    free(data);
+    points_sent += data.points;
+    if (!short_scan) bytes_sent += cloud.data._length; /* the sequence's, for their mean size */
+    free(data.data);
   }
   serve_until(now_ns() + (int64_t)(o.idle_s * 1e9), grid_reader, report_reader, &seen);
 

@@ -84,6 +84,21 @@ int main(int argc, char** argv) {
                  "organize_cloud and rslidar_sdk) or 'list' (height 1, the returns only, in "
                  "firing order, as HesaiLidar_ROS_2.0)")
       ->check(CLI::IsMember({"beams", "firings", "list"}));
+  std::string driver;
+  std::string driver_names;
+  for (const auto d : sim::all_drivers()) {
+    driver_names += (driver_names.empty() ? "" : ", ") + std::string(sim::driver_name(d));
+  }
+  app.add_option("--driver", driver,
+                 "an organised sequence's sweeps as this ROS 2 driver publishes them (" +
+                     driver_names +
+                     "): its field table, padding, layout, ring order, no-return marker and "
+                     "point times, every point timed at the stamp, as the simulator's sweeps are "
+                     "instantaneous (docs/lidar-drivers.md)")
+      ->check([](const std::string& name) {
+        sim::Driver d;
+        return sim::driver_from_name(name, d) ? std::string() : "no driver " + name;
+      });
   app.add_flag("--ring", options.ring_field,
                "an organised sequence's sweeps carry a ring field (uint16, 0 = lowest beam)");
   std::size_t pace_ahead = 0;
@@ -99,6 +114,11 @@ int main(int argc, char** argv) {
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
   if (layout == "firings") options.layout = tools::ReplayOptions::Layout::kRowsAreFirings;
   if (layout == "list") options.layout = tools::ReplayOptions::Layout::kUnorganised;
+  if (!driver.empty()) {
+    sim::Driver d;
+    sim::driver_from_name(driver, d);
+    options.driver = d;
+  }
   config::Config cfg;
   cfg.dds.participant.name = "tarmac-replay";
   if (!config_path.empty()) {

@@ -17,6 +17,7 @@
 #include "nav_msgsPubSubTypes.h"
 #include "sensor_msgsPubSubTypes.h"
 #include "tarmac/daemon/clock.hpp"
+#include "tarmac/replay/driver_message.hpp"
 #include "tarmac/transport/qos.hpp"
 
 namespace tarmac::tools {
@@ -278,6 +279,18 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
       cloud.frame_id = options.frame_id;
       cloud.stamp_ns = stamps[e.index];
       std::size_t height = seq.rows, width = seq.cols;
+      if (organised && options.driver) {
+        // The driver's message of the (instantaneous) sweep taken at the scan's stamp.
+        const auto msg = driver_sweep_message(cloud, seq.rows, seq.cols, *options.driver,
+                                              cloud.stamp_ns, 0.0, options.frame_id);
+        sleep_until_realtime(e.publish_ns);
+        stats.max_late_ms =
+            std::max(stats.max_late_ms, static_cast<double>(realtime_ns() - e.publish_ns) / 1e6);
+        clouds.value()->write(msg);
+        ++published_scans;
+        if (options.progress) options.progress(published_scans, total);
+        continue;
+      }
       if (organised) {
         if (options.ring_field) {
           cloud.ring.resize(cloud.size());

@@ -14,12 +14,14 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
 
 #include "tarmac/core/result.hpp"
+#include "tarmac/sim/driver_cloud.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/transport/participant.hpp"
 #include "tarmac/transport/qos.hpp"
@@ -78,6 +80,11 @@ struct ReplayOptions {
   Layout layout = Layout::kRowsAreBeams;
   /// With an organised sequence: a `ring` field (uint16, the beam's index, 0 = lowest) too.
   bool ring_field = false;
+  /// With an organised sequence: each sweep as this driver publishes it instead (field table,
+  /// padding, layout, ring order, no-return marker, point times: sim/driver_cloud.hpp), every
+  /// point timed at the stamp (the simulator's sweeps are instantaneous); `layout` and
+  /// `ring_field` are then not used.
+  std::optional<sim::Driver> driver;
   /// Called after each scan is published (index, count); e.g. a progress bar.
   std::function<void(std::size_t, std::size_t)> progress;
   /// Empty: the schedule alone sets the pace. Otherwise called before the first message (pose
