@@ -279,40 +279,35 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
       cloud.frame_id = options.frame_id;
       cloud.stamp_ns = stamps[e.index];
       std::size_t height = seq.rows, width = seq.cols;
+      transport::PointCloud2Msg msg;
       if (organised && options.driver) {
         // The driver's message of the (instantaneous) sweep taken at the scan's stamp.
-        const auto msg = driver_sweep_message(cloud, seq.rows, seq.cols, *options.driver,
-                                              cloud.stamp_ns, 0.0, options.frame_id);
-        sleep_until_realtime(e.publish_ns);
-        stats.max_late_ms =
-            std::max(stats.max_late_ms, static_cast<double>(realtime_ns() - e.publish_ns) / 1e6);
-        clouds.value()->write(msg);
-        ++published_scans;
-        if (options.progress) options.progress(published_scans, total);
-        continue;
-      }
-      if (organised) {
-        if (options.ring_field) {
-          cloud.ring.resize(cloud.size());
-          for (std::size_t i = 0; i < cloud.size(); ++i) {
-            cloud.ring[i] = static_cast<std::uint16_t>(i / seq.cols);
+        msg = driver_sweep_message(cloud, seq.rows, seq.cols, *options.driver, cloud.stamp_ns, 0.0,
+                                   options.frame_id);
+      } else {
+        if (organised) {
+          if (options.ring_field) {
+            cloud.ring.resize(cloud.size());
+            for (std::size_t i = 0; i < cloud.size(); ++i) {
+              cloud.ring[i] = static_cast<std::uint16_t>(i / seq.cols);
+            }
+          }
+          if (options.layout != ReplayOptions::Layout::kRowsAreBeams) {
+            transpose(cloud, seq.rows, seq.cols, transposed);
+            std::swap(height, width);
+          }
+          if (options.layout == ReplayOptions::Layout::kUnorganised) {
+            drop_no_returns(cloud);  // in firing order, as Hesai's and Velodyne's lists come
+            height = 1;
           }
         }
-        if (options.layout != ReplayOptions::Layout::kRowsAreBeams) {
-          transpose(cloud, seq.rows, seq.cols, transposed);
-          std::swap(height, width);
+        msg = transport::to_point_cloud2(cloud);
+        if (organised && height > 1) {
+          msg.height(static_cast<std::uint32_t>(height));
+          msg.width(static_cast<std::uint32_t>(width));
+          msg.row_step(msg.point_step() * msg.width());
+          msg.is_dense(false);
         }
-        if (options.layout == ReplayOptions::Layout::kUnorganised) {
-          drop_no_returns(cloud);  // in firing order, as Hesai's and Velodyne's lists come
-          height = 1;
-        }
-      }
-      auto msg = transport::to_point_cloud2(cloud);
-      if (organised && height > 1) {
-        msg.height(static_cast<std::uint32_t>(height));
-        msg.width(static_cast<std::uint32_t>(width));
-        msg.row_step(msg.point_step() * msg.width());
-        msg.is_dense(false);
       }
       sleep_until_realtime(e.publish_ns);
       stats.max_late_ms =

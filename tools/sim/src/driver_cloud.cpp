@@ -72,6 +72,27 @@ void set_fields(DriverCloud& c, std::uint32_t point_step, std::vector<DriverFiel
   c.fields = std::move(fields);
 }
 
+/// XYZI, ring u16 and an f64 `timestamp`, by addPointField without padding (26 bytes): the
+/// layout of rslidar_sdk's XYZIRT and of HesaiLidar_ROS_2.0.
+void set_xyzirt26_fields(DriverCloud& c) {
+  set_fields(c, 26,
+             {{"x", 0, kF32},
+              {"y", 4, kF32},
+              {"z", 8, kF32},
+              {"intensity", 12, kF32},
+              {"ring", 16, kU16},
+              {"timestamp", 18, kF64}});
+}
+
+/// One point of that layout.
+void put_xyzirt26(Writer& w, const LidarReturn* r, float marker, std::uint16_t ring, double t_s) {
+  w.xyz(r, marker);
+  w.put<float>(12, r != nullptr ? r->intensity : 0.0f);
+  w.put<std::uint16_t>(16, ring);
+  w.put<double>(18, t_s);
+  w.next();
+}
+
 /// ouster-ros `original`: ouster_ros::Point (PCL_ADD_POINT4D, 48 bytes), rows = beams top
 /// first (ring 0 = top), columns in firing order, NaN x, y, z kept for no return, t u32 ns from
 /// the stamp (the first column's time).
@@ -143,13 +164,7 @@ void velodyne(const Grid& g, std::int64_t start_ns, double period_s, bool organi
 /// at 18): rows = firings, columns = channels in raw order, ring = elevation rank (0 = lowest),
 /// NaN x, y, z with intensity 0 for no return; the stamp is the first point's time.
 void rslidar(const Grid& g, std::int64_t start_ns, double period_s, DriverCloud& c) {
-  set_fields(c, 26,
-             {{"x", 0, kF32},
-              {"y", 4, kF32},
-              {"z", 8, kF32},
-              {"intensity", 12, kF32},
-              {"ring", 16, kU16},
-              {"timestamp", 18, kF64}});
+  set_xyzirt26_fields(c);
   c.stamp_ns = start_ns;
   c.height = static_cast<std::uint32_t>(g.steps);
   c.width = static_cast<std::uint32_t>(g.beams);
@@ -157,12 +172,8 @@ void rslidar(const Grid& g, std::int64_t start_ns, double period_s, DriverCloud&
   for (int k = 0; k < g.steps; ++k) {
     for (int channel = 0; channel < g.beams; ++channel) {
       const int beam = interleaved_beam(channel, g.beams);
-      const LidarReturn* r = g.at(beam, step_fired(k, g.steps));
-      w.xyz(r, kNaN);
-      w.put<float>(12, r != nullptr ? r->intensity : 0.0f);
-      w.put<std::uint16_t>(16, static_cast<std::uint16_t>(beam));
-      w.put<double>(18, static_cast<double>(start_ns) / 1e9 + k * period_s / g.steps);
-      w.next();
+      put_xyzirt26(w, g.at(beam, step_fired(k, g.steps)), kNaN, static_cast<std::uint16_t>(beam),
+                   static_cast<double>(start_ns) / 1e9 + k * period_s / g.steps);
     }
   }
 }
@@ -171,13 +182,7 @@ void rslidar(const Grid& g, std::int64_t start_ns, double period_s, DriverCloud&
 /// channel 0 the top beam), (0, 0, 0) kept for no return, `timestamp` f64 absolute s of the
 /// packet (6 firings each), the stamp the first packet's.
 void hesai(const Grid& g, std::int64_t start_ns, double period_s, DriverCloud& c) {
-  set_fields(c, 26,
-             {{"x", 0, kF32},
-              {"y", 4, kF32},
-              {"z", 8, kF32},
-              {"intensity", 12, kF32},
-              {"ring", 16, kU16},
-              {"timestamp", 18, kF64}});
+  set_xyzirt26_fields(c);
   constexpr int kFiringsPerPacket = 6;
   c.stamp_ns = start_ns;
   c.height = 1;
@@ -187,12 +192,8 @@ void hesai(const Grid& g, std::int64_t start_ns, double period_s, DriverCloud& c
     const int packet_first = k - k % kFiringsPerPacket;
     for (int channel = 0; channel < g.beams; ++channel) {
       const int beam = g.beams - 1 - channel;
-      const LidarReturn* r = g.at(beam, step_fired(k, g.steps));
-      w.xyz(r, 0.0f);
-      w.put<float>(12, r != nullptr ? r->intensity : 0.0f);
-      w.put<std::uint16_t>(16, static_cast<std::uint16_t>(channel));
-      w.put<double>(18, static_cast<double>(start_ns) / 1e9 + packet_first * period_s / g.steps);
-      w.next();
+      put_xyzirt26(w, g.at(beam, step_fired(k, g.steps)), 0.0f, static_cast<std::uint16_t>(channel),
+                   static_cast<double>(start_ns) / 1e9 + packet_first * period_s / g.steps);
     }
   }
 }
