@@ -62,6 +62,8 @@ const std::vector<std::string_view> kTransports = {"localhost", "shm", "network"
 const std::vector<std::string_view> kReliability = {"best_effort", "reliable"};
 const std::vector<std::string_view> kDurability = {"volatile", "transient_local"};
 const std::vector<std::string_view> kPoseTypes = {"PoseWithCovarianceStamped", "Odometry"};
+const std::vector<std::string_view> kLidarDrivers = {"auto",  "ouster", "velodyne", "rslidar",
+                                                     "hesai", "livox",  "autoware"};
 const std::vector<std::string_view> kUnknownCost = {"unknown", "lethal", "free"};
 const std::vector<std::string_view> kFreeRule = {"whole_envelope", "any_voxel"};
 const std::vector<std::string_view> kUnknownPolicy = {"report", "occupied"};
@@ -209,6 +211,11 @@ std::vector<Key> make_schema() {
           boolean("sensors[].deskew",
                   "motion-compensate scans that carry per-point times (they wait for those poses)",
                   [](SensorEntry& s) -> Field { return &s.sensor.deskew; }),
+          choice("sensors[].driver", kLidarDrivers,
+                 "auto: fields and time unit told from each message; else the ROS 2 driver "
+                 "whose default message to expect (its ring and time fields fixed; one that "
+                 "does not match is rejected: pointcloud.driver_mismatch)",
+                 [](SensorEntry& s) -> Field { return choice_field(s.sensor.driver); }),
           // pose
           topic("pose.topic", "vehicle base pose T_map_base",
                 [](Config& c) -> Field { return &c.pose.topic; }),

@@ -14,7 +14,7 @@ core::Result<std::unique_ptr<TickInputs>> TickInputs::create(
   const auto& q = cfg.dds.qos;
   for (const auto& s : cfg.sensors) {
     auto input = transport::ScanInput::create(participant, s.topic, s.frame_id, q.lidar,
-                                              cfg.executor.queue_depth);
+                                              cfg.executor.queue_depth, s.driver);
     if (!input) return input.error();
     Sensor sensor;
     sensor.input = std::move(input).value();

@@ -93,6 +93,7 @@ void TickReport::declare_reasons(ReasonCounters& drops, ReasonCounters& rejectio
                         "pointcloud.field_outside_point",
                         "pointcloud.bad_row_step",
                         "pointcloud.bad_size",
+                        "pointcloud.driver_mismatch",
                         "pose.unknown_frame",
                         "pose.non_finite",
                         "pose.bad_quaternion",

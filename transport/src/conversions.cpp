@@ -61,6 +61,29 @@ TimeBase time_base(double first, std::uint8_t datatype, std::int64_t stamp_ns) {
   if (near((first - stamp_as_ns) * 1e-9)) return {stamp_as_ns, 1e-9};  // absolute nanoseconds
   return {};
 }
+/// A driver's ring and time fields (LidarDriver): names, the time's datatype and base.
+struct DriverFields {
+  std::string_view ring;  ///< empty: none (Livox)
+  std::string_view time;
+  std::uint8_t time_datatype = 0;
+  bool absolute = false;  ///< time from the epoch (origin the stamp), else from the stamp
+  double scale = 1.0;     ///< to seconds
+};
+
+std::optional<DriverFields> driver_fields(LidarDriver driver) {
+  switch (driver) {
+    case LidarDriver::kAuto: return std::nullopt;
+    case LidarDriver::kOuster: return DriverFields{"ring", "t", pf::UINT32, false, 1e-9};
+    case LidarDriver::kVelodyne: return DriverFields{"ring", "time", pf::FLOAT32, false, 1.0};
+    case LidarDriver::kRslidar:
+    case LidarDriver::kHesai: return DriverFields{"ring", "timestamp", pf::FLOAT64, true, 1.0};
+    case LidarDriver::kLivox: return DriverFields{"", "timestamp", pf::FLOAT64, true, 1e-9};
+    case LidarDriver::kAutoware:
+      return DriverFields{"channel", "time_stamp", pf::UINT32, false, 1e-9};
+  }
+  return std::nullopt;
+}
+
 /// Reads a numeric field of any datatype as double, honouring the message's endianness.
 double read_as_double(const std::uint8_t* p, std::uint8_t datatype, bool swap) {
   std::uint8_t raw[8];
@@ -227,8 +250,9 @@ PointCloud2Msg to_point_cloud2(const core::PointCloud& cloud) {
   return msg;
 }
 
-core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
-                               CloudNotes* notes) {
+core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out, CloudNotes* notes,
+                               LidarDriver driver) {
+  const std::optional<DriverFields> preset = driver_fields(driver);
   out.clear();
   if (notes != nullptr) *notes = CloudNotes{};
   out.frame_id = msg.header().frame_id();
@@ -240,9 +264,12 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
     const std::string& name = f.name();
     // The ring (beam index): `ring`, or Autoware's `channel`. Not Livox's `line`: the driver
     // makes it from the point's place in its packet, not from a beam.
-    const bool is_ring = name == "ring" || name == "channel";
+    // With a driver's preset, its own names only.
+    const bool is_ring = preset ? !preset->ring.empty() && name == preset->ring
+                                : name == "ring" || name == "channel";
     const bool is_time =
-        name == "t" || name == "time" || name == "timestamp" || name == "time_stamp";
+        preset ? name == preset->time
+               : name == "t" || name == "time" || name == "timestamp" || name == "time_stamp";
     const bool wanted =
         name == "x" || name == "y" || name == "z" || name == "intensity" || is_ring || is_time;
     if (!wanted) continue;  // other fields (normals, reflectivity, ...) are ignored
@@ -273,6 +300,13 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
       time = slot;  // the first of t / time / timestamp / time_stamp wins
   }
   if (!x || !y || !z) return reject("missing_xyz", "fields x, y and z are required");
+  if (preset &&
+      (!time || time->datatype != preset->time_datatype || (!preset->ring.empty() && !ring))) {
+    std::string want = "field '" + std::string(preset->time) + "' of datatype " +
+                       std::to_string(preset->time_datatype);
+    if (!preset->ring.empty()) want += " and field '" + std::string(preset->ring) + "'";
+    return reject("driver_mismatch", "sensors[].driver expects " + want);
+  }
 
   const std::size_t width = msg.width();
   const std::size_t height = msg.height();
@@ -303,7 +337,11 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
   };
   const std::uint8_t* base = msg.data().data();
   TimeBase times{0.0, 1.0};  // no finite time at all: nothing to relate, all read NaN
-  if (time) {
+  if (preset) {
+    // The driver's origin and unit, whatever the values say.
+    const double stamp = static_cast<double>(out.stamp_ns);
+    times = {preset->absolute ? (preset->scale == 1.0 ? stamp * 1e-9 : stamp) : 0.0, preset->scale};
+  } else if (time) {
     // The median of up to 31 finite values spread over the cloud decides: a few junk cells (a
     // driver's zero fill) cannot.
     std::array<double, 31> sample{};

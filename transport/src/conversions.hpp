@@ -24,6 +24,7 @@
 #include "tarmac/core/result.hpp"
 #include "tarmac/transport/cycle_report.hpp"
 #include "tarmac/transport/inputs.hpp"
+#include "tarmac/transport/lidar_driver.hpp"
 #include "tarmac_msgs.h"
 
 namespace tarmac::transport {
@@ -75,8 +76,12 @@ struct CloudNotes {
 /// the stamp). Either endianness, any offsets and padding, row padding honoured. Points whose x, y
 /// or z is not finite are kept (filters count them); the caller decides. Rejections carry a code
 /// "pointcloud.<reason>" and a message naming the offending field or size.
+/// With a `driver` other than kAuto, the ring and time fields are that driver's (by name and
+/// datatype, the time's origin and unit fixed, nothing told from the values); a message without
+/// them is rejected: "pointcloud.driver_mismatch".
 core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
-                               CloudNotes* notes = nullptr);
+                               CloudNotes* notes = nullptr,
+                               LidarDriver driver = LidarDriver::kAuto);
 
 /// Isometry -> geometry_msgs/Pose (unit quaternion from the rotation).
 PoseMsg to_pose_msg(const Eigen::Isometry3d& T);

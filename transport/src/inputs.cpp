@@ -34,19 +34,19 @@ class ScanInput::Impl {
   using Reader = transport::Reader<sensor_msgs::msg::dds_::PointCloud2_PubSubType>;
   std::unique_ptr<Reader> reader;
   std::string frame_id;
+  LidarDriver driver = LidarDriver::kAuto;
   std::vector<PointCloud2Msg> batch;  // capacity kept across drains
 };
 
-core::Result<std::unique_ptr<ScanInput>> ScanInput::create(const Participant& participant,
-                                                           const std::string& topic,
-                                                           const std::string& frame_id,
-                                                           const QosSpec& qos,
-                                                           std::size_t queue_depth) {
+core::Result<std::unique_ptr<ScanInput>> ScanInput::create(
+    const Participant& participant, const std::string& topic, const std::string& frame_id,
+    const QosSpec& qos, std::size_t queue_depth, LidarDriver driver) {
   auto reader = Impl::Reader::create(participant, topic, qos, queue_depth);
   if (!reader) return reader.error();
   auto impl = std::make_unique<Impl>();
   impl->reader = std::move(reader).value();
   impl->frame_id = frame_id;
+  impl->driver = driver;
   impl->batch.reserve(queue_depth);
   return std::unique_ptr<ScanInput>(new ScanInput(std::move(impl)));
 }
@@ -62,7 +62,7 @@ std::size_t ScanInput::drain(ScanSink& sink) {
     }
     core::PointCloud& cloud = sink.slot();
     CloudNotes notes;
-    if (auto parsed = from_point_cloud2(msg, cloud, &notes); !parsed) {
+    if (auto parsed = from_point_cloud2(msg, cloud, &notes, impl_->driver); !parsed) {
       sink.reject(parsed.error().code);
       return;
     }

@@ -17,6 +17,7 @@
 
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/result.hpp"
+#include "tarmac/transport/lidar_driver.hpp"
 #include "tarmac/transport/participant.hpp"
 #include "tarmac/transport/qos.hpp"
 
@@ -57,6 +58,9 @@ struct SensorConfig {
   /// Motion-compensate scans with per-point times (PointCloud2 field time / t / timestamp)
   /// using the poses at their first and last point; such scans also wait for those poses.
   bool deskew = true;
+  /// How its PointCloud2 is read: told from each message, or as this driver publishes it (a
+  /// message that does not match is rejected: pointcloud.driver_mismatch).
+  transport::LidarDriver driver = transport::LidarDriver::kAuto;
 };
 
 /// Which message type carries the vehicle pose.

@@ -16,6 +16,7 @@
 #include "tarmac/core/costmap_builder.hpp"
 #include "tarmac/core/point_cloud.hpp"
 #include "tarmac/core/result.hpp"
+#include "tarmac/transport/lidar_driver.hpp"
 #include "tarmac/transport/participant.hpp"
 #include "tarmac/transport/qos.hpp"
 
@@ -40,11 +41,10 @@ class ScanSink {
 class ScanInput {
  public:
   /// @param frame_id the only header.frame_id accepted ("scan.unknown_frame" otherwise).
-  static core::Result<std::unique_ptr<ScanInput>> create(const Participant& participant,
-                                                         const std::string& topic,
-                                                         const std::string& frame_id,
-                                                         const QosSpec& qos,
-                                                         std::size_t queue_depth);
+  /// @param driver how the clouds are read (lidar_driver.hpp; from_point_cloud2).
+  static core::Result<std::unique_ptr<ScanInput>> create(
+      const Participant& participant, const std::string& topic, const std::string& frame_id,
+      const QosSpec& qos, std::size_t queue_depth, LidarDriver driver = LidarDriver::kAuto);
   ~ScanInput();
   ScanInput(const ScanInput&) = delete;
   ScanInput& operator=(const ScanInput&) = delete;
