@@ -49,32 +49,32 @@ double ground_below_sensor(const Eigen::Isometry3d& T_W_B, const Eigen::Vector3d
   return *mid;
 }
 
-/// A beam without a return that descends towards the ground crossed it, or something dark
-/// before it: it shows free air only down to one voxel above the ground, never the ground or
-/// what lies under it (which would lower the costmap's ground estimate and make the real ground
-/// read as an obstacle above it). The ground here is a plane normal to the base frame's z axis
-/// ("up" for the costmap too) at `ground_h` along it from the sensor (ground_below_sensor).
-/// Each such direction is scaled to the fraction of `clear_range_m` it clears
-/// (OccupancyMap::integrate); one that would clear less than a voxel is dropped. Returns the
-/// number of beams shortened or dropped.
+/// A beam without a return that descends to the ground within the clearing range would have
+/// returned from it: its return was lost, on a dark, wet or specular spot of the ground or of
+/// something standing on it (real sensors lose a few per cent so). It shows nothing, not even
+/// the air along it: clearing that air would erase what the lost return stood on, an obstacle
+/// seen by too few returns yet to read occupied (the low edge of a fuselage at 18 m), and below
+/// the horizon every voxel it crosses is one a return would show. Such beams are dropped; one
+/// that meets the ground only beyond the clearing range clears its whole range, as one above the
+/// horizon does. The ground here is a plane normal to the base frame's z axis ("up" for the
+/// costmap too) at `ground_h` along it from the sensor (ground_below_sensor). Returns the
+/// number dropped.
 std::uint64_t clip_at_ground(const Eigen::Vector3d& up, double ground_h, double clear_range_m,
-                             double voxel_m, std::vector<Eigen::Vector3f>& dirs_W) {
+                             std::vector<Eigen::Vector3f>& dirs_W) {
   if (!(clear_range_m > 0.0)) return 0;
-  const double above = -ground_h - voxel_m;  // the sensor's height over the plane, less a voxel
-  std::uint64_t clipped = 0;
+  const double above = -ground_h;  // the sensor's height over the plane
+  std::uint64_t dropped = 0;
   std::size_t kept = 0;
   for (const Eigen::Vector3f& d : dirs_W) {
     const double descent = -up.dot(d.cast<double>());  // per metre along the (unit) beam
-    double length = clear_range_m;
-    if (descent > 0.0 && above < descent * clear_range_m) length = above / descent;
-    if (length < clear_range_m) {
-      ++clipped;
-      if (length < voxel_m) continue;
+    if (descent > 0.0 && above < descent * clear_range_m) {
+      ++dropped;
+      continue;
     }
-    dirs_W[kept++] = d * static_cast<float>(length / clear_range_m);
+    dirs_W[kept++] = d;
   }
   dirs_W.resize(kept);
-  return clipped;
+  return dropped;
 }
 
 /// Keeps the usable directions of beams without return, normalised, in `out`; counts both.
@@ -184,7 +184,7 @@ FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   rotate_directions(T_W_S, no_return_S, clearing_W_);
   counts.no_returns_grounded = clip_at_ground(
       T_W_B.linear().col(2), ground_below_sensor(T_W_B, sensor_W_, points_W_, ground_heights_),
-      params_.occupancy.clearing_range_m, params_.occupancy.voxel_size_m, clearing_W_);
+      params_.occupancy.clearing_range_m, clearing_W_);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&
         cursor_seq_ <= next_seq_ - retained_.size()) {
@@ -419,7 +419,7 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
     clip_at_ground(
         r.T_W_B.linear().col(2),
         ground_below_sensor(r.T_W_B, T_W_S.translation(), rebuild_points_W_, ground_heights_),
-        params_.occupancy.clearing_range_m, params_.occupancy.voxel_size_m, rebuild_clearing_W_);
+        params_.occupancy.clearing_range_m, rebuild_clearing_W_);
     spare_->recenter(r.T_W_B.translation());
     spare_->set_observation_stamp(r.stamp_ns);
     spare_->integrate(T_W_S.translation(), rebuild_points_W_, rebuild_clearing_W_, runner,

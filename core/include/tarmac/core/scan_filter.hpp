@@ -41,7 +41,7 @@ struct FilterCounts {
   std::uint64_t no_returns = 0;          ///< beams without return kept (clear free space)
   std::uint64_t no_returns_refused = 0;  ///< their directions not finite or not ~unit length
   /// Of the kept, those that descend to the vehicle's ground plane within the clearing range:
-  /// they clear only down to a voxel above it (the shortest not at all).
+  /// their return was lost, so they clear nothing (Mapper::ingest).
   std::uint64_t no_returns_grounded = 0;
   /// 1 when the scan came as a grid, or as a list with rings, whose layout could not be told
   /// (Mapper::ingest, organise()): integrated as a list of points, no beam without return.
