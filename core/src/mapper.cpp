@@ -1,5 +1,7 @@
 #include "tarmac/core/mapper.hpp"
 
+#include <limits>
+
 #include <algorithm>
 
 namespace tarmac::core {
@@ -77,6 +79,69 @@ std::uint64_t clip_at_ground(const Eigen::Vector3d& up, double ground_h, double 
   return dropped;
 }
 
+/// Ends each beam without return (unit directions in `dirs_W`, from `origin_W`) before the first
+/// voxel `map` holds occupied, as the map stood before this scan: a lost return on a surface
+/// sends its beam on through it, and what lies behind a surface the map knows was not seen (the
+/// unknown inside a fuselage marked free would leave its belly's voxel with free space above and
+/// below, no longer an underside, and the rays passing under it would empty it). Each direction
+/// is scaled to the share of `clear_range_m` it clears (OccupancyMap::integrate); one that would
+/// clear less than a voxel is dropped. Reads only, each beam on its own: the same for any
+/// runner. `scale` is scratch. Returns the number shortened or dropped.
+std::uint64_t stop_at_occupied(const OccupancyMap& map, const Eigen::Vector3d& origin_W,
+                               double clear_range_m, double voxel_m,
+                               std::vector<Eigen::Vector3f>& dirs_W, std::vector<float>& scale,
+                               TaskRunner& runner) {
+  if (!(clear_range_m > 0.0) || dirs_W.empty()) return 0;
+  const std::size_t n = dirs_W.size();
+  scale.assign(n, 1.0f);
+  const VoxelIndex start = map.voxel_of(origin_W);
+  constexpr std::size_t kChunk = 512;
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  runner.parallel_for(chunks, [&](std::size_t c) {
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+      const Eigen::Vector3d d = dirs_W[i].cast<double>();
+      // Amanatides & Woo over the voxel lattice [i·v, (i+1)·v), from the sensor's voxel.
+      VoxelIndex v = start;
+      Eigen::Vector3d t_max, t_delta;
+      Eigen::Vector3i step;
+      for (int a = 0; a < 3; ++a) {
+        step[a] = d[a] > 0.0 ? 1 : (d[a] < 0.0 ? -1 : 0);
+        if (step[a] == 0) {
+          t_max[a] = t_delta[a] = std::numeric_limits<double>::infinity();
+          continue;
+        }
+        const double boundary = (v[a] + (step[a] > 0 ? 1 : 0)) * voxel_m;
+        t_max[a] = (boundary - origin_W[a]) / d[a];
+        t_delta[a] = voxel_m / std::abs(d[a]);
+      }
+      for (;;) {
+        int a = 0;
+        if (t_max[1] < t_max[a]) a = 1;
+        if (t_max[2] < t_max[a]) a = 2;
+        const double t = t_max[a];
+        if (!(t < clear_range_m)) break;
+        v[a] += step[a];
+        t_max[a] += t_delta[a];
+        if (!map.in_window(v)) break;  // a box: once out, the beam does not come back
+        if (map.log_odds(v) > 0.0f) {  // occupied (unknown is negative)
+          scale[i] = static_cast<float>(t / clear_range_m);
+          break;
+        }
+      }
+    }
+  });
+  std::uint64_t stopped = 0;
+  std::size_t kept = 0;
+  const double min_share = voxel_m / clear_range_m;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (scale[i] < 1.0f) ++stopped;
+    if (scale[i] < min_share) continue;
+    dirs_W[kept++] = dirs_W[i] * scale[i];
+  }
+  dirs_W.resize(kept);
+  return stopped;
+}
+
 /// Keeps the usable directions of beams without return, normalised, in `out`; counts both.
 void accept_no_returns(std::span<const Eigen::Vector3f> dirs_S, std::vector<Eigen::Vector3f>& out,
                        FilterCounts& counts) {
@@ -132,6 +197,7 @@ Mapper::Mapper(const MapperParams& params)
   points_W_.clear();
   clearing_W_.reserve(kWarmUpPoints / 2);  // an organised 64 x 1024 sweep into the open sky
   no_return_scratch_S_.reserve(kWarmUpPoints / 2);
+  no_return_scale_.reserve(kWarmUpPoints / 2);
   ground_heights_.reserve(kWarmUpPoints);
   SerialRunner serial;
   build_costmap(map_, params_.costmap, T_W_B_, {}, 0, layers_, serial);
@@ -185,6 +251,9 @@ FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
   counts.no_returns_grounded = clip_at_ground(
       T_W_B.linear().col(2), ground_below_sensor(T_W_B, sensor_W_, points_W_, ground_heights_),
       params_.occupancy.clearing_range_m, clearing_W_);
+  counts.no_returns_stopped =
+      stop_at_occupied(map_, sensor_W_, params_.occupancy.clearing_range_m,
+                       params_.occupancy.voxel_size_m, clearing_W_, no_return_scale_, runner);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&
         cursor_seq_ <= next_seq_ - retained_.size()) {
@@ -420,6 +489,8 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
         r.T_W_B.linear().col(2),
         ground_below_sensor(r.T_W_B, T_W_S.translation(), rebuild_points_W_, ground_heights_),
         params_.occupancy.clearing_range_m, rebuild_clearing_W_);
+    stop_at_occupied(*spare_, T_W_S.translation(), params_.occupancy.clearing_range_m,
+                     params_.occupancy.voxel_size_m, rebuild_clearing_W_, no_return_scale_, runner);
     spare_->recenter(r.T_W_B.translation());
     spare_->set_observation_stamp(r.stamp_ns);
     spare_->integrate(T_W_S.translation(), rebuild_points_W_, rebuild_clearing_W_, runner,

@@ -233,7 +233,8 @@ class Mapper {
   std::vector<Eigen::Vector3f> clearing_W_;  ///< the last scan's beams without return, world
   std::vector<Eigen::Vector3f> rebuild_clearing_W_;
   std::vector<Eigen::Vector3f> no_return_scratch_S_;  ///< accepted directions when not retained
-  std::vector<float> ground_heights_;  ///< returns' heights for the ground under the sensor
+  std::vector<float> no_return_scale_;  ///< stop_at_occupied's share of each beam cleared
+  std::vector<float> ground_heights_;   ///< returns' heights for the ground under the sensor
   FilterScratch filter_scratch_;
   PointCloud deskewed_;   ///< the scan after deskew (points only), reused
   PointCloud organised_;  ///< the scan organised (organise()), when it needed it; reused

@@ -43,6 +43,9 @@ struct FilterCounts {
   /// Of the kept, those that descend to the vehicle's ground plane within the clearing range:
   /// their return was lost, so they clear nothing (Mapper::ingest).
   std::uint64_t no_returns_grounded = 0;
+  /// Of the rest, those that meet a voxel the map held occupied before this scan: they end
+  /// before it (a surface's lost return does not see behind the surface).
+  std::uint64_t no_returns_stopped = 0;
   /// 1 when the scan came as a grid, or as a list with rings, whose layout could not be told
   /// (Mapper::ingest, organise()): integrated as a list of points, no beam without return.
   std::uint64_t layout_undecided = 0;
