@@ -94,40 +94,12 @@ std::uint64_t stop_at_occupied(const OccupancyMap& map, const Eigen::Vector3d& o
   if (!(clear_range_m > 0.0) || dirs_W.empty()) return 0;
   const std::size_t n = dirs_W.size();
   scale.assign(n, 1.0f);
-  const VoxelIndex start = map.voxel_of(origin_W);
   constexpr std::size_t kChunk = 512;
   const std::size_t chunks = (n + kChunk - 1) / kChunk;
   runner.parallel_for(chunks, [&](std::size_t c) {
     for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
-      const Eigen::Vector3d d = dirs_W[i].cast<double>();
-      // Amanatides & Woo over the voxel lattice [i·v, (i+1)·v), from the sensor's voxel.
-      VoxelIndex v = start;
-      Eigen::Vector3d t_max, t_delta;
-      Eigen::Vector3i step;
-      for (int a = 0; a < 3; ++a) {
-        step[a] = d[a] > 0.0 ? 1 : (d[a] < 0.0 ? -1 : 0);
-        if (step[a] == 0) {
-          t_max[a] = t_delta[a] = std::numeric_limits<double>::infinity();
-          continue;
-        }
-        const double boundary = (v[a] + (step[a] > 0 ? 1 : 0)) * voxel_m;
-        t_max[a] = (boundary - origin_W[a]) / d[a];
-        t_delta[a] = voxel_m / std::abs(d[a]);
-      }
-      for (;;) {
-        int a = 0;
-        if (t_max[1] < t_max[a]) a = 1;
-        if (t_max[2] < t_max[a]) a = 2;
-        const double t = t_max[a];
-        if (!(t < clear_range_m)) break;
-        v[a] += step[a];
-        t_max[a] += t_delta[a];
-        if (!map.in_window(v)) break;  // a box: once out, the beam does not come back
-        if (map.log_odds(v) > 0.0f) {  // occupied (unknown is negative)
-          scale[i] = static_cast<float>(t / clear_range_m);
-          break;
-        }
-      }
+      const double t = map.first_occupied(origin_W, dirs_W[i].cast<double>(), clear_range_m);
+      if (t < clear_range_m) scale[i] = static_cast<float>(t / clear_range_m);
     }
   });
   std::uint64_t stopped = 0;

@@ -168,6 +168,47 @@ std::size_t OccupancyMap::slot(const VoxelIndex& v) const {
          wrap(v.x(), dims_.x());
 }
 
+double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
+                                    double max_t) const {
+  constexpr double kNone = std::numeric_limits<double>::infinity();
+  const double vox = params_.voxel_size_m;
+  const VoxelIndex v = voxel_of(origin_W);
+  if (!in_window(v)) return kNone;
+  // Window-relative and ring coordinates, stepped together: no division per step.
+  Eigen::Vector3i rel = v - min_;
+  Eigen::Vector3i ring(wrap(v.x(), dims_.x()), wrap(v.y(), dims_.y()), wrap(v.z(), dims_.z()));
+  Eigen::Vector3d t_max, t_delta;
+  Eigen::Vector3i step;
+  for (int a = 0; a < 3; ++a) {
+    step[a] = dir_W[a] > 0.0 ? 1 : (dir_W[a] < 0.0 ? -1 : 0);
+    if (step[a] == 0) {
+      t_max[a] = t_delta[a] = kNone;
+      continue;
+    }
+    t_max[a] = ((v[a] + (step[a] > 0 ? 1 : 0)) * vox - origin_W[a]) / dir_W[a];
+    t_delta[a] = vox / std::abs(dir_W[a]);
+  }
+  const std::size_t nx = static_cast<std::size_t>(dims_.x());
+  const std::size_t ny = static_cast<std::size_t>(dims_.y());
+  for (;;) {
+    int a = 0;
+    if (t_max[1] < t_max[a]) a = 1;
+    if (t_max[2] < t_max[a]) a = 2;
+    const double t = t_max[a];
+    if (!(t < max_t)) return kNone;
+    rel[a] += step[a];
+    if (rel[a] < 0 || rel[a] >= dims_[a]) return kNone;  // a box: the ray does not come back
+    ring[a] += step[a];
+    if (ring[a] == dims_[a]) ring[a] = 0;
+    if (ring[a] < 0) ring[a] = dims_[a] - 1;
+    t_max[a] += t_delta[a];
+    const std::size_t s =
+        (static_cast<std::size_t>(ring.z()) * ny + static_cast<std::size_t>(ring.y())) * nx +
+        static_cast<std::size_t>(ring.x());
+    if (log_odds_[s] > 0.0f) return t;  // occupied (unknown is negative)
+  }
+}
+
 float OccupancyMap::log_odds(const VoxelIndex& v) const {
   return in_window(v) ? log_odds_[slot(v)] : kUnknown;
 }

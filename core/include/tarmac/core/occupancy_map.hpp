@@ -156,6 +156,11 @@ class OccupancyMap {
   /// Log-odds at a voxel, kUnknown when unobserved or outside the window.
   [[nodiscard]] float log_odds(const VoxelIndex& v) const;
   [[nodiscard]] bool in_window(const VoxelIndex& v) const;
+  /// How far along the unit `dir_W` from `origin_W` the ray enters the first voxel past the
+  /// origin's that reads occupied, when that is within `max_t` and the window; infinity
+  /// otherwise. The walk of OccupancyMap::integrate's rays (Amanatides & Woo), reading only.
+  [[nodiscard]] double first_occupied(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
+                                      double max_t) const;
   [[nodiscard]] VoxelIndex voxel_of(const Eigen::Vector3d& p_W) const;
 
   /// Lowest-corner voxel of the window (inclusive) and its size in voxels.
