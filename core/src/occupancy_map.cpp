@@ -113,6 +113,10 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   // empty each scan zero-filled ~150 KB per scan.
   scan_ground_cols_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y() + 1, 0);
   hit_slots_.assign(kReservedHitSlots, 0);
+  bricks_ = (dims_.array() + ((1 << kBrickShift) - 1)) / (1 << kBrickShift);
+  brick_bits_.assign((static_cast<std::size_t>(bricks_.prod()) + 63) / 64, 0);
+  brick_skip_.assign(static_cast<std::size_t>(bricks_.prod()), 0);
+  update_brick_skips();
   warm(hit_slot_, kReservedHitSlots);
   warm(hit_column_, kReservedHitSlots);
   warm(hit_height_, kReservedHitSlots);
@@ -145,7 +149,8 @@ std::size_t OccupancyMap::memory_bytes() const {
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
       hit_height_.capacity() * sizeof(float) + hit_rise_.capacity() +
       (ray_order_.capacity() + ray_bucket_count_.capacity()) * sizeof(std::uint32_t) +
-      ray_bucket_.capacity() * sizeof(std::uint16_t);
+      ray_bucket_.capacity() * sizeof(std::uint16_t) +
+      brick_bits_.capacity() * sizeof(std::uint64_t) + brick_skip_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_words_) bytes += d.capacity() * sizeof(std::uint64_t);
   for (const auto& c : candidates_) bytes += c.capacity() * sizeof(std::uint32_t);
@@ -166,47 +171,6 @@ std::size_t OccupancyMap::slot(const VoxelIndex& v) const {
   return (static_cast<std::size_t>(wrap(v.z(), dims_.z())) * dims_.y() + wrap(v.y(), dims_.y())) *
              dims_.x() +
          wrap(v.x(), dims_.x());
-}
-
-double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
-                                    double max_t) const {
-  constexpr double kNone = std::numeric_limits<double>::infinity();
-  const double vox = params_.voxel_size_m;
-  const VoxelIndex v = voxel_of(origin_W);
-  if (!in_window(v)) return kNone;
-  // Window-relative and ring coordinates, stepped together: no division per step.
-  Eigen::Vector3i rel = v - min_;
-  Eigen::Vector3i ring(wrap(v.x(), dims_.x()), wrap(v.y(), dims_.y()), wrap(v.z(), dims_.z()));
-  Eigen::Vector3d t_max, t_delta;
-  Eigen::Vector3i step;
-  for (int a = 0; a < 3; ++a) {
-    step[a] = dir_W[a] > 0.0 ? 1 : (dir_W[a] < 0.0 ? -1 : 0);
-    if (step[a] == 0) {
-      t_max[a] = t_delta[a] = kNone;
-      continue;
-    }
-    t_max[a] = ((v[a] + (step[a] > 0 ? 1 : 0)) * vox - origin_W[a]) / dir_W[a];
-    t_delta[a] = vox / std::abs(dir_W[a]);
-  }
-  const std::size_t nx = static_cast<std::size_t>(dims_.x());
-  const std::size_t ny = static_cast<std::size_t>(dims_.y());
-  for (;;) {
-    int a = 0;
-    if (t_max[1] < t_max[a]) a = 1;
-    if (t_max[2] < t_max[a]) a = 2;
-    const double t = t_max[a];
-    if (!(t < max_t)) return kNone;
-    rel[a] += step[a];
-    if (rel[a] < 0 || rel[a] >= dims_[a]) return kNone;  // a box: the ray does not come back
-    ring[a] += step[a];
-    if (ring[a] == dims_[a]) ring[a] = 0;
-    if (ring[a] < 0) ring[a] = dims_[a] - 1;
-    t_max[a] += t_delta[a];
-    const std::size_t s =
-        (static_cast<std::size_t>(ring.z()) * ny + static_cast<std::size_t>(ring.y())) * nx +
-        static_cast<std::size_t>(ring.x());
-    if (log_odds_[s] > 0.0f) return t;  // occupied (unknown is negative)
-  }
 }
 
 float OccupancyMap::log_odds(const VoxelIndex& v) const {
@@ -393,11 +357,13 @@ void OccupancyMap::restore_static(const VoxelIndex& lo, const VoxelIndex& hi) {
             state_[s] = kStatic;
             log_odds_[s] = std::max(log_odds_[s], l_hit_);
             clear_floor_bits(s, 1);
+            flag_brick(s);
           }
         }
       }
     }
   }
+  if (bricks_dirty_) update_brick_skips();
 }
 
 void OccupancyMap::clear_floor_bits(std::size_t first, std::size_t count) {
@@ -583,6 +549,9 @@ void OccupancyMap::reset() {
   static_->clear();
   for (auto& c : candidates_) c.clear();
   std::fill(column_observed_ns_.begin(), column_observed_ns_.end(), std::int64_t{0});
+  std::fill(brick_bits_.begin(), brick_bits_.end(), std::uint64_t{0});
+  brick_refresh_row_ = 0;
+  update_brick_skips();
   min_ = VoxelIndex::Zero();
   placed_ = false;
 }

@@ -824,6 +824,98 @@ TEST(OccupancyMap, Params_RangesAreBounded) {
   EXPECT_FALSE(p.validate().ok());
 }
 
+/// Brute force over the window: how far along `dir` from `origin` the ray enters the first
+/// occupied voxel past the origin's (the slab test on each), or infinity within `max_t`.
+double first_occupied_brute_force(const OccupancyMap& map, const Eigen::Vector3d& origin,
+                                  const Eigen::Vector3d& dir, double max_t) {
+  const double v = map.params().voxel_size_m;
+  const VoxelIndex own = map.voxel_of(origin);
+  double best = std::numeric_limits<double>::infinity();
+  const Eigen::Vector3i dims = map.window_size();
+  for (int z = 0; z < dims.z(); ++z)
+    for (int y = 0; y < dims.y(); ++y)
+      for (int x = 0; x < dims.x(); ++x) {
+        const VoxelIndex q = map.window_min() + VoxelIndex(x, y, z);
+        if (q == own || !(map.log_odds(q) > 0.0f)) continue;
+        double enter = -std::numeric_limits<double>::infinity();
+        double leave = std::numeric_limits<double>::infinity();
+        for (int a = 0; a < 3; ++a) {
+          const double lo = q[a] * v, hi = (q[a] + 1) * v;
+          if (dir[a] == 0.0) {
+            if (origin[a] < lo || origin[a] >= hi) enter = leave = 0.0;  // never inside
+            continue;
+          }
+          const double t0 = (lo - origin[a]) / dir[a], t1 = (hi - origin[a]) / dir[a];
+          enter = std::max(enter, std::min(t0, t1));
+          leave = std::min(leave, std::max(t0, t1));
+        }
+        if (enter < leave && enter >= 0.0 && enter < max_t) best = std::min(best, enter);
+      }
+  return best;
+}
+
+TEST(OccupancyMap, FirstOccupied_SameAsBruteForce_WhileObjectsComeGoAndTheWindowMoves) {
+  // The walk crosses empty bricks of 8³ voxels many at a time; whatever the flags hold (set by
+  // hits, by the static layer coming back, stale after misses cleared a brick), it must find
+  // the voxel a brute force over every occupied voxel finds. A window that is not a multiple of
+  // the brick in any axis, scrolled across the ring's end; boxes that appear, move and vanish;
+  // rays from near the sensor in every direction, most of them near the horizontal.
+  auto params = small_params();
+  params.window_x_vox = 101;
+  params.window_y_vox = 94;
+  params.window_z_vox = 21;
+  params.max_range_m = 12.0;
+  params.static_promote_scans = 3;
+  OccupancyMap map(params);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::Vector3d position(0.05, 0.05, 0.05);
+  std::vector<Eigen::Vector3d> boxes;
+  for (int i = 0; i < 6; ++i) boxes.emplace_back(8.0 * u(rng), 8.0 * u(rng), u(rng));
+  std::size_t found = 0, checked = 0;
+  for (int scan_no = 0; scan_no < 40; ++scan_no) {
+    Scan scan{position, {}, {}};
+    for (std::size_t b = 0; b < boxes.size(); ++b) {
+      if ((scan_no + static_cast<int>(b)) % 7 == 0) continue;  // now and then a box is gone
+      for (int i = 0; i < 60; ++i) {
+        scan.points.push_back(
+            (position + boxes[b] + Eigen::Vector3d(0.5 * u(rng), 0.5 * u(rng), 0.4 * u(rng)))
+                .cast<float>());
+      }
+    }
+    for (int i = 0; i < 300; ++i) {  // ground 1.5 m below
+      scan.points.push_back(
+          (position + Eigen::Vector3d(6.0 * u(rng), 6.0 * u(rng), -1.5)).cast<float>());
+    }
+    for (int i = 0; i < 400; ++i) {  // free space everywhere round: misses clear what left
+      scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), 0.3 * u(rng)).normalized());
+    }
+    map.recenter(position);
+    integrate(map, scan);
+    for (int r = 0; r < 60; ++r) {
+      const Eigen::Vector3d from = position + Eigen::Vector3d(u(rng), u(rng), 0.3 * u(rng));
+      Eigen::Vector3d dir(u(rng), u(rng), (r % 3 == 0 ? 1.0 : 0.2) * u(rng));
+      if (r == 0) dir = Eigen::Vector3d(1.0, 0.0, 0.0);  // along an axis: no crossing on two
+      dir.normalize();
+      const double max_t = 2.0 + 10.0 * (u(rng) + 1.0);
+      const double want = first_occupied_brute_force(map, from, dir, max_t);
+      const double got = map.first_occupied(from, dir, max_t);
+      ++checked;
+      if (std::isinf(want)) {
+        EXPECT_TRUE(std::isinf(got)) << "scan " << scan_no << " ray " << r << " got " << got;
+      } else {
+        ++found;
+        EXPECT_NEAR(got, want, 1e-9) << "scan " << scan_no << " ray " << r;
+      }
+    }
+    // Boxes drift and the vehicle moves, by up to 12 voxels: the window scrolls round its ring.
+    for (auto& b : boxes) b += Eigen::Vector3d(0.3 * u(rng), 0.3 * u(rng), 0.0);  // round it
+    position += Eigen::Vector3d(2.4 * u(rng), 2.4 * u(rng), 0.2 * u(rng));
+  }
+  EXPECT_GT(found, checked / 4) << "too few rays met anything to test the walk";
+  EXPECT_LT(found, checked * 9 / 10) << "too few rays crossed empty space";
+}
+
 TEST(OccupancyMap, Deterministic_ForOneTwoAndFourThreads) {
   auto params = small_params();
   params.window_x_vox = 200;

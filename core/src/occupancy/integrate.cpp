@@ -216,8 +216,10 @@ void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
       first_hits[n_first++] = s;
       float& l = log_odds[s];
       // Reading free or unknown until now: its lowest return starts again from this one.
-      hit_floor[s] = l > 0.0f ? std::min(hit_floor[s], here) : here;
+      const bool was_occupied = l > 0.0f;
+      hit_floor[s] = was_occupied ? std::min(hit_floor[s], here) : here;
       l = after_hit(l, l_hit, l_min, l_max);
+      if (!was_occupied && l > 0.0f) flag_brick(s);
       std::uint8_t& st = state[s];
       if ((st & kStatic) != 0) {
         st = kStatic;  // a return: the run of free observations restarts
@@ -340,6 +342,9 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   });
   for (std::size_t k = 0; k < n_hit_slots_; ++k) hit_bits_[hit_slots_[k] >> 6] = 0;
   miss_occupied(runner, stats);
+  // The walks of the next scan's beams without return (first_occupied) read the bricks.
+  refresh_bricks(kBrickRowsPerScan);
+  update_brick_skips();
 
   stats.rays = n_rays;
   for (const auto v : task_visits) stats.voxel_visits += v;

@@ -29,6 +29,10 @@ constexpr std::size_t kApplyTasks = 32;
 /// Fixed ranges of slots (cut at multiples of 64) in which the window's scroll clears the ring
 /// slabs that the entering voxels take over.
 constexpr std::size_t kSlabTasks = 8;
+/// Rows of bricks (OccupancyMap::refresh_bricks) whose flags each scan recomputes: a
+/// 400×400×40 window has 250, so a brick emptied by misses stops flagging within 16 scans, for
+/// 1.6 MB of log-odds read per scan.
+constexpr int kBrickRowsPerScan = 16;
 /// No slot: the return does not mark (beyond max range or outside the window).
 constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};
 

@@ -158,7 +158,8 @@ class OccupancyMap {
   [[nodiscard]] bool in_window(const VoxelIndex& v) const;
   /// How far along the unit `dir_W` from `origin_W` the ray enters the first voxel past the
   /// origin's that reads occupied, when that is within `max_t` and the window; infinity
-  /// otherwise. The walk of OccupancyMap::integrate's rays (Amanatides & Woo), reading only.
+  /// otherwise. The walk of OccupancyMap::integrate's rays (Amanatides & Woo), reading only; it
+  /// crosses bricks of 8³ voxels that hold nothing occupied in one step (first_occupied.cpp).
   [[nodiscard]] double first_occupied(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
                                       double max_t) const;
   [[nodiscard]] VoxelIndex voxel_of(const Eigen::Vector3d& p_W) const;
@@ -259,6 +260,22 @@ class OccupancyMap {
   void miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats);
   /// Clears the floor bits of slots [first, first + count) (their log-odds are being rewritten).
   void clear_floor_bits(std::size_t first, std::size_t count);
+  /// The brick of a voxel given by its ring coordinates: bricks are 8³ voxels of ring space
+  /// (a brick never straddles the ring's wrap; the last along an axis may be thinner).
+  [[nodiscard]] std::size_t brick_of_ring(int rx, int ry, int rz) const {
+    return (static_cast<std::size_t>(rz >> kBrickShift) * bricks_.y() +
+            static_cast<std::size_t>(ry >> kBrickShift)) *
+               bricks_.x() +
+           static_cast<std::size_t>(rx >> kBrickShift);
+  }
+  /// Flags the brick of `slot` as holding an occupied voxel (first_occupied() reads it);
+  /// update_brick_skips() must run before the next walk.
+  void flag_brick(std::size_t slot);
+  /// Recomputes the flags of the next `rows` rows of bricks (round robin) from the log-odds, so
+  /// that bricks whose occupied voxels were cleared stop costing the walk time.
+  void refresh_bricks(int rows);
+  /// brick_skip_ from the flags.
+  void update_brick_skips();
 
   OccupancyParams params_;
   int walk_lanes_ = 8;
@@ -328,6 +345,21 @@ class OccupancyMap {
   std::vector<float> hit_height_;
   std::vector<std::uint8_t> hit_rise_;
   bool placed_ = false;
+  /// One bit per brick of 8³ voxels (brick_of_ring()): set wherever a voxel of the brick reads
+  /// occupied (and possibly where none does any more). Set as a voxel turns occupied (a hit,
+  /// the static layer restored), recomputed a few rows of bricks per scan (refresh_bricks()).
+  static constexpr int kBrickShift = 3;
+  Eigen::Vector3i bricks_;
+  std::vector<std::uint64_t> brick_bits_;
+  int brick_refresh_row_ = 0;  ///< the next row of bricks refresh_bricks() recomputes
+  /// Per brick: 0 where flagged, else how many bricks in x and y (Chebyshev, round the ring,
+  /// within its layer of bricks, at most kMaxBrickSkip) to the nearest flagged one.
+  /// first_occupied() crosses the empty bricks round it in one step: most of what a beam
+  /// without return passes through is empty, and these 12 KB (default window) stay in cache
+  /// where the log-odds (25 MB) do not. They decide how fast the walk goes, never its result.
+  std::vector<std::uint8_t> brick_skip_;
+  bool bricks_dirty_ = false;                    ///< a brick was flagged since update_brick_skips()
+  std::vector<std::uint8_t> brick_row_scratch_;  ///< update_brick_skips()' distances along x
 };
 
 /// ln(p / (1 − p)).

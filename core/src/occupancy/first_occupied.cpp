@@ -1,0 +1,240 @@
+/// @file OccupancyMap::first_occupied: the walk that ends a beam without return at the first
+/// voxel the map holds occupied (Mapper), and the brick flags that let it cross empty space
+/// many voxels at a time.
+///
+/// The walk is Amanatides & Woo's, with each boundary's crossing time computed from the
+/// boundary's index, (i·voxel − origin) / direction, never accumulated: the times, and so the
+/// voxels visited, depend only on the voxel the walk stands in. That lets it jump across a box
+/// of bricks that holds nothing occupied and land in exactly the state the voxel-by-voxel walk
+/// would reach, so the flags change how fast it goes, never what it returns.
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "tarmac/core/occupancy_map.hpp"
+#include "window.hpp"
+
+namespace tarmac::core {
+namespace {
+
+using occupancy::floor_to_int;
+using occupancy::wrap;
+
+constexpr double kNone = std::numeric_limits<double>::infinity();
+/// The farthest a brick's empty surroundings are counted (brick_skip_), in bricks.
+constexpr int kMaxBrickSkip = 15;  // fits brick_skip_'s bytes
+
+/// The walk's state: the voxel (world and window-relative, ring coordinates) and, per axis, the
+/// crossing time of the next boundary ahead.
+struct Walk {
+  Eigen::Vector3d origin;
+  double voxel = 0.0;
+  int step[3] = {0, 0, 0};
+  double inv_dir[3] = {0.0, 0.0, 0.0};
+  int v[3] = {0, 0, 0};
+  int rel[3] = {0, 0, 0};
+  int ring[3] = {0, 0, 0};
+  double t_next[3] = {0.0, 0.0, 0.0};
+
+  /// Crossing time of the j-th boundary ahead along `a` (j = 1: the next); j ≥ 1.
+  [[nodiscard]] double t_ahead(int a, int j) const {
+    const int i = step[a] > 0 ? v[a] + j : v[a] - j + 1;  // the boundary's world index
+    return (static_cast<double>(i) * voxel - origin[a]) * inv_dir[a];
+  }
+  /// The axis whose crossing comes first; ties go to the lowest axis (the order every walk of
+  /// the same ray takes them in).
+  [[nodiscard]] static int first_of(const double (&t)[3]) {
+    int a = 0;
+    if (t[1] < t[a]) a = 1;
+    if (t[2] < t[a]) a = 2;
+    return a;
+  }
+  /// Boundaries ahead along `b` that the voxel-by-voxel walk crosses before the crossing at
+  /// `t` on axis `a`: earlier, or at the same time on a lower axis. At most `limit`.
+  [[nodiscard]] int crossed_before(int b, double t, int a, int limit) const {
+    const auto before = [&](int j) {
+      const double tb = t_ahead(b, j);
+      return tb < t || (tb == t && b < a);
+    };
+    // From where the ray is at t, then settled on the crossing times themselves.
+    const std::int64_t at = floor_to_int((origin[b] + t / inv_dir[b]) / voxel);
+    std::int64_t guess = step[b] > 0 ? at - v[b] : v[b] - at;
+    int j = static_cast<int>(std::clamp<std::int64_t>(guess, 0, limit));
+    while (j < limit && before(j + 1)) ++j;
+    while (j > 0 && !before(j)) --j;
+    return j;
+  }
+  /// Moves `n` voxels along `a`; false when that leaves the window (`dims`).
+  bool move(int a, int n, const Eigen::Vector3i& dims) {
+    if (n == 0) return true;
+    const int d = step[a] * n;
+    v[a] += d;
+    rel[a] += d;
+    if (rel[a] < 0 || rel[a] >= dims[a]) return false;
+    ring[a] = wrap(ring[a] + d, dims[a]);
+    t_next[a] = t_ahead(a, 1);
+    return true;
+  }
+};
+
+}  // namespace
+
+double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
+                                    double max_t) const {
+  const VoxelIndex v0 = voxel_of(origin_W);
+  if (!in_window(v0)) return kNone;
+  constexpr int kBrick = 1 << kBrickShift;
+  Walk w;
+  w.origin = origin_W;
+  w.voxel = params_.voxel_size_m;
+  for (int a = 0; a < 3; ++a) {
+    w.step[a] = dir_W[a] > 0.0 ? 1 : (dir_W[a] < 0.0 ? -1 : 0);
+    w.inv_dir[a] = w.step[a] == 0 ? 0.0 : 1.0 / dir_W[a];
+    w.v[a] = v0[a];
+    w.rel[a] = v0[a] - min_[a];
+    w.ring[a] = wrap(v0[a], dims_[a]);
+    w.t_next[a] = w.step[a] == 0 ? kNone : w.t_ahead(a, 1);
+  }
+  // The thinnest brick across x and y (the last of a row is thinner when the window is not a
+  // multiple of 8): what each brick of empty surroundings is counted as.
+  int thinnest = kBrick;
+  for (int a = 0; a < 2; ++a) {
+    if (dims_[a] % kBrick != 0) thinnest = std::min(thinnest, dims_[a] % kBrick);
+  }
+  const std::size_t nx = static_cast<std::size_t>(dims_.x());
+  const std::size_t ny = static_cast<std::size_t>(dims_.y());
+  bool at_origin = true;  // the origin's own voxel is not looked at
+  double t_entry = 0.0;   // when the walk entered the voxel it stands in
+  for (;;) {
+    const int skip = brick_skip_[brick_of_ring(w.ring[0], w.ring[1], w.ring[2])];
+    if (skip > 0) {
+      // Nothing occupied in this brick, nor in the skip − 1 bricks round it in x and y: to the
+      // voxel past that box (in z, past this brick). Along each axis, the voxels to its side
+      // ahead (ring coordinates; the ring's end is a brick's end too).
+      int to_exit[3] = {0, 0, 0};
+      double t_exit_of[3] = {kNone, kNone, kNone};
+      for (int a = 0; a < 3; ++a) {
+        if (w.step[a] == 0) continue;
+        const int lo = (w.ring[a] >> kBrickShift) << kBrickShift;
+        to_exit[a] = w.step[a] > 0 ? std::min(lo + kBrick, dims_[a]) - w.ring[a]
+                                   : w.ring[a] - lo + 1;
+        if (a < 2) to_exit[a] += (skip - 1) * thinnest;
+        t_exit_of[a] = w.t_ahead(a, to_exit[a]);
+      }
+      const int exit_axis = Walk::first_of(t_exit_of);
+      const double t_exit = t_exit_of[exit_axis];
+      if (!(t_exit < max_t)) return kNone;
+      int crossed[3] = {0, 0, 0};
+      for (int b = 0; b < 3; ++b) {
+        if (w.step[b] == 0) continue;
+        crossed[b] = b == exit_axis ? to_exit[b]
+                                    : w.crossed_before(b, t_exit, exit_axis, to_exit[b] - 1);
+      }
+      for (int a = 0; a < 3; ++a) {
+        if (!w.move(a, crossed[a], dims_)) return kNone;  // a box: the ray does not come back
+      }
+      t_entry = t_exit;
+      at_origin = false;
+      continue;
+    }
+    if (!at_origin) {
+      const std::size_t s = (static_cast<std::size_t>(w.ring[2]) * ny +
+                             static_cast<std::size_t>(w.ring[1])) *
+                                nx +
+                            static_cast<std::size_t>(w.ring[0]);
+      if (log_odds_[s] > 0.0f) return t_entry;  // occupied (unknown is negative)
+    }
+    const int a = Walk::first_of(w.t_next);
+    t_entry = w.t_next[a];
+    if (!(t_entry < max_t)) return kNone;
+    if (!w.move(a, 1, dims_)) return kNone;
+    at_origin = false;
+  }
+}
+
+void OccupancyMap::flag_brick(std::size_t slot) {
+  const auto nx = static_cast<std::size_t>(dims_.x()), ny = static_cast<std::size_t>(dims_.y());
+  const auto rx = static_cast<int>(slot % nx);
+  const auto ry = static_cast<int>((slot / nx) % ny);
+  const auto rz = static_cast<int>(slot / (nx * ny));
+  const std::size_t b = brick_of_ring(rx, ry, rz);
+  const std::uint64_t bit = std::uint64_t{1} << (b & 63);
+  if ((brick_bits_[b >> 6] & bit) != 0) return;
+  brick_bits_[b >> 6] |= bit;
+  bricks_dirty_ = true;
+}
+
+void OccupancyMap::refresh_bricks(int rows) {
+  const int n_rows = bricks_.y() * bricks_.z();
+  const auto nx = static_cast<std::size_t>(dims_.x()), ny = static_cast<std::size_t>(dims_.y());
+  constexpr int kBrick = 1 << kBrickShift;
+  for (int r = 0; r < std::min(rows, n_rows); ++r) {
+    const int row = brick_refresh_row_;
+    brick_refresh_row_ = (brick_refresh_row_ + 1) % n_rows;
+    const int by = row % bricks_.y(), bz = row / bricks_.y();
+    for (int bx = 0; bx < bricks_.x(); ++bx) {
+      bool occupied = false;
+      const int x_end = std::min((bx + 1) * kBrick, dims_.x());
+      for (int z = bz * kBrick; z < std::min((bz + 1) * kBrick, dims_.z()) && !occupied; ++z) {
+        for (int y = by * kBrick; y < std::min((by + 1) * kBrick, dims_.y()); ++y) {
+          const float* line =
+              log_odds_.data() + (static_cast<std::size_t>(z) * ny + static_cast<std::size_t>(y)) * nx;
+          for (int x = bx * kBrick; x < x_end; ++x) occupied |= line[x] > 0.0f;
+        }
+      }
+      const std::size_t b = brick_of_ring(bx * kBrick, by * kBrick, bz * kBrick);
+      const std::uint64_t bit = std::uint64_t{1} << (b & 63);
+      brick_bits_[b >> 6] = occupied ? (brick_bits_[b >> 6] | bit) : (brick_bits_[b >> 6] & ~bit);
+    }
+  }
+}
+
+void OccupancyMap::update_brick_skips() {
+  // Chebyshev distance in x and y to the nearest flagged brick of the same layer, round the
+  // ring, capped: along x (two sweeps round each row), then the min over y of max(|dy|, that).
+  const int nbx = bricks_.x(), nby = bricks_.y(), nbz = bricks_.z();
+  const int cap = kMaxBrickSkip;
+  std::vector<std::uint8_t>& along_x = brick_row_scratch_;
+  along_x.assign(brick_skip_.size(), 0);
+  for (int bz = 0; bz < nbz; ++bz) {
+    for (int by = 0; by < nby; ++by) {
+      const std::size_t row = (static_cast<std::size_t>(bz) * nby + by) * nbx;
+      const auto flagged = [&](int bx) {
+        const std::size_t b = row + static_cast<std::size_t>(bx);
+        return ((brick_bits_[b >> 6] >> (b & 63)) & 1U) != 0;
+      };
+      int d = cap;
+      for (int k = 0; k < 2 * nbx; ++k) {  // forward, twice round: the wrap's distances too
+        const int bx = k % nbx;
+        d = flagged(bx) ? 0 : std::min(d + 1, cap);
+        if (k >= nbx) along_x[row + bx] = static_cast<std::uint8_t>(d);
+      }
+      d = cap;
+      for (int k = 2 * nbx - 1; k >= 0; --k) {
+        const int bx = k % nbx;
+        d = flagged(bx) ? 0 : std::min(d + 1, cap);
+        if (k < nbx) along_x[row + bx] = std::min(along_x[row + bx], static_cast<std::uint8_t>(d));
+      }
+    }
+  }
+  const int reach = std::min(cap, nby / 2);
+  for (int bz = 0; bz < nbz; ++bz) {
+    for (int by = 0; by < nby; ++by) {
+      for (int bx = 0; bx < nbx; ++bx) {
+        int best = along_x[(static_cast<std::size_t>(bz) * nby + by) * nbx + bx];
+        for (int dy = 1; dy <= reach && dy < best; ++dy) {
+          for (const int y : {wrap(by + dy, nby), wrap(by - dy, nby)}) {
+            const int here = along_x[(static_cast<std::size_t>(bz) * nby + y) * nbx + bx];
+            best = std::min(best, std::max(dy, here));
+          }
+        }
+        brick_skip_[(static_cast<std::size_t>(bz) * nby + by) * nbx + bx] =
+            static_cast<std::uint8_t>(best);
+      }
+    }
+  }
+  bricks_dirty_ = false;
+}
+
+}  // namespace tarmac::core
