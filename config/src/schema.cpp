@@ -438,13 +438,17 @@ std::vector<Key> make_schema() {
           real("costmap.ground_cell_m", 0.05, 20.0, "m", "local ground estimate cell",
                [](Config& c) -> Field { return &c.mapping.costmap.ground_cell_m; }),
           real("costmap.max_ground_step_m", 0.01, 10.0, "m",
-               "a ground cell this far above its neighbours is not ground",
+               "ground spreads from cell to neighbouring cell (`ground_cell_m`) only across steps "
+               "up "
+               "or down of at most this; a higher step (a dock, a truck roof, a wing with nothing "
+               "seen under it) is not ground",
                [](Config& c) -> Field { return &c.mapping.costmap.max_ground_step_m; }),
           real("costmap.max_ground_slope", 0.0, 1.0, "",
-               "rise over run of the ground from the plane of the wheels",
+               "the seed cells of the ground (within 4 m of the vehicle) lie within "
+               "`ground_tolerance_m` + this x distance of the wheels' plane",
                [](Config& c) -> Field { return &c.mapping.costmap.max_ground_slope; }),
           real("costmap.ground_tolerance_m", 0.0, 10.0, "m",
-               "ground lies within this (+ slope x distance) of the wheels' plane",
+               "the seed cells lie within this (+ slope x distance) of the wheels' plane",
                [](Config& c) -> Field { return &c.mapping.costmap.ground_tolerance_m; }),
           choice("costmap.unknown_cost", kUnknownCost, "value of cells never observed",
                  [](Config& c) -> Field { return choice_field(c.mapping.costmap.unknown_cost); }),

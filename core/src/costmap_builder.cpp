@@ -205,7 +205,7 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   find_ground_candidates(pass);
   find_coarse_ground(pass);
   const GroundPlane plane = fit_ground_plane(pass, T_W_B);
-  reject_non_ground(pass, plane);
+  grow_ground(pass, plane);
   fill_ground_gaps(pass, plane);
   classify_columns(pass);
   if (peers != nullptr) {

@@ -315,6 +315,86 @@ int nav2_static_layer(std::int8_t value, bool track_unknown_space, bool trinary_
   return static_cast<unsigned char>(static_cast<double>(v) / kLethalThreshold * 254);
 }
 
+TEST(Terrain, GradesBothWaysAreGround_ObjectOnTheGradeBlocks) {
+  // The vehicle on a flat 4 m wide strip at the origin; beyond x = 2 the ground climbs at 15 %
+  // (1.5 m above the wheels' plane at x = 12), beyond x = −2 it falls at 15 %: both leave any
+  // cone of slope round the vehicle's plane. A 0.5 m cone stands on the climb at (8, 3). The
+  // sensor is 2 m up at the origin.
+  const auto height = [](float x) {
+    return x > 2.0f ? 0.15f * (x - 2.0f) : (x < -2.0f ? -0.15f * (-2.0f - x) : 0.0f);
+  };
+  OccupancyMap map(test::apron_window_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3f> points;
+  for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+    for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
+      points.emplace_back(x + 0.013f, y + 0.017f, height(x + 0.013f) + 0.05f);
+    }
+  }
+  test::add_box(points, {7.9f, 2.9f, height(7.9f) + 0.05f}, {8.1f, 3.1f, height(8.1f) + 0.55f});
+  SerialRunner runner;
+  for (int i = 0; i < 3; ++i) map.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
+  CostmapParams cp;
+  cp.free_rule = FreeRule::kAnyVoxel;  // nothing above the sensor is seen here
+  CostmapLayers layers;
+  build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers, runner);
+  const auto cost_at = [&](double x, double y) {
+    const auto cell = layers.costmap.geometry().cell_of(x, y);
+    return layers.costmap.at(static_cast<std::uint32_t>(cell->x()),
+                             static_cast<std::uint32_t>(cell->y()));
+  };
+  EXPECT_EQ(cost_at(8.0, 3.0), kCostLethal) << "the cone on the grade blocks";
+  std::size_t ground = 0, lethal = 0;
+  std::string first;
+  for (double x = -11.0; x <= 11.0; x += 0.2) {
+    for (double y = -11.0; y <= 11.0; y += 0.2) {
+      if (std::hypot(x - 8.0, y - 3.0) < 1.5) continue;  // the cone and its inflation
+      ++ground;
+      if (cost_at(x, y) == kCostLethal) {
+        ++lethal;
+        if (first.empty()) first = std::to_string(x) + ", " + std::to_string(y);
+      }
+    }
+  }
+  EXPECT_EQ(lethal, 0u) << "of " << ground << " ground cells; the first at " << first;
+  const auto ground_z = [&](double x, double y) {
+    const auto cell = layers.costmap.geometry().cell_of(x, y);
+    return layers.ground_z_m.at(static_cast<std::uint32_t>(cell->x()),
+                                static_cast<std::uint32_t>(cell->y()));
+  };
+  EXPECT_NEAR(ground_z(10.0, -5.0), 1.3, 0.2) << "the ground follows the climb";
+  EXPECT_NEAR(ground_z(-10.0, 5.0), -1.1, 0.2) << "and the fall";
+  EXPECT_NEAR(ground_z(0.5, 0.5), 0.1, 1e-6);
+}
+
+TEST(Terrain, AStepAboveMaxGroundStepIsNoGround_ItsTopBlocks) {
+  // A loading dock 1.2 m high (a solid block from x = 5 to 11), its top seen: the climb onto it
+  // is a step of 1.2 m, more than max_ground_step_m (0.5), so its top is not ground and blocks.
+  OccupancyMap map(test::apron_window_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3f> points;
+  for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+    for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
+      const bool dock = x >= 5.0f && x <= 11.0f && y >= -3.0f && y <= 3.0f;
+      points.emplace_back(x + 0.013f, y + 0.017f, dock ? 1.25f : 0.05f);
+    }
+  }
+  SerialRunner runner;
+  for (int i = 0; i < 3; ++i) map.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
+  CostmapParams cp;
+  cp.free_rule = FreeRule::kAnyVoxel;
+  CostmapLayers layers;
+  build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers, runner);
+  const auto cell = layers.costmap.geometry().cell_of(8.0, 0.0);
+  EXPECT_EQ(layers.costmap.at(static_cast<std::uint32_t>(cell->x()),
+                              static_cast<std::uint32_t>(cell->y())),
+            kCostLethal);
+  EXPECT_LT(layers.ground_z_m.at(static_cast<std::uint32_t>(cell->x()),
+                                 static_cast<std::uint32_t>(cell->y())),
+            0.7)
+      << "the dock's top is not its ground";
+}
+
 TEST(DistanceDisplay, ShadesDistanceLinearly_UnknownStaysUnknown) {
   DistanceField field;
   field.dims = {6, 1, 1};

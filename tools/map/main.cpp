@@ -30,6 +30,7 @@
 #include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/tools/mesh_io.hpp"
+#include "tarmac/tools/open_ground.hpp"
 #include "tarmac/tools/safety.hpp"
 #include "tarmac/tools/stats.hpp"
 
@@ -48,6 +49,7 @@ struct Options {
   double sensor_height_m = 1.9;
   double fleet_period_s = 0.0;  ///< > 0: encode a fleet summary this often, report its bytes
   std::string memory_log;       ///< per scan: distance driven, RSS, resident and stored TSDF
+  bool open_ground = false;     ///< score the open flat ground of the returns with a truth too
 };
 
 struct StageTimes {
@@ -66,7 +68,9 @@ struct Inputs {
   std::optional<core::LoadedTsdf> prior;           ///< --prior
   std::optional<tools::ClearingTracker> clearing;  ///< tarmac-sim's dynamic_boxes.txt
   std::optional<tools::SafetyTracker> safety;      ///< tarmac-sim's obstacle_columns.txt
-  std::vector<tools::Correction> corrections;      ///< --corrections
+  /// Without a truth (real data), or --open-ground: the open flat ground of the drive's returns.
+  std::optional<tools::OpenGroundTracker> open_ground;
+  std::vector<tools::Correction> corrections;  ///< --corrections
 };
 
 /// What the run measured and counted.
@@ -191,6 +195,11 @@ int load_inputs(const Options& opt, Inputs& in) {
     } else {
       in.safety.emplace(std::move(truth).value());
     }
+  }
+
+  if (!in.safety || opt.open_ground) {
+    in.open_ground.emplace(params.occupancy.voxel_size_m,
+                           params.costmap.vehicle_height_m + params.costmap.clearance_m);
   }
 
   if (!opt.corrections.empty()) {
@@ -335,6 +344,13 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
       in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
                          T_W_B.translation().head<2>(), 20.0, moving_now);
     }
+    if (in.open_ground) {
+      in.open_ground->add(scan.points_W);
+      // Every 10th scan and the last: a full-window pass each.
+      if (k % 10 == 9 || k + 1 == n) {
+        in.open_ground->observe(mapper.costmap().costmap, static_cast<int>(k));
+      }
+    }
     run.promotions += occ.promotions;
     run.demotions += occ.demotions;
     run.t_filter.ms.push_back(f_ms);
@@ -427,6 +443,19 @@ void print_tsdf_footprint(const core::Mapper& mapper, const Run& run) {
 
 /// Prints the stage table, the run's summaries and the digests; writes timing.json. 0 or
 /// kExitIo.
+/// The open flat ground figure: its line, timing.json's "open_ground", open_ground.png.
+void report_open_ground(const Options& opt, const tools::OpenGroundTracker& open_ground,
+                        nlohmann::ordered_json& timing) {
+  std::printf("%s\n", tools::open_ground_summary(open_ground).c_str());
+  timing["open_ground"] = tools::open_ground_json(open_ground);
+  std::uint32_t w = 0, h = 0;
+  const std::vector<std::uint8_t> rgb = open_ground.render(w, h);
+  const auto file = std::filesystem::path(opt.out) / "open_ground.png";
+  if (auto written = tools::write_png(file, rgb, w, h); !written) {
+    std::fprintf(stderr, "tarmac-map: %s\n", written.error().message.c_str());
+  }
+}
+
 int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, const Run& run,
            const map_tool::WindowOutputs& window_out, const map_tool::TsdfOutputs& tsdf_out) {
   const core::MapperParams& params = in.cfg.mapping;
@@ -525,6 +554,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     std::printf("%s\n", tools::safety_summary(in.safety->report()).c_str());
     timing["safety"] = tools::safety_json(*in.safety);
   }
+  if (in.open_ground) report_open_ground(opt, *in.open_ground, timing);
   if (!run.fleet_messages.empty()) {
     // Each message stands for one period: bytes per second over the messages' periods.
     std::size_t total = 0, keyframes = 0, key_bytes = 0, key_max = 0, change_bytes = 0,
@@ -706,6 +736,9 @@ int main(int argc, char** argv) {
                  "CSV, one line per scan: scan, distance driven m, RSS MiB, TSDF resident MiB "
                  "(as counted against tsdf.resident_limit_mb), tile store MiB")
       ->type_name("FILE");
+  app.add_flag("--open-ground", opt.open_ground,
+               "also with a ground truth: score the open flat ground that the drive's own returns "
+               "show (always on without one; docs/tools.md)");
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
 
   Inputs in;

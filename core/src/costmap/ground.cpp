@@ -199,24 +199,29 @@ void find_coarse_ground(const CostmapPass& pass) {
   // Coarse ground buffers live in `out` and keep their capacity: no allocation after warm-up.
   auto& coarse = out.coarse_ground;
   coarse.assign(static_cast<std::size_t>(gx) * gy, kNoGround);
-  // Per coarse cell, the minimum over its g×g columns (an integer, so the order is irrelevant);
-  // walked in blocks of g columns so no cell needs a division; tasks own whole coarse rows.
+  // Per coarse cell, a low order statistic of its columns' candidates: the lowest after the
+  // lowest tenth is set aside, so a few stray returns under the surface (a glossy floor's
+  // mirror images, multipath) do not pull the ground down, while a cell with a little ground
+  // seen beside an object still finds it. Integers, so the order they come in is irrelevant;
+  // tasks own whole coarse rows.
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int cy0 = static_cast<int>(static_cast<std::size_t>(gy) * task / kRowTasks);
     const int cy1 = static_cast<int>(static_cast<std::size_t>(gy) * (task + 1) / kRowTasks);
-    for (int y = cy0 * g, y_end = std::min(ny, cy1 * g); y < y_end; ++y) {
-      const std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
-      float* coarse_row = &coarse[static_cast<std::size_t>(y / g) * gx];
-      for (int x0 = 0, cx = 0; x0 < nx; x0 += g, ++cx) {
-        int m = std::numeric_limits<int>::max();
-        for (int x = x0, x1 = std::min(nx, x0 + g); x < x1; ++x) {
-          const int z = low[x];
-          m = z >= 0 ? std::min(m, z) : m;
+    std::array<std::int16_t, 64 * 64> heights;  // g <= 64 (ground_cell_m / voxel)
+    for (int cy = cy0; cy < cy1; ++cy) {
+      for (int cx = 0; cx < gx; ++cx) {
+        std::size_t count = 0;
+        for (int y = cy * g, y1 = std::min(ny, (cy + 1) * g); y < y1; ++y) {
+          const std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+          for (int x = cx * g, x1 = std::min(nx, (cx + 1) * g); x < x1; ++x) {
+            if (low[x] >= 0 && count < heights.size()) heights[count++] = low[x];
+          }
         }
-        float& cell = coarse_row[cx];
-        if (m != std::numeric_limits<int>::max() && (std::isnan(cell) || m < cell)) {
-          cell = static_cast<float>(m);
-        }
+        if (count == 0) continue;
+        const auto k = static_cast<std::ptrdiff_t>(count / 10);
+        std::nth_element(heights.begin(), heights.begin() + k,
+                         heights.begin() + static_cast<std::ptrdiff_t>(count));
+        coarse[static_cast<std::size_t>(cy) * gx + cx] = static_cast<float>(heights[k]);
       }
     }
   });
@@ -251,40 +256,62 @@ GroundPlane fit_ground_plane(const CostmapPass& pass, const Eigen::Isometry3d& T
   return plane;
 }
 
-void reject_non_ground(const CostmapPass& pass, const GroundPlane& plane) {
+void grow_ground(const CostmapPass& pass, const GroundPlane& plane) {
   const auto& params = pass.params;
   auto& out = pass.out;
   const auto v = pass.v;
   const auto gx = pass.gx;
   const auto gy = pass.gy;
-  // Far off the plane of the vehicle's own wheels (extended with the steepest slope allowed) —
-  // a wing or a fuselage seen with no ground under it — or far above their neighbours (a truck
-  // roof).
   const auto& coarse = out.coarse_ground;
-  const float step_vox = static_cast<float>(params.max_ground_step_m / v);
   auto& filtered = out.coarse_filtered;
-  filtered.assign(coarse.begin(), coarse.end());
-  for (int cy = 0; cy < gy; ++cy) {
-    for (int cx = 0; cx < gx; ++cx) {
-      const float z = coarse[static_cast<std::size_t>(cy) * gx + cx];
-      if (std::isnan(z)) continue;
-      const Eigen::Vector2d center = plane.coarse_center(cx, cy);
-      const double reach_m = params.ground_tolerance_m +
-                             params.max_ground_slope * (center - plane.base_W.head<2>()).norm();
-      if (std::abs(z - plane.layer(center.x(), center.y())) > reach_m / v) {
-        filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
-        continue;
-      }
-      float lowest = std::numeric_limits<float>::infinity();
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int ux = cx + dx, uy = cy + dy;
-          if ((dx == 0 && dy == 0) || ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
-          const float n = coarse[static_cast<std::size_t>(uy) * gx + ux];
-          if (!std::isnan(n)) lowest = std::min(lowest, n);
+  filtered.assign(coarse.size(), kNoGround);
+  // The seeds: cells near the vehicle on the plane of its wheels (within ground_tolerance_m +
+  // max_ground_slope × distance).
+  // Then ground spreads from cell to neighbouring cell while their heights differ by at most
+  // max_ground_step_m: grades, ramps, crowns and levels reached by a slope are ground, however
+  // far they leave the vehicle's plane; a wing or a fuselage seen with nothing under it, a truck
+  // roof, a dock's top are not reached. A cell is ground when any chain of such steps joins it
+  // to a seed, so the result does not depend on the order cells are visited in.
+  constexpr double kSeedRadiusM = 4.0;
+  const float tolerance = static_cast<float>(params.ground_tolerance_m / v);
+  const float step = static_cast<float>(params.max_ground_step_m / v);
+  auto& queue = out.level_cells;  // scratch here; fill_ground_gaps reuses it after
+  queue.clear();
+  queue.reserve(coarse.size());
+  const auto seed_pass = [&](double radius_m) {
+    for (int cy = 0; cy < gy; ++cy) {
+      for (int cx = 0; cx < gx; ++cx) {
+        const std::size_t i = static_cast<std::size_t>(cy) * gx + cx;
+        const Eigen::Vector2d center = plane.coarse_center(cx, cy);
+        if (std::isnan(coarse[i]) || !std::isnan(filtered[i]) ||
+            (center - plane.base_W.head<2>()).norm() > radius_m) {
+          continue;
         }
+        const double d = (center - plane.base_W.head<2>()).norm();
+        const auto reach = static_cast<float>(tolerance + params.max_ground_slope * d / v);
+        if (std::abs(coarse[i] - plane.layer(center.x(), center.y())) > reach) continue;
+        filtered[i] = coarse[i];
+        queue.push_back(static_cast<std::uint32_t>(i));
       }
-      if (z - lowest > step_vox) filtered[static_cast<std::size_t>(cy) * gx + cx] = kNoGround;
+    }
+  };
+  seed_pass(kSeedRadiusM);
+  // Nothing seen near the vehicle (a blind start): the cells on its plane within 20 m.
+  if (queue.empty()) seed_pass(20.0);
+  for (std::size_t head = 0; head < queue.size(); ++head) {
+    const std::size_t i = queue[head];
+    const int cx = static_cast<int>(i % static_cast<std::size_t>(gx));
+    const int cy = static_cast<int>(i / static_cast<std::size_t>(gx));
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int ux = cx + dx, uy = cy + dy;
+        if ((dx == 0 && dy == 0) || ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
+        const std::size_t u = static_cast<std::size_t>(uy) * gx + ux;
+        if (std::isnan(coarse[u]) || !std::isnan(filtered[u])) continue;
+        if (std::abs(coarse[u] - coarse[i]) > step) continue;
+        filtered[u] = coarse[u];
+        queue.push_back(static_cast<std::uint32_t>(u));
+      }
     }
   }
 }

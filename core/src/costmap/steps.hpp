@@ -78,12 +78,14 @@ void for_row_runs(const OccupancyMap& map, const float* layer, int wy, Fn&& fn) 
 
 /// 1. Per column, its ground candidate: out.lowest_occupied (and the layer bit sets).
 void find_ground_candidates(const CostmapPass& pass);
-/// 2. Per coarse ground cell, the lowest candidate of its columns: out.coarse_ground.
+/// 2. Per coarse ground cell, a low order statistic of its columns' candidates:
+///    out.coarse_ground.
 void find_coarse_ground(const CostmapPass& pass);
 /// 3. The vehicle's ground plane, its offset the median over the coarse cells near the base.
 GroundPlane fit_ground_plane(const CostmapPass& pass, const Eigen::Isometry3d& T_W_B);
-/// 4. Coarse cells that cannot be ground rejected: out.coarse_filtered.
-void reject_non_ground(const CostmapPass& pass, const GroundPlane& plane);
+/// 4. The coarse cells joined to the vehicle's own by steps of at most max_ground_step_m:
+///    out.coarse_filtered (the others empty).
+void grow_ground(const CostmapPass& pass, const GroundPlane& plane);
 /// 5. Rejected and empty coarse cells filled from their neighbours, then from the plane.
 void fill_ground_gaps(const CostmapPass& pass, const GroundPlane& plane);
 /// 6. Every column's ground and class against the vehicle's envelope: out.ground_layer,

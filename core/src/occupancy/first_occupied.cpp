@@ -117,8 +117,8 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen
       for (int a = 0; a < 3; ++a) {
         if (w.step[a] == 0) continue;
         const int lo = (w.ring[a] >> kBrickShift) << kBrickShift;
-        to_exit[a] = w.step[a] > 0 ? std::min(lo + kBrick, dims_[a]) - w.ring[a]
-                                   : w.ring[a] - lo + 1;
+        to_exit[a] =
+            w.step[a] > 0 ? std::min(lo + kBrick, dims_[a]) - w.ring[a] : w.ring[a] - lo + 1;
         if (a < 2) to_exit[a] += (skip - 1) * thinnest;
         t_exit_of[a] = w.t_ahead(a, to_exit[a]);
       }
@@ -128,8 +128,8 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen
       int crossed[3] = {0, 0, 0};
       for (int b = 0; b < 3; ++b) {
         if (w.step[b] == 0) continue;
-        crossed[b] = b == exit_axis ? to_exit[b]
-                                    : w.crossed_before(b, t_exit, exit_axis, to_exit[b] - 1);
+        crossed[b] =
+            b == exit_axis ? to_exit[b] : w.crossed_before(b, t_exit, exit_axis, to_exit[b] - 1);
       }
       for (int a = 0; a < 3; ++a) {
         if (!w.move(a, crossed[a], dims_)) return kNone;  // a box: the ray does not come back
@@ -139,10 +139,9 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen
       continue;
     }
     if (!at_origin) {
-      const std::size_t s = (static_cast<std::size_t>(w.ring[2]) * ny +
-                             static_cast<std::size_t>(w.ring[1])) *
-                                nx +
-                            static_cast<std::size_t>(w.ring[0]);
+      const std::size_t s =
+          (static_cast<std::size_t>(w.ring[2]) * ny + static_cast<std::size_t>(w.ring[1])) * nx +
+          static_cast<std::size_t>(w.ring[0]);
       if (log_odds_[s] > 0.0f) return t_entry;  // occupied (unknown is negative)
     }
     const int a = Walk::first_of(w.t_next);
@@ -178,8 +177,8 @@ void OccupancyMap::refresh_bricks(int rows) {
       const int x_end = std::min((bx + 1) * kBrick, dims_.x());
       for (int z = bz * kBrick; z < std::min((bz + 1) * kBrick, dims_.z()) && !occupied; ++z) {
         for (int y = by * kBrick; y < std::min((by + 1) * kBrick, dims_.y()); ++y) {
-          const float* line =
-              log_odds_.data() + (static_cast<std::size_t>(z) * ny + static_cast<std::size_t>(y)) * nx;
+          const float* line = log_odds_.data() +
+                              (static_cast<std::size_t>(z) * ny + static_cast<std::size_t>(y)) * nx;
           for (int x = bx * kBrick; x < x_end; ++x) occupied |= line[x] > 0.0f;
         }
       }

@@ -54,10 +54,12 @@ struct CostmapParams {
   double inflation_radius_m = 3.0;   ///< costs decay to 0 beyond this
   double cost_scaling_factor = 3.0;  ///< Nav2's exponential decay rate, 1/m
   double ground_cell_m = 1.0;        ///< horizontal size of a local ground estimate cell
-  double max_ground_step_m = 0.5;    ///< a ground cell this far above its neighbours is not ground
-  /// Ground lies within ground_tolerance_m + max_ground_slope · (horizontal distance) of the
-  /// plane of the vehicle's wheels (its base frame's xy plane); lower or higher lowest returns
-  /// (a wing, a fuselage with no ground seen under it) are not taken for ground.
+  /// Ground spreads from the cells near the vehicle to neighbouring cells whose heights differ
+  /// by at most this (grades, ramps, crowns, levels joined by a slope); a higher step (a dock,
+  /// a truck roof, a wing with nothing seen under it) is not ground.
+  double max_ground_step_m = 0.5;
+  /// The seeds of that spread: cells within 4 m of the vehicle that lie within
+  /// ground_tolerance_m + max_ground_slope · (horizontal distance) of the plane of its wheels.
   double max_ground_slope = 0.05;
   double ground_tolerance_m = 0.5;
   UnknownCost unknown_cost = UnknownCost::kUnknown;
