@@ -399,7 +399,7 @@ void print_tsdf_footprint(const core::Mapper& mapper, const Run& run) {
     tiles.insert(key(t.x(), t.y(), t.z()));
   };
   if (run.pager != nullptr) {
-    run.pager->for_each_site_block(mapper.tsdf(), visit);
+    run.pager->site(mapper.tsdf()).for_each_block(visit);
   } else {
     mapper.tsdf().for_each_block(visit);
   }
@@ -485,7 +485,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
   // The site's static layer: with paging, the map's part and the stored tiles'.
   std::vector<Eigen::Vector3i> static_site;
   if (run.pager != nullptr) {
-    run.pager->static_site_voxels(static_site);
+    run.pager->site(mapper.tsdf()).static_voxels(static_site);
   } else {
     mapper.occupancy().export_static(static_site);
   }
@@ -644,7 +644,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       tools::digest(bytes(mapper.costmap().costmap.cells())).c_str(),
       tools::digest(bytes(mapper.costmap().obstacle_distance.distance_m)).c_str(),
       tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
-      static_cast<unsigned long long>(run.pager != nullptr ? run.pager->site_digest(mapper.tsdf())
+      static_cast<unsigned long long>(run.pager != nullptr ? run.pager->site(mapper.tsdf()).digest()
                                                            : mapper.tsdf().digest()));
   std::printf("digest: static %016llx\n",
               static_cast<unsigned long long>(core::static_voxels_digest(static_site)));
@@ -761,8 +761,8 @@ int main(int argc, char** argv) {
     // The site is the tile store: its products are made tile by tile.
     const std::filesystem::path prior_dir = opt.prior;
     if (auto w = map_tool::write_tsdf_site_outputs(
-            out, *pager, mapper.tsdf(), config::config_hash(in.cfg), run.last_stamp_ns,
-            opt.prior.empty() ? nullptr : &prior_dir, tsdf_out);
+            out, pager->site(mapper.tsdf()), mapper.tsdf(), config::config_hash(in.cfg),
+            run.last_stamp_ns, opt.prior.empty() ? nullptr : &prior_dir, tsdf_out);
         !w) {
       std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
       return kExitIo;
