@@ -24,55 +24,82 @@ const Cycle::ScanResult& Cycle::scan(const core::PointCloud& cloud, const Eigen:
   r = ScanResult{};
   const auto t0 = Clock::now();
   r.filtered = mapper_.ingest(cloud, T_W_B, T_B_S, runner_, motion);
-  const core::FilteredScan& filtered = r.filtered;
-  const auto t1 = Clock::now();
-  if (pager_ != nullptr) pager_->before_occupancy(mapper_.tsdf(), filtered.T_W_B.translation());
-  r.occupancy = mapper_.integrate(filtered, runner_);
-  if (pager_ != nullptr) pager_->after_occupancy();
-  const auto t2 = Clock::now();
-  r.ingest_ms = ms_between(t0, t1);
-  r.integrate_ms = ms_between(t1, t2);
+  r.ingest_ms = ms_between(t0, Clock::now());
+  // Each stage's time includes the residency step before it, and the last stage's the step
+  // that closes the scan: the paging a stage causes is counted against its budget.
+  double* last_ms = &r.integrate_ms;
+  integrate_occupancy(r);
   if (mapper_.params().tsdf.enabled) {
-    // Shed first (DESIGN.md §3), by the points quota only: the same scans skip the TSDF
-    // whatever the machine's speed.
-    const std::uint64_t n = filtered.points_W.size();
-    if (tick_.tsdf_points + n <= quotas_.tsdf_points_per_cycle) {
-      tick_.tsdf_points += n;
-      if (pager_ != nullptr) pager_->before_scan(mapper_.tsdf(), filtered.sensor_W);
-      r.tsdf = &mapper_.integrate_tsdf(filtered, runner_);
-      if (pager_ != nullptr) {
-        pager_->after_scan(mapper_.tsdf(), filtered.sensor_W, mapper_.rebuilding());
-      }
-      ++tick_.tsdf_scans;
-      r.tsdf_ms = ms_between(t2, Clock::now());
-    } else {
-      r.tsdf_shed = true;
-      ++tick_.tsdf_shed;
-    }
+    if (integrate_tsdf(r)) last_ms = &r.tsdf_ms;
   }
-  // A rebuild after a pose correction steps once per scan (a points quota of retained scans),
-  // so its progress is a function of the scan sequence, not of how scans fall into ticks.
   if (mapper_.rebuilding()) {
-    const auto t3 = Clock::now();
-    if (pager_ != nullptr) {
-      mapper_.rebuild_sensors(rebuild_sensors_);
-      pager_->before_rebuild(mapper_.tsdf(), rebuild_sensors_);
-    }
-    r.rebuild = mapper_.rebuild_step(runner_);
-    // The window and static layer re-derived from the retained scans are the map now.
-    if (r.rebuild.completed && pager_ != nullptr) pager_->occupancy_replaced();
-    r.rebuild_ms = ms_between(t3, Clock::now());
-    tick_.scans_reintegrated += r.rebuild.scans;
-    tick_.rebuilds_completed += r.rebuild.completed ? 1 : 0;
+    rebuild_step(r);
+    last_ms = &r.rebuild_ms;
   }
+  const auto t_end = Clock::now();
+  residency_step(ScanStage::kEnd, {}, r.rebuild.completed);
+  *last_ms += ms_between(t_end, Clock::now());
+  add_to_tick(r);
+  return r;
+}
+
+void Cycle::residency_step(ScanStage next, std::span<const Eigen::Vector3d> at_W,
+                           bool rebuild_completed) {
+  if (pager_ == nullptr) return;
+  ResidencyStep step;
+  step.next = next;
+  step.at_W = at_W;
+  step.rebuilding = mapper_.rebuilding();
+  step.rebuild_completed = rebuild_completed;
+  pager_->step(mapper_.tsdf(), step);
+}
+
+void Cycle::integrate_occupancy(ScanResult& r) {
+  const auto t0 = Clock::now();
+  const Eigen::Vector3d base_W = r.filtered.T_W_B.translation();
+  residency_step(ScanStage::kOccupancy, {&base_W, 1});
+  r.occupancy = mapper_.integrate(r.filtered, runner_);
+  r.integrate_ms = ms_between(t0, Clock::now());
+}
+
+bool Cycle::integrate_tsdf(ScanResult& r) {
+  // Shed first (DESIGN.md §3), by the points quota only: the same scans skip the TSDF
+  // whatever the machine's speed.
+  const std::uint64_t n = r.filtered.points_W.size();
+  if (tick_.tsdf_points + n > quotas_.tsdf_points_per_cycle) {
+    r.tsdf_shed = true;
+    ++tick_.tsdf_shed;
+    return false;
+  }
+  const auto t0 = Clock::now();
+  tick_.tsdf_points += n;
+  residency_step(ScanStage::kTsdf, {&r.filtered.sensor_W, 1});
+  r.tsdf = &mapper_.integrate_tsdf(r.filtered, runner_);
+  ++tick_.tsdf_scans;
+  r.tsdf_ms = ms_between(t0, Clock::now());
+  return true;
+}
+
+// A rebuild after a pose correction steps once per scan (a points quota of retained scans),
+// so its progress is a function of the scan sequence, not of how scans fall into ticks.
+void Cycle::rebuild_step(ScanResult& r) {
+  const auto t0 = Clock::now();
+  if (pager_ != nullptr) mapper_.rebuild_sensors(rebuild_sensors_);
+  residency_step(ScanStage::kRebuild, rebuild_sensors_);
+  r.rebuild = mapper_.rebuild_step(runner_);
+  r.rebuild_ms = ms_between(t0, Clock::now());
+  tick_.scans_reintegrated += r.rebuild.scans;
+  tick_.rebuilds_completed += r.rebuild.completed ? 1 : 0;
+}
+
+void Cycle::add_to_tick(const ScanResult& r) {
   ++tick_.scans;
-  tick_.points_in += filtered.counts.input;
-  tick_.points_used += filtered.counts.kept;
+  tick_.points_in += r.filtered.counts.input;
+  tick_.points_used += r.filtered.counts.kept;
   tick_.ingest_ms += r.ingest_ms;
   tick_.integrate_ms += r.integrate_ms;
   tick_.tsdf_ms += r.tsdf_ms;
   tick_.rebuild_ms += r.rebuild_ms;
-  return r;
 }
 
 void Cycle::share_with_fleet(const core::BevPeers* peers) {

@@ -661,9 +661,9 @@ TEST_F(Daemon, Paging_TheTileStoreIsTheMapAfterSaveAndRestart) {
   ASSERT_TRUE(pager.ok()) << pager.error().message;
   EXPECT_GT(pager.value()->stats().stored_tiles, 0u);
   EXPECT_GT(pager.value()->stats().static_tiles_stored, 0u);
-  EXPECT_EQ(pager.value()->site_digest(layer), digest);
+  EXPECT_EQ(pager.value()->site(layer).digest(), digest);
   std::vector<core::VoxelIndex> stored;
-  ASSERT_TRUE(pager.value()->static_site_voxels(stored));
+  ASSERT_TRUE(pager.value()->site(layer).static_voxels(stored));
   EXPECT_EQ(stored, statics);
   pager.value().reset();
   // tarmacd restarted over it: the tiles are absent until the vehicle is near, the map the same.

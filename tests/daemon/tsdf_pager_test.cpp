@@ -122,7 +122,7 @@ TEST_F(TsdfPaging, SmallLimit_SameMapBitForBit_TilesLeaveAndComeBack) {
   EXPECT_EQ(st.loads_late, 0u);
   EXPECT_EQ(st.write_errors + st.load_errors, 0u);
   EXPECT_LT(paged.tsdf().resident_bytes(), whole.tsdf().resident_bytes());
-  EXPECT_EQ(pager.value()->site_digest(paged.tsdf()), expected);
+  EXPECT_EQ(pager.value()->site(paged.tsdf()).digest(), expected);
   EXPECT_EQ(whole.occupancy().static_count(), paged.occupancy().static_count());
 
   // The store alone is the whole map: a restart over it (every tile absent) has the same site.
@@ -133,7 +133,7 @@ TEST_F(TsdfPaging, SmallLimit_SameMapBitForBit_TilesLeaveAndComeBack) {
   ASSERT_TRUE(reopened.ok()) << reopened.error().message;
   EXPECT_EQ(restarted.tsdf().block_count(), 0u);
   EXPECT_GT(restarted.tsdf().absent_count(), 0u);
-  EXPECT_EQ(reopened.value()->site_digest(restarted.tsdf()), expected);
+  EXPECT_EQ(reopened.value()->site(restarted.tsdf()).digest(), expected);
 }
 
 /// The static occupancy paged in column tiles with the TSDF: a window of 32 m drives the 60 m
@@ -162,7 +162,7 @@ TEST_F(TsdfPaging, StaticLayer_PagedInColumns_SameLayerWindowAndCostmap) {
   EXPECT_EQ(st.write_errors + st.load_errors, 0u);
   EXPECT_LT(paged.occupancy().static_count(), expected.size());
   std::vector<core::VoxelIndex> site;
-  ASSERT_TRUE(pager.value()->static_site_voxels(site));
+  ASSERT_TRUE(pager.value()->site(paged.tsdf()).static_voxels(site));
   EXPECT_EQ(site, expected);
   std::vector<float> a, b;
   whole.occupancy().export_log_odds(a);
@@ -177,7 +177,7 @@ TEST_F(TsdfPaging, StaticLayer_PagedInColumns_SameLayerWindowAndCostmap) {
   auto reopened = TsdfPager::open(pp, restarted.tsdf(), &restarted.occupancy());
   ASSERT_TRUE(reopened.ok()) << reopened.error().message;
   EXPECT_EQ(restarted.occupancy().static_count(), 0u);
-  ASSERT_TRUE(reopened.value()->static_site_voxels(site));
+  ASSERT_TRUE(reopened.value()->site(restarted.tsdf()).static_voxels(site));
   EXPECT_EQ(site, expected);
 }
 
@@ -191,13 +191,15 @@ TEST_F(TsdfPaging, VdbExportInParts_TogetherTheWholeMap) {
   map(paged, pager.value().get());
   ASSERT_GT(pager.value()->stats().evicted, 0u);
   std::vector<fs::path> files;
-  const core::Status exported = pager.value()->export_site(
-      paged.tsdf(), 2, [&](const Eigen::Vector2i& r, const core::TsdfLayer& part) {
-        EXPECT_GT(part.block_count(), 0u);
-        files.push_back(dir_ /
-                        ("part_" + std::to_string(r.x()) + "_" + std::to_string(r.y()) + ".vdb"));
-        return core::save_tsdf(files.back(), part, core::TsdfMapInfo{});
-      });
+  const core::Status exported =
+      pager.value()
+          ->site(paged.tsdf())
+          .export_parts(2, [&](const Eigen::Vector2i& r, const core::TsdfLayer& part) {
+            EXPECT_GT(part.block_count(), 0u);
+            files.push_back(
+                dir_ / ("part_" + std::to_string(r.x()) + "_" + std::to_string(r.y()) + ".vdb"));
+            return core::save_tsdf(files.back(), part, core::TsdfMapInfo{});
+          });
   ASSERT_TRUE(exported.ok()) << exported.error().message;
   ASSERT_GT(files.size(), 2u);
   core::TsdfLayer merged(whole.tsdf().voxel_size_m(), whole.tsdf().truncation_m());
@@ -243,23 +245,26 @@ TEST_F(TsdfPaging, ChangesAgainstATileStorePrior_SameLayerAsTheWholeMaps) {
   std::vector<float> raster;
   std::vector<int> strips;
   core::ChangeCounts counts;
-  const core::Status done = pager.value()->changes_site(
-      paged.tsdf(), prior_params.dir, {}, counts,
-      [&](const core::GridGeometry2D& g) {
-        geometry = g;
-        raster.assign(g.cell_count(), -7.0f);  // every cell is written once
-        return core::Status(core::Ok{});
-      },
-      [&](int y0, int rows, std::span<const float> cells) {
-        EXPECT_EQ(cells.size(), static_cast<std::size_t>(rows) * geometry.width);
-        if (!strips.empty()) {
-          EXPECT_LT(y0, strips.back());  // from the top down
-        }
-        strips.push_back(y0);
-        std::copy(cells.begin(), cells.end(),
-                  raster.begin() + static_cast<std::ptrdiff_t>(y0) * geometry.width);
-        return core::Status(core::Ok{});
-      });
+  const core::Status done =
+      pager.value()
+          ->site(paged.tsdf())
+          .changes(
+              prior_params.dir, {}, counts,
+              [&](const core::GridGeometry2D& g) {
+                geometry = g;
+                raster.assign(g.cell_count(), -7.0f);  // every cell is written once
+                return core::Status(core::Ok{});
+              },
+              [&](int y0, int rows, std::span<const float> cells) {
+                EXPECT_EQ(cells.size(), static_cast<std::size_t>(rows) * geometry.width);
+                if (!strips.empty()) {
+                  EXPECT_LT(y0, strips.back());  // from the top down
+                }
+                strips.push_back(y0);
+                std::copy(cells.begin(), cells.end(),
+                          raster.begin() + static_cast<std::ptrdiff_t>(y0) * geometry.width);
+                return core::Status(core::Ok{});
+              });
   ASSERT_TRUE(done.ok()) << done.error().message;
   EXPECT_GT(strips.size(), 1u);
   EXPECT_EQ(geometry.width, expected.geometry.width);
@@ -309,11 +314,12 @@ TEST_F(TsdfPaging, SiteMeshTileByTile_HoldsTheWholeMapsTriangles) {
   ASSERT_GT(pager.value()->stats().evicted, 0u);  // some tiles are read back from the store
   std::vector<core::TriangleMesh> pieces;
   ASSERT_TRUE(pager.value()
-                  ->mesh_site(paged.tsdf(), 1.0f,
-                              [&pieces](const core::TriangleMesh& piece) -> core::Status {
-                                pieces.push_back(piece);
-                                return core::Ok{};
-                              })
+                  ->site(paged.tsdf())
+                  .mesh(1.0f,
+                        [&pieces](const core::TriangleMesh& piece) -> core::Status {
+                          pieces.push_back(piece);
+                          return core::Ok{};
+                        })
                   .ok());
   EXPECT_GT(pieces.size(), 4u);
   const auto from_tiles = triangle_set(pieces);
@@ -351,7 +357,7 @@ TEST_F(TsdfPaging, DamagedTile_RefusedCountedRenamed_MapGoesOn) {
   // The refused tiles' ground was mapped again: the map is the one a fresh start makes.
   core::Mapper fresh(params());
   map(fresh, nullptr);
-  EXPECT_EQ(pager.value()->site_digest(again.tsdf()), fresh.tsdf().digest());
+  EXPECT_EQ(pager.value()->site(again.tsdf()).digest(), fresh.tsdf().digest());
 }
 
 TEST_F(TsdfPaging, NeverWaiting_LateTilesAreCountedNotShadowed) {
@@ -365,7 +371,7 @@ TEST_F(TsdfPaging, NeverWaiting_LateTilesAreCountedNotShadowed) {
   const TsdfPagerStats st = pager.value()->stats();
   EXPECT_GT(st.evicted, 5u);
   EXPECT_EQ(st.write_errors + st.load_errors, 0u);
-  EXPECT_NE(pager.value()->site_digest(paged.tsdf()), 0u);
+  EXPECT_NE(pager.value()->site(paged.tsdf()).digest(), 0u);
 }
 
 }  // namespace

@@ -415,7 +415,7 @@ void print_tsdf_footprint(const core::Mapper& mapper, const Run& run) {
     tiles.insert(key(t.x(), t.y(), t.z()));
   };
   if (run.pager != nullptr) {
-    run.pager->for_each_site_block(mapper.tsdf(), visit);
+    run.pager->site(mapper.tsdf()).for_each_block(visit);
   } else {
     mapper.tsdf().for_each_block(visit);
   }
@@ -441,8 +441,6 @@ void print_tsdf_footprint(const core::Mapper& mapper, const Run& run) {
   std::printf("\n");
 }
 
-/// Prints the stage table, the run's summaries and the digests; writes timing.json. 0 or
-/// kExitIo.
 /// The open flat ground figure: its line, timing.json's "open_ground", open_ground.png.
 void report_open_ground(const Options& opt, const tools::OpenGroundTracker& open_ground,
                         nlohmann::ordered_json& timing) {
@@ -456,24 +454,11 @@ void report_open_ground(const Options& opt, const tools::OpenGroundTracker& open
   }
 }
 
-int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, const Run& run,
-           const map_tool::WindowOutputs& window_out, const map_tool::TsdfOutputs& tsdf_out) {
-  const core::MapperParams& params = in.cfg.mapping;
-  // ---- timing table ----
-  double total_s = 0.0;
-  for (const double ms : run.t_total.ms) total_s += ms / 1000.0;
-  std::printf(
-      "tarmac-map: %zu scans, %llu points in, %llu used (dropped: %llu non-finite, %llu too close, "
-      "%llu ego vehicle, %llu isolated), %zu threads\n",
-      run.scans, static_cast<unsigned long long>(run.points_in),
-      static_cast<unsigned long long>(run.points_used),
-      static_cast<unsigned long long>(run.dropped_nonfinite),
-      static_cast<unsigned long long>(run.dropped_close),
-      static_cast<unsigned long long>(run.dropped_ego),
-      static_cast<unsigned long long>(run.dropped_isolated), opt.threads);
+/// The stage table: per stage, ms per scan (mean, p50, p99, max and the max's scan); returns it
+/// for timing.json.
+nlohmann::ordered_json print_stage_table(const core::MapperParams& params, const Run& run) {
   std::printf("%-16s %9s %9s %9s %9s %7s   (ms per scan; worst: the max's scan index)\n", "stage",
               "mean", "p50", "p99", "max", "worst");
-  nlohmann::ordered_json timing = {{"scans", run.scans}, {"threads", opt.threads}};
   nlohmann::ordered_json stages_ms = nlohmann::ordered_json::object();
   std::vector<const StageTimes*> stages = {&run.t_read, &run.t_filter, &run.t_occ, &run.t_cost,
                                            &run.t_total};
@@ -494,7 +479,107 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
                          {"max", mx},
                          {"max_scan", worst}};
   }
-  timing["stages_ms"] = std::move(stages_ms);
+  return stages_ms;
+}
+
+/// With tsdf.enabled: the mesh's time, the paging's or the whole TSDF's figures, the change
+/// layer's counts and the footprint.
+void print_tsdf_summary(const Options& opt, const core::MapperParams& params,
+                        const core::Mapper& mapper, const Run& run,
+                        const map_tool::TsdfOutputs& tsdf_out) {
+  if (run.pager != nullptr) {
+    std::printf("%-16s %9.2f   (once, at the end, tile by tile: %zu vertices, %zu triangles)\n",
+                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles);
+    constexpr double kMiB = 1024.0 * 1024.0;
+    const daemon::TsdfPagerStats st = run.pager->stats();
+    std::printf(
+        "tsdf paging (limit %u MiB): peak resident %.1f MiB, now %.1f MiB in %zu tiles; tile "
+        "store %zu tiles, %.1f MiB (%s/tsdf_tiles); %llu evicted, %llu written, %llu loaded, "
+        "%llu scans over the limit, %llu write / %llu load errors; driven %.0f m\n",
+        params.tsdf.resident_limit_mb, static_cast<double>(st.peak_resident_bytes) / kMiB,
+        static_cast<double>(st.resident_bytes) / kMiB, st.resident_tiles, st.stored_tiles,
+        static_cast<double>(st.stored_bytes) / kMiB, opt.out.c_str(),
+        static_cast<unsigned long long>(st.evicted), static_cast<unsigned long long>(st.written),
+        static_cast<unsigned long long>(st.loaded), static_cast<unsigned long long>(st.over_limit),
+        static_cast<unsigned long long>(st.write_errors),
+        static_cast<unsigned long long>(st.load_errors), run.distance_m);
+    std::printf(
+        "static paging: %zu voxels in memory (table %.1f MiB); %zu tiles stored, %.2f MiB; %llu "
+        "evicted, %llu written, %llu loaded\n",
+        st.static_resident_voxels, static_cast<double>(st.static_resident_bytes) / kMiB,
+        st.static_tiles_stored, static_cast<double>(st.static_stored_bytes) / kMiB,
+        static_cast<unsigned long long>(st.static_evicted),
+        static_cast<unsigned long long>(st.static_written),
+        static_cast<unsigned long long>(st.static_loaded));
+  } else {
+    std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
+                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
+                tsdf_out.save_ms);
+    std::printf(
+        "tsdf: %zu blocks, %zu voxels, %.1f MiB, %.1f voxel samples/point, %.1f voxel "
+        "updates/point\n",
+        mapper.tsdf().block_count(), mapper.tsdf().voxel_count(),
+        static_cast<double>(mapper.tsdf().memory_bytes()) / (1024.0 * 1024.0),
+        run.points_used > 0
+            ? static_cast<double>(run.tsdf_samples) / static_cast<double>(run.points_used)
+            : 0.0,
+        run.points_used > 0
+            ? static_cast<double>(run.tsdf_updates) / static_cast<double>(run.points_used)
+            : 0.0);
+  }
+  if (!opt.prior.empty()) {
+    std::printf("changes vs %s: %llu voxels compared, %llu new, %llu removed (%.1f ms%s)\n",
+                opt.prior.c_str(),
+                static_cast<unsigned long long>(tsdf_out.changes.compared_voxels),
+                static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
+                static_cast<unsigned long long>(tsdf_out.changes.removed_voxels),
+                tsdf_out.changes_ms, tsdf_out.paged ? ", tile by tile" : "");
+  }
+
+  print_tsdf_footprint(mapper, run);
+}
+
+/// With corrections.enabled: corrections applied and ignored, rebuilds and their cost.
+void print_corrections(const core::Mapper& mapper, const Run& run) {
+  const core::CorrectionStats& cs = mapper.correction_stats();
+  double rebuild_total = 0.0;
+  for (const double ms : run.rebuild_ms) rebuild_total += ms;
+  std::printf(
+      "corrections: %llu applied (%llu from pose jumps, %llu from --corrections), %llu "
+      "ignored; %llu rebuilds completed, %llu scans re-integrated in %zu steps, %.1f ms in "
+      "total (max step %.1f ms; %zu steps after the last scan), %llu scans rolled out, %llu "
+      "TSDF blocks erased\n",
+      static_cast<unsigned long long>(cs.corrections),
+      static_cast<unsigned long long>(run.jump_corrections),
+      static_cast<unsigned long long>(run.next_correction),
+      static_cast<unsigned long long>(cs.corrections_empty),
+      static_cast<unsigned long long>(cs.rebuilds_completed),
+      static_cast<unsigned long long>(cs.scans_reintegrated), run.rebuild_ms.size(), rebuild_total,
+      run.rebuild_ms.empty() ? 0.0
+                             : *std::max_element(run.rebuild_ms.begin(), run.rebuild_ms.end()),
+      run.rebuild_steps_after_end, static_cast<unsigned long long>(cs.scans_rolled_out),
+      static_cast<unsigned long long>(cs.tsdf_blocks_erased));
+}
+
+/// Prints the stage table, the run's summaries and the digests; writes timing.json. 0 or
+/// kExitIo.
+int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, const Run& run,
+           const map_tool::WindowOutputs& window_out, const map_tool::TsdfOutputs& tsdf_out) {
+  const core::MapperParams& params = in.cfg.mapping;
+  // ---- timing table ----
+  double total_s = 0.0;
+  for (const double ms : run.t_total.ms) total_s += ms / 1000.0;
+  std::printf(
+      "tarmac-map: %zu scans, %llu points in, %llu used (dropped: %llu non-finite, %llu too close, "
+      "%llu ego vehicle, %llu isolated), %zu threads\n",
+      run.scans, static_cast<unsigned long long>(run.points_in),
+      static_cast<unsigned long long>(run.points_used),
+      static_cast<unsigned long long>(run.dropped_nonfinite),
+      static_cast<unsigned long long>(run.dropped_close),
+      static_cast<unsigned long long>(run.dropped_ego),
+      static_cast<unsigned long long>(run.dropped_isolated), opt.threads);
+  nlohmann::ordered_json timing = {{"scans", run.scans}, {"threads", opt.threads}};
+  timing["stages_ms"] = print_stage_table(params, run);
   const double pts_per_s = total_s > 0 ? static_cast<double>(run.points_used) / total_s : 0.0;
   std::printf("%-16s %9.2f   (once, at the end, %d x %d x %d voxels)\n", "esdf3d",
               window_out.esdf3d_ms, window_out.esdf3d.dims.x(), window_out.esdf3d.dims.y(),
@@ -514,7 +599,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
   // The site's static layer: with paging, the map's part and the stored tiles'.
   std::vector<Eigen::Vector3i> static_site;
   if (run.pager != nullptr) {
-    run.pager->static_site_voxels(static_site);
+    run.pager->site(mapper.tsdf()).static_voxels(static_site);
   } else {
     mapper.occupancy().export_static(static_site);
   }
@@ -591,78 +676,9 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
     return kExitIo;
   }
-  if (run.pager != nullptr) {
-    std::printf("%-16s %9.2f   (once, at the end, tile by tile: %zu vertices, %zu triangles)\n",
-                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles);
-    constexpr double kMiB = 1024.0 * 1024.0;
-    const daemon::TsdfPagerStats st = run.pager->stats();
-    std::printf(
-        "tsdf paging (limit %u MiB): peak resident %.1f MiB, now %.1f MiB in %zu tiles; tile "
-        "store %zu tiles, %.1f MiB (%s/tsdf_tiles); %llu evicted, %llu written, %llu loaded, "
-        "%llu scans over the limit, %llu write / %llu load errors; driven %.0f m\n",
-        params.tsdf.resident_limit_mb, static_cast<double>(st.peak_resident_bytes) / kMiB,
-        static_cast<double>(st.resident_bytes) / kMiB, st.resident_tiles, st.stored_tiles,
-        static_cast<double>(st.stored_bytes) / kMiB, opt.out.c_str(),
-        static_cast<unsigned long long>(st.evicted), static_cast<unsigned long long>(st.written),
-        static_cast<unsigned long long>(st.loaded), static_cast<unsigned long long>(st.over_limit),
-        static_cast<unsigned long long>(st.write_errors),
-        static_cast<unsigned long long>(st.load_errors), run.distance_m);
-    std::printf(
-        "static paging: %zu voxels in memory (table %.1f MiB); %zu tiles stored, %.2f MiB; %llu "
-        "evicted, %llu written, %llu loaded\n",
-        st.static_resident_voxels, static_cast<double>(st.static_resident_bytes) / kMiB,
-        st.static_tiles_stored, static_cast<double>(st.static_stored_bytes) / kMiB,
-        static_cast<unsigned long long>(st.static_evicted),
-        static_cast<unsigned long long>(st.static_written),
-        static_cast<unsigned long long>(st.static_loaded));
-  } else if (params.tsdf.enabled) {
-    std::printf("%-16s %9.2f   (once, at the end: %zu vertices, %zu triangles); save %.2f ms\n",
-                "tsdf mesh", tsdf_out.mesh_ms, tsdf_out.vertices, tsdf_out.triangles,
-                tsdf_out.save_ms);
-    std::printf(
-        "tsdf: %zu blocks, %zu voxels, %.1f MiB, %.1f voxel samples/point, %.1f voxel "
-        "updates/point\n",
-        mapper.tsdf().block_count(), mapper.tsdf().voxel_count(),
-        static_cast<double>(mapper.tsdf().memory_bytes()) / (1024.0 * 1024.0),
-        run.points_used > 0
-            ? static_cast<double>(run.tsdf_samples) / static_cast<double>(run.points_used)
-            : 0.0,
-        run.points_used > 0
-            ? static_cast<double>(run.tsdf_updates) / static_cast<double>(run.points_used)
-            : 0.0);
-  }
-  if (params.tsdf.enabled && !opt.prior.empty()) {
-    std::printf("changes vs %s: %llu voxels compared, %llu new, %llu removed (%.1f ms%s)\n",
-                opt.prior.c_str(),
-                static_cast<unsigned long long>(tsdf_out.changes.compared_voxels),
-                static_cast<unsigned long long>(tsdf_out.changes.new_voxels),
-                static_cast<unsigned long long>(tsdf_out.changes.removed_voxels),
-                tsdf_out.changes_ms, tsdf_out.paged ? ", tile by tile" : "");
-  }
+  if (params.tsdf.enabled) print_tsdf_summary(opt, params, mapper, run, tsdf_out);
 
-  if (params.tsdf.enabled) print_tsdf_footprint(mapper, run);
-
-  if (params.corrections.enabled) {
-    const core::CorrectionStats& cs = mapper.correction_stats();
-    double rebuild_total = 0.0;
-    for (const double ms : run.rebuild_ms) rebuild_total += ms;
-    std::printf(
-        "corrections: %llu applied (%llu from pose jumps, %llu from --corrections), %llu "
-        "ignored; %llu rebuilds completed, %llu scans re-integrated in %zu steps, %.1f ms in "
-        "total (max step %.1f ms; %zu steps after the last scan), %llu scans rolled out, %llu "
-        "TSDF blocks erased\n",
-        static_cast<unsigned long long>(cs.corrections),
-        static_cast<unsigned long long>(run.jump_corrections),
-        static_cast<unsigned long long>(run.next_correction),
-        static_cast<unsigned long long>(cs.corrections_empty),
-        static_cast<unsigned long long>(cs.rebuilds_completed),
-        static_cast<unsigned long long>(cs.scans_reintegrated), run.rebuild_ms.size(),
-        rebuild_total,
-        run.rebuild_ms.empty() ? 0.0
-                               : *std::max_element(run.rebuild_ms.begin(), run.rebuild_ms.end()),
-        run.rebuild_steps_after_end, static_cast<unsigned long long>(cs.scans_rolled_out),
-        static_cast<unsigned long long>(cs.tsdf_blocks_erased));
-  }
+  if (params.corrections.enabled) print_corrections(mapper, run);
 
   const auto bytes = [](const auto& vec) {
     return std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(vec.data()),
@@ -674,7 +690,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       tools::digest(bytes(mapper.costmap().costmap.cells())).c_str(),
       tools::digest(bytes(mapper.costmap().obstacle_distance.distance_m)).c_str(),
       tools::digest(bytes(window_out.esdf3d.distance_m)).c_str(),
-      static_cast<unsigned long long>(run.pager != nullptr ? run.pager->site_digest(mapper.tsdf())
+      static_cast<unsigned long long>(run.pager != nullptr ? run.pager->site(mapper.tsdf()).digest()
                                                            : mapper.tsdf().digest()));
   std::printf("digest: static %016llx\n",
               static_cast<unsigned long long>(core::static_voxels_digest(static_site)));
@@ -794,8 +810,8 @@ int main(int argc, char** argv) {
     // The site is the tile store: its products are made tile by tile.
     const std::filesystem::path prior_dir = opt.prior;
     if (auto w = map_tool::write_tsdf_site_outputs(
-            out, *pager, mapper.tsdf(), config::config_hash(in.cfg), run.last_stamp_ns,
-            opt.prior.empty() ? nullptr : &prior_dir, tsdf_out);
+            out, pager->site(mapper.tsdf()), mapper.tsdf(), config::config_hash(in.cfg),
+            run.last_stamp_ns, opt.prior.empty() ? nullptr : &prior_dir, tsdf_out);
         !w) {
       std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
       return kExitIo;

@@ -278,7 +278,7 @@ core::Status write_tsdf_outputs(const std::filesystem::path& out, const core::Ts
 }
 
 core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
-                                     const daemon::TsdfPager& pager, const core::TsdfLayer& layer,
+                                     const daemon::SiteStore& site, const core::TsdfLayer& layer,
                                      const std::string& config_hash, std::int64_t stamp_ns,
                                      const std::filesystem::path* prior_dir, TsdfOutputs& result) {
   result.paged = true;
@@ -286,8 +286,7 @@ core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
   tools::PlyPieces ply(out / "mesh.ply");
   core::Status meshed = core::Ok{};
   result.mesh_ms = timed_ms([&] {
-    meshed = pager.mesh_site(layer, 1.0f,
-                             [&ply](const core::TriangleMesh& piece) { return ply.add(piece); });
+    meshed = site.mesh(1.0f, [&ply](const core::TriangleMesh& piece) { return ply.add(piece); });
     if (meshed) meshed = ply.finish();
   });
   if (!meshed) return meshed;
@@ -306,8 +305,8 @@ core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
   std::size_t parts = 0;
   core::Status exported = core::Ok{};
   result.save_ms = timed_ms([&] {
-    exported = pager.export_site(
-        layer, kVdbRegionTiles, [&](const Eigen::Vector2i& r, const core::TsdfLayer& part) {
+    exported = site.export_parts(
+        kVdbRegionTiles, [&](const Eigen::Vector2i& r, const core::TsdfLayer& part) {
           ++parts;
           const std::string name =
               "tsdf_" + std::to_string(r.x()) + "_" + std::to_string(r.y()) + ".vdb";
@@ -339,8 +338,8 @@ core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
     core::ChangeCounts counts;
     core::Status detected = core::Ok{};
     result.changes_ms = timed_ms([&] {
-      detected = pager.changes_site(
-          layer, *prior_dir, core::ChangeParams{}, counts,
+      detected = site.changes(
+          *prior_dir, core::ChangeParams{}, counts,
           [&](const core::GridGeometry2D& g) {
             result.changes.geometry = g;
             if (auto s = npy.open(out / "changes.npy", g.height, g.width); !s) return s;

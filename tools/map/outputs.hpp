@@ -14,7 +14,7 @@
 #include "tarmac/core/task_runner.hpp"
 #include "tarmac/core/tsdf_changes.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
-#include "tarmac/daemon/tsdf_pager.hpp"
+#include "tarmac/daemon/site_store.hpp"
 
 namespace tarmac::map_tool {
 
@@ -53,10 +53,10 @@ inline constexpr int kVdbRegionTiles = 4;
 /// With tsdf.resident_limit_mb: tsdf_vdb/ (the site's .vdb in parts of kVdbRegionTiles² tile
 /// columns), mesh.ply tile by tile, tsdf.json and, with `prior_dir` (a tile
 /// store of an earlier run), changes.npy + changes.png strip by strip
-/// (daemon::TsdfPager::changes_site): the same files as write_tsdf_outputs gives for the maps
-/// held whole. result.changes gets the geometry and counts; its raster stays empty.
+/// (daemon::SiteStore::changes): the same files as write_tsdf_outputs gives for the maps held
+/// whole. result.changes gets the geometry and counts; its raster stays empty.
 core::Status write_tsdf_site_outputs(const std::filesystem::path& out,
-                                     const daemon::TsdfPager& pager, const core::TsdfLayer& layer,
+                                     const daemon::SiteStore& site, const core::TsdfLayer& layer,
                                      const std::string& config_hash, std::int64_t stamp_ns,
                                      const std::filesystem::path* prior_dir, TsdfOutputs& result);
 

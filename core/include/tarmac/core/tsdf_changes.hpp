@@ -60,7 +60,7 @@ struct ChangeCounts {
 /// `raster`: row-major, `width` columns, its cell (0, 0) the voxel column `origin` (x, y); the
 /// block's columns must lie in it. The same rules as detect_changes, which calls it per block:
 /// a map held in tiles is compared block by block into strips of the raster
-/// (daemon::TsdfPager::changes_site). `params` must be valid.
+/// (daemon::SiteStore::changes). `params` must be valid.
 void compare_blocks(const TsdfBlockView& prior, const TsdfBlockView& current,
                     const ChangeParams& params, double voxel_size_m, const Eigen::Vector2i& origin,
                     std::uint32_t width, std::span<float> raster, ChangeCounts& counts);

@@ -1,8 +1,9 @@
 #pragma once
 /// @file Tiles of the TSDF: the site cut on the voxel lattice into cubes of 128³ voxels (16³
 /// blocks, 12.8 m at 0.1 m; OpenVDB's first-level internal node), which can leave a TsdfLayer as
-/// a whole, be encoded to bytes (compact, checksummed) and come back bit for bit. Paging
-/// (daemon/tsdf_pager) decides which tiles stay resident; this file only moves and encodes them.
+/// a whole, be encoded to bytes (compact, checksummed) and come back bit for bit. Which tiles
+/// stay resident is tile_residency.hpp's to decide (the daemon's TsdfPager carries it out); this
+/// file only moves and encodes them.
 ///
 /// A tile that left the layer is *absent*: the layer remembers it, and the integrator never
 /// builds a block inside an absent tile (its samples there are refused and counted), so a tile

@@ -73,8 +73,10 @@ class Cycle {
   /// times, and update_costmap() fuses `peers`' cells (null: none) and keeps the own classes
   /// for Mapper::fleet_snapshot().
   void share_with_fleet(const core::BevPeers* peers);
-  /// Pages the TSDF through `pager` from now on (null: no paging): before each scan's TSDF
-  /// integration the pager brings back the tiles near it, after it evicts down to its limit.
+  /// Pages the TSDF and the static occupancy through `pager` from now on (null: no paging):
+  /// scan() makes one residency step (TsdfPager::step) before each of its stages and one after
+  /// the last, so that each stage finds the tiles it can touch and the map stays within the
+  /// pager's limit.
   void page_tsdf(TsdfPager* pager) { pager_ = pager; }
   /// What the last update_costmap() took from peers.
   [[nodiscard]] const core::BevFusionCounts& fleet_counts() const { return fleet_counts_; }
@@ -91,6 +93,14 @@ class Cycle {
   [[nodiscard]] const core::Mapper& mapper() const { return mapper_; }
 
  private:
+  void residency_step(ScanStage next, std::span<const Eigen::Vector3d> at_W,
+                      bool rebuild_completed = false);
+  void integrate_occupancy(ScanResult& r);
+  /// False when the tick's TSDF quota sheds the scan.
+  bool integrate_tsdf(ScanResult& r);
+  void rebuild_step(ScanResult& r);
+  void add_to_tick(const ScanResult& r);
+
   core::Mapper& mapper_;
   core::TaskRunner& runner_;
   Quotas quotas_;

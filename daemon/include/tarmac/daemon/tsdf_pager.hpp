@@ -1,20 +1,18 @@
 #pragma once
 /// @file Bounded resident memory for the site-wide TSDF (`tsdf.resident_limit_mb`): tiles
 /// (core/tsdf_tiles.hpp) far from the vehicle leave the layer and go to a tile store on disk,
-/// and come back as the vehicle nears them. Which tiles leave and which are asked back is decided
-/// between scans, from the vehicle's position and the map alone (deterministic); the disk work
-/// (encode and write, read and decode) runs on a background thread of its own, never in a scan.
+/// and come back as the vehicle nears them; the occupancy's static layer likewise, in column
+/// tiles. The pager carries out core::TsdfResidency's and core::StaticResidency's decisions
+/// (core/tile_residency.hpp: which tiles leave and which are asked back, from the vehicle's
+/// position and the map alone) between a scan's stages, hands the disk work (encode and write,
+/// read and decode) to a thread of its own (tile_io), and gives the whole site to the tools
+/// through a read-only SiteStore (site_store.hpp).
 ///
-/// Rules (docs/mapping.md, "Site-scale maps"):
-///  - a scan can touch tiles within `need_radius_m` of its sensor (x, y): tsdf.max_range_m plus
-///    the truncation; tiles on disk within `load_radius_m` (one tile further) are asked back;
-///  - over the limit, tiles are evicted farthest first, never one within load_radius_m nor one a
-///    scan of the last `keep_scans` touched; down to 90 % of the limit. A tile loaded and not
-///    changed since is dropped without a write;
+/// Beyond the policy (docs/mapping.md, "Site-scale maps"):
 ///  - a tile still loading is absent: the integrator refuses to build blocks there (counted), so
-///    nothing in memory ever shadows a stored tile. `wait_for_loads` (tarmac-map) makes each scan
-///    wait for the tiles it can touch instead: the map is then bit for bit the unlimited one;
-///    tarmacd never waits, and a load later than the vehicle counts in `loads_late`;
+///    nothing in memory ever shadows a stored tile. `wait_for_loads` (tarmac-map) makes each
+///    stage wait for the tiles it can touch instead: the map is then bit for bit the unlimited
+///    one; tarmacd never waits, and a load later than the vehicle counts in `loads_late`;
 ///  - a failed write puts the tile back in memory (counted; eviction stops: the disk is not to be
 ///    trusted); a tile that fails to load is renamed `.refused`, counted, and its ground is mapped
 ///    afresh.
@@ -33,10 +31,9 @@
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/occupancy_map.hpp"
 #include "tarmac/core/result.hpp"
-#include "tarmac/core/tsdf_changes.hpp"
+#include "tarmac/core/tile_residency.hpp"
 #include "tarmac/core/tsdf_integrator.hpp"
-#include "tarmac/core/tsdf_mesh.hpp"
-#include "tarmac/core/tsdf_tiles.hpp"
+#include "tarmac/daemon/site_store.hpp"
 
 namespace tarmac::daemon {
 
@@ -55,6 +52,28 @@ struct TsdfPagerParams {
   /// For a mapper: need and load radius from the TSDF's max range and truncation; keep_scans
   /// covers the scans retained for a pose-correction rebuild (it erases their blocks).
   static TsdfPagerParams for_mapper(const core::MapperParams& mapping, std::filesystem::path dir);
+  /// The policy's part.
+  [[nodiscard]] core::TileResidencyParams residency() const;
+  /// The tile store's part.
+  [[nodiscard]] SiteStoreParams store() const;
+};
+
+/// A stage of Cycle::scan, as the pager's residency step sees it.
+enum class ScanStage {
+  kOccupancy,  ///< occupancy integration: places the window at the vehicle base
+  kTsdf,       ///< TSDF integration of the scan
+  kRebuild,    ///< a pose-correction rebuild step: re-integrates retained scans
+  kEnd,        ///< none: the scan's stages are done
+};
+
+/// What TsdfPager::step needs to know of the stage about to run and of the map now.
+struct ResidencyStep {
+  ScanStage next = ScanStage::kEnd;
+  /// kOccupancy: the vehicle base; kTsdf: the sensor; kRebuild: the sensor of every retained
+  /// scan the step re-integrates (Mapper::rebuild_sensors). World frame.
+  std::span<const Eigen::Vector3d> at_W;
+  bool rebuilding = false;         ///< Mapper::rebuilding(): holds the TSDF's eviction
+  bool rebuild_completed = false;  ///< the rebuild step just run completed
 };
 
 struct TsdfPagerStats {
@@ -96,26 +115,17 @@ class TsdfPager {
   TsdfPager(const TsdfPager&) = delete;
   TsdfPager& operator=(const TsdfPager&) = delete;
 
-  /// Before a scan's TSDF integration: takes the tiles the worker has read back, asks back the
-  /// tiles on disk within the load radius, and (wait_for_loads) waits for those within the need
-  /// radius.
-  void before_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W);
-  /// The same for a pose-correction rebuild step: the tiles around every retained scan it will
-  /// re-integrate (Mapper::rebuild_sensors).
-  void before_rebuild(core::TsdfLayer& layer, std::span<const Eigen::Vector3d> sensors_W);
-  /// After it: the tiles it changed are marked, then eviction down to the limit, unless `hold`
-  /// (a pose-correction rebuild is running: it erases and rewrites the retained scans' blocks,
-  /// wherever their corrected poses put them).
-  void after_scan(core::TsdfLayer& layer, const Eigen::Vector3d& sensor_W, bool hold = false);
-  /// Before a scan's occupancy integration, which places the window at `base_W`: asks back the
-  /// static tiles within one tile of that window and (wait_for_loads) waits for those it covers.
-  void before_occupancy(core::TsdfLayer& layer, const Eigen::Vector3d& base_W);
-  /// After it: static tiles beyond two tiles of the window leave the map.
-  void after_occupancy();
-  /// The map's static layer was replaced (a pose-correction rebuild completed: the layer is the
-  /// one re-derived from the retained scans): the stored static tiles are of the old one, and
-  /// are removed.
-  void occupancy_replaced();
+  /// One residency step, before each stage of a scan and once after its last (kEnd). It first
+  /// settles what the stage before did: after the occupancy, the static tiles beyond two tiles
+  /// of the window leave the map; after the TSDF, the tiles it changed are marked and the layer
+  /// is evicted down to the limit, unless `rebuilding` (a pose-correction rebuild erases and
+  /// rewrites the retained scans' blocks, wherever their corrected poses put them); after a
+  /// rebuild step that completed, the stored static tiles, of the layer it replaced, are
+  /// removed. Then it takes the tiles the worker has read back and asks back what the next stage
+  /// can touch: the static tiles within one tile of the window it places (occupancy), the tiles
+  /// within the load radius of its sensors (TSDF, rebuild), and (wait_for_loads) waits for
+  /// those it covers, or counts them late.
+  void step(core::TsdfLayer& layer, const ResidencyStep& step);
   /// Waits until the worker has done every queued write and read (and takes the reads back).
   void flush(core::TsdfLayer& layer);
   /// Hands a copy of every resident tile changed since it was last stored to the worker (the
@@ -125,51 +135,20 @@ class TsdfPager {
   /// store_changed, then waits: the store alone is then the whole map (the save on exit).
   core::Status store_all(core::TsdfLayer& layer);
 
-  /// Every block of the site (resident tiles and stored ones, each read and dropped in turn), in
-  /// TsdfLayer::for_each_block's order; call flush() first. False when a stored tile cannot be
-  /// read (its blocks are then missing from the visit).
-  bool for_each_site_block(const core::TsdfLayer& layer,
-                           const std::function<void(const core::TsdfBlockView&)>& fn) const;
-  /// The site's mesh, tile by tile (core::extract_mesh of each tile, meshed with its 26
-  /// neighbours present, read back from the store when away, so at most 27 tiles are in memory
-  /// besides the layer): `piece` gets each tile's triangles, in site order; together they are the
-  /// whole map's. Stops at the first error `piece` returns, or a tile that cannot be read.
-  core::Status mesh_site(const core::TsdfLayer& layer, float min_weight,
-                         const std::function<core::Status(const core::TriangleMesh&)>& piece) const;
-  /// The site in parts for export: the tiles of each square of `region_tiles` × `region_tiles`
-  /// tile columns (every height), copied or read back into a layer of their own, handed to
-  /// `part` with the square's index (tile x, y floor-divided by region_tiles), squares by (y, x).
-  /// At most one part is in memory besides the layer. Together the parts hold every block of the
-  /// site once. Call flush() first.
-  core::Status export_site(
-      const core::TsdfLayer& layer, int region_tiles,
-      const std::function<core::Status(const Eigen::Vector2i& region, const core::TsdfLayer& part)>&
-          part) const;
-  /// The change layer against a prior site held as a tile store (`prior_dir`: another run's
-  /// tsdf_tiles, same voxel size and truncation), the same cells and counts core::detect_changes
-  /// gives for the two maps held whole, delivered in strips so that neither map nor the raster is
-  /// ever whole in memory: `begin` gets the raster's geometry (the union of both sites' blocks),
-  /// then `strip(y0, rows, cells)` each band of up to one tile (128 rows; raster rows y0 ..
-  /// y0 + rows - 1, row-major), from the top (north) down, every row once. Call flush() first.
-  core::Status changes_site(
-      const core::TsdfLayer& layer, const std::filesystem::path& prior_dir,
-      const core::ChangeParams& params, core::ChangeCounts& counts,
-      const std::function<core::Status(const core::GridGeometry2D&)>& begin,
-      const std::function<core::Status(int y0, int rows, std::span<const float> cells)>& strip)
-      const;
-  /// The site's static voxels (the map's and the stored tiles'), sorted by (z, y, x): what
-  /// OccupancyMap::export_static gives of the same layer held whole. Call flush() first. False
-  /// when a stored tile cannot be read.
-  bool static_site_voxels(std::vector<Eigen::Vector3i>& out) const;
-  /// The site's digest: equal to TsdfLayer::digest() of the same map held whole.
-  [[nodiscard]] std::uint64_t site_digest(const core::TsdfLayer& layer) const;
+  /// The whole site, read-only, for products and digests: the layer's tiles, the map's static
+  /// voxels and the stored tiles. Call flush() first; valid while the layer, the map and the
+  /// pager's store are left as they are.
+  [[nodiscard]] SiteStore site(const core::TsdfLayer& layer) const;
 
   [[nodiscard]] TsdfPagerStats stats() const;
   [[nodiscard]] const TsdfPagerParams& params() const { return params_; }
 
  private:
   struct Impl;
-  explicit TsdfPager(const TsdfPagerParams& params);
+  TsdfPager(const TsdfPagerParams& params, core::OccupancyMap* occupancy);
+  /// The tiles an earlier run left in the store: taken (absent from `layer`) with `resume`,
+  /// removed without.
+  core::Status take_stored_tiles(core::TsdfLayer& layer);
   TsdfPagerParams params_;
   std::unique_ptr<Impl> impl_;
 };
