@@ -10,9 +10,9 @@
 namespace tarmac::tools {
 namespace {
 
-constexpr double kRadiusM = 1.0;      ///< the neighbourhood of a cell
-constexpr double kMaxRiseM = 0.25;    ///< its highest return above the neighbourhood's lowest
-constexpr double kMaxTallM = 0.3;     ///< anything in the neighbourhood above its lowest
+constexpr double kRadiusM = 1.0;    ///< the neighbourhood of a cell
+constexpr double kMaxRiseM = 0.25;  ///< its highest return above the neighbourhood's lowest
+constexpr double kMaxTallM = 0.3;   ///< anything in the neighbourhood above its lowest
 constexpr std::uint32_t kMinReturns = 3;
 
 /// What render() draws per cell.
@@ -128,7 +128,7 @@ const OpenGroundCycle& OpenGroundTracker::observe(const core::Grid2D<std::int8_t
 }
 
 std::vector<std::uint8_t> OpenGroundTracker::render(std::uint32_t& width,
-                                                     std::uint32_t& height) const {
+                                                    std::uint32_t& height) const {
   static constexpr std::uint8_t kColour[7][3] = {{0, 0, 0},     {90, 90, 90},   {220, 30, 30},
                                                  {240, 140, 0}, {240, 220, 60}, {40, 170, 60},
                                                  {60, 90, 200}};

@@ -4,9 +4,10 @@
 /// flat ground when it holds at least 3 returns, its highest lies less than 0.25 m above the
 /// lowest return within 1 m of it, and nothing within 1 m rises 0.3 m or more above that lowest
 /// return (no wall, vehicle or overhang near it). Returns higher than the vehicle's envelope above
-/// that lowest return (a hall's ceiling, a canopy) do not count: the vehicle passes under them. A costmap that reads such a cell lethal or
-/// inscribed would stop a vehicle on open ground: on slopes, a ground model that does not follow
-/// the terrain does exactly that (docs/mapping.md, "Ground").
+/// that lowest return (a hall's ceiling, a canopy) do not count: the vehicle passes under them. A
+/// costmap that reads such a cell lethal or inscribed would stop a vehicle on open ground: on
+/// slopes, a ground model that does not follow the terrain does exactly that (docs/mapping.md,
+/// "Ground").
 
 #include <cstdint>
 #include <span>
@@ -47,8 +48,7 @@ class OpenGroundTracker {
   /// The last observed window as RGB, rows top (max y) to bottom, 3 bytes per cell: open flat
   /// ground by what the costmap read there (lethal red, inscribed orange, inflated yellow, free
   /// green, unknown blue), other cells with returns grey, cells without any black.
-  [[nodiscard]] std::vector<std::uint8_t> render(std::uint32_t& width,
-                                                 std::uint32_t& height) const;
+  [[nodiscard]] std::vector<std::uint8_t> render(std::uint32_t& width, std::uint32_t& height) const;
 
  private:
   struct Cell {
