@@ -248,7 +248,7 @@ void isolate_in_table(bool outliers, std::uint32_t needed, const CandidateRanges
     }
   };
   // The table is built on one thread (two tables side by side were no faster, the cells
-  // being scattered: docs/perf/archive/perf-occ7.md).
+  // being scattered).
   runner.parallel_for(1 + kFilterTasks, [&](std::size_t job) {
     if (job == 0) {
       if (outliers) build_table();
