@@ -367,6 +367,35 @@ TEST(Terrain, GradesBothWaysAreGround_ObjectOnTheGradeBlocks) {
   EXPECT_NEAR(ground_z(0.5, 0.5), 0.1, 1e-6);
 }
 
+TEST(Terrain, TheGroundSpreadsAcrossTheEmptyCellsBetweenFarRings) {
+  // A 15 % climb beyond x = 2 seen only in rings 3 m apart beyond x = 4 (far from a sensor the
+  // beams' rings leave empty ground cells between them): the spread crosses the gaps, and the
+  // rings on the climb are ground, not a row of walls.
+  OccupancyMap map(test::apron_window_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3f> points;
+  for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+    const float fx = x + 0.013f;
+    if (fx > 4.0f && std::fmod(fx, 3.0f) > 0.6f) continue;  // the gaps between rings
+    for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
+      points.emplace_back(fx, y + 0.017f, (fx > 2.0f ? 0.15f * (fx - 2.0f) : 0.0f) + 0.05f);
+    }
+  }
+  SerialRunner runner;
+  for (int i = 0; i < 3; ++i) map.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
+  CostmapParams cp;
+  cp.free_rule = FreeRule::kAnyVoxel;
+  CostmapLayers layers;
+  build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers, runner);
+  std::size_t lethal = 0;
+  for (std::uint32_t y = 0; y < layers.costmap.height(); ++y) {
+    for (std::uint32_t x = 0; x < layers.costmap.width(); ++x) {
+      lethal += layers.costmap.at(x, y) == kCostLethal ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(lethal, 0u);
+}
+
 TEST(Terrain, AStepAboveMaxGroundStepIsNoGround_ItsTopBlocks) {
   // A loading dock 1.2 m high (a solid block from x = 5 to 11), its top seen: the climb onto it
   // is a step of 1.2 m, more than max_ground_step_m (0.5), so its top is not ground and blocks.

@@ -266,15 +266,21 @@ void grow_ground(const CostmapPass& pass, const GroundPlane& plane) {
   auto& filtered = out.coarse_filtered;
   filtered.assign(coarse.size(), kNoGround);
   // The seeds: cells near the vehicle on the plane of its wheels (within ground_tolerance_m +
-  // max_ground_slope × distance).
-  // Then ground spreads from cell to neighbouring cell while their heights differ by at most
-  // max_ground_step_m: grades, ramps, crowns and levels reached by a slope are ground, however
-  // far they leave the vehicle's plane; a wing or a fuselage seen with nothing under it, a truck
-  // roof, a dock's top are not reached. A cell is ground when any chain of such steps joins it
-  // to a seed, so the result does not depend on the order cells are visited in.
+  // max_ground_slope × distance). Then ground spreads from cell to neighbouring cell while
+  // their heights differ by at most max_ground_step_m: grades, ramps, crowns and levels reached
+  // by a slope are ground, however far they leave the vehicle's plane; a wing or a fuselage seen
+  // with nothing under it, a truck roof, a dock's top are not reached. Far from the sensor the
+  // beams' rings leave empty cells between them: the spread crosses up to kMaxGapCells of them,
+  // carrying the height it had. Breadth first from the seeds in a fixed order: the same cells
+  // for the same map.
   constexpr double kSeedRadiusM = 4.0;
+  constexpr std::uint8_t kMaxGapCells = 4;
   const float tolerance = static_cast<float>(params.ground_tolerance_m / v);
   const float step = static_cast<float>(params.max_ground_step_m / v);
+  auto& reach = out.coarse_reach;  // the height each cell was reached at, NaN: not yet
+  auto& gap = out.coarse_gap;
+  reach.assign(coarse.size(), kNoGround);
+  gap.assign(coarse.size(), 0);
   auto& queue = out.level_cells;  // scratch here; fill_ground_gaps reuses it after
   queue.clear();
   queue.reserve(coarse.size());
@@ -283,14 +289,11 @@ void grow_ground(const CostmapPass& pass, const GroundPlane& plane) {
       for (int cx = 0; cx < gx; ++cx) {
         const std::size_t i = static_cast<std::size_t>(cy) * gx + cx;
         const Eigen::Vector2d center = plane.coarse_center(cx, cy);
-        if (std::isnan(coarse[i]) || !std::isnan(filtered[i]) ||
-            (center - plane.base_W.head<2>()).norm() > radius_m) {
-          continue;
-        }
         const double d = (center - plane.base_W.head<2>()).norm();
-        const auto reach = static_cast<float>(tolerance + params.max_ground_slope * d / v);
-        if (std::abs(coarse[i] - plane.layer(center.x(), center.y())) > reach) continue;
-        filtered[i] = coarse[i];
+        if (std::isnan(coarse[i]) || !std::isnan(reach[i]) || d > radius_m) continue;
+        const auto allowed = static_cast<float>(tolerance + params.max_ground_slope * d / v);
+        if (std::abs(coarse[i] - plane.layer(center.x(), center.y())) > allowed) continue;
+        filtered[i] = reach[i] = coarse[i];
         queue.push_back(static_cast<std::uint32_t>(i));
       }
     }
@@ -307,9 +310,16 @@ void grow_ground(const CostmapPass& pass, const GroundPlane& plane) {
         const int ux = cx + dx, uy = cy + dy;
         if ((dx == 0 && dy == 0) || ux < 0 || uy < 0 || ux >= gx || uy >= gy) continue;
         const std::size_t u = static_cast<std::size_t>(uy) * gx + ux;
-        if (std::isnan(coarse[u]) || !std::isnan(filtered[u])) continue;
-        if (std::abs(coarse[u] - coarse[i]) > step) continue;
-        filtered[u] = coarse[u];
+        if (!std::isnan(reach[u])) continue;
+        if (std::isnan(coarse[u])) {  // empty: crossed, carrying this cell's height
+          if (gap[i] >= kMaxGapCells) continue;
+          reach[u] = reach[i];
+          gap[u] = static_cast<std::uint8_t>(gap[i] + 1);
+          queue.push_back(static_cast<std::uint32_t>(u));
+          continue;
+        }
+        if (std::abs(coarse[u] - reach[i]) > step) continue;
+        filtered[u] = reach[u] = coarse[u];
         queue.push_back(static_cast<std::uint32_t>(u));
       }
     }

@@ -100,6 +100,10 @@ struct CostmapLayers {
   std::vector<std::int16_t> ground_layer;     ///< per cell, window layer of the ground voxel
   std::vector<float> coarse_ground, coarse_filtered, coarse_next;  ///< ground estimate scratch
   std::vector<float> ground_offsets;  ///< coarse cells' offsets from the vehicle's plane
+  /// The ground's spread: per coarse cell, the height it was reached at (NaN: not reached) and
+  /// the empty cells crossed to reach it.
+  std::vector<float> coarse_reach;
+  std::vector<std::uint8_t> coarse_gap;
   /// Coarse gap cells ordered by fill level (level_cells[level_first[l] .. level_first[l + 1]])
   /// and the counting sort's cursor per level.
   std::vector<std::size_t> level_first, level_next;
