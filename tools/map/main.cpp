@@ -65,8 +65,9 @@ struct Inputs {
   tools::KittiSequence seq;
   std::optional<core::LoadedTsdf> prior;           ///< --prior
   std::optional<tools::ClearingTracker> clearing;  ///< tarmac-sim's dynamic_boxes.txt
-  std::optional<tools::SafetyTracker> safety;      ///< tarmac-sim's obstacle_columns.txt
-  std::vector<tools::Correction> corrections;      ///< --corrections
+  /// tarmac-sim's obstacle_columns.txt (and ground_cells.txt)
+  std::optional<tools::SafetyTracker> safety;
+  std::vector<tools::Correction> corrections;  ///< --corrections
 };
 
 /// What the run measured and counted.
@@ -175,10 +176,10 @@ int load_inputs(const Options& opt, Inputs& in) {
     in.clearing.emplace(std::move(truth).value());
   }
 
-  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt): safety figures per cycle.
-  if (const auto truth_file = std::filesystem::path(opt.dataset) / "obstacle_columns.txt";
-      std::filesystem::exists(truth_file)) {
-    auto truth = tools::read_obstacle_truth(truth_file);
+  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt, and ground_cells.txt on
+  // terrain): safety figures per cycle.
+  if (std::filesystem::exists(std::filesystem::path(opt.dataset) / "obstacle_columns.txt")) {
+    auto truth = tools::read_dataset_truth(opt.dataset);
     if (!truth) {
       std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
       return kExitData;
@@ -332,8 +333,10 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
           if (b.scan == static_cast<int>(k)) moving_now.push_back(b);
         }
       }
+      // The vehicle's position: the base under the sensor (as tarmac-audit takes it), which on a
+      // slope is not where the pitched base frame puts its origin.
       in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
-                         T_W_B.translation().head<2>(), 20.0, moving_now);
+                         s.T_W_S[k].translation().head<2>(), 20.0, moving_now);
     }
     run.promotions += occ.promotions;
     run.demotions += occ.demotions;
