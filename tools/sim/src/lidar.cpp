@@ -74,10 +74,10 @@ std::string readme(const SequenceParams& p) {
     s += "made of exact primitives (scene.json: parked aircraft with a wing over the path, jet\n";
     s += "bridge, traffic cones, 10 cm debris, a tug crossing the path).\n\n";
   } else {
-    s +=
-        "A simulated spinning multi-beam LiDAR on a vehicle driving over airside terrain made of\n";
-    s += "exact primitives (scene.json: ramps, a crowned road or a lower level, with cones,\n";
-    s += "crates, curbs and walls), pitched and rolled with the ground under its wheels.\n\n";
+    s += "A simulated spinning multi-beam LiDAR on a vehicle driving over airside terrain\n";
+    s += "made of exact primitives (scene.json: ramps, a crowned road or a lower level, with\n";
+    s += "cones, crates, curbs and walls), pitched and rolled with the ground under its\n";
+    s += "wheels.\n\n";
   }
   s += "Files:\n";
   s += "  scans/NNNNNN.bin  float32 little-endian x, y, z, intensity per point, sensor frame S\n";
@@ -104,11 +104,9 @@ std::string readme(const SequenceParams& p) {
   if (!p.path.terrain.flat()) {
     s += "  ground_cells.txt  the ground the vehicle may drive on: cells (lattice ix iy) within\n";
     s += "                    " + number(p.ground_truth_margin_m) +
-         " m of the drive whose ground rises less than " + number(p.envelope_low_m) +
-         " m across the\n";
-    s += "                    cell, with the ground's height at the cell's centre (scene frame, "
-         "m);\n";
-    s += "                    the envelope of obstacle_columns.txt is taken above that ground\n";
+         " m of the drive whose ground rises less than " + number(p.envelope_low_m) + " m\n";
+    s += "                    across the cell, with the ground's height at its centre (scene\n";
+    s += "                    frame, m); obstacle_columns.txt's span is taken above it\n";
   }
   s += "\n";
   s += "Each scan is one revolution taken at its stamp (no motion distortion). Beams that hit\n";
@@ -130,8 +128,7 @@ std::string readme(const SequenceParams& p) {
          " m above the base\n";
   }
   if (!p.path.terrain.flat()) {
-    s += "  terrain           the vehicle drives on the ground of kind ground (scene.json), "
-         "wheelbase " +
+    s += "  terrain           wheels on the objects of kind ground, wheelbase " +
          number(p.path.wheelbase_m) + " m, track " + number(p.path.track_m) + " m\n";
   }
   s += "  beams             " + std::to_string(l.beams) + ", elevation " +
@@ -156,12 +153,11 @@ std::string readme(const SequenceParams& p) {
          "\n";
   }
   if (p.drift_z_m != 0.0) {
-    s +=
-        "  height drift      " + number(p.drift_z_m) +
-        " m along scene z, growing evenly over the drive; " +
-        (p.correct_at_scan > 0 ? "true poses from scan " + std::to_string(p.correct_at_scan) + " on"
-                               : std::string("never corrected")) +
-        "\n";
+    const std::string end =
+        p.correct_at_scan > 0 ? "true poses from scan " + std::to_string(p.correct_at_scan) + " on"
+                              : "never corrected";
+    s += "  height drift      " + number(p.drift_z_m) +
+         " m along scene z, growing evenly over the drive; " + end + "\n";
   }
   return s;
 }
