@@ -125,6 +125,7 @@ TEST(Safety, GroundReadLethalIsFalse_TheCurbAndWhatIsNextToItAreNot) {
   ObstacleTruth truth;
   for (std::int64_t ix = -10; ix < 10; ++ix) {
     truth.first_seen[ObstacleTruth::key(ix, -5)] = 0;  // a curb along y = -1 m: cells (*, 5)
+    truth.curb_first_seen[ObstacleTruth::key(ix, -5)] = ix < 0 ? 0 : 1;  // its right half later
   }
   truth.ground = ground_but_a_step();
   auto map = costmap_of(core::kCostFree);
@@ -141,6 +142,8 @@ TEST(Safety, GroundReadLethalIsFalse_TheCurbAndWhatIsNextToItAreNot) {
   // The curb is seen and lethal.
   EXPECT_EQ(c.visible, 20u);
   EXPECT_EQ(c.lethal_near, 20u);
+  EXPECT_EQ(c.curb_visible, 10u);
+  EXPECT_EQ(c.curb_lethal_near, 10u);
   // The ground figure reaches 30 m, the obstacle figures 20 m.
   const SafetyCycle far = score_costmap(map, truth, 0, {25.0, 0.0}, 20.0);
   EXPECT_EQ(far.lethal_cells, 0u);
@@ -148,6 +151,16 @@ TEST(Safety, GroundReadLethalIsFalse_TheCurbAndWhatIsNextToItAreNot) {
   EXPECT_EQ(far.ground_cells, c.ground_cells);
   EXPECT_EQ(far.ground_lethal, 1u);
   EXPECT_EQ(score_costmap(map, truth, 0, {35.0, 0.0}, 20.0).ground_cells, 0u);
+  // Driven over: the curb's cells and their neighbours free.
+  for (std::uint32_t cy = 4; cy <= 6; ++cy) {
+    for (std::uint32_t cx = 0; cx < 20; ++cx) map.at(cx, cy) = core::kCostFree;
+  }
+  map.at(19, 5) = core::kCostLethal;
+  const SafetyCycle missed = score_costmap(map, truth, 1, {0.0, 0.0}, 20.0);
+  EXPECT_EQ(missed.curb_visible, 20u);
+  EXPECT_EQ(missed.curb_lethal_near, 2u);  // (18, 5) and (19, 5)
+  EXPECT_EQ(missed.read_free, 18u);
+  EXPECT_DOUBLE_EQ(missed.share_curb_lethal(), 0.1);
 }
 
 TEST(Safety, GroundFigure_WithoutGroundTruthEveryCellIsGround_MovingBoxesLeftOut) {
@@ -190,11 +203,36 @@ TEST(Safety, TrackerReportsTheWorstGroundCycle_InTheLineAndTheJson) {
                       "782 ground cell-cycles)"),
             std::string::npos)
       << line;
+  EXPECT_EQ(line.find("curb"), std::string::npos) << "no curbs in this truth";
   const auto j = safety_json(tracker);
   EXPECT_EQ(j["ground_lethal"], 4u);
-  ASSERT_EQ(j["cycle_fields"].size(), 10u);
+  ASSERT_EQ(j["cycle_fields"].size(), 12u);
   EXPECT_EQ(j["cycle_fields"][8], "ground_cells");
   EXPECT_EQ(j["per_cycle"][1][9], 4u);
+}
+
+TEST(Safety, TrackerReportsTheCurbsWhenTheTruthHasThem) {
+  ObstacleTruth truth;
+  truth.first_seen[ObstacleTruth::key(0, 0)] = 0;
+  truth.curb_first_seen[ObstacleTruth::key(0, 0)] = 0;
+  SafetyTracker tracker(truth);
+  auto lethal = costmap_of(core::kCostFree);
+  lethal.at(10, 10) = core::kCostLethal;
+  tracker.observe(lethal, 0, {0.0, 0.0});
+  tracker.observe(costmap_of(core::kCostFree), 1, {0.0, 0.0});  // driven over
+  const SafetyReport r = tracker.report();
+  EXPECT_TRUE(r.curbs);
+  EXPECT_DOUBLE_EQ(r.worst_curb_share, 0.0);
+  EXPECT_EQ(r.worst_curb_scan, 1);
+  EXPECT_DOUBLE_EQ(r.mean_curb_share, 0.5);
+  const std::string line = safety_summary(r);
+  EXPECT_NE(line.find("; curb columns lethal within one cell worst 0.0 % (scan 1), mean 50.0 %"),
+            std::string::npos)
+      << line;
+  const auto j = safety_json(tracker);
+  EXPECT_EQ(j["per_cycle"][0][10], 1u);  // curb_visible
+  EXPECT_EQ(j["per_cycle"][0][11], 1u);  // curb_lethal_near
+  EXPECT_EQ(j["per_cycle"][1][11], 0u);
 }
 
 TEST(Safety, SimulatorTruthOfTheParkingLevels_CurbIsAColumn_TheDeckIsNot_GroundFollowsTheRamp) {
@@ -222,6 +260,13 @@ TEST(Safety, SimulatorTruthOfTheParkingLevels_CurbIsAColumn_TheDeckIsNot_GroundF
   };
   EXPECT_TRUE(column(40.1, -4.1)) << "the curb on the ramp, 15 cm above it";
   EXPECT_TRUE(column(100.1, -4.1)) << "the curb on the lower road";
+  const auto curb = [&](double x, double y) {
+    return truth.curb_first_seen.count(ObstacleTruth::key(cell(x), cell(y))) != 0;
+  };
+  EXPECT_TRUE(curb(40.1, -4.1));
+  EXPECT_TRUE(curb(100.1, -4.1));
+  EXPECT_FALSE(curb(60.1, -5.1)) << "the wall is no curb";
+  EXPECT_FALSE(curb(48.0, -3.2)) << "nor the cone beside it";
   EXPECT_FALSE(column(40.1, -3.7)) << "beside the curb";
   EXPECT_TRUE(column(48.0, -3.2)) << "a 30 cm cone 1.6 m below the apron, on the ramp";
   EXPECT_TRUE(column(60.1, -5.1)) << "the wall";

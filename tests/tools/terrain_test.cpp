@@ -293,6 +293,13 @@ TEST_P(DriftZ, ShiftsTheWrittenPosesOnly_ToMAtTheEnd) {
     EXPECT_TRUE(written[i].linear() == truth[i].linear()) << i;
   }
   EXPECT_NE(read_bytes(true_dir.path / "README.txt"), read_bytes(drifted_dir.path / "README.txt"));
+  // The ground truth of terrain, the curbs' of the scene with curbs; the flat scenes have none.
+  EXPECT_EQ(std::filesystem::exists(true_dir.path / "ground_cells.txt"),
+            !drive->path.terrain.flat());
+  EXPECT_EQ(read_bytes(true_dir.path / "ground_cells.txt"),
+            read_bytes(drifted_dir.path / "ground_cells.txt"));
+  EXPECT_EQ(std::filesystem::exists(true_dir.path / "curb_columns.txt"),
+            std::string(GetParam()) == "parking");
 }
 
 INSTANTIATE_TEST_SUITE_P(EveryKindOfScene, DriftZ,

@@ -65,7 +65,7 @@ struct Inputs {
   tools::KittiSequence seq;
   std::optional<core::LoadedTsdf> prior;           ///< --prior
   std::optional<tools::ClearingTracker> clearing;  ///< tarmac-sim's dynamic_boxes.txt
-  /// tarmac-sim's obstacle_columns.txt (and ground_cells.txt)
+  /// tarmac-sim's obstacle_columns.txt (ground_cells.txt, curb_columns.txt)
   std::optional<tools::SafetyTracker> safety;
   std::vector<tools::Correction> corrections;  ///< --corrections
 };
@@ -176,8 +176,8 @@ int load_inputs(const Options& opt, Inputs& in) {
     in.clearing.emplace(std::move(truth).value());
   }
 
-  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt, and ground_cells.txt on
-  // terrain): safety figures per cycle.
+  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt; on terrain ground_cells.txt
+  // and curb_columns.txt): safety figures per cycle.
   if (std::filesystem::exists(std::filesystem::path(opt.dataset) / "obstacle_columns.txt")) {
     auto truth = tools::read_dataset_truth(opt.dataset);
     if (!truth) {

@@ -54,11 +54,10 @@ core::Status read_truth_file(const std::filesystem::path& file, std::string_view
   return core::Ok{};
 }
 
-}  // namespace
-
-core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& file) {
+/// A file of columns ("# <kind> columns: cell_m V ...", then `ix iy first_seen_scan`).
+core::Result<ObstacleTruth> read_columns(const std::filesystem::path& file, std::string_view kind) {
   ObstacleTruth truth;
-  auto read = read_truth_file(file, "obstacle", truth.cell_m, [&](std::istringstream& s) {
+  auto read = read_truth_file(file, kind, truth.cell_m, [&](std::istringstream& s) {
     std::int64_t ix = 0, iy = 0;
     int first = 0;
     if (!(s >> ix >> iy >> first)) return false;
@@ -67,6 +66,12 @@ core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& fil
   });
   if (!read) return read.error();
   return truth;
+}
+
+}  // namespace
+
+core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& file) {
+  return read_columns(file, "obstacle");
 }
 
 core::Result<GroundTruth> read_ground_truth(const std::filesystem::path& file) {
@@ -95,6 +100,17 @@ core::Result<ObstacleTruth> read_dataset_truth(const std::filesystem::path& dir)
                                             std::to_string(truth.value().cell_m) + " m"};
     }
     truth.value().ground = std::move(ground).value();
+  }
+  if (const auto file = dir / "curb_columns.txt"; std::filesystem::exists(file)) {
+    auto curbs = read_columns(file, "curb");
+    if (!curbs) return curbs.error();
+    if (std::abs(curbs.value().cell_m - truth.value().cell_m) > 1e-9) {
+      return core::Error{"truth.cells", file.string() + ": cells of " +
+                                            std::to_string(curbs.value().cell_m) +
+                                            " m, the obstacle columns' " +
+                                            std::to_string(truth.value().cell_m) + " m"};
+    }
+    truth.value().curb_first_seen = std::move(curbs).value().first_seen;
   }
   return truth;
 }
@@ -171,8 +187,9 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
       const auto it = truth.first_seen.find(ObstacleTruth::key(ox + cx, oy + cy));
       if (it == truth.first_seen.end() || it->second < 0 || it->second > scan) continue;
       ++c.visible;
-      if (near(cx, cy,
-               [&](std::int64_t x, std::int64_t y) { return value(x, y) == core::kCostLethal; })) {
+      const bool lethal_near = near(
+          cx, cy, [&](std::int64_t x, std::int64_t y) { return value(x, y) == core::kCostLethal; });
+      if (lethal_near) {
         ++c.lethal_near;
       } else if (v == core::kCostFree) {
         ++c.read_free;
@@ -180,6 +197,11 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
         ++c.read_unknown;
       } else {
         ++c.read_inflated;
+      }
+      const auto curb = truth.curb_first_seen.find(ObstacleTruth::key(ox + cx, oy + cy));
+      if (curb != truth.curb_first_seen.end() && curb->second >= 0 && curb->second <= scan) {
+        ++c.curb_visible;
+        if (lethal_near) ++c.curb_lethal_near;
       }
     }
   }
@@ -196,9 +218,18 @@ const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan
 SafetyReport SafetyTracker::report() const {
   SafetyReport r;
   r.cycles = cycles_.size();
-  double sum = 0.0, open_sum = 0.0, ground_sum = 0.0;
-  std::size_t counted = 0, ground_counted = 0;
+  double sum = 0.0, open_sum = 0.0, ground_sum = 0.0, curb_sum = 0.0;
+  std::size_t counted = 0, ground_counted = 0, curb_counted = 0;
+  r.curbs = !truth_.curb_first_seen.empty();
   for (const SafetyCycle& c : cycles_) {
+    if (c.curb_visible > 0) {
+      ++curb_counted;
+      curb_sum += c.share_curb_lethal();
+      if (c.share_curb_lethal() < r.worst_curb_share) {
+        r.worst_curb_share = c.share_curb_lethal();
+        r.worst_curb_scan = c.scan;
+      }
+    }
     r.ground_cells += c.ground_cells;
     r.ground_lethal += c.ground_lethal;
     if (c.ground_cells > 0) {
@@ -231,6 +262,7 @@ SafetyReport SafetyTracker::report() const {
   if (counted > 0) r.mean_share = sum / static_cast<double>(counted);
   if (!cycles_.empty()) r.mean_open_known = open_sum / static_cast<double>(cycles_.size());
   if (ground_counted > 0) r.mean_ground_lethal = ground_sum / static_cast<double>(ground_counted);
+  if (curb_counted > 0) r.mean_curb_share = curb_sum / static_cast<double>(curb_counted);
   return r;
 }
 
@@ -248,7 +280,14 @@ std::string safety_summary(const SafetyReport& r) {
       kOpenRadiusM, 100.0 * r.worst_open_known, 100.0 * r.mean_open_known, kGroundRadiusM,
       100.0 * r.worst_ground_lethal, r.worst_ground_scan, 100.0 * r.mean_ground_lethal,
       r.ground_lethal, r.ground_cells);
-  return line;
+  std::string summary = line;
+  if (r.curbs) {
+    std::snprintf(line, sizeof line,
+                  "; curb columns lethal within one cell worst %.1f %% (scan %d), mean %.1f %%",
+                  100.0 * r.worst_curb_share, r.worst_curb_scan, 100.0 * r.mean_curb_share);
+    summary += line;
+  }
+  return summary;
 }
 
 nlohmann::ordered_json safety_json(const SafetyTracker& tracker) {
@@ -270,15 +309,19 @@ nlohmann::ordered_json safety_json(const SafetyTracker& tracker) {
                               {"ground_lethal", r.ground_lethal},
                               {"worst_ground_lethal", r.worst_ground_lethal},
                               {"worst_ground_scan", r.worst_ground_scan},
-                              {"mean_ground_lethal", r.mean_ground_lethal}};
-  j["cycle_fields"] = {"scan",          "visible",      "lethal_near",  "read_free",
-                       "read_inflated", "read_unknown", "lethal_cells", "false_lethal",
-                       "ground_cells",  "ground_lethal"};
+                              {"mean_ground_lethal", r.mean_ground_lethal},
+                              {"curbs", r.curbs},
+                              {"worst_curb_share", r.worst_curb_share},
+                              {"worst_curb_scan", r.worst_curb_scan},
+                              {"mean_curb_share", r.mean_curb_share}};
+  j["cycle_fields"] = {"scan",          "visible",       "lethal_near",  "read_free",
+                       "read_inflated", "read_unknown",  "lethal_cells", "false_lethal",
+                       "ground_cells",  "ground_lethal", "curb_visible", "curb_lethal_near"};
   nlohmann::ordered_json per_cycle = nlohmann::ordered_json::array();
   for (const SafetyCycle& c : tracker.cycles()) {
     per_cycle.push_back({c.scan, c.visible, c.lethal_near, c.read_free, c.read_inflated,
                          c.read_unknown, c.lethal_cells, c.false_lethal, c.ground_cells,
-                         c.ground_lethal});
+                         c.ground_lethal, c.curb_visible, c.curb_lethal_near});
   }
   j["per_cycle"] = std::move(per_cycle);
   return j;

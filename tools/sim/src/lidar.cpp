@@ -107,6 +107,8 @@ std::string readme(const SequenceParams& p) {
          " m of the drive whose ground rises less than " + number(p.envelope_low_m) + " m\n";
     s += "                    across the cell, with the ground's height at its centre (scene\n";
     s += "                    frame, m); obstacle_columns.txt's span is taken above it\n";
+    s += "  curb_columns.txt  when the scene has curbs: the obstacle columns of the curbs, with\n";
+    s += "                    the first scan that returned a point of a curb from their span\n";
   }
   s += "\n";
   s += "Each scan is one revolution taken at its stamp (no motion distortion). Beams that hit\n";
@@ -574,6 +576,8 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
   const double cell = params.truth_cell_m;
   const Terrain& terrain = params.path.terrain;
   std::map<std::pair<long, long>, int> columns;  // (ix, iy) -> first scan seen, -1 never
+  // The curbs' own, scored apart: a costmap that blocks cones may still drive over a curb.
+  std::map<std::pair<long, long>, int> curb_columns;
   for (const Object& o : scene.objects()) {
     if (o.dynamic() || o.kind == "ground") continue;
     const Aabb b = scene.bounds_at(o.id, 0.0);
@@ -600,6 +604,7 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
           }
         }
         if (hit) columns.emplace(std::make_pair(ix, iy), -1);
+        if (hit && o.kind == "curb") curb_columns.emplace(std::make_pair(ix, iy), -1);
       }
     }
   }
@@ -656,6 +661,10 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
                                       static_cast<long>(std::floor(p_W.y() / cell)));
       // A return on the object's surface lies in one of its columns (or on the edge of one).
       if (auto it = columns.find(key); it != columns.end() && it->second < 0) it->second = i;
+      if (o.kind != "curb") continue;
+      if (auto it = curb_columns.find(key); it != curb_columns.end() && it->second < 0) {
+        it->second = i;
+      }
     }
     poses += pose_line(params.written_T_O_S(i));
     times += number(t_s) + "\n";
@@ -686,15 +695,30 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       !write_file(out_dir / "dynamic_boxes.txt", boxes, result.error)) {
     return result;
   }
-  std::string truth = "# obstacle columns: cell_m " + number(cell) + " envelope_z_m " +
-                      number(params.envelope_low_m) + " " + number(params.envelope_high_m) +
-                      "\n# T_world_scene " + pose_line(T_O_W) +
-                      "# ix iy first_seen_scan (-1: no return from its envelope span)\n";
-  for (const auto& [key, first] : columns) {
-    truth += std::to_string(key.first) + ' ' + std::to_string(key.second) + ' ' +
-             std::to_string(first) + '\n';
+  const auto column_file = [&](const std::string& what,
+                               const std::map<std::pair<long, long>, int>& first_seen) {
+    std::string text = "# " + what + " columns: cell_m " + number(cell) + " envelope_z_m " +
+                       number(params.envelope_low_m) + " " + number(params.envelope_high_m) +
+                       "\n# T_world_scene " + pose_line(T_O_W) +
+                       "# ix iy first_seen_scan (-1: no return from its envelope span)\n";
+    for (const auto& [key, first] : first_seen) {
+      text += std::to_string(key.first) + ' ' + std::to_string(key.second) + ' ' +
+              std::to_string(first) + '\n';
+    }
+    return text;
+  };
+  if (!write_file(out_dir / "obstacle_columns.txt", column_file("obstacle", columns),
+                  result.error)) {
+    return result;
   }
-  if (!write_file(out_dir / "obstacle_columns.txt", truth, result.error)) return result;
+  if (!curb_columns.empty()) {
+    if (!write_file(out_dir / "curb_columns.txt", column_file("curb", curb_columns),
+                    result.error)) {
+      return result;
+    }
+  } else {
+    std::filesystem::remove(out_dir / "curb_columns.txt", ec);  // none stale from an earlier run
+  }
   if (!terrain.flat()) {
     std::string ground = ground_cells(params, T_O_W);
     if (!write_file(out_dir / "ground_cells.txt", ground, result.error)) return result;

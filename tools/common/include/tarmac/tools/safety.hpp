@@ -36,6 +36,9 @@ struct ObstacleTruth {
   /// Nothing: every cell is ground (the plane z = 0 of tarmac-sim's flat scenes, which write no
   /// ground_cells.txt).
   std::optional<GroundTruth> ground;
+  /// The curbs' columns among them (curb_columns.txt), first seen by a return from a curb;
+  /// empty: the scene has none.
+  std::unordered_map<std::int64_t, int> curb_first_seen;
 
   static std::int64_t key(std::int64_t ix, std::int64_t iy) {
     return (ix << 32) ^ (iy & 0xffffffff);
@@ -55,9 +58,9 @@ core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& fil
 /// Reads ground_cells.txt. Errors as read_obstacle_truth's.
 core::Result<GroundTruth> read_ground_truth(const std::filesystem::path& file);
 
-/// A tarmac-sim dataset's truth: DIR/obstacle_columns.txt and, when there is one,
-/// DIR/ground_cells.txt. Errors: read_obstacle_truth's, read_ground_truth's, "truth.cells" (the
-/// two lattices differ).
+/// A tarmac-sim dataset's truth: DIR/obstacle_columns.txt and, when they are there,
+/// DIR/ground_cells.txt and DIR/curb_columns.txt. Errors: read_obstacle_truth's,
+/// read_ground_truth's, "truth.cells" (the lattices differ).
 core::Result<ObstacleTruth> read_dataset_truth(const std::filesystem::path& dir);
 
 /// One cycle's figures, over the obstacle columns within `radius_m` of the vehicle.
@@ -90,6 +93,15 @@ struct SafetyCycle {
   /// ones reading lethal (the ground model taking ground for an obstacle).
   std::size_t ground_cells = 0;
   std::size_t ground_lethal = 0;
+  /// Of the visible columns, the curbs' (first seen by a return from a curb), and of those the
+  /// ones with a lethal cell within one cell.
+  std::size_t curb_visible = 0;
+  std::size_t curb_lethal_near = 0;
+  [[nodiscard]] double share_curb_lethal() const {
+    return curb_visible == 0
+               ? 1.0
+               : static_cast<double>(curb_lethal_near) / static_cast<double>(curb_visible);
+  }
   [[nodiscard]] double share_ground_lethal() const {
     return ground_cells == 0
                ? 0.0
@@ -110,6 +122,11 @@ struct SafetyReport {
   /// ground lethal) and the mean over the cycles with ground cells.
   double worst_ground_lethal = 0.0, mean_ground_lethal = 0.0;
   int worst_ground_scan = -1;
+  /// The truth has curbs; then SafetyCycle::share_curb_lethal over the cycles that saw one: the
+  /// worst (and its scan; −1: none below 100 %) and the mean.
+  bool curbs = false;
+  double worst_curb_share = 1.0, mean_curb_share = 1.0;
+  int worst_curb_scan = -1;
 };
 
 /// The radius of the open-ground figure (SafetyCycle::open_cells), m.

@@ -219,8 +219,9 @@ struct SequenceResult {
 /// envelope span taken above the ground under each point; on terrain also ground_cells.txt,
 /// the cells of the lattice within ground_truth_margin_m of the drive's bounding box whose
 /// ground rises less than envelope_low_m across the cell, each with the ground's height at its
-/// centre (`ix iy z_m`, mm precision). Errors: the path's terrain is not the scene's, or the
-/// drive leaves the terrain.
+/// centre (`ix iy z_m`, mm precision); with objects of kind "curb", curb_columns.txt, their
+/// columns as obstacle_columns.txt lists them, first seen by a return from a curb. Errors: the
+/// path's terrain is not the scene's, or the drive leaves the terrain.
 SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
                               const std::filesystem::path& out_dir);
 
