@@ -1,16 +1,21 @@
-// The costmap's safety figures: the scorer on hand-made costmaps, the stamped scorer's choice of
-// scan for a costmap that arrives stamped (tarmacd's over DDS), and the simulator's truth of
-// which columns a costmap must show lethal on the parked-aircraft scene.
+// The costmap's safety figures: the scorer on hand-made costmaps (obstacle columns and drivable
+// ground), the stamped scorer's choice of scan for a costmap that arrives stamped (tarmacd's over
+// DDS), and the simulator's truth of which columns a costmap must show lethal on the
+// parked-aircraft scene and of which cells are ground on the parking levels.
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 
 #include <gtest/gtest.h>
 #include <unistd.h>
+#include <nlohmann/json.hpp>
 
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
+#include "tarmac/sim/scene_catalog.hpp"
 #include "tarmac/tools/safety.hpp"
 #include "tarmac/tools/stamped_safety.hpp"
 
@@ -102,6 +107,176 @@ TEST(Safety, SimulatorTruthOfTheAircraftStand_BellyGearEnginesAreColumns_NotTheW
   EXPECT_FALSE(column(19.0, 0.0)) << "past the fuselage's end";
   EXPECT_FALSE(column(8.0, 1.9)) << "beside the fuselage";
   EXPECT_FALSE(column(25.0, 10.0)) << "open apron";
+  std::filesystem::remove_all(dir);
+}
+
+/// A ground truth of every cell of costmap_of()'s square but those of column ix = 5 (a step).
+GroundTruth ground_but_a_step() {
+  GroundTruth ground;
+  for (std::int64_t iy = -10; iy < 10; ++iy) {
+    for (std::int64_t ix = -10; ix < 10; ++ix) {
+      if (ix != 5) ground.z_m[ObstacleTruth::key(ix, iy)] = 0.1f * static_cast<float>(ix);
+    }
+  }
+  return ground;
+}
+
+TEST(Safety, GroundReadLethalIsFalse_TheCurbAndWhatIsNextToItAreNot) {
+  ObstacleTruth truth;
+  for (std::int64_t ix = -10; ix < 10; ++ix) {
+    truth.first_seen[ObstacleTruth::key(ix, -5)] = 0;  // a curb along y = -1 m: cells (*, 5)
+    truth.curb_first_seen[ObstacleTruth::key(ix, -5)] = ix < 0 ? 0 : 1;  // its right half later
+  }
+  truth.ground = ground_but_a_step();
+  auto map = costmap_of(core::kCostFree);
+  for (std::uint32_t cx = 0; cx < 20; ++cx) map.at(cx, 5) = core::kCostLethal;  // the curb
+  map.at(3, 6) = core::kCostLethal;    // next to the curb: within one cell of it
+  map.at(12, 15) = core::kCostLethal;  // open ground: false
+  map.at(2, 12) = 99;                  // inscribed is not lethal
+  map.at(15, 12) = core::kCostLethal;  // the step (ix = 5): not ground, not counted
+  const SafetyCycle c = score_costmap(map, truth, 0, {0.0, 0.0}, 20.0);
+  // 20 x 20 cells, less the step's column (20) and the curb's rows 4..6 on the 19 other columns.
+  EXPECT_EQ(c.ground_cells, 400u - 20u - 3u * 19u);
+  EXPECT_EQ(c.ground_lethal, 1u);
+  EXPECT_DOUBLE_EQ(c.share_ground_lethal(), 1.0 / 323.0);
+  // The curb is seen and lethal.
+  EXPECT_EQ(c.visible, 20u);
+  EXPECT_EQ(c.lethal_near, 20u);
+  EXPECT_EQ(c.curb_visible, 10u);
+  EXPECT_EQ(c.curb_lethal_near, 10u);
+  // The ground figure reaches 30 m, the obstacle figures 20 m.
+  const SafetyCycle far = score_costmap(map, truth, 0, {25.0, 0.0}, 20.0);
+  EXPECT_EQ(far.lethal_cells, 0u);
+  EXPECT_EQ(far.visible, 0u);
+  EXPECT_EQ(far.ground_cells, c.ground_cells);
+  EXPECT_EQ(far.ground_lethal, 1u);
+  EXPECT_EQ(score_costmap(map, truth, 0, {35.0, 0.0}, 20.0).ground_cells, 0u);
+  // Driven over: the curb's cells and their neighbours free.
+  for (std::uint32_t cy = 4; cy <= 6; ++cy) {
+    for (std::uint32_t cx = 0; cx < 20; ++cx) map.at(cx, cy) = core::kCostFree;
+  }
+  map.at(19, 5) = core::kCostLethal;
+  const SafetyCycle missed = score_costmap(map, truth, 1, {0.0, 0.0}, 20.0);
+  EXPECT_EQ(missed.curb_visible, 20u);
+  EXPECT_EQ(missed.curb_lethal_near, 2u);  // (18, 5) and (19, 5)
+  EXPECT_EQ(missed.read_free, 18u);
+  EXPECT_DOUBLE_EQ(missed.share_curb_lethal(), 0.1);
+}
+
+TEST(Safety, GroundFigure_WithoutGroundTruthEveryCellIsGround_MovingBoxesLeftOut) {
+  ObstacleTruth truth;
+  truth.first_seen[ObstacleTruth::key(0, 0)] = 0;  // cell (10, 10)
+  auto map = costmap_of(core::kCostFree);
+  map.at(2, 2) = core::kCostLethal;
+  map.at(17, 17) = core::kCostLethal;  // under the moving box
+  DynamicBox tug;
+  tug.min_W = Eigen::Vector3d(1.2, 1.2, 0.0);
+  tug.max_W = Eigen::Vector3d(1.8, 1.8, 1.5);
+  const DynamicBox moving[] = {tug};
+  const SafetyCycle c = score_costmap(map, truth, 0, {0.0, 0.0}, 20.0, moving);
+  // Every cell but the nine round the column and the 5 x 5 within a cell of the tug's box.
+  EXPECT_EQ(c.ground_cells, 400u - 9u - 25u);
+  EXPECT_EQ(c.ground_lethal, 1u);
+  EXPECT_EQ(c.false_lethal, 1u);
+  EXPECT_EQ(c.open_cells, 400u - 9u);
+}
+
+TEST(Safety, TrackerReportsTheWorstGroundCycle_InTheLineAndTheJson) {
+  ObstacleTruth truth;
+  truth.first_seen[ObstacleTruth::key(0, 0)] = 0;
+  SafetyTracker tracker(truth);
+  auto clean = costmap_of(core::kCostFree);
+  clean.at(10, 10) = core::kCostLethal;
+  auto bad = costmap_of(core::kCostFree);
+  bad.at(10, 10) = core::kCostLethal;
+  for (std::uint32_t cx = 0; cx < 4; ++cx) bad.at(cx, 0) = core::kCostLethal;
+  tracker.observe(clean, 0, {0.0, 0.0});
+  tracker.observe(bad, 1, {0.0, 0.0});
+  const SafetyReport r = tracker.report();
+  EXPECT_EQ(r.ground_cells, 2u * 391u);
+  EXPECT_EQ(r.ground_lethal, 4u);
+  EXPECT_EQ(r.worst_ground_scan, 1);
+  EXPECT_DOUBLE_EQ(r.worst_ground_lethal, 4.0 / 391.0);
+  EXPECT_DOUBLE_EQ(r.mean_ground_lethal, 2.0 / 391.0);
+  const std::string line = safety_summary(r);
+  EXPECT_NE(line.find("ground within 30 m read lethal worst 1.02 % (scan 1), mean 0.51 % (4 of "
+                      "782 ground cell-cycles)"),
+            std::string::npos)
+      << line;
+  EXPECT_EQ(line.find("curb"), std::string::npos) << "no curbs in this truth";
+  const auto j = safety_json(tracker);
+  EXPECT_EQ(j["ground_lethal"], 4u);
+  ASSERT_EQ(j["cycle_fields"].size(), 12u);
+  EXPECT_EQ(j["cycle_fields"][8], "ground_cells");
+  EXPECT_EQ(j["per_cycle"][1][9], 4u);
+}
+
+TEST(Safety, TrackerReportsTheCurbsWhenTheTruthHasThem) {
+  ObstacleTruth truth;
+  truth.first_seen[ObstacleTruth::key(0, 0)] = 0;
+  truth.curb_first_seen[ObstacleTruth::key(0, 0)] = 0;
+  SafetyTracker tracker(truth);
+  auto lethal = costmap_of(core::kCostFree);
+  lethal.at(10, 10) = core::kCostLethal;
+  tracker.observe(lethal, 0, {0.0, 0.0});
+  tracker.observe(costmap_of(core::kCostFree), 1, {0.0, 0.0});  // driven over
+  const SafetyReport r = tracker.report();
+  EXPECT_TRUE(r.curbs);
+  EXPECT_DOUBLE_EQ(r.worst_curb_share, 0.0);
+  EXPECT_EQ(r.worst_curb_scan, 1);
+  EXPECT_DOUBLE_EQ(r.mean_curb_share, 0.5);
+  const std::string line = safety_summary(r);
+  EXPECT_NE(line.find("; curb columns lethal within one cell worst 0.0 % (scan 1), mean 50.0 %"),
+            std::string::npos)
+      << line;
+  const auto j = safety_json(tracker);
+  EXPECT_EQ(j["per_cycle"][0][10], 1u);  // curb_visible
+  EXPECT_EQ(j["per_cycle"][0][11], 1u);  // curb_lethal_near
+  EXPECT_EQ(j["per_cycle"][1][11], 0u);
+}
+
+TEST(Safety, SimulatorTruthOfTheParkingLevels_CurbIsAColumn_TheDeckIsNot_GroundFollowsTheRamp) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("tarmac_safety_parking_" + std::to_string(::getpid()));
+  const auto drive = sim::scene_drive("parking", std::nullopt, 2.0);
+  ASSERT_TRUE(drive);
+  sim::SequenceParams p;
+  p.path = drive->path;
+  p.scans = 3;
+  p.rate_hz = 2.0 / p.path.duration_s();  // the start, the middle and the end of the drive
+  p.lidar.beams = 8;
+  p.lidar.azimuth_steps = 256;
+  const auto written = sim::write_sequence(drive->scene, p, dir);
+  ASSERT_TRUE(written.ok()) << written.error;
+  auto read = read_dataset_truth(dir);
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  const ObstacleTruth& truth = read.value();
+  ASSERT_TRUE(truth.ground);
+  const auto cell = [](double v) { return static_cast<std::int64_t>(std::floor(v / 0.2)); };
+  const auto column = [&](double x, double y) { return truth.is_column(cell(x), cell(y)); };
+  const auto ground_z = [&](double x, double y) -> double {
+    const auto it = truth.ground->z_m.find(ObstacleTruth::key(cell(x), cell(y)));
+    return it == truth.ground->z_m.end() ? std::nan("") : it->second;
+  };
+  EXPECT_TRUE(column(40.1, -4.1)) << "the curb on the ramp, 15 cm above it";
+  EXPECT_TRUE(column(100.1, -4.1)) << "the curb on the lower road";
+  const auto curb = [&](double x, double y) {
+    return truth.curb_first_seen.count(ObstacleTruth::key(cell(x), cell(y))) != 0;
+  };
+  EXPECT_TRUE(curb(40.1, -4.1));
+  EXPECT_TRUE(curb(100.1, -4.1));
+  EXPECT_FALSE(curb(60.1, -5.1)) << "the wall is no curb";
+  EXPECT_FALSE(curb(48.0, -3.2)) << "nor the cone beside it";
+  EXPECT_FALSE(column(40.1, -3.7)) << "beside the curb";
+  EXPECT_TRUE(column(48.0, -3.2)) << "a 30 cm cone 1.6 m below the apron, on the ramp";
+  EXPECT_TRUE(column(60.1, -5.1)) << "the wall";
+  EXPECT_FALSE(column(115.1, 0.1)) << "under the deck, 3.6 m up";
+  EXPECT_NEAR(ground_z(115.1, 0.1), -2.25, 1e-6) << "the road under the deck";
+  EXPECT_NEAR(ground_z(42.5, -1.0), -1.125, 1e-3) << "the ramp, 12.5 m down at 9 %";
+  EXPECT_NEAR(ground_z(40.1, -3.7), -0.9 - 0.09 * 0.1, 1e-3) << "the ramp beside the curb";
+  EXPECT_NEAR(ground_z(10.1, 30.1), 0.0, 1e-6) << "the apron";
+  EXPECT_TRUE(std::isnan(ground_z(60.1, 5.3))) << "the cut's edge: a step, no ground";
+  EXPECT_TRUE(std::isnan(ground_z(-100.0, 0.0))) << "farther from the drive than the margin";
   std::filesystem::remove_all(dir);
 }
 

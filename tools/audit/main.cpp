@@ -104,11 +104,12 @@ struct Scoring {
   std::string error;  ///< the first failure; scoring stops there
 };
 
-/// Reads DIR's poses.txt, obstacle_columns.txt and (when present) dynamic_boxes.txt.
+/// Reads DIR's poses.txt, obstacle_columns.txt and (when present) ground_cells.txt,
+/// curb_columns.txt and dynamic_boxes.txt.
 core::Result<Scoring> open_scoring(const std::string& dir, const Eigen::Isometry3d& T_B_S) {
   auto seq = tools::open_kitti(dir);
   if (!seq) return seq.error();
-  auto truth = tools::read_obstacle_truth(std::filesystem::path(dir) / "obstacle_columns.txt");
+  auto truth = tools::read_dataset_truth(dir);
   if (!truth) return truth.error();
   std::vector<tools::DynamicBox> moving;
   if (const auto file = std::filesystem::path(dir) / "dynamic_boxes.txt";
@@ -194,11 +195,11 @@ std::optional<int> parse_options(int argc, char** argv, Options& opt) {
       ->check(CLI::ExistingDirectory);
   app.add_option("--score", opt.score,
                  "score every costmap against the ground truth of DIR, a tarmac-sim dataset "
-                 "(obstacle_columns.txt, dynamic_boxes.txt, poses.txt) being replayed with "
-                 "tarmac-replay: each costmap as the map of the latest scan stamped at or before "
-                 "it, the scans' stamps read from the pose topic (start the replay after "
-                 "'matched', with --pose-readers 2); prints the 'safety (...)' line of "
-                 "tarmac-map, --json adds it under \"safety\"")
+                 "(obstacle_columns.txt, ground_cells.txt, curb_columns.txt, dynamic_boxes.txt, "
+                 "poses.txt) being replayed with tarmac-replay: each costmap as the map of the "
+                 "latest scan stamped at or before it, the scans' stamps read from the pose "
+                 "topic (start the replay after 'matched', with --pose-readers 2); prints the "
+                 "'safety (...)' line of tarmac-map, --json adds it under \"safety\"")
       ->check(CLI::ExistingDirectory);
   app.footer("Stops on SIGINT/SIGTERM too. Exit 0 when at least one report arrived.");
   return cli::parse(app, argc, argv);

@@ -67,7 +67,8 @@ struct Inputs {
   tools::KittiSequence seq;
   std::optional<core::LoadedTsdf> prior;           ///< --prior
   std::optional<tools::ClearingTracker> clearing;  ///< tarmac-sim's dynamic_boxes.txt
-  std::optional<tools::SafetyTracker> safety;      ///< tarmac-sim's obstacle_columns.txt
+  /// tarmac-sim's obstacle_columns.txt (ground_cells.txt, curb_columns.txt)
+  std::optional<tools::SafetyTracker> safety;
   /// Without a truth (real data), or --open-ground: the open flat ground of the drive's returns.
   std::optional<tools::OpenGroundTracker> open_ground;
   std::vector<tools::Correction> corrections;  ///< --corrections
@@ -179,10 +180,10 @@ int load_inputs(const Options& opt, Inputs& in) {
     in.clearing.emplace(std::move(truth).value());
   }
 
-  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt): safety figures per cycle.
-  if (const auto truth_file = std::filesystem::path(opt.dataset) / "obstacle_columns.txt";
-      std::filesystem::exists(truth_file)) {
-    auto truth = tools::read_obstacle_truth(truth_file);
+  // The costmap's ground truth (tarmac-sim's obstacle_columns.txt; on terrain ground_cells.txt
+  // and curb_columns.txt): safety figures per cycle.
+  if (std::filesystem::exists(std::filesystem::path(opt.dataset) / "obstacle_columns.txt")) {
+    auto truth = tools::read_dataset_truth(opt.dataset);
     if (!truth) {
       std::fprintf(stderr, "tarmac-map: %s\n", truth.error().message.c_str());
       return kExitData;
@@ -341,8 +342,10 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
           if (b.scan == static_cast<int>(k)) moving_now.push_back(b);
         }
       }
+      // The vehicle's position: the base under the sensor (as tarmac-audit takes it), which on a
+      // slope is not where the pitched base frame puts its origin.
       in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
-                         T_W_B.translation().head<2>(), 20.0, moving_now);
+                         s.T_W_S[k].translation().head<2>(), 20.0, moving_now);
     }
     if (in.open_ground) {
       in.open_ground->add(scan.points_W);

@@ -6,16 +6,24 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
 namespace tarmac::tools {
 
-core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& file) {
+namespace {
+
+/// Reads a truth file of tarmac-sim: '#' lines, among them "# <kind> ...: cell_m V ..." (the
+/// lattice's cell, read into cell_m) and "# T_world_scene" (which must be the identity: the
+/// cells are in the scene frame); every other line goes to `row` (false: a bad line).
+template <typename Row>
+core::Status read_truth_file(const std::filesystem::path& file, std::string_view kind,
+                             double& cell_m, Row&& row) {
   std::ifstream in(file);
   if (!in) return core::Error{"truth.open", file.string() + ": cannot be read"};
-  ObstacleTruth truth;
   std::string line;
   for (int n = 1; std::getline(in, line); ++n) {
     if (line.empty()) continue;
@@ -23,8 +31,8 @@ core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& fil
     if (line[0] == '#') {
       std::string word;
       s >> word >> word;
-      if (word == "obstacle") {  // "# obstacle columns: cell_m V envelope_z_m LO HI"
-        s >> word >> word >> truth.cell_m;
+      if (word == kind) {  // "# obstacle columns: cell_m V ...", "# ground cells: cell_m V ..."
+        s >> word >> word >> cell_m;
       } else if (word == "T_world_scene") {
         double m[12];
         for (double& v : m) s >> v;
@@ -38,14 +46,72 @@ core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& fil
       }
       continue;
     }
-    std::int64_t ix = 0, iy = 0;
-    int first = 0;
-    if (!(s >> ix >> iy >> first)) {
+    if (!row(s)) {
       return core::Error{"truth.parse", file.string() + ":" + std::to_string(n) + ": bad line"};
     }
-    truth.first_seen[ObstacleTruth::key(ix, iy)] = first;
   }
-  if (!(truth.cell_m > 0.0)) return core::Error{"truth.parse", file.string() + ": no cell_m"};
+  if (!(cell_m > 0.0)) return core::Error{"truth.parse", file.string() + ": no cell_m"};
+  return core::Ok{};
+}
+
+/// A file of columns ("# <kind> columns: cell_m V ...", then `ix iy first_seen_scan`).
+core::Result<ObstacleTruth> read_columns(const std::filesystem::path& file, std::string_view kind) {
+  ObstacleTruth truth;
+  auto read = read_truth_file(file, kind, truth.cell_m, [&](std::istringstream& s) {
+    std::int64_t ix = 0, iy = 0;
+    int first = 0;
+    if (!(s >> ix >> iy >> first)) return false;
+    truth.first_seen[ObstacleTruth::key(ix, iy)] = first;
+    return true;
+  });
+  if (!read) return read.error();
+  return truth;
+}
+
+}  // namespace
+
+core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& file) {
+  return read_columns(file, "obstacle");
+}
+
+core::Result<GroundTruth> read_ground_truth(const std::filesystem::path& file) {
+  GroundTruth truth;
+  auto read = read_truth_file(file, "ground", truth.cell_m, [&](std::istringstream& s) {
+    std::int64_t ix = 0, iy = 0;
+    float z_m = 0.0f;
+    if (!(s >> ix >> iy >> z_m)) return false;
+    truth.z_m[ObstacleTruth::key(ix, iy)] = z_m;
+    return true;
+  });
+  if (!read) return read.error();
+  return truth;
+}
+
+core::Result<ObstacleTruth> read_dataset_truth(const std::filesystem::path& dir) {
+  auto truth = read_obstacle_truth(dir / "obstacle_columns.txt");
+  if (!truth) return truth.error();
+  if (const auto file = dir / "ground_cells.txt"; std::filesystem::exists(file)) {
+    auto ground = read_ground_truth(file);
+    if (!ground) return ground.error();
+    if (std::abs(ground.value().cell_m - truth.value().cell_m) > 1e-9) {
+      return core::Error{"truth.cells", file.string() + ": cells of " +
+                                            std::to_string(ground.value().cell_m) +
+                                            " m, the obstacle columns' " +
+                                            std::to_string(truth.value().cell_m) + " m"};
+    }
+    truth.value().ground = std::move(ground).value();
+  }
+  if (const auto file = dir / "curb_columns.txt"; std::filesystem::exists(file)) {
+    auto curbs = read_columns(file, "curb");
+    if (!curbs) return curbs.error();
+    if (std::abs(curbs.value().cell_m - truth.value().cell_m) > 1e-9) {
+      return core::Error{"truth.cells", file.string() + ": cells of " +
+                                            std::to_string(curbs.value().cell_m) +
+                                            " m, the obstacle columns' " +
+                                            std::to_string(truth.value().cell_m) + " m"};
+    }
+    truth.value().curb_first_seen = std::move(curbs).value().first_seen;
+  }
   return truth;
 }
 
@@ -71,36 +137,59 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
     return false;
   };
   const double r2 = radius_m * radius_m;
+  const double outer = std::max(radius_m, kGroundRadiusM);
+  // Which cells within reach are obstacle columns, the map's cells plus a border of one: each
+  // cell's "column within one cell" then reads nine flags, not nine lookups in the truth.
+  const double reach = outer + 2.0 * truth.cell_m;
+  std::vector<std::uint8_t> column(static_cast<std::size_t>((w + 2) * (h + 2)), 0);
+  for (std::int64_t cy = -1; cy <= h; ++cy) {
+    for (std::int64_t cx = -1; cx <= w; ++cx) {
+      const Eigen::Vector2d centre((static_cast<double>(ox + cx) + 0.5) * truth.cell_m,
+                                   (static_cast<double>(oy + cy) + 0.5) * truth.cell_m);
+      if ((centre - vehicle_xy).squaredNorm() > reach * reach) continue;
+      column[static_cast<std::size_t>((cy + 1) * (w + 2) + cx + 1)] =
+          truth.is_column(ox + cx, oy + cy) ? 1 : 0;
+    }
+  }
+  const auto is_column = [&](std::int64_t x, std::int64_t y) {
+    return column[static_cast<std::size_t>((y + 1) * (w + 2) + x + 1)] != 0;
+  };
   for (std::int64_t cy = 0; cy < h; ++cy) {
     for (std::int64_t cx = 0; cx < w; ++cx) {
       const Eigen::Vector2d centre((static_cast<double>(ox + cx) + 0.5) * truth.cell_m,
                                    (static_cast<double>(oy + cy) + 0.5) * truth.cell_m);
-      if ((centre - vehicle_xy).squaredNorm() > r2) continue;
+      const double d2 = (centre - vehicle_xy).squaredNorm();
+      if (d2 > outer * outer) continue;
       const int v = value(cx, cy);
-      if (v == core::kCostLethal) {
-        ++c.lethal_cells;
-        const double margin = truth.cell_m;  // within one cell of a moving object: not false
-        const bool under_moving = std::any_of(moving.begin(), moving.end(), [&](const auto& b) {
+      const double margin = truth.cell_m;  // within one cell of a moving object
+      const auto under_moving = [&] {
+        return std::any_of(moving.begin(), moving.end(), [&](const auto& b) {
           return centre.x() >= b.min_W.x() - margin && centre.x() <= b.max_W.x() + margin &&
                  centre.y() >= b.min_W.y() - margin && centre.y() <= b.max_W.y() + margin;
         });
-        if (!under_moving && !near(cx, cy, [&](std::int64_t x, std::int64_t y) {
-              return truth.is_column(ox + x, oy + y);
-            })) {
-          ++c.false_lethal;
-        }
+      };
+      if (d2 <= kGroundRadiusM * kGroundRadiusM && truth.is_ground(ox + cx, oy + cy) &&
+          !near(cx, cy, is_column) && !under_moving()) {
+        ++c.ground_cells;
+        if (v == core::kCostLethal) ++c.ground_lethal;
       }
-      if ((centre - vehicle_xy).squaredNorm() <= kOpenRadiusM * kOpenRadiusM &&
-          !near(cx, cy,
-                [&](std::int64_t x, std::int64_t y) { return truth.is_column(ox + x, oy + y); })) {
+      if (d2 > r2) continue;
+      if (v == core::kCostLethal) {
+        ++c.lethal_cells;
+        // Within one cell of a moving object: not false (a ghost further off is).
+        if (!under_moving() && !near(cx, cy, is_column)) ++c.false_lethal;
+      }
+      if (d2 <= kOpenRadiusM * kOpenRadiusM && truth.is_ground(ox + cx, oy + cy) &&
+          !near(cx, cy, is_column)) {
         ++c.open_cells;
         if (v == core::kCostUnknown) ++c.open_unknown;
       }
       const auto it = truth.first_seen.find(ObstacleTruth::key(ox + cx, oy + cy));
       if (it == truth.first_seen.end() || it->second < 0 || it->second > scan) continue;
       ++c.visible;
-      if (near(cx, cy,
-               [&](std::int64_t x, std::int64_t y) { return value(x, y) == core::kCostLethal; })) {
+      const bool lethal_near = near(
+          cx, cy, [&](std::int64_t x, std::int64_t y) { return value(x, y) == core::kCostLethal; });
+      if (lethal_near) {
         ++c.lethal_near;
       } else if (v == core::kCostFree) {
         ++c.read_free;
@@ -108,6 +197,11 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
         ++c.read_unknown;
       } else {
         ++c.read_inflated;
+      }
+      const auto curb = truth.curb_first_seen.find(ObstacleTruth::key(ox + cx, oy + cy));
+      if (curb != truth.curb_first_seen.end() && curb->second >= 0 && curb->second <= scan) {
+        ++c.curb_visible;
+        if (lethal_near) ++c.curb_lethal_near;
       }
     }
   }
@@ -124,9 +218,28 @@ const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan
 SafetyReport SafetyTracker::report() const {
   SafetyReport r;
   r.cycles = cycles_.size();
-  double sum = 0.0, open_sum = 0.0;
-  std::size_t counted = 0;
+  double sum = 0.0, open_sum = 0.0, ground_sum = 0.0, curb_sum = 0.0;
+  std::size_t counted = 0, ground_counted = 0, curb_counted = 0;
+  r.curbs = !truth_.curb_first_seen.empty();
   for (const SafetyCycle& c : cycles_) {
+    if (c.curb_visible > 0) {
+      ++curb_counted;
+      curb_sum += c.share_curb_lethal();
+      if (c.share_curb_lethal() < r.worst_curb_share) {
+        r.worst_curb_share = c.share_curb_lethal();
+        r.worst_curb_scan = c.scan;
+      }
+    }
+    r.ground_cells += c.ground_cells;
+    r.ground_lethal += c.ground_lethal;
+    if (c.ground_cells > 0) {
+      ++ground_counted;
+      ground_sum += c.share_ground_lethal();
+      if (c.share_ground_lethal() > r.worst_ground_lethal) {
+        r.worst_ground_lethal = c.share_ground_lethal();
+        r.worst_ground_scan = c.scan;
+      }
+    }
     r.read_free += c.read_free;
     r.read_inflated += c.read_inflated;
     r.read_unknown += c.read_unknown;
@@ -148,21 +261,33 @@ SafetyReport SafetyTracker::report() const {
   }
   if (counted > 0) r.mean_share = sum / static_cast<double>(counted);
   if (!cycles_.empty()) r.mean_open_known = open_sum / static_cast<double>(cycles_.size());
+  if (ground_counted > 0) r.mean_ground_lethal = ground_sum / static_cast<double>(ground_counted);
+  if (curb_counted > 0) r.mean_curb_share = curb_sum / static_cast<double>(curb_counted);
   return r;
 }
 
 std::string safety_summary(const SafetyReport& r) {
-  char line[640];
+  char line[896];
   std::snprintf(
       line, sizeof line,
       "safety (obstacle columns within 20 m seen by then, %zu cycles): lethal within one cell "
       "worst %.1f %% (scan %d), mean %.1f %%; read free %zu, inflated only %zu, unknown %zu "
       "(column-cycles); false lethal %zu of %zu lethal cells (worst cycle %.2f %%); open ground "
-      "within %.0f m known (not unknown) worst %.1f %%, mean %.1f %%",
+      "within %.0f m known (not unknown) worst %.1f %%, mean %.1f %%; ground within %.0f m read "
+      "lethal worst %.2f %% (scan %d), mean %.2f %% (%zu of %zu ground cell-cycles)",
       r.cycles, 100.0 * r.worst_share, r.worst_scan, 100.0 * r.mean_share, r.read_free,
       r.read_inflated, r.read_unknown, r.false_lethal, r.lethal_cells, 100.0 * r.worst_false_share,
-      kOpenRadiusM, 100.0 * r.worst_open_known, 100.0 * r.mean_open_known);
-  return line;
+      kOpenRadiusM, 100.0 * r.worst_open_known, 100.0 * r.mean_open_known, kGroundRadiusM,
+      100.0 * r.worst_ground_lethal, r.worst_ground_scan, 100.0 * r.mean_ground_lethal,
+      r.ground_lethal, r.ground_cells);
+  std::string summary = line;
+  if (r.curbs) {
+    std::snprintf(line, sizeof line,
+                  "; curb columns lethal within one cell worst %.1f %% (scan %d), mean %.1f %%",
+                  100.0 * r.worst_curb_share, r.worst_curb_scan, 100.0 * r.mean_curb_share);
+    summary += line;
+  }
+  return summary;
 }
 
 nlohmann::ordered_json safety_json(const SafetyTracker& tracker) {
@@ -178,13 +303,25 @@ nlohmann::ordered_json safety_json(const SafetyTracker& tracker) {
                               {"false_lethal", r.false_lethal},
                               {"worst_false_share", r.worst_false_share},
                               {"worst_open_known", r.worst_open_known},
-                              {"mean_open_known", r.mean_open_known}};
-  j["cycle_fields"] = {"scan",          "visible",      "lethal_near",  "read_free",
-                       "read_inflated", "read_unknown", "lethal_cells", "false_lethal"};
+                              {"mean_open_known", r.mean_open_known},
+                              {"ground_radius_m", kGroundRadiusM},
+                              {"ground_cells", r.ground_cells},
+                              {"ground_lethal", r.ground_lethal},
+                              {"worst_ground_lethal", r.worst_ground_lethal},
+                              {"worst_ground_scan", r.worst_ground_scan},
+                              {"mean_ground_lethal", r.mean_ground_lethal},
+                              {"curbs", r.curbs},
+                              {"worst_curb_share", r.worst_curb_share},
+                              {"worst_curb_scan", r.worst_curb_scan},
+                              {"mean_curb_share", r.mean_curb_share}};
+  j["cycle_fields"] = {"scan",          "visible",       "lethal_near",  "read_free",
+                       "read_inflated", "read_unknown",  "lethal_cells", "false_lethal",
+                       "ground_cells",  "ground_lethal", "curb_visible", "curb_lethal_near"};
   nlohmann::ordered_json per_cycle = nlohmann::ordered_json::array();
   for (const SafetyCycle& c : tracker.cycles()) {
     per_cycle.push_back({c.scan, c.visible, c.lethal_near, c.read_free, c.read_inflated,
-                         c.read_unknown, c.lethal_cells, c.false_lethal});
+                         c.read_unknown, c.lethal_cells, c.false_lethal, c.ground_cells,
+                         c.ground_lethal, c.curb_visible, c.curb_lethal_near});
   }
   j["per_cycle"] = std::move(per_cycle);
   return j;

@@ -4,6 +4,7 @@
 #include <bit>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -68,9 +69,16 @@ std::string readme(const SequenceParams& p) {
   const LidarParams& l = p.lidar;
   std::string s;
   s += "tarmac-sim: a synthetic airside sequence in KITTI layout with analytic ground truth.\n\n";
-  s += "A simulated spinning multi-beam LiDAR on a vehicle driving through an airside apron\n";
-  s += "made of exact primitives (scene.json: parked aircraft with a wing over the path, jet\n";
-  s += "bridge, traffic cones, 10 cm debris, a tug crossing the path).\n\n";
+  if (p.path.terrain.flat()) {
+    s += "A simulated spinning multi-beam LiDAR on a vehicle driving through an airside apron\n";
+    s += "made of exact primitives (scene.json: parked aircraft with a wing over the path, jet\n";
+    s += "bridge, traffic cones, 10 cm debris, a tug crossing the path).\n\n";
+  } else {
+    s += "A simulated spinning multi-beam LiDAR on a vehicle driving over airside terrain\n";
+    s += "made of exact primitives (scene.json: ramps, a crowned road or a lower level, with\n";
+    s += "cones, crates, curbs and walls), pitched and rolled with the ground under its\n";
+    s += "wheels.\n\n";
+  }
   s += "Files:\n";
   s += "  scans/NNNNNN.bin  float32 little-endian x, y, z, intensity per point, sensor frame S\n";
   s += "  organised/NNNNNN.bin  the same sweep as a grid of beams (rows, lowest first) by azimuth\n"
@@ -81,14 +89,28 @@ std::string readme(const SequenceParams& p) {
   s += "  poses.txt         per scan, row-major 3x4 T_world_sensor (12 numbers)\n";
   s += "  times.txt         per scan, stamp in s (scan i at i / rate)\n";
   s += "  scene.json        the scene in the scene frame (x along the apron, y left, z up, m,\n";
-  s += "                    ground z = 0) and T_world_scene (rotation about x by the tilt)\n";
+  s += p.path.terrain.flat()
+           ? "                    ground z = 0) and T_world_scene (rotation about x by the tilt)\n"
+           : "                    ground: the objects of kind ground) and T_world_scene (rotation\n"
+             "                    about x by the tilt)\n";
   s += "  obstacle_columns.txt  the costmap's ground truth: cells (lattice ix iy) whose span\n";
   s += "                    " + number(p.envelope_low_m) + ".." + number(p.envelope_high_m) +
-       " m up meets a static object, with the first scan that returned a point from it\n";
+       (p.path.terrain.flat() ? " m up" : " m above the ground") +
+       " meets a static object, with the first scan that returned a point from it\n";
   s += "  dynamic_boxes.txt moving objects' ground truth: a '# T_world_scene' line (12 numbers,\n";
   s += "                    row-major 3x4), then per scan and moving object 'scan id min_x min_y\n";
   s += "                    min_z max_x max_y max_z': its axis-aligned box in the scene frame at\n";
-  s += "                    the scan's stamp, m\n\n";
+  s += "                    the scan's stamp, m\n";
+  if (!p.path.terrain.flat()) {
+    s += "  ground_cells.txt  the ground the vehicle may drive on: cells (lattice ix iy) within\n";
+    s += "                    " + number(p.ground_truth_margin_m) +
+         " m of the drive whose ground rises less than " + number(p.envelope_low_m) + " m\n";
+    s += "                    across the cell, with the ground's height at its centre (scene\n";
+    s += "                    frame, m); obstacle_columns.txt's span is taken above it\n";
+    s += "  curb_columns.txt  when the scene has curbs: the obstacle columns of the curbs, with\n";
+    s += "                    the first scan that returned a point of a curb from their span\n";
+  }
+  s += "\n";
   s += "Each scan is one revolution taken at its stamp (no motion distortion). Beams that hit\n";
   s += "nothing within the maximum range give no point.\n\n";
   s += "Parameters:\n";
@@ -106,6 +128,10 @@ std::string readme(const SequenceParams& p) {
          ") -> (" + number(p.path.end_W.x()) + ", " + number(p.path.end_W.y()) + ") m at " +
          number(p.path.speed_mps) + " m/s, sensor " + number(p.path.sensor_height_m) +
          " m above the base\n";
+  }
+  if (!p.path.terrain.flat()) {
+    s += "  terrain           wheels on the objects of kind ground, wheelbase " +
+         number(p.path.wheelbase_m) + " m, track " + number(p.path.track_m) + " m\n";
   }
   s += "  beams             " + std::to_string(l.beams) + ", elevation " +
        number(l.min_elevation_deg) + " .. " + number(l.max_elevation_deg) + " deg\n";
@@ -127,6 +153,13 @@ std::string readme(const SequenceParams& p) {
                                       " on (corrections.txt: the corrected trajectory)"
                                 : std::string("never corrected")) +
          "\n";
+  }
+  if (p.drift_z_m != 0.0) {
+    const std::string end =
+        p.correct_at_scan > 0 ? "true poses from scan " + std::to_string(p.correct_at_scan) + " on"
+                              : "never corrected";
+    s += "  height drift      " + number(p.drift_z_m) +
+         " m along scene z, growing evenly over the drive; " + end + "\n";
   }
   return s;
 }
@@ -299,6 +332,35 @@ std::vector<PathPiece> path_pieces(const std::vector<Eigen::Vector2d>& points, d
 
 }  // namespace
 
+namespace {
+
+/// The base at xy_W heading `heading` with its wheels on `terrain` (DrivePath): the contacts'
+/// mean height, x along the rear-to-front line, z normal to it and to the right-to-left line.
+Eigen::Isometry3d on_terrain(const Terrain& terrain, const Eigen::Vector2d& xy_W, double heading,
+                             double wheelbase_m, double track_m) {
+  const Eigen::Vector2d forward(std::cos(heading), std::sin(heading));
+  const Eigen::Vector2d left(-forward.y(), forward.x());
+  // Off the terrain a wheel is taken at z = 0: write_sequence refuses such a drive.
+  const auto z = [&](const Eigen::Vector2d& xy) { return terrain.height_m(xy).value_or(0.0); };
+  const double front = z(xy_W + 0.5 * wheelbase_m * forward);
+  const double rear = z(xy_W - 0.5 * wheelbase_m * forward);
+  const double left_z = z(xy_W + 0.5 * track_m * left);
+  const double right_z = z(xy_W - 0.5 * track_m * left);
+  const Eigen::Vector3d x_axis =
+      Eigen::Vector3d(wheelbase_m * forward.x(), wheelbase_m * forward.y(), front - rear)
+          .normalized();
+  const Eigen::Vector3d across(track_m * left.x(), track_m * left.y(), left_z - right_z);
+  const Eigen::Vector3d z_axis = x_axis.cross(across).normalized();
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear().col(0) = x_axis;
+  T.linear().col(1) = z_axis.cross(x_axis);
+  T.linear().col(2) = z_axis;
+  T.translation() = Eigen::Vector3d(xy_W.x(), xy_W.y(), 0.25 * (front + rear + left_z + right_z));
+  return T;
+}
+
+}  // namespace
+
 double DrivePath::length_m() const {
   if (waypoints_W.size() < 2) return (end_W - start_W).norm();
   double length = 0.0;
@@ -329,6 +391,7 @@ Eigen::Isometry3d DrivePath::T_W_base(double t_s) const {
     heading += k * s;
     p = centre + Eigen::Vector2d(std::sin(heading), -std::cos(heading)) / k;
   }
+  if (!terrain.flat()) return on_terrain(terrain, p, heading, wheelbase_m, track_m);
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = Eigen::AngleAxisd(heading, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   T.translation() = Eigen::Vector3d(p.x(), p.y(), 0.0);
@@ -353,9 +416,15 @@ Eigen::Isometry3d SequenceParams::true_T_O_S(int i) const {
 
 Eigen::Isometry3d SequenceParams::written_T_O_S(int i) const {
   const double t_s = stamp_s(i);
-  if (drift_m == 0.0 || (correct_at_scan > 0 && i >= correct_at_scan)) return true_T_O_S(i);
+  if ((drift_m == 0.0 && drift_z_m == 0.0) || (correct_at_scan > 0 && i >= correct_at_scan)) {
+    return true_T_O_S(i);
+  }
   Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
   D.translation().y() = drift_m * std::min(t_s / drift_ramp_s, 1.0);
+  if (drift_z_m != 0.0) {
+    const double last_s = stamp_s(scan_count() - 1);
+    D.translation().z() = last_s > 0.0 ? drift_z_m * t_s / last_s : 0.0;
+  }
   return T_O_W() * D * path.T_W_S(t_s);
 }
 
@@ -378,6 +447,16 @@ std::string SequenceParams::validate() const {
     return "tilt must be in [-180, 180] deg";
   }
   if (!std::isfinite(drift_m) || std::abs(drift_m) > 100.0) return "drift must be in [-100, 100] m";
+  if (!std::isfinite(drift_z_m) || std::abs(drift_z_m) > 100.0) {
+    return "height drift must be in [-100, 100] m";
+  }
+  if (!path.terrain.flat() && (!(path.wheelbase_m > 0.0) || !(path.track_m > 0.0) ||
+                               !std::isfinite(path.wheelbase_m) || !std::isfinite(path.track_m))) {
+    return "wheelbase and track must be > 0 m";
+  }
+  if (!(ground_truth_margin_m >= 0.0) || !std::isfinite(ground_truth_margin_m)) {
+    return "ground truth margin must be >= 0 m";
+  }
   if (!(drift_ramp_s > 0.0) || !std::isfinite(drift_ramp_s)) return "drift ramp must be > 0 s";
   if (correct_at_scan < 0) return "correct-at must be >= 0 (0: never)";
   if (scans > 1000000 || (scans == 0 && !(path.duration_s() * rate_hz < 1e6))) {
@@ -386,12 +465,75 @@ std::string SequenceParams::validate() const {
   return {};
 }
 
+namespace {
+
+/// ground_cells.txt (write_sequence): the cells within ground_truth_margin_m of the drive's
+/// bounding box whose ground is there and rises less than envelope_low_m across the cell (a
+/// rise the costmap must block is no ground), with the ground's height at their centres.
+std::string ground_cells(const SequenceParams& params, const Eigen::Isometry3d& T_O_W) {
+  const Terrain& terrain = params.path.terrain;
+  const double cell = params.truth_cell_m;
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector2d hi = -lo;
+  for (int i = 0; i < params.scan_count(); ++i) {
+    const Eigen::Vector2d xy = params.path.T_W_base(params.stamp_s(i)).translation().head<2>();
+    lo = lo.cwiseMin(xy);
+    hi = hi.cwiseMax(xy);
+  }
+  lo.array() -= params.ground_truth_margin_m;
+  hi.array() += params.ground_truth_margin_m;
+  std::string out = "# ground cells: cell_m " + number(cell) + " rise_below_m " +
+                    number(params.envelope_low_m) + "\n# T_world_scene " + pose_line(T_O_W) +
+                    "# ix iy ground_z_m (at the cell's centre)\n";
+  char line[80];
+  for (long iy = static_cast<long>(std::floor(lo.y() / cell));
+       iy <= static_cast<long>(std::floor(hi.y() / cell)); ++iy) {
+    for (long ix = static_cast<long>(std::floor(lo.x() / cell));
+         ix <= static_cast<long>(std::floor(hi.x() / cell)); ++ix) {
+      // The same 3 x 3 points of the cell's square as the obstacle columns.
+      double low = std::numeric_limits<double>::infinity(), high = -low;
+      bool covered = true;
+      for (int sx = 0; sx < 3 && covered; ++sx) {
+        for (int sy = 0; sy < 3 && covered; ++sy) {
+          const std::optional<double> z =
+              terrain.height_m({(static_cast<double>(ix) + 0.1 + 0.4 * sx) * cell,
+                                (static_cast<double>(iy) + 0.1 + 0.4 * sy) * cell});
+          covered = z.has_value();
+          if (covered) {
+            low = std::min(low, *z);
+            high = std::max(high, *z);
+          }
+        }
+      }
+      if (!covered || high - low >= params.envelope_low_m) continue;
+      const double centre_z = *terrain.height_m(
+          {(static_cast<double>(ix) + 0.5) * cell, (static_cast<double>(iy) + 0.5) * cell});
+      std::snprintf(line, sizeof line, "%ld %ld %.3f\n", ix, iy, centre_z);
+      out += line;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
                               const std::filesystem::path& out_dir) {
   SequenceResult result;
   if (std::string e = params.validate(); !e.empty()) {
     result.error = e;
     return result;
+  }
+  if (params.path.terrain != scene.terrain()) {
+    result.error = "the drive path's terrain is not the scene's (path.terrain = scene.terrain())";
+    return result;
+  }
+  for (int i = 0; i < params.scan_count() && !params.path.terrain.flat(); ++i) {
+    const Eigen::Vector2d xy = params.path.T_W_base(params.stamp_s(i)).translation().head<2>();
+    if (!params.path.terrain.height_m(xy)) {
+      result.error = "the drive leaves the terrain at scan " + std::to_string(i);
+      return result;
+    }
   }
   const std::filesystem::path scans_dir = out_dir / "scans";
   const std::filesystem::path organised_dir = out_dir / "organised";
@@ -432,27 +574,37 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
   // Ground truth for the costmap: every column (truth_cell_m on the lattice) whose envelope span
   // meets a static object, with the first scan that returned a point from that span.
   const double cell = params.truth_cell_m;
+  const Terrain& terrain = params.path.terrain;
   std::map<std::pair<long, long>, int> columns;  // (ix, iy) -> first scan seen, -1 never
+  // The curbs' own, scored apart: a costmap that blocks cones may still drive over a curb.
+  std::map<std::pair<long, long>, int> curb_columns;
   for (const Object& o : scene.objects()) {
     if (o.dynamic() || o.kind == "ground") continue;
     const Aabb b = scene.bounds_at(o.id, 0.0);
-    if (b.max_W.z() < params.envelope_low_m || b.min_W.z() > params.envelope_high_m) continue;
+    // On flat ground the envelope is one z range; on terrain it follows the ground.
+    if (terrain.flat() &&
+        (b.max_W.z() < params.envelope_low_m || b.min_W.z() > params.envelope_high_m)) {
+      continue;
+    }
     for (long ix = static_cast<long>(std::floor(b.min_W.x() / cell));
          ix <= static_cast<long>(std::floor(b.max_W.x() / cell)); ++ix) {
       for (long iy = static_cast<long>(std::floor(b.min_W.y() / cell));
            iy <= static_cast<long>(std::floor(b.max_W.y() / cell)); ++iy) {
-        // 3 x 3 points of the cell's square, every 2 cm up the envelope.
+        // 3 x 3 points of the cell's square, every 2 cm up the envelope above their ground.
         bool hit = false;
         for (int sx = 0; sx < 3 && !hit; ++sx) {
           for (int sy = 0; sy < 3 && !hit; ++sy) {
             const double x = (static_cast<double>(ix) + 0.1 + 0.4 * sx) * cell;
             const double y = (static_cast<double>(iy) + 0.1 + 0.4 * sy) * cell;
+            const std::optional<double> ground_z = terrain.height_m({x, y});
+            if (!ground_z) continue;
             for (double z = params.envelope_low_m; z <= params.envelope_high_m && !hit; z += 0.02) {
-              hit = contains(o.shape_W, Eigen::Vector3d(x, y, z));
+              hit = contains(o.shape_W, Eigen::Vector3d(x, y, *ground_z + z));
             }
           }
         }
         if (hit) columns.emplace(std::make_pair(ix, iy), -1);
+        if (hit && o.kind == "curb") curb_columns.emplace(std::make_pair(ix, iy), -1);
       }
     }
   }
@@ -499,11 +651,20 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       const Object& o = scene.objects()[static_cast<std::size_t>(r.object_id)];
       if (o.dynamic() || o.kind == "ground") continue;
       const Eigen::Vector3d p_W = T_W_S * (r.point_S * (r.true_range_m / r.range_m));
-      if (p_W.z() < params.envelope_low_m || p_W.z() > params.envelope_high_m) continue;
+      const std::optional<double> ground_z = terrain.height_m(p_W.head<2>());
+      if (!ground_z) continue;
+      const double above_ground_m = p_W.z() - *ground_z;
+      if (above_ground_m < params.envelope_low_m || above_ground_m > params.envelope_high_m) {
+        continue;
+      }
       const auto key = std::make_pair(static_cast<long>(std::floor(p_W.x() / cell)),
                                       static_cast<long>(std::floor(p_W.y() / cell)));
       // A return on the object's surface lies in one of its columns (or on the edge of one).
       if (auto it = columns.find(key); it != columns.end() && it->second < 0) it->second = i;
+      if (o.kind != "curb") continue;
+      if (auto it = curb_columns.find(key); it != curb_columns.end() && it->second < 0) {
+        it->second = i;
+      }
     }
     poses += pose_line(params.written_T_O_S(i));
     times += number(t_s) + "\n";
@@ -518,7 +679,8 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
     }
     points_per_scan.push_back(returns.size());
   }
-  if (params.drift_m != 0.0 && params.correct_at_scan > 0 && params.correct_at_scan <= n) {
+  if ((params.drift_m != 0.0 || params.drift_z_m != 0.0) && params.correct_at_scan > 0 &&
+      params.correct_at_scan <= n) {
     std::string corrections;
     const std::string after = std::to_string(params.correct_at_scan - 1) + " ";
     for (int i = 0; i < params.correct_at_scan; ++i) {
@@ -533,15 +695,36 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       !write_file(out_dir / "dynamic_boxes.txt", boxes, result.error)) {
     return result;
   }
-  std::string truth = "# obstacle columns: cell_m " + number(cell) + " envelope_z_m " +
-                      number(params.envelope_low_m) + " " + number(params.envelope_high_m) +
-                      "\n# T_world_scene " + pose_line(T_O_W) +
-                      "# ix iy first_seen_scan (-1: no return from its envelope span)\n";
-  for (const auto& [key, first] : columns) {
-    truth += std::to_string(key.first) + ' ' + std::to_string(key.second) + ' ' +
-             std::to_string(first) + '\n';
+  const auto column_file = [&](const std::string& what,
+                               const std::map<std::pair<long, long>, int>& first_seen) {
+    std::string text = "# " + what + " columns: cell_m " + number(cell) + " envelope_z_m " +
+                       number(params.envelope_low_m) + " " + number(params.envelope_high_m) +
+                       "\n# T_world_scene " + pose_line(T_O_W) +
+                       "# ix iy first_seen_scan (-1: no return from its envelope span)\n";
+    for (const auto& [key, first] : first_seen) {
+      text += std::to_string(key.first) + ' ' + std::to_string(key.second) + ' ' +
+              std::to_string(first) + '\n';
+    }
+    return text;
+  };
+  if (!write_file(out_dir / "obstacle_columns.txt", column_file("obstacle", columns),
+                  result.error)) {
+    return result;
   }
-  if (!write_file(out_dir / "obstacle_columns.txt", truth, result.error)) return result;
+  if (!curb_columns.empty()) {
+    if (!write_file(out_dir / "curb_columns.txt", column_file("curb", curb_columns),
+                    result.error)) {
+      return result;
+    }
+  } else {
+    std::filesystem::remove(out_dir / "curb_columns.txt", ec);  // none stale from an earlier run
+  }
+  if (!terrain.flat()) {
+    std::string ground = ground_cells(params, T_O_W);
+    if (!write_file(out_dir / "ground_cells.txt", ground, result.error)) return result;
+  } else {
+    std::filesystem::remove(out_dir / "ground_cells.txt", ec);  // none stale from an earlier run
+  }
 
   std::sort(points_per_scan.begin(), points_per_scan.end());
   result.summary.scans = n;

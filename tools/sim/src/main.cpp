@@ -2,11 +2,13 @@
 // simulated spinning LiDAR driving through an analytic scene, with the scene as ground truth.
 
 #include <cstdio>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "tarmac/config/cli.hpp"
 #include "tarmac/sim/lidar.hpp"
-#include "tarmac/sim/scene.hpp"
+#include "tarmac/sim/scene_catalog.hpp"
 
 namespace {
 
@@ -21,9 +23,10 @@ int main(int argc, char** argv) {
   std::string out_dir;
   std::string scene_name = "airside";
   cli::App app("tarmac-sim",
-               "Drives a vehicle along y = 0 from x = 0 to x = 60 m through a synthetic airside "
-               "apron and writes DIR/scans/NNNNNN.bin (sensor frame), poses.txt "
-               "(T_world_sensor), times.txt, scene.json (ground truth) and README.txt. Same "
+               "Drives a vehicle through a synthetic airside scene (by default along y = 0 from "
+               "x = 0 to x = 60 m over a flat apron) and writes DIR/scans/NNNNNN.bin (sensor "
+               "frame), poses.txt (T_world_sensor), times.txt, scene.json, the costmap's ground "
+               "truth (obstacle_columns.txt; on terrain, ground_cells.txt) and README.txt. Same "
                "arguments, same bytes.");
   app.add_option("--out", out_dir, "output directory (created; stale scans/NNNNNN.bin are removed)")
       ->type_name("DIR")
@@ -57,46 +60,46 @@ int main(int argc, char** argv) {
                  "airside, terminal (long walls beside the path) or aircraft (a loop round a "
                  "parked aircraft whose belly is in the vehicle envelope, turns of 20 m radius, "
                  "default speed 10 m/s) or site (a 2.2 km service road round an apron: "
-                 "buildings, parked aircraft, poles; 10 m/s)")
-      ->check(CLI::IsMember({"airside", "terminal", "aircraft", "site"}));
+                 "buildings, parked aircraft, poles; 10 m/s); on terrain, the vehicle pitched "
+                 "and rolled with the ground under its wheels: ramp5 and ramp10 (an apron, a "
+                 "ramp climbing 5 % over 30 m or 10 % over 25 m, the upper level; cones and "
+                 "crates on all three; 90 m), crown (the right lane of a road with a 2 % cross "
+                 "fall each side of its crown, shoulders beyond; 90 m) or parking (a ramp down "
+                 "9 % in a walled cut to a road and bays 2.25 m below, a 15 cm curb along the "
+                 "right, the road's end under a deck with 3.6 m of headroom; 120 m)")
+      ->check(CLI::IsMember(
+          std::vector<std::string>(sim::kSceneNames.begin(), sim::kSceneNames.end())));
   auto* drift = app.add_option("--drift-m", params.drift_m,
                                "pose drift: written poses shifted along scene y, growing to M")
                     ->transform(cli::in_range(-100.0, 100.0));
+  auto* drift_z =
+      app.add_option("--drift-z-m", params.drift_z_m,
+                     "height drift: written poses raised along scene z, evenly over the drive, "
+                     "by M at its end (the truth stays exact)")
+          ->transform(cli::in_range(-100.0, 100.0));
   app.add_option("--drift-ramp-s", params.drift_ramp_s, "time the drift takes to reach M, s")
       ->transform(cli::positive<double>())
       ->needs(drift);
-  app.add_option("--correct-at", params.correct_at_scan,
-                 "true poses again from scan K on; writes corrections.txt (the corrected "
-                 "trajectory of scans 0..K-1, for tarmac-map --corrections)")
-      ->transform(cli::non_negative<int>())
-      ->needs(drift);
+  auto* correct_at =
+      app.add_option("--correct-at", params.correct_at_scan,
+                     "true poses again from scan K on (needs --drift-m or --drift-z-m); writes "
+                     "corrections.txt (the corrected trajectory of scans 0..K-1, for tarmac-map "
+                     "--corrections)")
+          ->transform(cli::non_negative<int>());
   if (auto exit = cli::parse(app, argc, argv)) return *exit;
   if (out_dir.empty()) return cli::usage_error(app, "--out: the directory name is empty");
-  const bool speed_given = speed->count() > 0;
-  if (scene_name == "aircraft") {
-    const double sensor_height_m = params.path.sensor_height_m;
-    // Turns of 20 m radius: at 10 m/s the heading changes 2.9 deg per scan at 10 Hz, as a
-    // vehicle can drive it (an instant 90 deg turn is a pose jump, and tarmac treats it so).
-    params.path = sim::DrivePath::loop({-30.0, -22.0}, {30.0, 22.0},
-                                       speed_given ? params.path.speed_mps : 10.0, 20.0);
-    params.path.sensor_height_m = sensor_height_m;
+  if (correct_at->count() > 0 && drift->count() == 0 && drift_z->count() == 0) {
+    return cli::usage_error(app, "--correct-at requires --drift-m or --drift-z-m");
   }
-  if (scene_name == "site") {
-    const double sensor_height_m = params.path.sensor_height_m;
-    // The service road round the apron, 2.2 km, at 10 m/s by default, turns of 20 m radius.
-    params.path = sim::DrivePath::loop(sim::Scene::site_route_min(), sim::Scene::site_route_max(),
-                                       speed_given ? params.path.speed_mps : 10.0, 20.0);
-    params.path.sensor_height_m = sensor_height_m;
-  }
+  std::optional<sim::SceneDrive> drive = sim::scene_drive(
+      scene_name, speed->count() > 0 ? std::optional<double>(params.path.speed_mps) : std::nullopt,
+      params.path.sensor_height_m);
+  params.path = std::move(drive->path);
   if (const std::string error = params.validate(); !error.empty()) {
     return cli::usage_error(app, error);
   }
 
-  const sim::Scene scene = scene_name == "terminal"   ? sim::Scene::terminal_walls()
-                           : scene_name == "aircraft" ? sim::Scene::aircraft_stand()
-                           : scene_name == "site"     ? sim::Scene::airport_site()
-                                                      : sim::Scene::airside_default();
-  const sim::SequenceResult result = sim::write_sequence(scene, params, out_dir);
+  const sim::SequenceResult result = sim::write_sequence(drive->scene, params, out_dir);
   if (!result.ok()) {
     std::fprintf(stderr, "tarmac-sim: %s\n", result.error.c_str());
     return kExitIo;

@@ -4,7 +4,9 @@
 #include <charconv>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <utility>
+#include <vector>
 
 namespace tarmac::sim {
 namespace {
@@ -65,6 +67,29 @@ Interval interval(const Box& box, const Eigen::Vector3d& o, const Eigen::Vector3
     const Interval s = slab(o[i], d[i], box.min_W[i], box.max_W[i]);
     in.clip(s.lo, s.hi);
   }
+  return in;
+}
+
+/// Where o + t·d lies in the half-space n·p <= limit, given n·o and n·d.
+Interval half_space(double n_dot_o, double n_dot_d, double limit) {
+  if (n_dot_d == 0.0) return n_dot_o <= limit ? Interval{} : kEmpty;
+  const double t = (limit - n_dot_o) / n_dot_d;
+  return n_dot_d > 0.0 ? Interval{-kInf, t} : Interval{t, kInf};
+}
+
+Interval interval(const SlopedBox& box, const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
+  Interval in = slab(o.x(), d.x(), box.min_xy_W.x(), box.max_xy_W.x());
+  const Interval along_y = slab(o.y(), d.y(), box.min_xy_W.y(), box.max_xy_W.y());
+  in.clip(along_y.lo, along_y.hi);
+  const Interval above_bottom = half_space(-o.z(), -d.z(), -box.bottom_z_m);
+  in.clip(above_bottom.lo, above_bottom.hi);
+  // Below the top: n·(p − corner) <= 0 with n = (−grade, 1), taken from the footprint's corner
+  // at the top's height so that the sums stay small.
+  const double gx = box.grade.x(), gy = box.grade.y();
+  const double n_dot_o =
+      (o.z() - box.top_z_m) - gx * (o.x() - box.min_xy_W.x()) - gy * (o.y() - box.min_xy_W.y());
+  const Interval below_top = half_space(n_dot_o, d.z() - gx * d.x() - gy * d.y(), 0.0);
+  in.clip(below_top.lo, below_top.hi);
   return in;
 }
 
@@ -158,6 +183,10 @@ std::string vec(const Eigen::Vector3d& v) {
   return "[" + number(v.x()) + ", " + number(v.y()) + ", " + number(v.z()) + "]";
 }
 
+std::string vec2(const Eigen::Vector2d& v) {
+  return "[" + number(v.x()) + ", " + number(v.y()) + "]";
+}
+
 std::string quoted(std::string_view s) {
   std::string out = "\"";
   for (const char c : s) {
@@ -194,6 +223,11 @@ std::string primitive_json(const Primitive& primitive) {
       return "{\"type\": \"cone\", \"base\": " + vec(c.base_W) +
              ", \"radius_m\": " + number(c.radius_m) + ", \"height_m\": " + number(c.height_m) +
              "}";
+    }
+    std::string operator()(const SlopedBox& b) const {
+      return "{\"type\": \"sloped_box\", \"min_xy\": " + vec2(b.min_xy_W) +
+             ", \"max_xy\": " + vec2(b.max_xy_W) + ", \"bottom_z_m\": " + number(b.bottom_z_m) +
+             ", \"top_z_m\": " + number(b.top_z_m) + ", \"grade\": " + vec2(b.grade) + "}";
     }
   };
   return std::visit(Visitor{}, primitive);
@@ -235,6 +269,10 @@ bool contains(const Primitive& primitive, const Eigen::Vector3d& p_W) {
       const double dy = p.y() - c.base_W.y();
       return dx * dx + dy * dy <= r * r;
     }
+    bool operator()(const SlopedBox& b) const {
+      const Eigen::Vector2d xy = p.head<2>();
+      return b.covers(xy) && p.z() >= b.bottom_z_m && p.z() <= b.top_at(xy);
+    }
   };
   return std::visit(Visitor{p_W}, primitive);
 }
@@ -268,6 +306,17 @@ Aabb bounds(const Primitive& primitive) {
       box.max_W.z() = c.base_W.z() + c.height_m;
       return box;
     }
+    Aabb operator()(const SlopedBox& b) const {
+      // A plane over a rectangle is highest at one of its corners.
+      double top = -kInf;
+      for (const double x : {b.min_xy_W.x(), b.max_xy_W.x()}) {
+        for (const double y : {b.min_xy_W.y(), b.max_xy_W.y()}) {
+          top = std::max(top, b.top_at({x, y}));
+        }
+      }
+      return {Eigen::Vector3d(b.min_xy_W.x(), b.min_xy_W.y(), b.bottom_z_m),
+              Eigen::Vector3d(b.max_xy_W.x(), b.max_xy_W.y(), top)};
+    }
   };
   return std::visit(Visitor{}, primitive);
 }
@@ -292,8 +341,27 @@ Primitive translated(const Primitive& primitive, const Eigen::Vector3d& offset_W
       c.base_W += offset;
       return c;
     }
+    Primitive operator()(SlopedBox b) const {
+      b.min_xy_W += offset.head<2>();
+      b.max_xy_W += offset.head<2>();
+      b.bottom_z_m += offset.z();
+      b.top_z_m += offset.z();
+      return b;
+    }
   };
   return std::visit(Visitor{offset_W}, primitive);
+}
+
+std::optional<double> Terrain::height_m(const Eigen::Vector2d& xy_W) const {
+  if (flat()) return 0.0;
+  std::optional<double> height;
+  for (const SlopedBox& patch : patches) {
+    if (!patch.covers(xy_W)) continue;
+    // Patches share their edges: on one, the higher top is the surface.
+    const double z = patch.top_at(xy_W);
+    if (!height || z > *height) height = z;
+  }
+  return height;
 }
 
 int Scene::add(std::string name, std::string kind, Primitive shape_W,
@@ -364,11 +432,25 @@ bool Scene::occupied(const Eigen::Vector3d& p_W, double t_s) const {
   return false;
 }
 
+Terrain Scene::terrain() const {
+  Terrain terrain;
+  for (const Object& object : objects_) {
+    if (object.kind != "ground" || object.dynamic()) continue;
+    if (const auto* patch = std::get_if<SlopedBox>(&object.shape_W)) {
+      terrain.patches.push_back(*patch);
+    }
+  }
+  return terrain;
+}
+
 std::string Scene::to_json(const Eigen::Isometry3d& T_world_W) const {
   std::string out = "{\n";
-  out +=
-      "  \"frame\": \"scene frame: x forward along the apron, y left, z up, metres; ground plane "
-      "z = 0; time in seconds from the first scan\",\n";
+  out += terrain().flat()
+             ? "  \"frame\": \"scene frame: x forward along the apron, y left, z up, metres; "
+               "ground plane z = 0; time in seconds from the first scan\",\n"
+             : "  \"frame\": \"scene frame: x forward along the apron, y left, z up, metres; "
+               "ground: the tops of the objects of kind ground; time in seconds from the first "
+               "scan\",\n";
   out += "  \"T_world_scene\": [";
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 4; ++c) {
@@ -509,6 +591,172 @@ Scene Scene::airside_default() {
   // A tug crossing the path ahead of the vehicle, then parked clear of the path and aircraft.
   scene.add("tug", "tug", Box{V(14.2, -5.5, 0.0), V(15.8, -2.5, 1.5)},
             LinearMotion{V(0.0, 2.0, 0.0), 0.0, 6.0});
+  return scene;
+}
+
+namespace {
+
+/// Below every terrain scene's lowest ground, m.
+constexpr double kTerrainBottomM = -20.0;
+/// The terrain scenes' extent: beyond the sensor's range from their drives, m.
+constexpr double kTerrainMinX = -150.0, kTerrainMaxX = 250.0, kTerrainHalfWidth = 150.0;
+
+/// Ground over [min_xy, max_xy], its top `top_z_m` at min_xy, rising by `grade`.
+SlopedBox ground_patch(const Eigen::Vector2d& min_xy, const Eigen::Vector2d& max_xy, double top_z_m,
+                       const Eigen::Vector2d& grade = Eigen::Vector2d::Zero()) {
+  return SlopedBox{min_xy, max_xy, kTerrainBottomM, top_z_m, grade};
+}
+
+/// The lowest and highest ground over the rectangle [min_xy, max_xy], from its corners and
+/// centre: exact for planar patches, and for the terrain scenes' kinks (straight lines across
+/// the drive, where a ramp meets a level).
+std::pair<double, double> ground_range(const Terrain& terrain, const Eigen::Vector2d& min_xy,
+                                       const Eigen::Vector2d& max_xy) {
+  double lo = kInf, hi = -kInf;
+  for (const Eigen::Vector2d& xy :
+       {min_xy, max_xy, Eigen::Vector2d(min_xy.x(), max_xy.y()),
+        Eigen::Vector2d(max_xy.x(), min_xy.y()), Eigen::Vector2d(0.5 * (min_xy + max_xy))}) {
+    const double z = terrain.height_m(xy).value();
+    lo = std::min(lo, z);
+    hi = std::max(hi, z);
+  }
+  return {lo, hi};
+}
+
+/// A cone standing on `terrain` at xy: its base as low as the ground under it, so that it stands
+/// on the slope without a gap, its apex height_m above the ground at xy.
+Cone cone_on(const Terrain& terrain, const Eigen::Vector2d& xy, double radius_m, double height_m) {
+  const Eigen::Vector2d r(radius_m, radius_m);
+  const double base_z = ground_range(terrain, xy - r, xy + r).first;
+  const double apex_z = terrain.height_m(xy).value() + height_m;
+  return Cone{Eigen::Vector3d(xy.x(), xy.y(), base_z), radius_m, apex_z - base_z};
+}
+
+/// A crate on `terrain` over [min_xy, max_xy]: its bottom as low as the ground under it, its top
+/// height_m above the highest ground under it.
+Box crate_on(const Terrain& terrain, const Eigen::Vector2d& min_xy, const Eigen::Vector2d& max_xy,
+             double height_m) {
+  const auto [lo, hi] = ground_range(terrain, min_xy, max_xy);
+  return Box{Eigen::Vector3d(min_xy.x(), min_xy.y(), lo),
+             Eigen::Vector3d(max_xy.x(), max_xy.y(), hi + height_m)};
+}
+
+/// Adds `patches` to `scene` as its ground, named ground_0, ground_1, ...
+void add_ground(Scene& scene, const std::vector<SlopedBox>& patches) {
+  for (std::size_t i = 0; i < patches.size(); ++i) {
+    scene.add("ground_" + std::to_string(i), "ground", patches[i]);
+  }
+}
+
+}  // namespace
+
+Scene Scene::apron_ramp(double grade, double ramp_length_m) {
+  using V2 = Eigen::Vector2d;
+  const double foot_x = 20.0, top_x = foot_x + ramp_length_m, top_z = grade * ramp_length_m;
+  Scene scene;
+  add_ground(
+      scene,
+      {ground_patch({kTerrainMinX, -kTerrainHalfWidth}, {foot_x, kTerrainHalfWidth}, 0.0),
+       ground_patch({foot_x, -kTerrainHalfWidth}, {top_x, kTerrainHalfWidth}, 0.0, {grade, 0.0}),
+       ground_patch({top_x, -kTerrainHalfWidth}, {kTerrainMaxX, kTerrainHalfWidth}, top_z)});
+  const Terrain terrain = scene.terrain();
+  const double mid_x = foot_x + 0.5 * ramp_length_m;
+  scene.add("cone_apron_right", "cone", cone_on(terrain, {10.0, -2.5}, 0.2, 0.5));
+  scene.add("cone_apron_left", "cone", cone_on(terrain, {14.0, 3.0}, 0.25, 0.7));
+  scene.add("cone_ramp_foot", "cone", cone_on(terrain, {21.0, -2.0}, 0.15, 0.3));
+  scene.add("cone_ramp_left", "cone", cone_on(terrain, {mid_x, 2.0}, 0.2, 0.5));
+  scene.add("crate_ramp", "crate",
+            crate_on(terrain, {mid_x + 4.0, -3.5}, {mid_x + 5.2, -2.5}, 0.5));
+  scene.add("cone_crest", "cone", cone_on(terrain, {top_x + 1.0, 2.0}, 0.2, 0.5));
+  scene.add("cone_top_right", "cone", cone_on(terrain, {70.0, -2.5}, 0.15, 0.3));
+  scene.add("crate_top", "crate", crate_on(terrain, V2(78.0, 2.0), V2(79.2, 3.0), 0.6));
+  scene.add("cone_ahead", "cone", cone_on(terrain, {95.0, 1.5}, 0.2, 0.5));
+  return scene;
+}
+
+Scene Scene::crowned_road() {
+  using V2 = Eigen::Vector2d;
+  constexpr double kCrownZ = 0.1, kRoadHalfWidth = 5.0, kShoulderEdge = 8.0, kVergeZ = -0.12;
+  constexpr double kCrossFall = kCrownZ / kRoadHalfWidth;                        // 2 %
+  constexpr double kShoulderFall = -kVergeZ / (kShoulderEdge - kRoadHalfWidth);  // 4 %
+  Scene scene;
+  add_ground(
+      scene,
+      {ground_patch({kTerrainMinX, -kTerrainHalfWidth}, {kTerrainMaxX, -kShoulderEdge}, kVergeZ),
+       ground_patch({kTerrainMinX, -kShoulderEdge}, {kTerrainMaxX, -kRoadHalfWidth}, kVergeZ,
+                    {0.0, kShoulderFall}),
+       ground_patch({kTerrainMinX, -kRoadHalfWidth}, {kTerrainMaxX, 0.0}, 0.0, {0.0, kCrossFall}),
+       ground_patch({kTerrainMinX, 0.0}, {kTerrainMaxX, kRoadHalfWidth}, kCrownZ,
+                    {0.0, -kCrossFall}),
+       ground_patch({kTerrainMinX, kRoadHalfWidth}, {kTerrainMaxX, kShoulderEdge}, 0.0,
+                    {0.0, -kShoulderFall}),
+       ground_patch({kTerrainMinX, kShoulderEdge}, {kTerrainMaxX, kTerrainHalfWidth}, kVergeZ)});
+  const Terrain terrain = scene.terrain();
+  scene.add("cone_centre", "cone", cone_on(terrain, {25.0, 0.0}, 0.2, 0.5));
+  scene.add("cone_right_edge", "cone", cone_on(terrain, {35.0, -4.6}, 0.15, 0.3));
+  scene.add("cone_left_lane", "cone", cone_on(terrain, {45.0, 2.5}, 0.25, 0.7));
+  scene.add("crate_right_shoulder", "crate",
+            crate_on(terrain, V2(55.0, -7.0), V2(56.2, -6.0), 0.5));
+  scene.add("cone_left_shoulder", "cone", cone_on(terrain, {65.0, 6.5}, 0.2, 0.5));
+  scene.add("crate_left_lane", "crate", crate_on(terrain, V2(75.0, 1.5), V2(76.5, 3.0), 0.8));
+  scene.add("cone_ahead", "cone", cone_on(terrain, {96.0, -2.5}, 0.2, 0.5));
+  return scene;
+}
+
+Scene Scene::parking_levels() {
+  using V = Eigen::Vector3d;
+  using V2 = Eigen::Vector2d;
+  constexpr double kLowerZ = -2.25, kRampX0 = 30.0, kRampX1 = 55.0, kCut = 5.3;
+  constexpr double kRampGrade = kLowerZ / (kRampX1 - kRampX0);  // -9 %
+  constexpr double kRoadEnd = 130.3, kBaysX0 = 74.7, kBaysX1 = 115.3, kBaysY1 = 25.3;
+  constexpr double kW = kTerrainHalfWidth;
+  Scene scene;
+  add_ground(scene,
+             {// The apron round the cut.
+              ground_patch({kTerrainMinX, -kW}, {kRampX0, kW}, 0.0),
+              ground_patch({kRampX0, -kW}, {kTerrainMaxX, -kCut}, 0.0),
+              ground_patch({kRampX0, kCut}, {kBaysX0, kW}, 0.0),
+              ground_patch({kBaysX0, kBaysY1}, {kBaysX1, kW}, 0.0),
+              ground_patch({kBaysX1, kCut}, {kTerrainMaxX, kW}, 0.0),
+              ground_patch({kRoadEnd, -kCut}, {kTerrainMaxX, kCut}, 0.0),
+              // The cut: the ramp, the lower road, the bays.
+              ground_patch({kRampX0, -kCut}, {kRampX1, kCut}, 0.0, {kRampGrade, 0.0}),
+              ground_patch({kRampX1, -kCut}, {kRoadEnd, kCut}, kLowerZ),
+              ground_patch({kBaysX0, kCut}, {kBaysX1, kBaysY1}, kLowerZ)});
+  // Walls from below the lower level to a parapet over the apron, on every edge of the cut.
+  constexpr double kWallLow = kLowerZ - 0.5, kWallTop = 1.0, kT = 0.3;
+  const auto wall = [&](const std::string& name, double x0, double y0, double x1, double y1) {
+    scene.add(name, "wall", Box{V(x0, y0, kWallLow), V(x1, y1, kWallTop)});
+  };
+  wall("wall_right", kRampX0, -kCut, kRoadEnd, -kCut + kT);
+  wall("wall_left_ramp", kRampX0, kCut - kT, kBaysX0, kCut);
+  wall("wall_left_end", kBaysX1, kCut - kT, kRoadEnd, kCut);
+  wall("wall_bays_west", kBaysX0, kCut - kT, kBaysX0 + kT, kBaysY1);
+  wall("wall_bays_east", kBaysX1 - kT, kCut - kT, kBaysX1, kBaysY1);
+  wall("wall_bays_north", kBaysX0, kBaysY1 - kT, kBaysX1, kBaysY1);
+  wall("wall_end", kRoadEnd - kT, -kCut, kRoadEnd, kCut);
+  // A 15 cm curb along the right side, following the ramp down to the road.
+  constexpr double kCurbY0 = -4.3, kCurbY1 = -4.0, kCurbH = 0.15;
+  scene.add("curb_ramp", "curb",
+            SlopedBox{{kRampX0, kCurbY0}, {kRampX1, kCurbY1}, kWallLow, kCurbH, {kRampGrade, 0.0}});
+  scene.add("curb_road", "curb",
+            Box{V(kRampX1, kCurbY0, kWallLow), V(kRoadEnd - kT, kCurbY1, kLowerZ + kCurbH)});
+  // The road under the terminal: a deck 3.6 m over the lower level.
+  scene.add("deck", "deck", Box{V(100.0, -kCut, kLowerZ + 3.6), V(kRoadEnd, kCut, kLowerZ + 4.0)});
+  const Terrain terrain = scene.terrain();
+  const auto car = [&](const std::string& name, const V2& min_xy, const V2& max_xy) {
+    scene.add(name, "car", crate_on(terrain, min_xy, max_xy, 1.5));
+  };
+  car("car_1", {80.0, 20.0}, {81.9, 24.6});
+  car("car_2", {84.0, 20.0}, {85.9, 24.6});
+  car("car_3", {96.0, 20.0}, {97.9, 24.6});
+  car("car_4", {102.0, 7.0}, {106.6, 8.9});
+  scene.add("cone_apron", "cone", cone_on(terrain, {15.0, -3.0}, 0.2, 0.5));
+  scene.add("cone_ramp", "cone", cone_on(terrain, {42.0, 2.5}, 0.2, 0.5));
+  scene.add("cone_ramp_curb", "cone", cone_on(terrain, {48.0, -3.2}, 0.15, 0.3));
+  scene.add("cone_road", "cone", cone_on(terrain, {70.0, -3.0}, 0.25, 0.7));
+  scene.add("crate_road", "crate", crate_on(terrain, V2(90.0, 2.5), V2(91.2, 3.5), 0.6));
+  scene.add("cone_under_deck", "cone", cone_on(terrain, {112.0, 3.0}, 0.2, 0.5));
   return scene;
 }
 

@@ -1,10 +1,11 @@
 #pragma once
 /// @file Scores a costmap cycle by cycle against the obstacle columns a costmap must show
-/// (tarmac-sim's obstacle_columns.txt): the safety figures of DESIGN.md §4 ("judged cycle by
-/// cycle against ground truth").
+/// (tarmac-sim's obstacle_columns.txt) and the ground it must leave drivable (ground_cells.txt):
+/// the safety figures of DESIGN.md §4 ("judged cycle by cycle against ground truth").
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <span>
 #include <string>
 #include <unordered_map>
@@ -19,11 +20,25 @@
 
 namespace tarmac::tools {
 
+/// The cells of the ground a vehicle may drive on, on the world lattice of `cell_m`, with the
+/// ground's height at their centres (m, scene frame): tarmac-sim's ground_cells.txt, written for
+/// its terrain scenes. A cell where the ground steps is none.
+struct GroundTruth {
+  double cell_m = 0.2;
+  std::unordered_map<std::int64_t, float> z_m;  ///< key(ix, iy) (ObstacleTruth::key) -> height
+};
+
 /// The columns whose envelope span meets a static object, on the world lattice of `cell_m`, with
-/// the first scan that returned a point from that span (−1: none did).
+/// the first scan that returned a point from that span (−1: none did); and the ground cells.
 struct ObstacleTruth {
   double cell_m = 0.2;
   std::unordered_map<std::int64_t, int> first_seen;  ///< key(ix, iy) -> scan, −1 never
+  /// Nothing: every cell is ground (the plane z = 0 of tarmac-sim's flat scenes, which write no
+  /// ground_cells.txt).
+  std::optional<GroundTruth> ground;
+  /// The curbs' columns among them (curb_columns.txt), first seen by a return from a curb;
+  /// empty: the scene has none.
+  std::unordered_map<std::int64_t, int> curb_first_seen;
 
   static std::int64_t key(std::int64_t ix, std::int64_t iy) {
     return (ix << 32) ^ (iy & 0xffffffff);
@@ -31,11 +46,22 @@ struct ObstacleTruth {
   [[nodiscard]] bool is_column(std::int64_t ix, std::int64_t iy) const {
     return first_seen.count(key(ix, iy)) != 0;
   }
+  [[nodiscard]] bool is_ground(std::int64_t ix, std::int64_t iy) const {
+    return !ground || ground->z_m.count(key(ix, iy)) != 0;
+  }
 };
 
 /// Reads obstacle_columns.txt. Errors: "truth.open", "truth.parse" (with the line number),
 /// "truth.frame" (a tilted world frame: the columns are in the scene frame).
 core::Result<ObstacleTruth> read_obstacle_truth(const std::filesystem::path& file);
+
+/// Reads ground_cells.txt. Errors as read_obstacle_truth's.
+core::Result<GroundTruth> read_ground_truth(const std::filesystem::path& file);
+
+/// A tarmac-sim dataset's truth: DIR/obstacle_columns.txt and, when they are there,
+/// DIR/ground_cells.txt and DIR/curb_columns.txt. Errors: read_obstacle_truth's,
+/// read_ground_truth's, "truth.cells" (the lattices differ).
+core::Result<ObstacleTruth> read_dataset_truth(const std::filesystem::path& dir);
 
 /// One cycle's figures, over the obstacle columns within `radius_m` of the vehicle.
 struct SafetyCycle {
@@ -62,6 +88,25 @@ struct SafetyCycle {
   [[nodiscard]] double share_lethal() const {
     return visible == 0 ? 1.0 : static_cast<double>(lethal_near) / static_cast<double>(visible);
   }
+  /// Drivable ground within kGroundRadiusM of the vehicle: ground cells more than one cell from
+  /// every obstacle column and from every moving object's box at this scan, and of those the
+  /// ones reading lethal (the ground model taking ground for an obstacle).
+  std::size_t ground_cells = 0;
+  std::size_t ground_lethal = 0;
+  /// Of the visible columns, the curbs' (first seen by a return from a curb), and of those the
+  /// ones with a lethal cell within one cell.
+  std::size_t curb_visible = 0;
+  std::size_t curb_lethal_near = 0;
+  [[nodiscard]] double share_curb_lethal() const {
+    return curb_visible == 0
+               ? 1.0
+               : static_cast<double>(curb_lethal_near) / static_cast<double>(curb_visible);
+  }
+  [[nodiscard]] double share_ground_lethal() const {
+    return ground_cells == 0
+               ? 0.0
+               : static_cast<double>(ground_lethal) / static_cast<double>(ground_cells);
+  }
 };
 
 struct SafetyReport {
@@ -72,14 +117,27 @@ struct SafetyReport {
   std::size_t lethal_cells = 0, false_lethal = 0;                  ///< summed over cycles
   double worst_false_share = 0.0;  ///< max over cycles of false_lethal / lethal_cells
   double worst_open_known = 1.0, mean_open_known = 1.0;  ///< SafetyCycle::share_open_known
+  std::size_t ground_cells = 0, ground_lethal = 0;       ///< summed over cycles
+  /// SafetyCycle::share_ground_lethal: the worst cycle (and its scan; −1: no cycle read any
+  /// ground lethal) and the mean over the cycles with ground cells.
+  double worst_ground_lethal = 0.0, mean_ground_lethal = 0.0;
+  int worst_ground_scan = -1;
+  /// The truth has curbs; then SafetyCycle::share_curb_lethal over the cycles that saw one: the
+  /// worst (and its scan; −1: none below 100 %) and the mean.
+  bool curbs = false;
+  double worst_curb_share = 1.0, mean_curb_share = 1.0;
+  int worst_curb_scan = -1;
 };
 
 /// The radius of the open-ground figure (SafetyCycle::open_cells), m.
 inline constexpr double kOpenRadiusM = 10.0;
+/// The radius of the drivable-ground figure (SafetyCycle::ground_cells), m.
+inline constexpr double kGroundRadiusM = 30.0;
 
 /// Scores one costmap (values 0..100, −1) whose cells lie on the truth's lattice (the costmap's
 /// resolution must equal cell_m and its origin a lattice point). `moving` are the moving
-/// objects' boxes at this scan (tarmac-sim's dynamic_boxes.txt), scene frame.
+/// objects' boxes at this scan (tarmac-sim's dynamic_boxes.txt), scene frame. The obstacle
+/// figures are taken within radius_m, the ground figure within kGroundRadiusM.
 SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
                           const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0,
                           std::span<const DynamicBox> moving = {});

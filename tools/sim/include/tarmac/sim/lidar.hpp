@@ -107,6 +107,14 @@ class Lidar {
 /// rounded into circular arcs of corner_radius_m (tangent to both segments, shrunk where a
 /// segment is too short). The sensor sits sensor_height_m above the base (T_base_S =
 /// translation (0, 0, sensor_height_m), no rotation).
+///
+/// On flat terrain the base is on the plane z = 0, level. Otherwise the vehicle drives on the
+/// terrain: its four wheels touch the surface (front and rear on the centre line, wheelbase_m
+/// apart; left and right across the middle, track_m apart), the base's x axis runs from the
+/// rear contact to the front one, its y axis lies in the plane of that line and the left-right
+/// one, and the base sits at the mean height of the four contacts. On a plane that is the
+/// surface under the base, pitched and rolled with it (a 10 % ramp pitches it by atan(0.1));
+/// over a kink the wheels even it out as a vehicle's axles do.
 struct DrivePath {
   Eigen::Vector2d start_W{0.0, 0.0};         ///< m, on the ground
   Eigen::Vector2d end_W{60.0, 0.0};          ///< m, != start_W
@@ -116,6 +124,10 @@ struct DrivePath {
   double corner_radius_m = 0.0;
   double speed_mps = 3.0;  ///< > 0
   double sensor_height_m = 2.0;
+  /// The surface the wheels run on: the scene's (Scene::terrain()).
+  Terrain terrain;
+  double wheelbase_m = 3.0;  ///< > 0; on terrain only
+  double track_m = 2.0;      ///< > 0; on terrain only
 
   /// A loop round the rectangle [min_W, max_W], counter-clockwise from the middle of its lower
   /// side back to it, at `speed_mps`, its corners turned on arcs of `corner_radius_m`.
@@ -146,6 +158,11 @@ struct SequenceParams {
   /// true poses are written again (the jump a GPS fix or loop closure makes). The scans are
   /// always taken from the true poses.
   double drift_m = 0.0;
+  /// Height drift written into poses.txt (a localiser's height wandering): the translation D(t)
+  /// above also rises along the scene's +z by drift_z_m · t / t_last, t_last the last scan's
+  /// stamp, so the written poses reach drift_z_m above the true ones at the end of the drive.
+  /// correct_at_scan ends it as it ends drift_m.
+  double drift_z_m = 0.0;
   /// Ground truth for the costmap (obstacle_columns.txt): columns of truth_cell_m on the world
   /// lattice whose vertical span [envelope_low_m, envelope_high_m] above the ground meets a static
   /// object, i.e. what the costmap must show lethal (the shipped config's min_obstacle_height_m and
@@ -153,6 +170,9 @@ struct SequenceParams {
   double truth_cell_m = 0.2;
   double envelope_low_m = 0.08;
   double envelope_high_m = 2.8;
+  /// On terrain, ground_cells.txt lists the ground cells within this of the drive's bounding
+  /// box (the scored radius round the vehicle, and a pose drift, inside it), m.
+  double ground_truth_margin_m = 35.0;
   double drift_ramp_s = 2.0;  ///< > 0
   int correct_at_scan = 0;
   /// The written pose of scan i (with the drift, if any).
@@ -194,6 +214,14 @@ struct SequenceResult {
 /// the pose source publishes with its jump, one line per scan 0 .. K − 1:
 /// `K−1 stamp_s` then the 12 numbers of the true T_O_S (row-major 3×4) — read by
 /// `tarmac-map --corrections` (applied after scan K − 1 is integrated).
+///
+/// The costmap's ground truth: obstacle_columns.txt (SequenceParams::truth_cell_m), the
+/// envelope span taken above the ground under each point; on terrain also ground_cells.txt,
+/// the cells of the lattice within ground_truth_margin_m of the drive's bounding box whose
+/// ground rises less than envelope_low_m across the cell, each with the ground's height at its
+/// centre (`ix iy z_m`, mm precision); with objects of kind "curb", curb_columns.txt, their
+/// columns as obstacle_columns.txt lists them, first seen by a return from a curb. Errors: the
+/// path's terrain is not the scene's, or the drive leaves the terrain.
 SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
                               const std::filesystem::path& out_dir);
 

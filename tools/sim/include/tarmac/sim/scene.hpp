@@ -1,10 +1,11 @@
 #pragma once
 /// @file A synthetic airside scene built from exact analytic primitives (plane, axis-aligned box,
-/// axis-aligned finite cylinder, upright cone), with exact ray casting and point occupancy, so
-/// that simulated scans and maps can be checked against analytic ground truth.
+/// axis-aligned finite cylinder, upright cone, box with a sloped top), with exact ray casting and
+/// point occupancy, so that simulated scans and maps can be checked against analytic ground truth.
 ///
-/// Frame W (the scene frame): x forward along the apron, y left, z up, metres; the ground is the
-/// plane z = 0. Time t_s is seconds since the start of the sequence.
+/// Frame W (the scene frame): x forward along the apron, y left, z up, metres. The ground is the
+/// plane z = 0, or, in the terrain scenes, the sloped tops of boxes laid edge to edge (Terrain).
+/// Time t_s is seconds since the start of the sequence.
 
 #include <cstdint>
 #include <optional>
@@ -51,8 +52,41 @@ struct Cone {
   double height_m = 0.0;
 };
 
+/// Solid axis-aligned box whose top face is a sloped plane: the points with x in
+/// [min_xy_W.x, max_xy_W.x], y in [min_xy_W.y, max_xy_W.y] and bottom_z_m <= z <= top_at(x, y).
+/// Laid edge to edge with matching heights, such boxes make piecewise-planar ground (an apron, a
+/// ramp, one side of a crowned road); on that ground, a curb that follows a ramp. Requires
+/// min_xy_W <= max_xy_W component-wise and the top at or above bottom_z_m over the footprint.
+struct SlopedBox {
+  Eigen::Vector2d min_xy_W = Eigen::Vector2d::Zero();
+  Eigen::Vector2d max_xy_W = Eigen::Vector2d::Zero();
+  double bottom_z_m = 0.0;
+  double top_z_m = 0.0;                             ///< height of the top at min_xy_W
+  Eigen::Vector2d grade = Eigen::Vector2d::Zero();  ///< the top's rise over run along x and y
+
+  /// Height of the top's plane over xy_W (inside the footprint or not), m.
+  double top_at(const Eigen::Vector2d& xy_W) const { return top_z_m + grade.dot(xy_W - min_xy_W); }
+  /// True when xy_W lies in the footprint (edges included).
+  bool covers(const Eigen::Vector2d& xy_W) const {
+    return (xy_W.array() >= min_xy_W.array()).all() && (xy_W.array() <= max_xy_W.array()).all();
+  }
+  bool operator==(const SlopedBox&) const = default;
+};
+
 /// One exact analytic shape in frame W.
-using Primitive = std::variant<Plane, Box, Cylinder, Cone>;
+using Primitive = std::variant<Plane, Box, Cylinder, Cone, SlopedBox>;
+
+/// The surface the vehicle drives on: the highest top of `patches` over a point; with no
+/// patches, the plane z = 0 (the flat scenes).
+struct Terrain {
+  std::vector<SlopedBox> patches;
+
+  /// True for the plane z = 0.
+  [[nodiscard]] bool flat() const { return patches.empty(); }
+  /// Height of the surface over xy_W, m; nothing where no patch covers it.
+  [[nodiscard]] std::optional<double> height_m(const Eigen::Vector2d& xy_W) const;
+  bool operator==(const Terrain&) const = default;
+};
 
 /// Axis-aligned bounds in frame W (m); unbounded directions hold ±infinity (the ground plane).
 struct Aabb {
@@ -141,8 +175,13 @@ class Scene {
   /// every axis: the only ones a ray from p_W can hit within radius_m.
   std::vector<int> near(const Eigen::Vector3d& p_W, double radius_m, double t_s) const;
 
-  /// True when p_W lies inside any non-ground object at time t_s, or below the ground (z < 0).
+  /// True when p_W lies inside any object at time t_s, the ground's solid included (below the
+  /// plane z = 0, or inside a terrain patch).
   bool occupied(const Eigen::Vector3d& p_W, double t_s) const;
+
+  /// The ground the vehicle drives on: the SlopedBoxes of kind "ground" (static). Flat (no
+  /// patches) for the scenes whose ground is the plane z = 0.
+  [[nodiscard]] Terrain terrain() const;
 
   /// The scene as JSON: every object with id, name, kind, dynamic flag, primitive type and
   /// parameters (start pose) and motion. `T_world_W` (written as "T_world_scene", row-major 3×4)
@@ -209,6 +248,63 @@ class Scene {
   static Scene airport_site();
   static Eigen::Vector2d site_route_min() { return {-400.0, -150.0}; }
   static Eigen::Vector2d site_route_max() { return {400.0, 150.0}; }
+
+  // Terrain scenes. Their ground is SlopedBoxes of kind "ground" (no plane) spanning x in
+  // [-150, 250] and y in [-150, 150], beyond the sensor's range from the drive; the vehicle drives
+  // on it (DrivePath::terrain) and every obstacle stands on it: a cone's base is sunk so that no
+  // gap opens under its downhill edge, its apex at its height above the ground under its centre;
+  // a crate's top is its height above the highest ground under it. Every step in the ground has
+  // a wall on it. Coordinates in m, frame W.
+
+  /// An apron at z = 0 for x <= 20, a ramp over the scene's width climbing at `grade` for
+  /// `ramp_length_m`, and the level it reaches (x_top = 20 + ramp_length_m, z = grade ·
+  /// ramp_length_m). Obstacles beside the drive (y = 0, x from 0 to 90), on the apron, on the
+  /// ramp and on the upper level:
+  ///  - cone_apron_right  (10, -2.5), r = 0.2, h = 0.5
+  ///  - cone_apron_left   (14, 3), r = 0.25, h = 0.7
+  ///  - cone_ramp_foot    (21, -2), r = 0.15, h = 0.3
+  ///  - cone_ramp_left    (20 + ramp_length_m / 2, 2), r = 0.2, h = 0.5
+  ///  - crate_ramp        [24 + ramp_length_m / 2, -3.5] .. [25.2 + ramp_length_m / 2, -2.5],
+  ///                      h = 0.5
+  ///  - cone_crest        (x_top + 1, 2), r = 0.2, h = 0.5
+  ///  - cone_top_right    (70, -2.5), r = 0.15, h = 0.3
+  ///  - crate_top         [78, 2] .. [79.2, 3], h = 0.6
+  ///  - cone_ahead        (95, 1.5), r = 0.2, h = 0.5 (past the end of the drive)
+  static Scene apron_ramp(double grade, double ramp_length_m);
+
+  /// A crowned road along x: its centre line y = 0 at z = 0.1, falling 2 % to z = 0 at |y| = 5,
+  /// shoulders falling 4 % to z = -0.12 at |y| = 8, a flat verge beyond. The drive: the right
+  /// lane, y = -2.5, x from 0 to 90 (the vehicle rolled by the cross fall). Obstacles:
+  ///  - cone_centre          (25, 0), r = 0.2, h = 0.5 (on the crown)
+  ///  - cone_right_edge      (35, -4.6), r = 0.15, h = 0.3
+  ///  - cone_left_lane       (45, 2.5), r = 0.25, h = 0.7
+  ///  - crate_right_shoulder [55, -7] .. [56.2, -6], h = 0.5
+  ///  - cone_left_shoulder   (65, 6.5), r = 0.2, h = 0.5
+  ///  - crate_left_lane      [75, 1.5] .. [76.5, 3], h = 0.8
+  ///  - cone_ahead           (96, -2.5), r = 0.2, h = 0.5 (past the end of the drive)
+  static Scene crowned_road();
+
+  /// A lower parking level joined to the apron by a ramp in a walled cut, part of it under a
+  /// deck. The apron is at z = 0; the ramp, x in [30, 55], |y| <= 5.3, descends 9 % to the
+  /// lower road (x in [55, 130.3], |y| <= 5.3) and the bays beside it (x in [74.7, 115.3], y in
+  /// [5.3, 25.3]), both at z = -2.25. The drive: y = -1, x from 0 to 120. Objects:
+  ///  - walls                0.3 m thick from below the lower level to z = 1 (a parapet over the
+  ///                         apron) on every edge of the cut: y in [-5.3, -5] (x in [30, 130.3]),
+  ///                         y in [5, 5.3] (x in [30, 74.7] and [115.3, 130.3]), round the bays
+  ///                         and across the road's end (x in [130, 130.3])
+  ///  - curb_ramp, curb_road a 0.15 m curb, y in [-4.3, -4], along the ramp (following its
+  ///                         slope) and the lower road to x = 130
+  ///  - deck                 box [100, -5.3, 1.35] .. [130.3, 5.3, 1.75]: the road under the
+  ///                         terminal, 3.6 m of headroom
+  ///  - car_1 .. car_4       parked cars, 1.5 m high: [80, 20] .. [81.9, 24.6], [84, 20] ..
+  ///                         [85.9, 24.6], [96, 20] .. [97.9, 24.6], [102, 7] .. [106.6, 8.9]
+  ///  - cone_apron           (15, -3), r = 0.2, h = 0.5
+  ///  - cone_ramp            (42, 2.5), r = 0.2, h = 0.5
+  ///  - cone_ramp_curb       (48, -3.2), r = 0.15, h = 0.3
+  ///  - cone_road            (70, -3), r = 0.25, h = 0.7
+  ///  - crate_road           [90, 2.5] .. [91.2, 3.5], h = 0.6
+  ///  - cone_under_deck      (112, 3), r = 0.2, h = 0.5
+  static Scene parking_levels();
 
  private:
   std::vector<Object> objects_;
