@@ -10,6 +10,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <unordered_set>
 #include <utility>
@@ -18,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "outputs.hpp"
+#include "run.hpp"
 #include "tarmac/config/cli.hpp"
 #include "tarmac/config/config.hpp"
 #include "tarmac/core/mapper.hpp"
@@ -38,65 +40,11 @@ namespace {
 
 using namespace tarmac;
 
-constexpr int kExitData = 65;
-constexpr int kExitIo = 74;
-constexpr int kExitConfig = 78;
-
-struct Options {
-  std::string dataset, out = "out/map", config, poses = "poses.txt", prior, corrections;
-  std::size_t threads = 2;
-  std::size_t max_scans = 0;  // 0: all
-  double sensor_height_m = 1.9;
-  double fleet_period_s = 0.0;  ///< > 0: encode a fleet summary this often, report its bytes
-  std::string memory_log;       ///< per scan: distance driven, RSS, resident and stored TSDF
-  bool open_ground = false;     ///< score the open flat ground of the returns with a truth too
-};
-
-struct StageTimes {
-  const char* name;
-  std::vector<double> ms;
-};
-
+using namespace map_tool;  // NOLINT(google-build-using-namespace): this tool's own run
 using tools::mean;
 using tools::percentile;
 
 using tools::timed_ms;
-/// Everything the run reads, checked before any work is done.
-struct Inputs {
-  config::Config cfg;
-  tools::KittiSequence seq;
-  std::optional<core::LoadedTsdf> prior;           ///< --prior
-  std::optional<tools::ClearingTracker> clearing;  ///< tarmac-sim's dynamic_boxes.txt
-  /// tarmac-sim's obstacle_columns.txt (ground_cells.txt, curb_columns.txt)
-  std::optional<tools::SafetyTracker> safety;
-  /// Without a truth (real data), or --open-ground: the open flat ground of the drive's returns.
-  std::optional<tools::OpenGroundTracker> open_ground;
-  std::vector<tools::Correction> corrections;  ///< --corrections
-};
-
-/// What the run measured and counted.
-struct Run {
-  std::size_t scans = 0;           ///< scans mapped (--scans, or all)
-  std::int64_t last_stamp_ns = 0;  ///< the last scan's stamp
-  StageTimes t_read{"read", {}}, t_filter{"filter", {}}, t_occ{"occupancy", {}},
-      t_cost{"costmap+esdf2d", {}}, t_tsdf{"tsdf", {}}, t_band{"esdf_band", {}},
-      t_total{"pipeline", {}}, t_spares{"tsdf spares", {}};
-  std::uint64_t tsdf_samples = 0, tsdf_updates = 0;
-  std::uint64_t points_in = 0, points_used = 0, dropped_nonfinite = 0, dropped_close = 0,
-                dropped_ego = 0, dropped_isolated = 0, voxel_visits = 0, promotions = 0,
-                demotions = 0;
-  std::vector<double> rebuild_ms;  ///< per rebuild step that re-integrated scans
-  std::uint64_t jump_corrections = 0;
-  std::size_t next_correction = 0;  ///< --corrections applied so far
-  std::size_t rebuild_steps_after_end = 0;
-  double distance_m = 0.0;  ///< driven (sensor path in x, y)
-  /// --memory-log: one CSV line per scan.
-  std::FILE* memory_log = nullptr;
-  /// tsdf.resident_limit_mb > 0: the TSDF's tiles paged to out/tsdf_tiles.
-  daemon::TsdfPager* pager = nullptr;
-  /// --fleet-period: each summary's wire bytes and whether it was a keyframe.
-  std::vector<std::pair<std::size_t, bool>> fleet_messages;
-};
 
 /// Reads and checks everything the run needs before any work is done: the config, the sequence,
 /// the prior TSDF, the ground truths of tarmac-sim's sequences, the corrections. 0, or the exit
@@ -241,6 +189,40 @@ void log_memory(const Run& run, const core::Mapper& mapper, std::size_t k) {
                static_cast<double>(st.stored_bytes) / kMiB);
 }
 
+/// Scores scan k's costmap against what the dataset holds to score it by: tarmac-sim's truths
+/// (dynamic clearing, safety), or the open flat ground of the drive's returns.
+void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size_t n,
+                const Eigen::Isometry3d& T_W_B, const Eigen::Isometry3d& T_B_S,
+                std::span<const Eigen::Vector3f> points_W) {
+  const tools::KittiSequence& s = in.seq;
+  if (in.clearing) {
+    // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
+    const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
+    in.clearing->observe(
+        static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
+        tools::blind_radius_from_ground(sensor_W, points_W, T_W_B.translation().z()));
+  }
+  if (in.safety) {
+    std::vector<tools::DynamicBox> moving_now;  // the moving objects' boxes at this scan
+    if (in.clearing) {
+      for (const auto& b : in.clearing->truth().boxes) {
+        if (b.scan == static_cast<int>(k)) moving_now.push_back(b);
+      }
+    }
+    // The vehicle's position: the base under the sensor (as tarmac-audit takes it), which on a
+    // slope is not where the pitched base frame puts its origin.
+    in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
+                       s.T_W_S[k].translation().head<2>(), 20.0, moving_now);
+  }
+  if (in.open_ground) {
+    in.open_ground->add(points_W);
+    // Every 10th scan and the last: a full-window pass each.
+    if (k % 10 == 9 || k + 1 == n) {
+      in.open_ground->observe(mapper.costmap().costmap, static_cast<int>(k));
+    }
+  }
+}
+
 /// Maps the sequence scan by scan through the daemon's stages (daemon::Cycle), applying the
 /// corrections and feeding the ground-truth trackers; a rebuild still running after the last
 /// scan is finished. Exits with kExitData on a scan it cannot read.
@@ -248,7 +230,6 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
                   Run& run) {
   const core::MapperParams& params = in.cfg.mapping;
   const config::Config& cfg = in.cfg;
-  std::vector<tools::DynamicBox> moving_now;  // the moving objects' boxes at the current scan
   daemon::Cycle cycle(mapper, pool, daemon::Cycle::Quotas{cfg.quotas.tsdf_points_per_cycle});
   cycle.page_tsdf(run.pager);
   core::PoseJumpDetector jumps(params.corrections);
@@ -328,32 +309,7 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     cycle.update_esdf_band({}, cloud.stamp_ns);
     const double f_ms = r.ingest_ms, o_ms = r.integrate_ms, tsdf_ms = r.tsdf_ms;
     const double c_ms = cycle.tick().costmap_ms, b_ms = cycle.tick().esdf_band_ms;
-    if (in.clearing) {
-      // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
-      const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
-      in.clearing->observe(
-          static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
-          tools::blind_radius_from_ground(sensor_W, scan.points_W, T_W_B.translation().z()));
-    }
-    if (in.safety) {
-      moving_now.clear();
-      if (in.clearing) {
-        for (const auto& b : in.clearing->truth().boxes) {
-          if (b.scan == static_cast<int>(k)) moving_now.push_back(b);
-        }
-      }
-      // The vehicle's position: the base under the sensor (as tarmac-audit takes it), which on a
-      // slope is not where the pitched base frame puts its origin.
-      in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
-                         s.T_W_S[k].translation().head<2>(), 20.0, moving_now);
-    }
-    if (in.open_ground) {
-      in.open_ground->add(scan.points_W);
-      // Every 10th scan and the last: a full-window pass each.
-      if (k % 10 == 9 || k + 1 == n) {
-        in.open_ground->observe(mapper.costmap().costmap, static_cast<int>(k));
-      }
-    }
+    score_scan(in, mapper, k, n, T_W_B, T_B_S, scan.points_W);
     run.promotions += occ.promotions;
     run.demotions += occ.demotions;
     run.t_filter.ms.push_back(f_ms);
