@@ -315,6 +315,20 @@ int nav2_static_layer(std::int8_t value, bool track_unknown_space, bool trinary_
   return static_cast<unsigned char>(static_cast<double>(v) / kLethalThreshold * 254);
 }
 
+/// The costmap of `points` seen three times from a sensor 2 m up at the origin (the apron's
+/// window), under the any-voxel rule (nothing above the sensor is seen here).
+CostmapLayers terrain_costmap(const std::vector<Eigen::Vector3f>& points) {
+  OccupancyMap map(test::apron_window_params());
+  map.recenter(Eigen::Vector3d::Zero());
+  SerialRunner runner;
+  for (int i = 0; i < 3; ++i) map.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
+  CostmapParams cp;
+  cp.free_rule = FreeRule::kAnyVoxel;
+  CostmapLayers layers;
+  build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers, runner);
+  return layers;
+}
+
 TEST(Terrain, GradesBothWaysAreGround_ObjectOnTheGradeBlocks) {
   // The vehicle on a flat 4 m wide strip at the origin; beyond x = 2 the ground climbs at 15 %
   // (1.5 m above the wheels' plane at x = 12), beyond x = −2 it falls at 15 %: both leave any
@@ -323,8 +337,6 @@ TEST(Terrain, GradesBothWaysAreGround_ObjectOnTheGradeBlocks) {
   const auto height = [](float x) {
     return x > 2.0f ? 0.15f * (x - 2.0f) : (x < -2.0f ? -0.15f * (-2.0f - x) : 0.0f);
   };
-  OccupancyMap map(test::apron_window_params());
-  map.recenter(Eigen::Vector3d::Zero());
   std::vector<Eigen::Vector3f> points;
   for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
     for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
@@ -332,12 +344,7 @@ TEST(Terrain, GradesBothWaysAreGround_ObjectOnTheGradeBlocks) {
     }
   }
   test::add_box(points, {7.9f, 2.9f, height(7.9f) + 0.05f}, {8.1f, 3.1f, height(8.1f) + 0.55f});
-  SerialRunner runner;
-  for (int i = 0; i < 3; ++i) map.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
-  CostmapParams cp;
-  cp.free_rule = FreeRule::kAnyVoxel;  // nothing above the sensor is seen here
-  CostmapLayers layers;
-  build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers, runner);
+  const CostmapLayers layers = terrain_costmap(points);
   const auto cost_at = [&](double x, double y) {
     const auto cell = layers.costmap.geometry().cell_of(x, y);
     return layers.costmap.at(static_cast<std::uint32_t>(cell->x()),
@@ -371,8 +378,6 @@ TEST(Terrain, TheGroundSpreadsAcrossTheEmptyCellsBetweenFarRings) {
   // A 15 % climb beyond x = 2 seen only in rings 3 m apart beyond x = 4 (far from a sensor the
   // beams' rings leave empty ground cells between them): the spread crosses the gaps, and the
   // rings on the climb are ground, not a row of walls.
-  OccupancyMap map(test::apron_window_params());
-  map.recenter(Eigen::Vector3d::Zero());
   std::vector<Eigen::Vector3f> points;
   for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
     const float fx = x + 0.013f;
@@ -381,12 +386,7 @@ TEST(Terrain, TheGroundSpreadsAcrossTheEmptyCellsBetweenFarRings) {
       points.emplace_back(fx, y + 0.017f, (fx > 2.0f ? 0.15f * (fx - 2.0f) : 0.0f) + 0.05f);
     }
   }
-  SerialRunner runner;
-  for (int i = 0; i < 3; ++i) map.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
-  CostmapParams cp;
-  cp.free_rule = FreeRule::kAnyVoxel;
-  CostmapLayers layers;
-  build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers, runner);
+  const CostmapLayers layers = terrain_costmap(points);
   std::size_t lethal = 0;
   for (std::uint32_t y = 0; y < layers.costmap.height(); ++y) {
     for (std::uint32_t x = 0; x < layers.costmap.width(); ++x) {
@@ -399,8 +399,6 @@ TEST(Terrain, TheGroundSpreadsAcrossTheEmptyCellsBetweenFarRings) {
 TEST(Terrain, AStepAboveMaxGroundStepIsNoGround_ItsTopBlocks) {
   // A loading dock 1.2 m high (a solid block from x = 5 to 11), its top seen: the climb onto it
   // is a step of 1.2 m, more than max_ground_step_m (0.5), so its top is not ground and blocks.
-  OccupancyMap map(test::apron_window_params());
-  map.recenter(Eigen::Vector3d::Zero());
   std::vector<Eigen::Vector3f> points;
   for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
     for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
@@ -408,12 +406,7 @@ TEST(Terrain, AStepAboveMaxGroundStepIsNoGround_ItsTopBlocks) {
       points.emplace_back(x + 0.013f, y + 0.017f, dock ? 1.25f : 0.05f);
     }
   }
-  SerialRunner runner;
-  for (int i = 0; i < 3; ++i) map.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), points, {}, runner);
-  CostmapParams cp;
-  cp.free_rule = FreeRule::kAnyVoxel;
-  CostmapLayers layers;
-  build_costmap(map, cp, Eigen::Isometry3d::Identity(), {}, 0, layers, runner);
+  const CostmapLayers layers = terrain_costmap(points);
   const auto cell = layers.costmap.geometry().cell_of(8.0, 0.0);
   EXPECT_EQ(layers.costmap.at(static_cast<std::uint32_t>(cell->x()),
                               static_cast<std::uint32_t>(cell->y())),
