@@ -14,6 +14,7 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/sim_poses.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
 
@@ -396,21 +397,7 @@ ScanPointsS read_scan(const std::filesystem::path& file) {
   return scan;
 }
 
-std::vector<Eigen::Isometry3d> read_poses(const std::filesystem::path& file) {
-  std::vector<Eigen::Isometry3d> poses;
-  std::ifstream in(file);
-  std::string line;
-  while (std::getline(in, line)) {
-    std::istringstream s(line);
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 4; ++c) s >> T.matrix()(r, c);
-    }
-    EXPECT_TRUE(static_cast<bool>(s)) << line;
-    poses.push_back(T);
-  }
-  return poses;
-}
+using tarmac::test::read_sim_poses;
 
 TEST(WriteSequence, SameArguments_ByteIdenticalOutput) {
   SequenceParams params;
@@ -453,7 +440,7 @@ TEST(WriteSequence, RewriteWithFewerScans_RemovesStaleScans) {
   for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir.path / "scans"))
     ++files;
   EXPECT_EQ(files, 2);
-  EXPECT_EQ(read_poses(dir.path / "poses.txt").size(), 2u);
+  EXPECT_EQ(read_sim_poses(dir.path / "poses.txt").size(), 2u);
 }
 
 /// Every point of every scan, moved into the scene frame with its pose, lies on the scene
@@ -468,7 +455,7 @@ void expect_points_on_scene_surfaces(double tilt_deg) {
   ASSERT_TRUE(result.ok()) << result.error;
   ASSERT_EQ(result.summary.scans, 11);
 
-  const auto poses = read_poses(dir.path / "poses.txt");
+  const auto poses = read_sim_poses(dir.path / "poses.txt");
   ASSERT_EQ(poses.size(), 11u);
   std::ifstream times(dir.path / "times.txt");
   const Eigen::Isometry3d T_W_O = params.T_O_W().inverse();

@@ -18,6 +18,7 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/sim_poses.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
 #include "tarmac/sim/scene_catalog.hpp"
@@ -228,20 +229,7 @@ std::string read_bytes(const std::filesystem::path& file) {
   return s.str();
 }
 
-std::vector<Eigen::Isometry3d> read_poses(const std::filesystem::path& file) {
-  std::vector<Eigen::Isometry3d> poses;
-  std::ifstream in(file);
-  std::string line;
-  while (std::getline(in, line)) {
-    std::istringstream s(line);
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 4; ++c) s >> T.matrix()(r, c);
-    }
-    poses.push_back(T);
-  }
-  return poses;
-}
+using tarmac::test::read_sim_poses;
 
 /// A fresh directory under the temp dir, removed on destruction.
 struct TempDir {
@@ -281,8 +269,8 @@ TEST_P(DriftZ, ShiftsTheWrittenPosesOnly_ToMAtTheEnd) {
                            "obstacle_columns.txt", "scene.json", "times.txt"}) {
     EXPECT_EQ(read_bytes(true_dir.path / name), read_bytes(drifted_dir.path / name)) << name;
   }
-  const auto truth = read_poses(true_dir.path / "poses.txt");
-  const auto written = read_poses(drifted_dir.path / "poses.txt");
+  const auto truth = read_sim_poses(true_dir.path / "poses.txt");
+  const auto written = read_sim_poses(drifted_dir.path / "poses.txt");
   ASSERT_EQ(truth.size(), 5u);
   ASSERT_EQ(written.size(), 5u);
   for (int i = 0; i < 5; ++i) {
@@ -327,7 +315,7 @@ TEST(WriteSequence, TerrainScenes_PointsInSensorFrameLieOnSceneSurfaces) {
     TempDir dir(name);
     const SequenceResult result = write_sequence(drive->scene, params, dir.path);
     ASSERT_TRUE(result.ok()) << result.error;
-    const auto poses = read_poses(dir.path / "poses.txt");
+    const auto poses = read_sim_poses(dir.path / "poses.txt");
     ASSERT_EQ(poses.size(), 8u);
     std::size_t checked = 0;
     for (int i = 0; i < 8; ++i) {
