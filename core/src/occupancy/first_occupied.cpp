@@ -184,7 +184,10 @@ void OccupancyMap::refresh_bricks(int rows) {
       }
       const std::size_t b = brick_of_ring(bx * kBrick, by * kBrick, bz * kBrick);
       const std::uint64_t bit = std::uint64_t{1} << (b & 63);
-      brick_bits_[b >> 6] = occupied ? (brick_bits_[b >> 6] | bit) : (brick_bits_[b >> 6] & ~bit);
+      const std::uint64_t word =
+          occupied ? (brick_bits_[b >> 6] | bit) : (brick_bits_[b >> 6] & ~bit);
+      bricks_dirty_ = bricks_dirty_ || word != brick_bits_[b >> 6];  // the skips follow a change
+      brick_bits_[b >> 6] = word;
     }
   }
 }

@@ -344,7 +344,7 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   miss_occupied(runner, stats);
   // The walks of the next scan's beams without return (first_occupied) read the bricks.
   refresh_bricks(kBrickRowsPerScan);
-  update_brick_skips();
+  if (bricks_dirty_) update_brick_skips();
 
   stats.rays = n_rays;
   for (const auto v : task_visits) stats.voxel_visits += v;
