@@ -358,7 +358,7 @@ class OccupancyMap {
   /// without return passes through is empty, and these 12 KB (default window) stay in cache
   /// where the log-odds (25 MB) do not. They decide how fast the walk goes, never its result.
   std::vector<std::uint8_t> brick_skip_;
-  bool bricks_dirty_ = false;                    ///< a brick was flagged since update_brick_skips()
+  bool bricks_dirty_ = false;                    ///< a flag changed since update_brick_skips()
   std::vector<std::uint8_t> brick_row_scratch_;  ///< update_brick_skips()' distances along x
 };
 
