@@ -646,7 +646,6 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
   int kills_inside_a_save = 0;
   std::vector<SaveLine> previous_completed, previous_started;
   double previous_kill_s = 0.0;
-  int previous_skipped = 0;
   for (int round = 0; round <= kKills; ++round) {
     SCOPED_TRACE("round " + std::to_string(round));
     NotifySocket notify(dir / "notify.sock");
@@ -671,18 +670,22 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
                              load.voxels == previous_started.back().voxels;
       EXPECT_TRUE(last_complete || in_flight)
           << "loaded " << load.voxels << " voxels stamped " << load.stamp_ns;
-      // At most one save period of mapping lost: the snapshot loaded was taken (its save's
-      // start line) less than a save period before the kill — plus one more for each periodic
-      // save the killed run skipped because the previous one was still writing (a loaded
-      // machine), and a margin for the save in flight.
+      // At most one save period of mapping lost, counted in saves, not seconds: the snapshot
+      // loaded is the latest save started, or the one before it when the kill cut that one
+      // short. (Saves come every save_period_s of ticks; a loaded machine that overruns ticks
+      // stretches the period in wall time: a bound in seconds failed there, 2.1 s for 2.)
       const auto loaded =
           std::find_if(previous_started.begin(), previous_started.end(), [&](const SaveLine& l) {
             return l.stamp_ns == load.stamp_ns && l.voxels == load.voxels;
           });
       ASSERT_NE(loaded, previous_started.end());
+      const auto started_after = std::distance(loaded, previous_started.end()) - 1;
       double lost_s = previous_kill_s - loaded->logged_s;
       if (lost_s < 0.0) lost_s += 86400.0;  // across midnight
-      EXPECT_LT(lost_s, kSavePeriodS * static_cast<double>(1 + previous_skipped) + 1.0 * kS);
+      EXPECT_LE(started_after, 1) << "lost " << lost_s << " s of mapping";
+      std::printf("round %d: the loaded save started %.2f s before the kill, %td started after it\n",
+                  round, lost_s, started_after);
+      std::fflush(stdout);  // before the next fork, or the child writes it again
       EXPECT_FALSE(fs::exists(partial)) << "the cut-short save was not cleared at start";
     }
     if (round == kKills) {
@@ -718,11 +721,6 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
     log = read_file(dir / "tarmacd.log");
     previous_completed = saves_in(log, true);
     previous_started = saves_in(log, false);
-    previous_skipped = 0;
-    for (std::size_t at = log.find("periodic TSDF save skipped"); at != std::string::npos;
-         at = log.find("periodic TSDF save skipped", at + 1)) {
-      ++previous_skipped;
-    }
     ASSERT_GE(previous_completed.size(), round < 2 ? 2u : 1u) << log;
     if (round >= 2 && previous_started.size() > previous_completed.size()) ++kills_inside_a_save;
   }
