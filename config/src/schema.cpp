@@ -410,7 +410,8 @@ std::vector<Key> make_schema() {
                "beams beyond max range or without return clear this far",
                [](Config& c) -> Field { return &c.mapping.occupancy.clearing_range_m; }),
           real("occupancy.ground_radius_m", 0.0, 10.0, "m",
-               "heights above ground are taken against the lowest return within this radius",
+               "heights above ground are taken against the second-lowest return of the scan "
+               "within this radius",
                [](Config& c) -> Field { return &c.mapping.occupancy.ground_radius_m; }),
           integer("occupancy.static_promote_scans", 0, 127, "scans",
                   "consecutive hits that make a voxel static; 0: no static layer",
@@ -439,9 +440,9 @@ std::vector<Key> make_schema() {
                [](Config& c) -> Field { return &c.mapping.costmap.ground_cell_m; }),
           real("costmap.max_ground_step_m", 0.01, 10.0, "m",
                "ground spreads from cell to neighbouring cell (`ground_cell_m`) only across steps "
-               "up "
-               "or down of at most this; a higher step (a dock, a truck roof, a wing with nothing "
-               "seen under it) is not ground",
+               "up or down of at most this; a higher step (a dock, a truck roof, a wing with "
+               "nothing seen under it) is not ground, and a column observed more than this below "
+               "its ground (a dock edge falling away, a pit) is lethal",
                [](Config& c) -> Field { return &c.mapping.costmap.max_ground_step_m; }),
           real("costmap.max_ground_slope", 0.0, 1.0, "",
                "the seed cells of the ground (within 4 m of the vehicle) lie within "

@@ -93,6 +93,7 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   for (auto& c : candidates_) c.reserve(4096);  // per scan and task; grows once if more
   scan_ground_z_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y(),
                         std::numeric_limits<float>::infinity());
+  scan_ground2_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
   scan_ground_near_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
   const std::size_t words = (n + 63) / 64;
   hit_bits_.assign(words, 0);
@@ -142,7 +143,8 @@ std::size_t OccupancyMap::memory_bytes() const {
   std::size_t bytes =
       log_odds_.capacity() * sizeof(float) + rise_cm_.capacity() + state_.capacity() +
       hit_floor_.capacity() + scan_rays_.memory_bytes() + static_bytes() +
-      (scan_ground_z_.capacity() + scan_ground_near_z_.capacity()) * sizeof(float) +
+      (scan_ground_z_.capacity() + scan_ground2_z_.capacity() + scan_ground_near_z_.capacity()) *
+          sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
       (hit_bits_.capacity() + floor_bits_.capacity()) * sizeof(std::uint64_t) +
       hit_slots_.capacity() * sizeof(std::uint32_t) +

@@ -417,6 +417,82 @@ TEST(Terrain, AStepAboveMaxGroundStepIsNoGround_ItsTopBlocks) {
       << "the dock's top is not its ground";
 }
 
+TEST(Terrain, ADropBeyondMaxGroundStepIsAHazard_TheGroundBeforeItIsNot) {
+  // The vehicle on a dock: beyond x = 5 the ground falls away 1.2 m to the road below (no slope
+  // joins them), and a pit 1 m deep, 2 m square, lies at (−6, 0). Only what the sensor (2 m up
+  // at the origin) sees is returned: the road from x = 8 on (the dock's edge hides the rest), the
+  // pit's far wall. The rays into both pass more than max_ground_step_m (0.5) below the ground:
+  // a vehicle that drove on would fall, and those cells read lethal; the dock's top is ground.
+  const auto height = [](float x, float y) {
+    if (x > 5.0f) return -1.2f;
+    return std::abs(x + 6.0f) < 1.0f && std::abs(y) < 1.0f ? -1.0f : 0.0f;
+  };
+  const Eigen::Vector3f sensor(0.05f, 0.05f, 2.0f);
+  const auto visible = [&](const Eigen::Vector3f& p) {
+    const int steps = static_cast<int>((p - sensor).head<2>().norm() / 0.05f);
+    for (int k = 1; k < steps; ++k) {
+      const Eigen::Vector3f q = sensor + (p - sensor) * (static_cast<float>(k) / steps);
+      if (q.z() < height(q.x(), q.y()) - 1e-3f) return false;
+    }
+    return true;
+  };
+  std::vector<Eigen::Vector3f> points;
+  for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+    for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
+      const Eigen::Vector3f p(x + 0.013f, y + 0.017f, 0.0f);
+      const Eigen::Vector3f ground(p.x(), p.y(), height(p.x(), p.y()) + 0.05f);
+      if (visible(ground)) points.push_back(ground);
+    }
+  }
+  for (float y = -1.0f; y <= 1.0f; y += 0.1f) {  // the pit's far wall faces the sensor
+    for (float z = -0.95f; z <= 0.0f; z += 0.1f) {
+      const Eigen::Vector3f wall(-6.98f, y + 0.017f, z);
+      if (visible(wall)) points.push_back(wall);
+    }
+  }
+  const CostmapLayers layers = terrain_costmap(points);
+  const auto cost_at = [&](double x, double y) {
+    const auto cell = layers.costmap.geometry().cell_of(x, y);
+    return layers.costmap.at(static_cast<std::uint32_t>(cell->x()),
+                             static_cast<std::uint32_t>(cell->y()));
+  };
+  for (const double y : {-8.0, -3.0, 0.0, 4.0, 8.0}) {
+    EXPECT_EQ(cost_at(6.9, y), kCostLethal) << "over the road below the edge, y = " << y;
+    EXPECT_EQ(cost_at(9.0, y), kCostLethal) << "the road below, y = " << y;
+    EXPECT_NE(cost_at(4.5, y), kCostLethal) << "the dock's top before its edge, y = " << y;
+  }
+  EXPECT_EQ(cost_at(-6.7, 0.0), kCostLethal) << "the pit";
+  EXPECT_NE(cost_at(-6.0, 3.0), kCostLethal) << "the ground beside it";
+}
+
+TEST(Terrain, AStrayReturnBelowTheFloorLiftsNothingIntoAnObstacle) {
+  // A glossy floor returns the odd point well below itself (a reflection, a mixed pixel): the
+  // floor round it must not rise above that point into a ring of low objects. Real floors did
+  // this (balm_hall: a few strays a scan, 5–30 cm under the floor); a 10 cm box still blocks.
+  std::vector<Eigen::Vector3f> points;
+  for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+    for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
+      points.emplace_back(x + 0.013f, y + 0.017f, 0.05f);
+    }
+  }
+  points.emplace_back(4.01f, 0.01f, -0.2f);
+  points.emplace_back(-3.01f, 5.01f, -0.15f);
+  test::add_box(points, {6.9f, -3.1f, 0.05f}, {7.1f, -2.9f, 0.15f});
+  const CostmapLayers layers = terrain_costmap(points);
+  const auto cost_at = [&](double x, double y) {
+    const auto cell = layers.costmap.geometry().cell_of(x, y);
+    return layers.costmap.at(static_cast<std::uint32_t>(cell->x()),
+                             static_cast<std::uint32_t>(cell->y()));
+  };
+  EXPECT_EQ(cost_at(7.0, -3.0), kCostLethal) << "the box";
+  for (double dx = -0.4; dx <= 0.41; dx += 0.2) {
+    for (double dy = -0.4; dy <= 0.41; dy += 0.2) {
+      EXPECT_NE(cost_at(4.0 + dx, dy), kCostLethal) << dx << ", " << dy;
+      EXPECT_NE(cost_at(-3.0 + dx, 5.0 + dy), kCostLethal) << dx << ", " << dy;
+    }
+  }
+}
+
 TEST(DistanceDisplay, ShadesDistanceLinearly_UnknownStaysUnknown) {
   DistanceField field;
   field.dims = {6, 1, 1};

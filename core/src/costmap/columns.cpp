@@ -85,6 +85,7 @@ struct ColumnRules {
             std::ceil((pass.params.vehicle_height_m + pass.params.clearance_m) / pass.v + 0.5))),
         min_rise_cm(static_cast<int>(std::ceil(pass.params.min_obstacle_height_m * 100.0 - 1e-9))),
         whole_envelope(pass.params.free_rule == FreeRule::kWholeEnvelope),
+        drop_layers(static_cast<float>(pass.params.max_ground_step_m / pass.v)),
         v(pass.v),
         wmin_z(pass.wmin.z()),
         ground_first(-pass.nz),
@@ -120,6 +121,13 @@ struct ColumnRules {
   [[nodiscard]] bool observed_count(int known, int gl) const {
     return whole_envelope ? gl >= 0 && gl + top_layers <= nz && known == top_layers : known != 0;
   }
+  /// Whether a column falls away: observed (a return, or a ray passing) more than
+  /// max_ground_step_m below its ground estimate. The edge of a loading dock, a pit, a level
+  /// below seen over a parapet: the ground did not spread there (no slope joins it), and a
+  /// vehicle that drove on would fall, whether the bottom returned or not.
+  [[nodiscard]] bool drops(int lowest_observed, int estimate) const {
+    return lowest_observed >= 0 && static_cast<float>(estimate - lowest_observed) > drop_layers;
+  }
   /// Whether ring slot `sl` holds a low object in layers [z0, z1).
   [[nodiscard]] bool rises(std::size_t sl, int z0, int z1) const {
     bool rise = false;
@@ -134,6 +142,7 @@ struct ColumnRules {
   const OccupancyMap& map;
   int nz, lo_layers, top_layers, min_rise_cm;
   bool whole_envelope;
+  float drop_layers;
   double v;
   int wmin_z;
   std::array<const std::uint8_t*, 64> rise_layers{};
@@ -153,6 +162,7 @@ void classify_rows_by_bits(const CostmapPass& pass, const ColumnRules& rules,
   float* __restrict ground_z = out.ground_z_m.cells().data();
   std::int16_t* __restrict ground_of = out.ground_layer.data();
   const std::int16_t* __restrict low_of = out.lowest_occupied.data();
+  const std::int16_t* __restrict seen_of = out.lowest_observed.data();
   std::uint8_t* __restrict cls = out.column_class.cells().data();
   CellState* __restrict esdf_in = out.esdf_input.data();
   const std::uint32_t* __restrict occ_bits = out.occupied_bits.data();
@@ -174,7 +184,8 @@ void classify_rows_by_bits(const CostmapPass& pass, const ColumnRules& rules,
         const std::uint64_t known = obs_bits[sl] | std::uint64_t{obs_bits[pass.cells_n + sl]} << 32;
         const std::uint64_t occupied = occ_bits[sl] | std::uint64_t{occ_bits[pass.cells_n + sl]}
                                                           << 32;
-        const bool obstacle = (occupied & e.obstacle_mask) != 0;
+        const bool obstacle =
+            (occupied & e.obstacle_mask) != 0 || rules.drops(seen_of[i], estimate);
         // A low object blocks whatever the free rule says of the rest of the envelope.
         const bool low =
             !obstacle && (known & e.seen_mask) != 0 && rules.rises(sl, e.rise_begin, e.rise_end);
@@ -237,11 +248,14 @@ void classify_rows_by_layers(const CostmapPass& pass, const ColumnRules& rules,
       const std::size_t i = static_cast<std::size_t>(y) * nx + x;
       const int gl = ground_layer[i];
       const bool seen = rules.observed_count(any_known[i], gl);
+      const int estimate =
+          static_cast<int>(estimates[static_cast<std::size_t>(y / pass.g) * pass.gx + x / pass.g]);
+      const bool drop = rules.drops(out.lowest_observed[i], estimate);
       // A low object blocks whatever the free rule says of the rest of the envelope.
       const bool low =
           any_obstacle[i] == 0 && any_known[i] != 0 &&
           rules.rises(ring_row + rx, std::max(0, gl), std::min(pass.nz, gl + rules.lo_layers));
-      classes[i] = column_class(any_obstacle[i] != 0 || low, seen);
+      classes[i] = column_class(any_obstacle[i] != 0 || drop || low, seen);
       out.esdf_input[i] = esdf_state(classes[i]);
     }
   }

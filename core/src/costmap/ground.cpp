@@ -124,9 +124,10 @@ void find_ground_candidates(const CostmapPass& pass) {
   known_bits.resize(use_bits ? 2 * cells_n : 0);
   if (use_bits) {
     lowest.resize(cells_n);  // every cell is written below
+    out.lowest_observed.resize(cells_n);
   } else {
     lowest.assign(cells_n, -1);
-    out.ground_layer.assign(cells_n, -1);
+    out.lowest_observed.assign(cells_n, -1);
   }
   // Each layer's storage, looked up once per call.
   std::array<const float*, 64> layer_data{};
@@ -151,7 +152,7 @@ void find_ground_candidates(const CostmapPass& pass) {
     }
     // Top down, overwriting: what stays is the lowest occupied layer. A plain select per cell,
     // which the compiler vectorises (the "first occupied from below" test did not).
-    std::int16_t* observed = out.ground_layer.data();  // scratch until step 3
+    std::int16_t* observed = out.lowest_observed.data();
     for (int z = nz - 1; z >= 0; --z) {
       const float* layer = map.ring_layer(z);
       const auto zz = static_cast<std::int16_t>(z);
@@ -174,11 +175,13 @@ void find_ground_candidates(const CostmapPass& pass) {
       for (int y = y0; y < y1; ++y) {
         const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
         std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+        std::int16_t* seen = &out.lowest_observed[static_cast<std::size_t>(y) * nx];
         for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
           const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
           const std::uint64_t b = occupied_bits[sl] | std::uint64_t{occupied_bits[cells_n + sl]}
                                                           << 32;
           const std::uint64_t k = known_bits[sl] | std::uint64_t{known_bits[cells_n + sl]} << 32;
+          seen[x] = k == 0 ? std::int16_t{-1} : static_cast<std::int16_t>(std::countr_zero(k));
           low[x] = b == 0 ? std::int16_t{-1}
                           : ground_candidate(std::countr_zero(b), std::countr_zero(k));
         }

@@ -110,6 +110,7 @@ void OccupancyMap::hit_heights(std::span<const Eigen::Vector3f> points_W,
   const std::size_t n_points = points_W.size();
   for (std::size_t k = 0; k < n_ground_cols_; ++k) {
     scan_ground_z_[scan_ground_cols_[k]] = kNoGround;
+    scan_ground2_z_[scan_ground_cols_[k]] = kNoGround;
   }
   n_ground_cols_ = 0;
   // Heights, and the lowest return per column, in point order. A column's first return books
@@ -123,6 +124,7 @@ void OccupancyMap::hit_heights(std::span<const Eigen::Vector3f> points_W,
   std::uint32_t* const touched = scan_ground_cols_.data();
   std::size_t n_touched = 0;
   float* const ground = scan_ground_z_.data();
+  float* const ground2 = scan_ground2_z_.data();
   float* const height_of_hit = hit_height_.data();
   const std::uint32_t* const column_of_hit = hit_column_.data();
   for (std::size_t i = 0; i < n_points; ++i) {
@@ -134,6 +136,7 @@ void OccupancyMap::hit_heights(std::span<const Eigen::Vector3f> points_W,
     touched[n_touched] = column;
     n_touched += g == kNoGround ? 1 : 0;
     ground[column] = std::min(g, height);
+    ground2[column] = std::min(ground2[column], std::max(g, height));
   }
   n_ground_cols_ = n_touched;
 }
@@ -141,23 +144,29 @@ void OccupancyMap::hit_heights(std::span<const Eigen::Vector3f> points_W,
 void OccupancyMap::hit_rises(std::size_t n_points) {
   const int nx = dims_.x(), ny = dims_.y();
   const std::uint32_t* const slot_of_hit = hit_slot_.data();
-  // Rise above the lowest return of this scan within ground_radius_m (an object cannot hide
-  // the ground around it). Once per column the scan touched (returns stack up in columns:
-  // walls, poles), then per return; a return's own column is among them, so its ground is at
-  // most its height.
+  // Rise above the second-lowest return of this scan within ground_radius_m (an object cannot
+  // hide the ground around it): one stray return below the ground (a reflection off a glossy
+  // floor, a mixed pixel) would otherwise lift every return round it by its depth; a ring
+  // crossing the ground there gives many returns. The lowest where it is the only one. Once
+  // per column the scan touched (returns stack up in columns: walls, poles), then per return;
+  // a return's own column is among them, so its ground is at most its height unless it is the
+  // lowest there (a rise below zero reads as none).
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
   for (std::size_t k = 0; k < n_ground_cols_; ++k) {
     const std::uint32_t c = scan_ground_cols_[k];
     const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
     const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
-    float ground_z = kNoGround;
+    float lowest = kNoGround, second = kNoGround;
     for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
-      const float* row = &scan_ground_z_[static_cast<std::size_t>(y) * nx];
+      const std::size_t row = static_cast<std::size_t>(y) * nx;
       for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
-        ground_z = std::min(ground_z, row[x]);
+        const float g = scan_ground_z_[row + x];
+        second = std::min(second, std::max(lowest, g));
+        lowest = std::min(lowest, g);
+        second = std::min(second, scan_ground2_z_[row + x]);
       }
     }
-    scan_ground_near_z_[c] = ground_z;
+    scan_ground_near_z_[c] = second == kNoGround ? lowest : second;
   }
   // The loops that store bytes read through locals: a byte store may alias anything, and the
   // compiler would reload every member after each.

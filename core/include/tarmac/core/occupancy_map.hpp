@@ -52,8 +52,9 @@ struct OccupancyParams {
   double max_range_m = 50.0;
   /// How far a beam with no return (or beyond max range) clears free space.
   double clearing_range_m = 30.0;
-  /// Heights of returns above the ground are taken against the lowest return of the same scan
-  /// within this horizontal radius (a beam that grazes a 10 cm object at range d from a sensor
+  /// Heights of returns above the ground are taken against the second-lowest return of the same
+  /// scan within this horizontal radius (one stray return below the ground does not count; a
+  /// beam that grazes a 10 cm object at range d from a sensor
   /// h up lands on the ground 0.1·d/h further: with 0.4 m and a sensor 2 m up, 10 cm debris is
   /// marked from the scans taken within about 8 m of it; larger radii met road camber and
   /// noise on real data, tests/data).
@@ -180,7 +181,8 @@ class OccupancyMap {
   [[nodiscard]] const float* ring_layer(int wz) const;
   /// Height of the latest returns above the local ground of their own scan, per voxel, in the
   /// same ring order as ring_layer(): the highest return of the latest scan that hit the voxel,
-  /// in cm above the lowest return of that scan within ground_radius_m of it (0..255; 0 also where
+  /// in cm above the second-lowest return of that scan within ground_radius_m of it (the lowest
+  /// where it is alone there; 0..255; 0 also where
   /// nothing was returned). Heights within one sweep share one pose, so pose error between
   /// scans cannot look like an object, and they stay after grazing rays clear the voxel (rays
   /// through the empty upper part of a 20 cm voxel over 10 cm debris do not contradict it). The
@@ -249,9 +251,9 @@ class OccupancyMap {
   /// not finite, beyond max range or outside the window); returns those outside the window.
   std::uint64_t hit_voxels(const Eigen::Vector3d& origin_W,
                            std::span<const Eigen::Vector3f> points_W);
-  /// Each return's height along `up` and the scan's lowest return per window column.
+  /// Each return's height along `up` and the scan's two lowest returns per window column.
   void hit_heights(std::span<const Eigen::Vector3f> points_W, const Eigen::Vector3f& up);
-  /// Each return's rise (cm) above the scan's lowest return within ground_radius_m.
+  /// Each return's rise (cm) above the scan's second-lowest return within ground_radius_m.
   void hit_rises(std::size_t n_points);
   /// One hit per voxel in point order, its static-layer state and its sub-voxel heights.
   void apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdateStats& stats);
@@ -301,10 +303,11 @@ class OccupancyMap {
   std::vector<std::uint8_t> miss_decision_;
   std::vector<std::vector<std::uint32_t>> kept_;  ///< per slab task, leaving slots kept as static
   std::vector<std::uint64_t> taken_keys_;         ///< take_static_columns' scratch
-  /// Per scan: lowest return height per window column (m along the up axis, +inf where none)
-  /// and the columns that hold one (reset next scan).
-  std::vector<float> scan_ground_z_;
-  /// Per scan, for the columns that hold a return: the lowest return within ground_radius_m.
+  /// Per scan: the lowest and second-lowest return heights per window column (m along the up
+  /// axis, +inf where none) and the columns that hold one (reset next scan).
+  std::vector<float> scan_ground_z_, scan_ground2_z_;
+  /// Per scan, for the columns that hold a return: the ground under a return's rise, the
+  /// second-lowest return within ground_radius_m (see hit_rises()).
   std::vector<float> scan_ground_near_z_;
   std::vector<std::uint32_t> scan_ground_cols_;  ///< the first n_ground_cols_ (no per-scan fill)
   std::size_t n_ground_cols_ = 0;
