@@ -223,6 +223,22 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
   }
 }
 
+/// The vehicle base under a sensor at T_W_S. A vehicle's sensor is fixed to it: the base is the
+/// sensor's frame moved down sensor_height_m along the sensor's own z. A handheld or
+/// cart-carried sensor (--level-base) tilts on its carrier: the base keeps only the sensor's
+/// heading and stands level in the world frame, which must then be gravity-aligned (e.g.
+/// balm_hall's poses_leveled.txt); else the map's "up" would tilt with the hand and a flat
+/// floor would read as a slope rising into obstacles.
+Eigen::Isometry3d base_pose(const Options& opt, const Eigen::Isometry3d& T_W_S) {
+  if (!opt.level_base) return T_W_S * Eigen::Translation3d(0.0, 0.0, -opt.sensor_height_m);
+  Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
+  const Eigen::Matrix3d& R = T_W_S.linear();
+  T_W_B.linear() = Eigen::AngleAxisd(std::atan2(R(1, 0), R(0, 0)), Eigen::Vector3d::UnitZ())
+                       .toRotationMatrix();
+  T_W_B.translation() = T_W_S.translation() - opt.sensor_height_m * Eigen::Vector3d::UnitZ();
+  return T_W_B;
+}
+
 /// Maps the sequence scan by scan through the daemon's stages (daemon::Cycle), applying the
 /// corrections and feeding the ground-truth trackers; a rebuild still running after the last
 /// scan is finished. Exits with kExitData on a scan it cannot read.
@@ -234,8 +250,6 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
   cycle.page_tsdf(run.pager);
   core::PoseJumpDetector jumps(params.corrections);
   std::optional<Eigen::Vector3d> last_sensor_W;
-  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
-  T_B_S.translation().z() = opt.sensor_height_m;
   // --fleet-period: this vehicle's summaries as tarmacd would send them (a keyframe every
   // kKeyframeEvery messages), to measure their bytes; no peers.
   constexpr std::size_t kKeyframeEvery = 10;
@@ -258,7 +272,7 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     while (run.next_correction < in.corrections.size() &&
            in.corrections[run.next_correction].after_scan < k) {
       std::vector<core::StampedPose> traj = in.corrections[run.next_correction].trajectory_W_S;
-      for (auto& p : traj) p.T_W_B = p.T_W_B * T_B_S.inverse();
+      for (auto& p : traj) p.T_W_B = base_pose(opt, p.T_W_B);
       mapper.correct_trajectory(traj);
       jumps.reset(traj);  // the next live poses are predicted from the corrected ones
       ++run.next_correction;
@@ -281,7 +295,8 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
       }
     }));
     cloud.stamp_ns = static_cast<std::int64_t>(std::llround(s.times_s[k] * 1e9));
-    const Eigen::Isometry3d T_W_B = s.T_W_S[k] * T_B_S.inverse();
+    const Eigen::Isometry3d T_W_B = base_pose(opt, s.T_W_S[k]);
+    const Eigen::Isometry3d T_B_S = T_W_B.inverse() * s.T_W_S[k];
     // One scan a tick, through the daemon's stages (daemon::Cycle); corrections first, as
     // tarmacd applies a correction before the first scan stamped after it.
     cycle.begin();
@@ -711,6 +726,9 @@ int main(int argc, char** argv) {
                  "CSV, one line per scan: scan, distance driven m, RSS MiB, TSDF resident MiB "
                  "(as counted against tsdf.resident_limit_mb), tile store MiB")
       ->type_name("FILE");
+  app.add_flag("--level-base", opt.level_base,
+               "the sensor tilts on its carrier (handheld): the base stands level in the "
+               "(gravity-aligned) world frame under it, with its heading");
   app.add_flag("--open-ground", opt.open_ground,
                "also with a ground truth: score the open flat ground that the drive's own returns "
                "show (always on without one; docs/tools.md)");

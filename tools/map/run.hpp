@@ -32,6 +32,9 @@ struct Options {
   double fleet_period_s = 0.0;  ///< > 0: encode a fleet summary this often, report its bytes
   std::string memory_log;       ///< per scan: distance driven, RSS, resident and stored TSDF
   bool open_ground = false;     ///< score the open flat ground of the returns with a truth too
+  /// The sensor tilts on its carrier (handheld): the base is level in the world frame, under
+  /// the sensor by sensor_height_m, with the sensor's heading (see base_pose()).
+  bool level_base = false;
 };
 
 struct StageTimes {
