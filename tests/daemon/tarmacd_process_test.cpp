@@ -683,8 +683,9 @@ TEST(TarmacdKill, Sigkill_WhileMappingAndInsideSaves_RestartLoadsTheLastComplete
       double lost_s = previous_kill_s - loaded->logged_s;
       if (lost_s < 0.0) lost_s += 86400.0;  // across midnight
       EXPECT_LE(started_after, 1) << "lost " << lost_s << " s of mapping";
-      std::printf("round %d: the loaded save started %.2f s before the kill, %td started after it\n",
-                  round, lost_s, started_after);
+      std::printf(
+          "round %d: the loaded save started %.2f s before the kill, %td started after it\n", round,
+          lost_s, started_after);
       std::fflush(stdout);  // before the next fork, or the child writes it again
       EXPECT_FALSE(fs::exists(partial)) << "the cut-short save was not cleared at start";
     }

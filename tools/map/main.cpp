@@ -233,8 +233,8 @@ Eigen::Isometry3d base_pose(const Options& opt, const Eigen::Isometry3d& T_W_S) 
   if (!opt.level_base) return T_W_S * Eigen::Translation3d(0.0, 0.0, -opt.sensor_height_m);
   Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
   const Eigen::Matrix3d& R = T_W_S.linear();
-  T_W_B.linear() = Eigen::AngleAxisd(std::atan2(R(1, 0), R(0, 0)), Eigen::Vector3d::UnitZ())
-                       .toRotationMatrix();
+  T_W_B.linear() =
+      Eigen::AngleAxisd(std::atan2(R(1, 0), R(0, 0)), Eigen::Vector3d::UnitZ()).toRotationMatrix();
   T_W_B.translation() = T_W_S.translation() - opt.sensor_height_m * Eigen::Vector3d::UnitZ();
   return T_W_B;
 }
