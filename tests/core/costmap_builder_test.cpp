@@ -396,6 +396,29 @@ TEST(Terrain, TheGroundSpreadsAcrossTheEmptyCellsBetweenFarRings) {
   EXPECT_EQ(lethal, 0u);
 }
 
+TEST(Terrain, ARampGoingDownSeenInRingsFarApartIsGround) {
+  // A 12 % ramp down beyond x = 2 seen only in rings 7 m apart, as a far sensor's rings fall on
+  // a surface falling away: 6 empty cells between the rings at x = 4 and 11, the second 0.84 m
+  // lower. The spread crosses them at the ramp's grade; else the far ring would lie more than
+  // max_ground_step_m under the ground carried from the near one and read as a drop.
+  std::vector<Eigen::Vector3f> points;
+  for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+    const float fx = x + 0.013f;
+    if (fx > 3.0f && std::fmod(fx + 3.0f, 7.0f) > 0.6f) continue;  // rings at 4, 11
+    for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
+      points.emplace_back(fx, y + 0.017f, (fx > 2.0f ? -0.12f * (fx - 2.0f) : 0.0f) + 0.05f);
+    }
+  }
+  const CostmapLayers layers = terrain_costmap(points);
+  std::size_t lethal = 0;
+  for (std::uint32_t y = 0; y < layers.costmap.height(); ++y) {
+    for (std::uint32_t x = 0; x < layers.costmap.width(); ++x) {
+      lethal += layers.costmap.at(x, y) == kCostLethal ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(lethal, 0u);
+}
+
 TEST(Terrain, AStepAboveMaxGroundStepIsNoGround_ItsTopBlocks) {
   // A loading dock 1.2 m high (a solid block from x = 5 to 11), its top seen: the climb onto it
   // is a step of 1.2 m, more than max_ground_step_m (0.5), so its top is not ground and blocks.

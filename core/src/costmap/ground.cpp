@@ -274,10 +274,17 @@ void grow_ground(const CostmapPass& pass, const GroundPlane& plane) {
   // by a slope are ground, however far they leave the vehicle's plane; a wing or a fuselage seen
   // with nothing under it, a truck roof, a dock's top are not reached. Far from the sensor the
   // beams' rings leave empty cells between them: the spread crosses up to kMaxGapCells of them,
-  // carrying the height it had. Breadth first from the seeds in a fixed order: the same cells
+  // carrying the height it had, and the next cell seen may lie a step plus kGapGrade per cell
+  // crossed from it. Breadth first from the seeds in a fixed order: the same cells
   // for the same map.
   constexpr double kSeedRadiusM = 4.0;
-  constexpr std::uint8_t kMaxGapCells = 4;
+  constexpr std::uint8_t kMaxGapCells = 8;
+  // The grade the ground may keep across the empty cells it crosses: a ramp seen only where a
+  // far sensor's rings fall (6–7 cells apart on a 9 % ramp going down 30 m off) is reached, the
+  // road 1.2 m below a dock's edge across the 3 m the edge hides from a sensor 2 m up 5 m
+  // before it is not (0.5 + 3 × 0.15 < 1.2), and is marked as the drop it is.
+  constexpr double kGapGrade = 0.15;
+  const auto gap_grade = static_cast<float>(kGapGrade * pass.g);  // layers per crossed cell
   const float tolerance = static_cast<float>(params.ground_tolerance_m / v);
   const float step = static_cast<float>(params.max_ground_step_m / v);
   auto& reach = out.coarse_reach;  // the height each cell was reached at, NaN: not yet
@@ -304,6 +311,14 @@ void grow_ground(const CostmapPass& pass, const GroundPlane& plane) {
   seed_pass(kSeedRadiusM);
   // Nothing seen near the vehicle (a blind start): the cells on its plane within 20 m.
   if (queue.empty()) seed_pass(20.0);
+  // Rings lie one beyond the other: a gap is crossed away from the vehicle only, so the spread
+  // does not wander round through unseen cells (beyond the data's edge, along a drop's shadow)
+  // and come back onto a level no ring joins.
+  const auto outward = [&](int fx, int fy, int tx, int ty) {
+    const Eigen::Vector2d base = plane.base_W.head<2>();
+    return (plane.coarse_center(tx, ty) - base).squaredNorm() >
+           (plane.coarse_center(fx, fy) - base).squaredNorm();
+  };
   for (std::size_t head = 0; head < queue.size(); ++head) {
     const std::size_t i = queue[head];
     const int cx = static_cast<int>(i % static_cast<std::size_t>(gx));
@@ -315,13 +330,17 @@ void grow_ground(const CostmapPass& pass, const GroundPlane& plane) {
         const std::size_t u = static_cast<std::size_t>(uy) * gx + ux;
         if (!std::isnan(reach[u])) continue;
         if (std::isnan(coarse[u])) {  // empty: crossed, carrying this cell's height
-          if (gap[i] >= kMaxGapCells) continue;
+          if (gap[i] >= kMaxGapCells || !outward(cx, cy, ux, uy)) continue;
           reach[u] = reach[i];
           gap[u] = static_cast<std::uint8_t>(gap[i] + 1);
           queue.push_back(static_cast<std::uint32_t>(u));
           continue;
         }
-        if (std::abs(coarse[u] - reach[i]) > step) continue;
+        // Across a gap the ground may have gone on at a grade of up to kGapGrade.
+        if (gap[i] > 0 && !outward(cx, cy, ux, uy)) continue;
+        if (std::abs(coarse[u] - reach[i]) > step + gap_grade * static_cast<float>(gap[i])) {
+          continue;
+        }
         filtered[u] = reach[u] = coarse[u];
         queue.push_back(static_cast<std::uint32_t>(u));
       }
