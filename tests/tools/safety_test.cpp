@@ -206,9 +206,35 @@ TEST(Safety, TrackerReportsTheWorstGroundCycle_InTheLineAndTheJson) {
   EXPECT_EQ(line.find("curb"), std::string::npos) << "no curbs in this truth";
   const auto j = safety_json(tracker);
   EXPECT_EQ(j["ground_lethal"], 4u);
-  ASSERT_EQ(j["cycle_fields"].size(), 12u);
+  ASSERT_EQ(j["cycle_fields"].size(), 14u);
   EXPECT_EQ(j["cycle_fields"][8], "ground_cells");
   EXPECT_EQ(j["per_cycle"][1][9], 4u);
+}
+
+TEST(Safety, ReachableGround_AWallCutsOffTheLevelBeyondIt_AStepUpDoesToo) {
+  // 20 x 20 cells at 0.2 m round the vehicle at (0, 0): a wall (obstacle columns) along x = 1 m,
+  // the ground beyond it 2.25 m higher (an upper level whose way round lies outside the
+  // window), and a step of 0.3 m at y = 1 m on the vehicle's side (no wall: the step stops it).
+  ObstacleTruth truth;
+  GroundTruth ground;
+  for (std::int64_t iy = -10; iy < 10; ++iy) {
+    truth.first_seen[ObstacleTruth::key(5, iy)] = 0;  // the wall: cells (15, *)
+    for (std::int64_t ix = -10; ix < 10; ++ix) {
+      if (ix == 5) continue;
+      ground.z_m[ObstacleTruth::key(ix, iy)] = ix > 5 ? 2.25f : (iy >= 5 ? 0.3f : 0.0f);
+    }
+  }
+  truth.ground = std::move(ground);
+  auto map = costmap_of(core::kCostFree);
+  map.at(18, 3) = core::kCostLethal;  // beyond the wall
+  map.at(2, 17) = core::kCostLethal;  // on the step's top
+  map.at(3, 3) = core::kCostLethal;   // on the vehicle's level
+  const SafetyCycle c = score_costmap(map, truth, 0, {0.0, 0.0}, 20.0);
+  EXPECT_EQ(c.ground_lethal, 3u);
+  EXPECT_EQ(c.reach_lethal, 1u);
+  // The vehicle's level: x < 14 (the wall's neighbours left out as near a column), y < 15.
+  EXPECT_EQ(c.reach_cells, 14u * 15u);
+  EXPECT_DOUBLE_EQ(c.share_reach_lethal(), 1.0 / 210.0);
 }
 
 TEST(Safety, TrackerReportsTheCurbsWhenTheTruthHasThem) {

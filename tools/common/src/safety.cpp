@@ -115,6 +115,63 @@ core::Result<ObstacleTruth> read_dataset_truth(const std::filesystem::path& dir)
   return truth;
 }
 
+namespace {
+
+/// Per cell of a w × h window whose cell (0, 0) is lattice cell (ox, oy): 1 where the ground
+/// joins the ground under the vehicle (see SafetyCycle::reach_cells), breadth first from the
+/// ground cell nearest to `vehicle_xy` (within 1 m). All zero without ground truth or without
+/// ground under the vehicle.
+std::vector<std::uint8_t> reachable_ground(const ObstacleTruth& truth, std::int64_t ox,
+                                           std::int64_t oy, std::int64_t w, std::int64_t h,
+                                           const Eigen::Vector2d& vehicle_xy) {
+  const auto n = static_cast<std::size_t>(w * h);
+  std::vector<std::uint8_t> reached(n, 0);
+  if (!truth.ground) return reached;
+  constexpr float kNone = std::numeric_limits<float>::quiet_NaN();
+  std::vector<float> z(n, kNone);  // ground height, NaN: no ground or an obstacle column
+  for (std::int64_t y = 0; y < h; ++y) {
+    for (std::int64_t x = 0; x < w; ++x) {
+      const auto it = truth.ground->z_m.find(ObstacleTruth::key(ox + x, oy + y));
+      if (it != truth.ground->z_m.end() && !truth.is_column(ox + x, oy + y)) {
+        z[static_cast<std::size_t>(y * w + x)] = it->second;
+      }
+    }
+  }
+  const auto vx = static_cast<std::int64_t>(std::floor(vehicle_xy.x() / truth.cell_m)) - ox;
+  const auto vy = static_cast<std::int64_t>(std::floor(vehicle_xy.y() / truth.cell_m)) - oy;
+  const auto r = static_cast<std::int64_t>(std::ceil(1.0 / truth.cell_m));
+  std::int64_t start = -1, best = std::numeric_limits<std::int64_t>::max();
+  for (std::int64_t y = std::max<std::int64_t>(0, vy - r); y <= std::min(h - 1, vy + r); ++y) {
+    for (std::int64_t x = std::max<std::int64_t>(0, vx - r); x <= std::min(w - 1, vx + r); ++x) {
+      const std::int64_t d2 = (x - vx) * (x - vx) + (y - vy) * (y - vy);
+      if (!std::isnan(z[static_cast<std::size_t>(y * w + x)]) && d2 < best) {
+        best = d2;
+        start = y * w + x;
+      }
+    }
+  }
+  if (start < 0) return reached;
+  std::vector<std::int64_t> queue{start};
+  reached[static_cast<std::size_t>(start)] = 1;
+  for (std::size_t head = 0; head < queue.size(); ++head) {
+    const std::int64_t i = queue[head], cx = i % w, cy = i / w;
+    const float zi = z[static_cast<std::size_t>(i)];
+    for (std::int64_t dy = -1; dy <= 1; ++dy) {
+      for (std::int64_t dx = -1; dx <= 1; ++dx) {
+        const std::int64_t ux = cx + dx, uy = cy + dy;
+        if (ux < 0 || uy < 0 || ux >= w || uy >= h) continue;
+        const auto u = static_cast<std::size_t>(uy * w + ux);
+        if (reached[u] != 0 || !(std::abs(z[u] - zi) <= kReachStepM)) continue;  // NaN: no
+        reached[u] = 1;
+        queue.push_back(uy * w + ux);
+      }
+    }
+  }
+  return reached;
+}
+
+}  // namespace
+
 SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
                           const Eigen::Vector2d& vehicle_xy, double radius_m,
                           std::span<const DynamicBox> moving) {
@@ -154,6 +211,7 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
   const auto is_column = [&](std::int64_t x, std::int64_t y) {
     return column[static_cast<std::size_t>((y + 1) * (w + 2) + x + 1)] != 0;
   };
+  const std::vector<std::uint8_t> reachable = reachable_ground(truth, ox, oy, w, h, vehicle_xy);
   for (std::int64_t cy = 0; cy < h; ++cy) {
     for (std::int64_t cx = 0; cx < w; ++cx) {
       const Eigen::Vector2d centre((static_cast<double>(ox + cx) + 0.5) * truth.cell_m,
@@ -172,6 +230,10 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
           !near(cx, cy, is_column) && !under_moving()) {
         ++c.ground_cells;
         if (v == core::kCostLethal) ++c.ground_lethal;
+        if (reachable[static_cast<std::size_t>(cy * w + cx)] != 0) {
+          ++c.reach_cells;
+          if (v == core::kCostLethal) ++c.reach_lethal;
+        }
       }
       if (d2 > r2) continue;
       if (v == core::kCostLethal) {
@@ -218,8 +280,8 @@ const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan
 SafetyReport SafetyTracker::report() const {
   SafetyReport r;
   r.cycles = cycles_.size();
-  double sum = 0.0, open_sum = 0.0, ground_sum = 0.0, curb_sum = 0.0;
-  std::size_t counted = 0, ground_counted = 0, curb_counted = 0;
+  double sum = 0.0, open_sum = 0.0, ground_sum = 0.0, curb_sum = 0.0, reach_sum = 0.0;
+  std::size_t counted = 0, ground_counted = 0, curb_counted = 0, reach_counted = 0;
   r.curbs = !truth_.curb_first_seen.empty();
   for (const SafetyCycle& c : cycles_) {
     if (c.curb_visible > 0) {
@@ -238,6 +300,16 @@ SafetyReport SafetyTracker::report() const {
       if (c.share_ground_lethal() > r.worst_ground_lethal) {
         r.worst_ground_lethal = c.share_ground_lethal();
         r.worst_ground_scan = c.scan;
+      }
+    }
+    r.reach_cells += c.reach_cells;
+    r.reach_lethal += c.reach_lethal;
+    if (c.reach_cells > 0) {
+      ++reach_counted;
+      reach_sum += c.share_reach_lethal();
+      if (c.share_reach_lethal() > r.worst_reach_lethal) {
+        r.worst_reach_lethal = c.share_reach_lethal();
+        r.worst_reach_scan = c.scan;
       }
     }
     r.read_free += c.read_free;
@@ -263,6 +335,7 @@ SafetyReport SafetyTracker::report() const {
   if (!cycles_.empty()) r.mean_open_known = open_sum / static_cast<double>(cycles_.size());
   if (ground_counted > 0) r.mean_ground_lethal = ground_sum / static_cast<double>(ground_counted);
   if (curb_counted > 0) r.mean_curb_share = curb_sum / static_cast<double>(curb_counted);
+  if (reach_counted > 0) r.mean_reach_lethal = reach_sum / static_cast<double>(reach_counted);
   return r;
 }
 
@@ -281,6 +354,14 @@ std::string safety_summary(const SafetyReport& r) {
       100.0 * r.worst_ground_lethal, r.worst_ground_scan, 100.0 * r.mean_ground_lethal,
       r.ground_lethal, r.ground_cells);
   std::string summary = line;
+  if (r.reach_cells > 0) {
+    std::snprintf(line, sizeof line,
+                  "; of it reachable inside the window read lethal worst %.2f %% (scan %d), mean "
+                  "%.2f %% (%zu of %zu)",
+                  100.0 * r.worst_reach_lethal, r.worst_reach_scan, 100.0 * r.mean_reach_lethal,
+                  r.reach_lethal, r.reach_cells);
+    summary += line;
+  }
   if (r.curbs) {
     std::snprintf(line, sizeof line,
                   "; curb columns lethal within one cell worst %.1f %% (scan %d), mean %.1f %%",
@@ -310,18 +391,25 @@ nlohmann::ordered_json safety_json(const SafetyTracker& tracker) {
                               {"worst_ground_lethal", r.worst_ground_lethal},
                               {"worst_ground_scan", r.worst_ground_scan},
                               {"mean_ground_lethal", r.mean_ground_lethal},
+                              {"reach_cells", r.reach_cells},
+                              {"reach_lethal", r.reach_lethal},
+                              {"worst_reach_lethal", r.worst_reach_lethal},
+                              {"worst_reach_scan", r.worst_reach_scan},
+                              {"mean_reach_lethal", r.mean_reach_lethal},
                               {"curbs", r.curbs},
                               {"worst_curb_share", r.worst_curb_share},
                               {"worst_curb_scan", r.worst_curb_scan},
                               {"mean_curb_share", r.mean_curb_share}};
   j["cycle_fields"] = {"scan",          "visible",       "lethal_near",  "read_free",
                        "read_inflated", "read_unknown",  "lethal_cells", "false_lethal",
-                       "ground_cells",  "ground_lethal", "curb_visible", "curb_lethal_near"};
+                       "ground_cells",  "ground_lethal", "curb_visible", "curb_lethal_near",
+                       "reach_cells",   "reach_lethal"};
   nlohmann::ordered_json per_cycle = nlohmann::ordered_json::array();
   for (const SafetyCycle& c : tracker.cycles()) {
     per_cycle.push_back({c.scan, c.visible, c.lethal_near, c.read_free, c.read_inflated,
                          c.read_unknown, c.lethal_cells, c.false_lethal, c.ground_cells,
-                         c.ground_lethal, c.curb_visible, c.curb_lethal_near});
+                         c.ground_lethal, c.curb_visible, c.curb_lethal_near, c.reach_cells,
+                         c.reach_lethal});
   }
   j["per_cycle"] = std::move(per_cycle);
   return j;

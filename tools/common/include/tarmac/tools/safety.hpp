@@ -93,6 +93,12 @@ struct SafetyCycle {
   /// ones reading lethal (the ground model taking ground for an obstacle).
   std::size_t ground_cells = 0;
   std::size_t ground_lethal = 0;
+  /// Of those, the ones the vehicle can drive to inside the costmap's window: joined to the
+  /// ground under it by ground cells (never an obstacle column) whose heights step by at most
+  /// kReachStepM. Ground the window holds no way to (an upper level beyond walls whose ramp lies
+  /// outside the window) is not; a local costmap cannot tell it from a plateau.
+  std::size_t reach_cells = 0;
+  std::size_t reach_lethal = 0;
   /// Of the visible columns, the curbs' (first seen by a return from a curb), and of those the
   /// ones with a lethal cell within one cell.
   std::size_t curb_visible = 0;
@@ -106,6 +112,10 @@ struct SafetyCycle {
     return ground_cells == 0
                ? 0.0
                : static_cast<double>(ground_lethal) / static_cast<double>(ground_cells);
+  }
+  [[nodiscard]] double share_reach_lethal() const {
+    return reach_cells == 0 ? 0.0
+                            : static_cast<double>(reach_lethal) / static_cast<double>(reach_cells);
   }
 };
 
@@ -122,6 +132,10 @@ struct SafetyReport {
   /// ground lethal) and the mean over the cycles with ground cells.
   double worst_ground_lethal = 0.0, mean_ground_lethal = 0.0;
   int worst_ground_scan = -1;
+  /// The same for the ground the vehicle can reach inside the window (SafetyCycle::reach_cells).
+  std::size_t reach_cells = 0, reach_lethal = 0;
+  double worst_reach_lethal = 0.0, mean_reach_lethal = 0.0;
+  int worst_reach_scan = -1;
   /// The truth has curbs; then SafetyCycle::share_curb_lethal over the cycles that saw one: the
   /// worst (and its scan; −1: none below 100 %) and the mean.
   bool curbs = false;
@@ -133,6 +147,9 @@ struct SafetyReport {
 inline constexpr double kOpenRadiusM = 10.0;
 /// The radius of the drivable-ground figure (SafetyCycle::ground_cells), m.
 inline constexpr double kGroundRadiusM = 30.0;
+/// The largest height step between neighbouring ground cells (0.2 m) that joins them for
+/// SafetyCycle::reach_cells, m: a 50 % grade; tarmac-sim's curbs are obstacle columns anyway.
+inline constexpr double kReachStepM = 0.1;
 
 /// Scores one costmap (values 0..100, −1) whose cells lie on the truth's lattice (the costmap's
 /// resolution must equal cell_m and its origin a lattice point). `moving` are the moving
