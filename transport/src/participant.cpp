@@ -1,17 +1,12 @@
 #include "tarmac/transport/participant.hpp"
 
-#include <arpa/inet.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
-#include <cerrno>
-#include <cstring>
 #include <deque>
-#include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <mutex>
 
 #include <fastdds/rtps/attributes/ServerAttributes.h>
@@ -22,6 +17,7 @@
 #include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
 #include <fastdds/dds/log/Log.hpp>
 
+#include "addresses.hpp"
 #include "participant_impl.hpp"
 #include "security_check.hpp"
 #include "tarmac/transport/qos.hpp"
@@ -33,64 +29,11 @@ using eprosima::fastrtps::rtps::Locator_t;
 
 namespace {
 
-bool is_ipv4(const std::string& text) {
-  in_addr addr{};
-  return inet_pton(AF_INET, text.c_str(), &addr) == 1;
-}
-
-core::Error config_error(const std::string& key, const std::string& why) {
-  return core::Error{"config.transport", key + ": " + why};
-}
-
-/// "a.b.c.d:port" split; false when it is not an IPv4 address and a port 1..65535.
-bool split_server(const std::string& text, std::string& address, std::uint32_t& port) {
-  const auto colon = text.rfind(':');
-  if (colon == std::string::npos) return false;
-  address = text.substr(0, colon);
-  const std::string digits = text.substr(colon + 1);
-  if (digits.empty() || digits.size() > 5 ||
-      !std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; })) {
-    return false;
-  }
-  port = static_cast<std::uint32_t>(std::stoul(digits));
-  return is_ipv4(address) && port >= 1 && port <= 65535;
-}
-
 Locator_t udp_locator(const std::string& address) {
   Locator_t locator;
   locator.kind = LOCATOR_KIND_UDPv4;
   IPLocator::setIPv4(locator, address);
   return locator;
-}
-
-core::Error security_error(const std::string& key, const std::string& why) {
-  return core::Error{"config.security", "dds.security." + key + ": " + why};
-}
-
-/// Checks one security file: set, a readable regular file, and (when `marker` is given) the
-/// kind of PEM block expected, so swapped paths are caught here rather than as a vague refusal.
-core::Status check_security_file(const std::string& key, const std::string& path,
-                                 const char* marker, const char* what) {
-  if (path.empty()) return security_error(key, "must be set when dds.security.enabled is true");
-  std::error_code ec;
-  const auto status = std::filesystem::status(path, ec);
-  if (status.type() == std::filesystem::file_type::not_found) {
-    return security_error(key, "'" + path + "' does not exist");
-  }
-  if (ec) return security_error(key, "'" + path + "': " + ec.message());
-  if (!std::filesystem::is_regular_file(status)) {
-    return security_error(key, "'" + path + "' is not a regular file");
-  }
-  if (::access(path.c_str(), R_OK) != 0) {
-    return security_error(key, "cannot read '" + path + "': " + std::strerror(errno));
-  }
-  std::ifstream in(path);
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (!in.good() && !in.eof()) return security_error(key, "cannot read '" + path + "'");
-  if (marker != nullptr && text.find(marker) == std::string::npos) {
-    return security_error(key, "'" + path + "' is not " + what + " (no '" + marker + "')");
-  }
-  return core::Ok{};
 }
 
 /// Keeps Fast DDS's recent error entries so a refusal can be explained in the returned error.
@@ -274,44 +217,6 @@ std::vector<std::string> udp_buffer_shortfalls(const ParticipantConfig& config) 
   return out;
 }
 
-const char* to_string(TransportMode mode) {
-  switch (mode) {
-    case TransportMode::kLocalhost: return "localhost";
-    case TransportMode::kSharedMemoryOnly: return "shm";
-    case TransportMode::kNetwork: return "network";
-  }
-  return "?";
-}
-
-core::Status SecurityConfig::validate() const {
-  if (!enabled) return core::Ok{};
-  constexpr const char* kCert = "-----BEGIN CERTIFICATE-----";
-  constexpr const char* kCertWhat = "a PEM certificate";
-  if (auto ok = check_security_file("identity_ca", identity_ca, kCert, kCertWhat); !ok) return ok;
-  if (auto ok = check_security_file("identity_certificate", identity_certificate, kCert, kCertWhat);
-      !ok) {
-    return ok;
-  }
-  if (auto ok =
-          check_security_file("private_key", private_key, "PRIVATE KEY-----", "a PEM private key");
-      !ok) {
-    return ok;
-  }
-  if (auto ok = check_security_file("permissions_ca", permissions_ca, kCert, kCertWhat); !ok) {
-    return ok;
-  }
-  // Governance and permissions: S/MIME (openssl smime -sign) or PEM PKCS#7; Fast DDS checks.
-  if (auto ok = check_security_file("governance", governance, nullptr, nullptr); !ok) return ok;
-  if (auto ok = check_security_file("permissions", permissions, nullptr, nullptr); !ok) return ok;
-  return core::Ok{};
-}
-
-void SecurityConfig::use_identity_dir(const std::string& dir) {
-  enabled = true;
-  identity_certificate = (std::filesystem::path(dir) / "cert.pem").string();
-  private_key = (std::filesystem::path(dir) / "key.pem").string();
-}
-
 std::string take_dds_errors() {
   ErrorCollector* collector = g_collector.load();
   if (collector == nullptr) return {};
@@ -326,64 +231,6 @@ std::string security_refusal_hint(const ParticipantImpl& impl) {
       "identity?";
   if (const std::string why = take_dds_errors(); !why.empty()) hint += " Fast DDS: " + why;
   return hint + ")";
-}
-
-core::Status ParticipantConfig::validate() const {
-  if (domain_id > 232) {
-    return config_error("dds.domain_id", "must be 0..232, got " + std::to_string(domain_id));
-  }
-  if (shm_segment_bytes < shm_max_message_bytes) {
-    return config_error("dds.shm_segment_bytes", "must be >= dds.shm_max_message_bytes");
-  }
-  if (shm_max_message_bytes < 64u * 1024u) {
-    return config_error("dds.shm_max_message_bytes", "must be >= 65536");
-  }
-  // Fast DDS refuses a UDP transport whose buffers are smaller than one datagram (65500 B).
-  if (udp_receive_buffer_bytes < 64u * 1024u) {
-    return config_error("dds.udp_receive_buffer_bytes", "must be >= 65536");
-  }
-  if (udp_send_buffer_bytes < 64u * 1024u) {
-    return config_error("dds.udp_send_buffer_bytes", "must be >= 65536");
-  }
-  if (transport == TransportMode::kNetwork && network_interfaces.empty()) {
-    return config_error("dds.network_interfaces",
-                        "transport 'network' needs the interface addresses to use, explicitly");
-  }
-  if (transport != TransportMode::kNetwork &&
-      (!network_interfaces.empty() || !initial_peers.empty())) {
-    return config_error("dds.network_interfaces",
-                        std::string("only allowed with transport 'network', transport is '") +
-                            to_string(transport) + "'");
-  }
-  for (const auto& address : network_interfaces) {
-    if (!is_ipv4(address))
-      return config_error("dds.network_interfaces", "not an IPv4 address: " + address);
-  }
-  for (const auto& address : initial_peers) {
-    if (!is_ipv4(address))
-      return config_error("dds.initial_peers", "not an IPv4 address: " + address);
-  }
-  if (!discovery_servers.empty() && transport == TransportMode::kSharedMemoryOnly) {
-    return config_error("dds.discovery_servers", "need a UDP transport, transport is 'shm'");
-  }
-  if (discovery_servers.size() > 256) return config_error("dds.discovery_servers", "at most 256");
-  for (const auto& server : discovery_servers) {
-    std::string address;
-    std::uint32_t port = 0;
-    if (!split_server(server, address, port)) {
-      return config_error("dds.discovery_servers", "not IPv4:port (port 1..65535): " + server);
-    }
-    if (transport == TransportMode::kLocalhost && address.rfind("127.", 0) != 0) {
-      return config_error("dds.discovery_servers",
-                          "transport 'localhost' reaches 127.0.0.0/8 only, not " + server);
-    }
-  }
-  return security.validate();
-}
-
-core::Status QosSpec::validate() const {
-  if (history_depth < 1) return core::Error{"config.qos", "history_depth: must be >= 1"};
-  return core::Ok{};
 }
 
 core::Result<Participant> Participant::create(const ParticipantConfig& config) {

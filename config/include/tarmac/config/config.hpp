@@ -18,7 +18,7 @@
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/transport/lidar_driver.hpp"
-#include "tarmac/transport/participant.hpp"
+#include "tarmac/transport/participant_config.hpp"
 #include "tarmac/transport/qos.hpp"
 
 namespace tarmac::config {

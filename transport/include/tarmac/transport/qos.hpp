@@ -1,6 +1,6 @@
 #pragma once
 /// @file DDS quality of service as plain config values (filled from YAML by config/), and the
-/// defaults of DESIGN.md §5 per topic role.
+/// defaults of DESIGN.md §5 per topic role. No Fast DDS here: the config includes it.
 
 #include <cstdint>
 
