@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -100,6 +101,28 @@ core::Result<ObstacleTruth> read_dataset_truth(const std::filesystem::path& dir)
                                             std::to_string(truth.value().cell_m) + " m"};
     }
     truth.value().ground = std::move(ground).value();
+    GroundTruth& g = *truth.value().ground;
+    if (!g.z_m.empty()) {
+      std::int64_t x1 = std::numeric_limits<std::int64_t>::min(), y1 = x1;
+      g.x0 = g.y0 = std::numeric_limits<std::int64_t>::max();
+      for (const auto& [k, z] : g.z_m) {
+        const std::int64_t ix = k >> 32, iy = static_cast<std::int32_t>(k & 0xffffffff);
+        g.x0 = std::min(g.x0, ix);
+        g.y0 = std::min(g.y0, iy);
+        x1 = std::max(x1, ix);
+        y1 = std::max(y1, iy);
+      }
+      g.w = x1 - g.x0 + 1;
+      g.h = y1 - g.y0 + 1;
+      g.drivable_z.assign(static_cast<std::size_t>(g.w * g.h),
+                          std::numeric_limits<float>::quiet_NaN());
+      for (const auto& [k, z] : g.z_m) {
+        const std::int64_t ix = k >> 32, iy = static_cast<std::int32_t>(k & 0xffffffff);
+        if (!truth.value().is_column(ix, iy)) {
+          g.drivable_z[static_cast<std::size_t>((iy - g.y0) * g.w + ix - g.x0)] = z;
+        }
+      }
+    }
   }
   if (const auto file = dir / "curb_columns.txt"; std::filesystem::exists(file)) {
     auto curbs = read_columns(file, "curb");
@@ -129,12 +152,19 @@ std::vector<std::uint8_t> reachable_ground(const ObstacleTruth& truth, std::int6
   if (!truth.ground) return reached;
   constexpr float kNone = std::numeric_limits<float>::quiet_NaN();
   std::vector<float> z(n, kNone);  // ground height, NaN: no ground or an obstacle column
+  const GroundTruth& g = *truth.ground;
   for (std::int64_t y = 0; y < h; ++y) {
     for (std::int64_t x = 0; x < w; ++x) {
-      const auto it = truth.ground->z_m.find(ObstacleTruth::key(ox + x, oy + y));
-      if (it != truth.ground->z_m.end() && !truth.is_column(ox + x, oy + y)) {
-        z[static_cast<std::size_t>(y * w + x)] = it->second;
+      float& to = z[static_cast<std::size_t>(y * w + x)];
+      const std::int64_t gx = ox + x - g.x0, gy = oy + y - g.y0;
+      if (!g.drivable_z.empty()) {
+        if (gx >= 0 && gy >= 0 && gx < g.w && gy < g.h) {
+          to = g.drivable_z[static_cast<std::size_t>(gy * g.w + gx)];
+        }
+        continue;
       }
+      const auto it = g.z_m.find(ObstacleTruth::key(ox + x, oy + y));
+      if (it != g.z_m.end() && !truth.is_column(ox + x, oy + y)) to = it->second;
     }
   }
   const auto vx = static_cast<std::int64_t>(std::floor(vehicle_xy.x() / truth.cell_m)) - ox;

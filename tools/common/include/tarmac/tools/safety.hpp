@@ -26,6 +26,11 @@ namespace tarmac::tools {
 struct GroundTruth {
   double cell_m = 0.2;
   std::unordered_map<std::int64_t, float> z_m;  ///< key(ix, iy) (ObstacleTruth::key) -> height
+  /// The same as a dense grid over their bounding box (cell (x0 + i, y0 + j) at j·w + i), NaN
+  /// where no ground or an obstacle column: what the reachable-ground walk reads per costmap
+  /// (read_dataset_truth builds it; empty: the walk looks cells up in z_m).
+  std::int64_t x0 = 0, y0 = 0, w = 0, h = 0;
+  std::vector<float> drivable_z;
 };
 
 /// The columns whose envelope span meets a static object, on the world lattice of `cell_m`, with
