@@ -329,6 +329,16 @@ CostmapLayers terrain_costmap(const std::vector<Eigen::Vector3f>& points) {
   return layers;
 }
 
+std::size_t lethal_cells(const CostmapLayers& layers) {
+  std::size_t lethal = 0;
+  for (std::uint32_t y = 0; y < layers.costmap.height(); ++y) {
+    for (std::uint32_t x = 0; x < layers.costmap.width(); ++x) {
+      lethal += layers.costmap.at(x, y) == kCostLethal ? 1 : 0;
+    }
+  }
+  return lethal;
+}
+
 TEST(Terrain, GradesBothWaysAreGround_ObjectOnTheGradeBlocks) {
   // The vehicle on a flat 4 m wide strip at the origin; beyond x = 2 the ground climbs at 15 %
   // (1.5 m above the wheels' plane at x = 12), beyond x = −2 it falls at 15 %: both leave any
@@ -387,13 +397,7 @@ TEST(Terrain, TheGroundSpreadsAcrossTheEmptyCellsBetweenFarRings) {
     }
   }
   const CostmapLayers layers = terrain_costmap(points);
-  std::size_t lethal = 0;
-  for (std::uint32_t y = 0; y < layers.costmap.height(); ++y) {
-    for (std::uint32_t x = 0; x < layers.costmap.width(); ++x) {
-      lethal += layers.costmap.at(x, y) == kCostLethal ? 1 : 0;
-    }
-  }
-  EXPECT_EQ(lethal, 0u);
+  EXPECT_EQ(lethal_cells(layers), 0u);
 }
 
 TEST(Terrain, ARampGoingDownSeenInRingsFarApartIsGround) {
@@ -410,13 +414,7 @@ TEST(Terrain, ARampGoingDownSeenInRingsFarApartIsGround) {
     }
   }
   const CostmapLayers layers = terrain_costmap(points);
-  std::size_t lethal = 0;
-  for (std::uint32_t y = 0; y < layers.costmap.height(); ++y) {
-    for (std::uint32_t x = 0; x < layers.costmap.width(); ++x) {
-      lethal += layers.costmap.at(x, y) == kCostLethal ? 1 : 0;
-    }
-  }
-  EXPECT_EQ(lethal, 0u);
+  EXPECT_EQ(lethal_cells(layers), 0u);
 }
 
 TEST(Terrain, AStepAboveMaxGroundStepIsNoGround_ItsTopBlocks) {

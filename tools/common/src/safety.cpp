@@ -307,11 +307,38 @@ const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan
   return cycles_.back();
 }
 
+namespace {
+
+/// A ground figure over the cycles: cells and lethal cells summed, the worst cycle's share and
+/// scan (−1: none read any lethal), the mean share over the cycles with cells.
+struct LethalShares {
+  std::size_t cells = 0, lethal = 0, counted = 0;
+  double sum = 0.0, worst = 0.0;
+  int worst_scan = -1;
+  void add(std::size_t cycle_cells, std::size_t cycle_lethal, double share, int scan) {
+    cells += cycle_cells;
+    lethal += cycle_lethal;
+    if (cycle_cells == 0) return;
+    ++counted;
+    sum += share;
+    if (share > worst) {
+      worst = share;
+      worst_scan = scan;
+    }
+  }
+  [[nodiscard]] double mean() const {
+    return counted == 0 ? 0.0 : sum / static_cast<double>(counted);
+  }
+};
+
+}  // namespace
+
 SafetyReport SafetyTracker::report() const {
   SafetyReport r;
   r.cycles = cycles_.size();
-  double sum = 0.0, open_sum = 0.0, ground_sum = 0.0, curb_sum = 0.0, reach_sum = 0.0;
-  std::size_t counted = 0, ground_counted = 0, curb_counted = 0, reach_counted = 0;
+  double sum = 0.0, open_sum = 0.0, curb_sum = 0.0;
+  std::size_t counted = 0, curb_counted = 0;
+  LethalShares ground, reach;
   r.curbs = !truth_.curb_first_seen.empty();
   for (const SafetyCycle& c : cycles_) {
     if (c.curb_visible > 0) {
@@ -322,26 +349,8 @@ SafetyReport SafetyTracker::report() const {
         r.worst_curb_scan = c.scan;
       }
     }
-    r.ground_cells += c.ground_cells;
-    r.ground_lethal += c.ground_lethal;
-    if (c.ground_cells > 0) {
-      ++ground_counted;
-      ground_sum += c.share_ground_lethal();
-      if (c.share_ground_lethal() > r.worst_ground_lethal) {
-        r.worst_ground_lethal = c.share_ground_lethal();
-        r.worst_ground_scan = c.scan;
-      }
-    }
-    r.reach_cells += c.reach_cells;
-    r.reach_lethal += c.reach_lethal;
-    if (c.reach_cells > 0) {
-      ++reach_counted;
-      reach_sum += c.share_reach_lethal();
-      if (c.share_reach_lethal() > r.worst_reach_lethal) {
-        r.worst_reach_lethal = c.share_reach_lethal();
-        r.worst_reach_scan = c.scan;
-      }
-    }
+    ground.add(c.ground_cells, c.ground_lethal, c.share_ground_lethal(), c.scan);
+    reach.add(c.reach_cells, c.reach_lethal, c.share_reach_lethal(), c.scan);
     r.read_free += c.read_free;
     r.read_inflated += c.read_inflated;
     r.read_unknown += c.read_unknown;
@@ -363,9 +372,17 @@ SafetyReport SafetyTracker::report() const {
   }
   if (counted > 0) r.mean_share = sum / static_cast<double>(counted);
   if (!cycles_.empty()) r.mean_open_known = open_sum / static_cast<double>(cycles_.size());
-  if (ground_counted > 0) r.mean_ground_lethal = ground_sum / static_cast<double>(ground_counted);
+  r.ground_cells = ground.cells;
+  r.ground_lethal = ground.lethal;
+  r.worst_ground_lethal = ground.worst;
+  r.worst_ground_scan = ground.worst_scan;
+  r.mean_ground_lethal = ground.mean();
+  r.reach_cells = reach.cells;
+  r.reach_lethal = reach.lethal;
+  r.worst_reach_lethal = reach.worst;
+  r.worst_reach_scan = reach.worst_scan;
+  r.mean_reach_lethal = reach.mean();
   if (curb_counted > 0) r.mean_curb_share = curb_sum / static_cast<double>(curb_counted);
-  if (reach_counted > 0) r.mean_reach_lethal = reach_sum / static_cast<double>(reach_counted);
   return r;
 }
 
