@@ -449,6 +449,236 @@ static void parse(int argc, char** argv, Options* o) {
   }
 }
 
+/* poses.txt: one row-major 3x4 T_world_sensor per scan; at most max_scans (0: all). */
+static double* read_poses(const char* dataset, long max_scans, long* scans) {
+  char path[4096];
+  snprintf(path, sizeof path, "%s/poses.txt", dataset);
+  FILE* pf = fopen(path, "r");
+  if (!pf) FAIL("cannot read %s", path);
+  long capacity = 1024, n = 0;
+  double* poses = malloc((size_t)capacity * 12 * sizeof(double));
+  for (;;) {
+    double row[12];
+    int got = 0;
+    for (; got < 12; ++got) {
+      if (fscanf(pf, "%lf", &row[got]) != 1) break;
+    }
+    if (got < 12) break;
+    if (n == capacity) {
+      capacity *= 2;
+      poses = realloc(poses, (size_t)capacity * 12 * sizeof(double));
+    }
+    memcpy(&poses[n * 12], row, sizeof row);
+    ++n;
+  }
+  fclose(pf);
+  if (max_scans > 0 && max_scans < n) n = max_scans;
+  if (n == 0) FAIL("no poses in %s", path);
+  *scans = n;
+  return poses;
+}
+
+/* The participant, the two writers of a LiDAR driver and a localiser, the readers of tarmacd's
+ * costmap and CycleReport, with rclcpp's QoS for each. */
+typedef struct {
+  dds_entity_t participant, cloud_writer, pose_writer, grid_reader, report_reader;
+  dds_qos_t *sensor_qos, *pose_qos, *grid_qos, *report_qos;
+} Endpoints;
+
+static Endpoints create_endpoints(const Options* o) {
+  Endpoints e;
+  e.participant = dds_create_participant(o->domain, NULL, NULL);
+  if (e.participant < 0) FAIL("create participant: %s", dds_strretcode(-e.participant));
+  e.sensor_qos = dds_create_qos(); /* rclcpp::SensorDataQoS */
+  dds_qset_reliability(e.sensor_qos, DDS_RELIABILITY_BEST_EFFORT, 0);
+  dds_qset_history(e.sensor_qos, DDS_HISTORY_KEEP_LAST, 5);
+  e.pose_qos = dds_create_qos();
+  dds_qset_reliability(e.pose_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  dds_qset_history(e.pose_qos, DDS_HISTORY_KEEP_LAST, 100);
+  e.grid_qos = dds_create_qos();
+  dds_qset_reliability(e.grid_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  dds_qset_durability(e.grid_qos, DDS_DURABILITY_TRANSIENT_LOCAL);
+  dds_qset_history(e.grid_qos, DDS_HISTORY_KEEP_LAST, 1);
+  e.report_qos = dds_create_qos();
+  dds_qset_reliability(e.report_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  dds_qset_history(e.report_qos, DDS_HISTORY_KEEP_LAST, 100);
+  const dds_entity_t p = e.participant;
+  e.cloud_writer =
+      dds_create_writer(p, make_topic(p, &sensor_msgs_msg_dds__PointCloud2__desc, o->lidar_topic),
+                        e.sensor_qos, NULL);
+  e.pose_writer = dds_create_writer(
+      p, make_topic(p, &geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc, o->pose_topic),
+      e.pose_qos, NULL);
+  e.grid_reader = dds_create_reader(
+      p, make_topic(p, &nav_msgs_msg_dds__OccupancyGrid__desc, o->costmap_topic), e.grid_qos, NULL);
+  e.report_reader = dds_create_reader(
+      p, make_topic(p, &tarmac_msgs_msg_dds__CycleReport__desc, o->diagnostics_topic), e.report_qos,
+      NULL);
+  if (e.cloud_writer < 0 || e.pose_writer < 0 || e.grid_reader < 0 || e.report_reader < 0) {
+    FAIL("cannot create the writers and readers");
+  }
+  return e;
+}
+
+static void delete_endpoints(Endpoints* e) {
+  dds_delete_qos(e->sensor_qos);
+  dds_delete_qos(e->pose_qos);
+  dds_delete_qos(e->grid_qos);
+  dds_delete_qos(e->report_qos);
+  dds_delete(e->participant);
+}
+
+/* Waits for tarmacd: both its readers and its costmap writer. 0, or 2 after a message. */
+static int wait_for_tarmacd(const Options* o, const Endpoints* e) {
+  const int64_t wait_until = now_ns() + (int64_t)(o->wait_s * 1e9);
+  for (;;) {
+    dds_publication_matched_status_t c = {0}, p = {0};
+    dds_subscription_matched_status_t g = {0};
+    dds_get_publication_matched_status(e->cloud_writer, &c);
+    dds_get_publication_matched_status(e->pose_writer, &p);
+    dds_get_subscription_matched_status(e->grid_reader, &g);
+    if (c.current_count > 0 && p.current_count >= o->pose_readers && g.current_count > 0) return 0;
+    if (now_ns() > wait_until) {
+      fprintf(stderr, "tarmac-cyclone-replay: tarmacd did not match within %.0f s (domain %d)\n",
+              o->wait_s, o->domain);
+      return 2;
+    }
+    sleep_ns(10000000);
+  }
+}
+
+/* The pose message of a row-major 3x4 T_world_sensor at `stamp`. */
+static void fill_pose(geometry_msgs_msg_dds__PoseWithCovarianceStamped_* pose, const double* T,
+                      int64_t stamp, const char* frame_id) {
+  memset(pose, 0, sizeof *pose);
+  pose->header.stamp = to_time(stamp);
+  pose->header.frame_id = (char*)frame_id;
+  const double R[9] = {T[0], T[1], T[2], T[4], T[5], T[6], T[8], T[9], T[10]};
+  double q[4];
+  to_quaternion(R, q);
+  pose->pose.pose.position.x = T[3];
+  pose->pose.pose.position.y = T[7];
+  pose->pose.pose.position.z = T[11];
+  pose->pose.pose.orientation.x = q[0];
+  pose->pose.pose.orientation.y = q[1];
+  pose->pose.pose.orientation.z = q[2];
+  pose->pose.pose.orientation.w = q[3];
+}
+
+/* The PointCloud2 of a loaded scan at `stamp` (it borrows the scan's fields and bytes). */
+static void fill_cloud(sensor_msgs_msg_dds__PointCloud2_* cloud, Scan* data, int64_t stamp,
+                       const char* frame_id) {
+  memset(cloud, 0, sizeof *cloud);
+  cloud->header.stamp = to_time(stamp);
+  cloud->header.frame_id = (char*)frame_id;
+  cloud->height = data->height;
+  cloud->width = data->width;
+  cloud->fields._length = cloud->fields._maximum = data->field_count;
+  cloud->fields._buffer = data->fields;
+  cloud->is_bigendian = false;
+  cloud->point_step = data->point_step;
+  cloud->row_step = data->point_step * data->width;
+  cloud->data._length = cloud->data._maximum = cloud->row_step * data->height;
+  cloud->data._buffer = data->data;
+  cloud->is_dense = data->points == data->height * data->width;
+}
+
+/* What was sent. */
+typedef struct {
+  long sent, write_errors;
+  uint64_t points_sent, bytes_sent;
+} Sent;
+
+/* Sends the head scans, the sequence and the tail scans at rate_hz on the grid of the period, as
+ * a LiDAR phase-locked to PTP would, serving tarmacd's costmaps and reports between them, and
+ * then for idle_s. */
+static Sent send_scans(const Options* o, const Endpoints* e, const double* poses, long scans,
+                       long rows, long cols, Seen* seen) {
+  const long total = o->head_scans + scans + o->tail_scans;
+  const int64_t period_ns = (int64_t)llround(1e9 / o->rate_hz);
+  const int64_t start_ns = (now_ns() / period_ns + 5) * period_ns;
+  Sent out = {0, 0, 0, 0};
+  for (long k = 0; k < total; ++k) {
+    /* A head scan repeats the first pose, a tail scan the last one. */
+    const long j = k - o->head_scans;
+    const int short_scan = j < 0 || j >= scans;
+    const long scan = j < 0 ? 0 : j < scans ? j : scans - 1;
+    Scan data = {0};
+    if (o->layout) {
+      load_organised_scan(o, rows, cols, scan, short_scan, &data);
+    } else {
+      load_list_scan(o, scan, short_scan, &data);
+    }
+    const int64_t stamp = start_ns + k * period_ns;
+    geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose;
+    fill_pose(&pose, &poses[scan * 12], stamp, o->pose_frame_id);
+    sensor_msgs_msg_dds__PointCloud2_ cloud;
+    fill_cloud(&cloud, &data, stamp, o->frame_id);
+    seen->stamps[k] = stamp;
+    seen->scans = k + 1;
+    serve_until(stamp, e->grid_reader, e->report_reader, seen);
+    if (dds_write(e->pose_writer, &pose) != DDS_RETCODE_OK) ++out.write_errors;
+    if (dds_write(e->cloud_writer, &cloud) != DDS_RETCODE_OK) ++out.write_errors;
+    ++out.sent;
+    out.points_sent += data.points;
+    if (!short_scan) out.bytes_sent += cloud.data._length; /* the sequence's, for their mean */
+    free(data.data);
+  }
+  serve_until(now_ns() + (int64_t)(o->idle_s * 1e9), e->grid_reader, e->report_reader, seen);
+  return out;
+}
+
+/* The figures: printed, and with --json written. */
+static void report(const Options* o, const Seen* seen, const Sent* s, long scans, long total) {
+  double* lat = malloc((size_t)total * sizeof(double));
+  long with_costmap = 0;
+  for (long k = 0; k < total; ++k) {
+    if (seen->latency_ms[k] >= 0) lat[with_costmap++] = seen->latency_ms[k];
+  }
+  /* Scans before the first that came back in a costmap: a receiver has no reference for losses
+   * before the first sample it got from a writer (DDS counts a loss as a gap after it). */
+  long first_back = -1;
+  for (long k = 0; k < total && first_back < 0; ++k) {
+    if (seen->latency_ms[k] >= 0) first_back = k;
+  }
+  qsort(lat, (size_t)with_costmap, sizeof(double), cmp_double);
+  const double p50 = percentile(lat, with_costmap, 0.5), p99 = percentile(lat, with_costmap, 0.99);
+  const double max = with_costmap ? lat[with_costmap - 1] : 0.0;
+  const double share =
+      s->points_sent ? (double)seen->points_integrated / (double)s->points_sent : 0.0;
+  printf(
+      "scans sent: %ld incl. %ld short head and %ld short tail scans (%.0f KB per cloud of the "
+      "sequence on average, %.1f Hz, %ld write errors)\n",
+      s->sent, o->head_scans, o->tail_scans, (double)s->bytes_sent / (double)scans / 1000.0,
+      o->rate_hz, s->write_errors);
+  printf("points integrated by tarmacd: %llu of %llu sent (%.2f %%)\n",
+         (unsigned long long)seen->points_integrated, (unsigned long long)s->points_sent,
+         100.0 * share);
+  printf("tarmacd transport drops: lost %llu, rejected %llu, queue overflow %llu (%ld reports)\n",
+         (unsigned long long)seen->lost, (unsigned long long)seen->rejected,
+         (unsigned long long)seen->overflow, seen->reports);
+  printf("costmaps received: %ld; scans with a costmap of their stamp: %ld (the first: scan %ld)\n",
+         seen->costmaps, with_costmap, first_back);
+  printf("scan stamp -> costmap received (ms): p50 %.1f  p99 %.1f  max %.1f\n", p50, p99, max);
+  if (o->json) {
+    FILE* j = fopen(o->json, "w");
+    if (!j) FAIL("cannot write %s", o->json);
+    fprintf(j,
+            "{\"scans_sent\": %ld, \"bytes_per_cloud\": %.0f, \"rate_hz\": %g, "
+            "\"write_errors\": %ld, \"points_sent\": %llu, \"points_integrated\": %llu, "
+            "\"transport_lost\": %llu, \"transport_rejected\": %llu, \"queue_overflow\": %llu, "
+            "\"costmaps_received\": %ld, \"scans_with_costmap\": %ld, \"first_scan_back\": %ld, "
+            "\"latency_ms\": {\"p50\": %.3f, \"p99\": %.3f, \"max\": %.3f}}\n",
+            s->sent, (double)s->bytes_sent / (double)scans, o->rate_hz, s->write_errors,
+            (unsigned long long)s->points_sent, (unsigned long long)seen->points_integrated,
+            (unsigned long long)seen->lost, (unsigned long long)seen->rejected,
+            (unsigned long long)seen->overflow, seen->costmaps, with_costmap, first_back, p50, p99,
+            max);
+    fclose(j);
+  }
+  free(lat);
+}
+
 int main(int argc, char** argv) {
   Options o = {NULL,
                NULL,
@@ -470,207 +700,25 @@ int main(int argc, char** argv) {
                0,
                1};
   parse(argc, argv, &o);
-
-  /* poses.txt: one row-major 3x4 T_world_sensor per scan. */
-  char path[4096];
-  snprintf(path, sizeof path, "%s/poses.txt", o.dataset);
-  FILE* pf = fopen(path, "r");
-  if (!pf) FAIL("cannot read %s", path);
-  long capacity = 1024, scans = 0;
-  double* poses = malloc((size_t)capacity * 12 * sizeof(double));
-  for (;;) {
-    double row[12];
-    int got = 0;
-    for (; got < 12; ++got) {
-      if (fscanf(pf, "%lf", &row[got]) != 1) break;
-    }
-    if (got < 12) break;
-    if (scans == capacity) {
-      capacity *= 2;
-      poses = realloc(poses, (size_t)capacity * 12 * sizeof(double));
-    }
-    memcpy(&poses[scans * 12], row, sizeof row);
-    ++scans;
-  }
-  fclose(pf);
-  if (o.max_scans > 0 && o.max_scans < scans) scans = o.max_scans;
-  if (scans == 0) FAIL("no poses in %s", path);
+  long scans = 0;
+  double* poses = read_poses(o.dataset, o.max_scans, &scans);
   long rows = 0, cols = 0;
   if (o.layout) organised_shape(o.dataset, &rows, &cols);
 
-  const dds_entity_t participant = dds_create_participant(o.domain, NULL, NULL);
-  if (participant < 0) FAIL("create participant: %s", dds_strretcode(-participant));
-
-  dds_qos_t* sensor_qos = dds_create_qos(); /* rclcpp::SensorDataQoS */
-  dds_qset_reliability(sensor_qos, DDS_RELIABILITY_BEST_EFFORT, 0);
-  dds_qset_history(sensor_qos, DDS_HISTORY_KEEP_LAST, 5);
-  dds_qos_t* pose_qos = dds_create_qos();
-  dds_qset_reliability(pose_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
-  dds_qset_history(pose_qos, DDS_HISTORY_KEEP_LAST, 100);
-  dds_qos_t* grid_qos = dds_create_qos();
-  dds_qset_reliability(grid_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
-  dds_qset_durability(grid_qos, DDS_DURABILITY_TRANSIENT_LOCAL);
-  dds_qset_history(grid_qos, DDS_HISTORY_KEEP_LAST, 1);
-  dds_qos_t* report_qos = dds_create_qos();
-  dds_qset_reliability(report_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
-  dds_qset_history(report_qos, DDS_HISTORY_KEEP_LAST, 100);
-
-  const dds_entity_t cloud_writer = dds_create_writer(
-      participant, make_topic(participant, &sensor_msgs_msg_dds__PointCloud2__desc, o.lidar_topic),
-      sensor_qos, NULL);
-  const dds_entity_t pose_writer = dds_create_writer(
-      participant,
-      make_topic(participant, &geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc,
-                 o.pose_topic),
-      pose_qos, NULL);
-  const dds_entity_t grid_reader = dds_create_reader(
-      participant, make_topic(participant, &nav_msgs_msg_dds__OccupancyGrid__desc, o.costmap_topic),
-      grid_qos, NULL);
-  const dds_entity_t report_reader = dds_create_reader(
-      participant,
-      make_topic(participant, &tarmac_msgs_msg_dds__CycleReport__desc, o.diagnostics_topic),
-      report_qos, NULL);
-  if (cloud_writer < 0 || pose_writer < 0 || grid_reader < 0 || report_reader < 0) {
-    FAIL("cannot create the writers and readers");
-  }
-
-  /* Wait for tarmacd: both its readers and its costmap writer. */
-  const int64_t wait_until = now_ns() + (int64_t)(o.wait_s * 1e9);
-  for (;;) {
-    dds_publication_matched_status_t c = {0}, p = {0};
-    dds_subscription_matched_status_t g = {0};
-    dds_get_publication_matched_status(cloud_writer, &c);
-    dds_get_publication_matched_status(pose_writer, &p);
-    dds_get_subscription_matched_status(grid_reader, &g);
-    if (c.current_count > 0 && p.current_count >= o.pose_readers && g.current_count > 0) break;
-    if (now_ns() > wait_until) {
-      fprintf(stderr, "tarmac-cyclone-replay: tarmacd did not match within %.0f s (domain %d)\n",
-              o.wait_s, o.domain);
-      return 2;
-    }
-    sleep_ns(10000000);
-  }
+  Endpoints e = create_endpoints(&o);
+  if (wait_for_tarmacd(&o, &e) != 0) return 2;
 
   Seen seen = {0};
   const long total = o.head_scans + scans + o.tail_scans;
   seen.stamps = calloc((size_t)total, sizeof(int64_t));
   seen.latency_ms = malloc((size_t)total * sizeof(double));
   for (long k = 0; k < total; ++k) seen.latency_ms[k] = -1.0;
-  take_costmaps(grid_reader, &seen); /* a transient-local costmap of an earlier run */
+  take_costmaps(e.grid_reader, &seen); /* a transient-local costmap of an earlier run */
   for (long k = 0; k < seen.scans; ++k) seen.latency_ms[k] = -1.0;
 
-  /* Stamps on the grid of the period, as a LiDAR phase-locked to PTP would send them. */
-  const int64_t period_ns = (int64_t)llround(1e9 / o.rate_hz);
-  const int64_t start_ns = (now_ns() / period_ns + 5) * period_ns;
-  uint64_t points_sent = 0, bytes_sent = 0;
-  long sent = 0, write_errors = 0;
-  for (long k = 0; k < total; ++k) {
-    /* A head scan repeats the first pose, a tail scan the last one. */
-    const long j = k - o.head_scans;
-    const int short_scan = j < 0 || j >= scans;
-    const long scan = j < 0 ? 0 : j < scans ? j : scans - 1;
-    Scan data = {0};
-    if (o.layout) {
-      load_organised_scan(&o, rows, cols, scan, short_scan, &data);
-    } else {
-      load_list_scan(&o, scan, short_scan, &data);
-    }
-    const int64_t stamp = start_ns + k * period_ns;
-
-    geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose;
-    memset(&pose, 0, sizeof pose);
-    pose.header.stamp = to_time(stamp);
-    pose.header.frame_id = (char*)o.pose_frame_id;
-    const double* T = &poses[scan * 12];
-    const double R[9] = {T[0], T[1], T[2], T[4], T[5], T[6], T[8], T[9], T[10]};
-    double q[4];
-    to_quaternion(R, q);
-    pose.pose.pose.position.x = T[3];
-    pose.pose.pose.position.y = T[7];
-    pose.pose.pose.position.z = T[11];
-    pose.pose.pose.orientation.x = q[0];
-    pose.pose.pose.orientation.y = q[1];
-    pose.pose.pose.orientation.z = q[2];
-    pose.pose.pose.orientation.w = q[3];
-
-    sensor_msgs_msg_dds__PointCloud2_ cloud;
-    memset(&cloud, 0, sizeof cloud);
-    cloud.header.stamp = to_time(stamp);
-    cloud.header.frame_id = (char*)o.frame_id;
-    cloud.height = data.height;
-    cloud.width = data.width;
-    cloud.fields._length = cloud.fields._maximum = data.field_count;
-    cloud.fields._buffer = data.fields;
-    cloud.is_bigendian = false;
-    cloud.point_step = data.point_step;
-    cloud.row_step = data.point_step * data.width;
-    cloud.data._length = cloud.data._maximum = cloud.row_step * data.height;
-    cloud.data._buffer = data.data;
-    cloud.is_dense = data.points == data.height * data.width;
-
-    seen.stamps[k] = stamp;
-    seen.scans = k + 1;
-    serve_until(stamp, grid_reader, report_reader, &seen);
-    if (dds_write(pose_writer, &pose) != DDS_RETCODE_OK) ++write_errors;
-    if (dds_write(cloud_writer, &cloud) != DDS_RETCODE_OK) ++write_errors;
-    ++sent;
-    points_sent += data.points;
-    if (!short_scan) bytes_sent += cloud.data._length; /* the sequence's, for their mean size */
-    free(data.data);
-  }
-  serve_until(now_ns() + (int64_t)(o.idle_s * 1e9), grid_reader, report_reader, &seen);
-
-  double* lat = malloc((size_t)total * sizeof(double));
-  long with_costmap = 0;
-  for (long k = 0; k < total; ++k) {
-    if (seen.latency_ms[k] >= 0) lat[with_costmap++] = seen.latency_ms[k];
-  }
-  /* Scans before the first that came back in a costmap: a receiver has no reference for losses
-   * before the first sample it got from a writer (DDS counts a loss as a gap after it). */
-  long first_back = -1;
-  for (long k = 0; k < total && first_back < 0; ++k) {
-    if (seen.latency_ms[k] >= 0) first_back = k;
-  }
-  qsort(lat, (size_t)with_costmap, sizeof(double), cmp_double);
-  const double p50 = percentile(lat, with_costmap, 0.5), p99 = percentile(lat, with_costmap, 0.99);
-  const double max = with_costmap ? lat[with_costmap - 1] : 0.0;
-  const double share = points_sent ? (double)seen.points_integrated / (double)points_sent : 0.0;
-  printf(
-      "scans sent: %ld incl. %ld short head and %ld short tail scans (%.0f KB per cloud of the "
-      "sequence on average, %.1f Hz, %ld write errors)\n",
-      sent, o.head_scans, o.tail_scans, (double)bytes_sent / (double)scans / 1000.0, o.rate_hz,
-      write_errors);
-  printf("points integrated by tarmacd: %llu of %llu sent (%.2f %%)\n",
-         (unsigned long long)seen.points_integrated, (unsigned long long)points_sent,
-         100.0 * share);
-  printf("tarmacd transport drops: lost %llu, rejected %llu, queue overflow %llu (%ld reports)\n",
-         (unsigned long long)seen.lost, (unsigned long long)seen.rejected,
-         (unsigned long long)seen.overflow, seen.reports);
-  printf("costmaps received: %ld; scans with a costmap of their stamp: %ld (the first: scan %ld)\n",
-         seen.costmaps, with_costmap, first_back);
-  printf("scan stamp -> costmap received (ms): p50 %.1f  p99 %.1f  max %.1f\n", p50, p99, max);
-  if (o.json) {
-    FILE* j = fopen(o.json, "w");
-    if (!j) FAIL("cannot write %s", o.json);
-    fprintf(j,
-            "{\"scans_sent\": %ld, \"bytes_per_cloud\": %.0f, \"rate_hz\": %g, "
-            "\"write_errors\": %ld, \"points_sent\": %llu, \"points_integrated\": %llu, "
-            "\"transport_lost\": %llu, \"transport_rejected\": %llu, \"queue_overflow\": %llu, "
-            "\"costmaps_received\": %ld, \"scans_with_costmap\": %ld, \"first_scan_back\": %ld, "
-            "\"latency_ms\": {\"p50\": %.3f, \"p99\": %.3f, \"max\": %.3f}}\n",
-            sent, (double)bytes_sent / (double)scans, o.rate_hz, write_errors,
-            (unsigned long long)points_sent, (unsigned long long)seen.points_integrated,
-            (unsigned long long)seen.lost, (unsigned long long)seen.rejected,
-            (unsigned long long)seen.overflow, seen.costmaps, with_costmap, first_back, p50, p99,
-            max);
-    fclose(j);
-  }
-  dds_delete_qos(sensor_qos);
-  dds_delete_qos(pose_qos);
-  dds_delete_qos(grid_qos);
-  dds_delete_qos(report_qos);
-  dds_delete(participant);
-  free(lat);
+  const Sent sent = send_scans(&o, &e, poses, scans, rows, cols, &seen);
+  report(&o, &seen, &sent, scans, total);
+  delete_endpoints(&e);
   free(seen.stamps);
   free(seen.latency_ms);
   free(poses);
