@@ -136,6 +136,146 @@ core::Result<std::function<bool(std::size_t, std::int64_t)>> pace_by_costmap(
       });
 }
 
+namespace {
+
+/// The scans' stamps on the sender's clock (CLOCK_REALTIME + clock_offset_ns), the first at
+/// `start`: the sequence's spacing over rate_scale, loop after loop.
+std::vector<std::int64_t> scan_stamps(const KittiSequence& seq, std::size_t n,
+                                      const ReplayOptions& options, std::int64_t& start) {
+  const std::size_t total = n * options.loops;
+  start = options.start_ns != 0 ? options.start_ns
+                                : realtime_ns() + options.clock_offset_ns +
+                                      static_cast<std::int64_t>(options.lead_ms * 1e6);
+  if (options.start_ns == 0 && options.align_ms > 0.0) {
+    const auto grid = static_cast<std::int64_t>(std::llround(options.align_ms * 1e6));
+    start = (start / grid + 1) * grid;
+  }
+  // A loop lasts the sequence plus one scan interval, so stamps keep their spacing across loops.
+  const double step_s =
+      n > 1 ? (seq.times_s[n - 1] - seq.times_s[0]) / static_cast<double>(n - 1) : 0.1;
+  const double loop_s = seq.times_s[n - 1] - seq.times_s[0] + step_s;
+  std::vector<std::int64_t> stamps(total);
+  for (std::size_t k = 0; k < total; ++k) {
+    const double t_s = seq.times_s[k % n] - seq.times_s[0] + static_cast<double>(k / n) * loop_s;
+    stamps[k] = start + std::llround(t_s * 1e9 / options.rate_scale);
+  }
+  return stamps;
+}
+
+/// Every message to send, in the order of their send times (CLOCK_REALTIME): each scan's pose
+/// and cloud, jittered, and each correction after its scan. Errors: "replay.options".
+core::Result<std::vector<Event>> schedule(const std::vector<std::int64_t>& stamps, std::size_t n,
+                                          const ReplayOptions& options) {
+  const std::size_t total = stamps.size();
+  const std::int64_t offset = options.clock_offset_ns;
+  std::mt19937_64 rng(options.seed);
+  std::uniform_real_distribution<double> jitter(0.0, std::max(0.0, options.jitter_ms) * 1e6);
+  std::vector<Event> events;
+  events.reserve(2 * total);
+  for (std::size_t k = 0; k < total; ++k) {
+    const Event scan{stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kScan};
+    const bool in_gap =
+        k >= options.pose_gap_first && k < options.pose_gap_first + options.pose_gap_count;
+    if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count) && !in_gap) {
+      // Without jitter the pose leaves first (the sort below is stable): a scan that reaches a
+      // busy daemon late then finds its pose there, rather than waiting for it.
+      events.push_back({stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kPose});
+    }
+    events.push_back(scan);
+  }
+  // After its scan whatever the jitter: a localiser corrects what it has seen.
+  const auto jitter_bound = static_cast<std::int64_t>(std::ceil(jitter.max())) + 1;
+  for (std::size_t c = 0; c < options.corrections.size(); ++c) {
+    const std::size_t after = options.corrections[c].after_scan;
+    if (after >= n || options.corrections[c].trajectory_W_S.empty()) {
+      return core::Error{"replay.options", "correction " + std::to_string(c) + ": after scan " +
+                                               std::to_string(after) + " of " + std::to_string(n) +
+                                               ", or empty"};
+    }
+    events.push_back(
+        {stamps[after] - offset + jitter_bound - std::llround(options.correction_lead_s * 1e9), c,
+         EventKind::kCorrection});
+  }
+  std::stable_sort(events.begin(), events.end(),
+                   [](const Event& a, const Event& b) { return a.publish_ns < b.publish_ns; });
+  return events;
+}
+
+/// Scan `index`'s cloud as the configured driver or layout publishes it. Errors:
+/// read_kitti_scan's, "dataset.scan".
+core::Result<transport::PointCloud2Msg> scan_message(const KittiSequence& seq, std::size_t n,
+                                                     std::size_t index, std::int64_t stamp,
+                                                     const ReplayOptions& options,
+                                                     core::PointCloud& cloud,
+                                                     core::PointCloud& transposed) {
+  // Organised sweeps (tarmac-sim) go out organised, NaN where a beam returned nothing, as a
+  // spinning LiDAR's driver publishes them.
+  const bool organised = !seq.organised.empty();
+  if (auto read =
+          read_kitti_scan(organised ? seq.organised[index % n] : seq.scans[index % n], cloud);
+      !read) {
+    return read.error();
+  }
+  if (organised && cloud.size() != seq.rows * seq.cols) {
+    return core::Error{"dataset.scan", seq.organised[index % n].string() +
+                                           ": not rows x cols of organised/shape.txt"};
+  }
+  cloud.frame_id = options.frame_id;
+  cloud.stamp_ns = stamp;
+  std::size_t height = seq.rows, width = seq.cols;
+  transport::PointCloud2Msg msg;
+  if (organised && options.driver) {
+    // The driver's message of the (instantaneous) sweep taken at the scan's stamp.
+    msg = driver_sweep_message(cloud, seq.rows, seq.cols, *options.driver, cloud.stamp_ns, 0.0,
+                               options.frame_id);
+  } else {
+    if (organised) {
+      if (options.ring_field) {
+        cloud.ring.resize(cloud.size());
+        for (std::size_t i = 0; i < cloud.size(); ++i) {
+          cloud.ring[i] = static_cast<std::uint16_t>(i / seq.cols);
+        }
+      }
+      if (options.layout != ReplayOptions::Layout::kRowsAreBeams) {
+        transpose(cloud, seq.rows, seq.cols, transposed);
+        std::swap(height, width);
+      }
+      if (options.layout == ReplayOptions::Layout::kUnorganised) {
+        drop_no_returns(cloud);  // in firing order, as Hesai's and Velodyne's lists come
+        height = 1;
+      }
+    }
+    msg = transport::to_point_cloud2(cloud);
+    if (organised && height > 1) {
+      msg.height(static_cast<std::uint32_t>(height));
+      msg.width(static_cast<std::uint32_t>(width));
+      msg.row_step(msg.point_step() * msg.width());
+      msg.is_dense(false);
+    }
+  }
+  return msg;
+}
+
+/// Correction `c` as a nav_msgs/Path of base poses, stamped on the replay's clock.
+transport::PathMsg correction_message(const Correction& c, const KittiSequence& seq, std::size_t n,
+                                      const std::vector<std::int64_t>& stamps, std::int64_t start,
+                                      const ReplayOptions& options) {
+  transport::PathMsg msg;
+  msg.header().stamp(transport::to_time_msg(stamps[c.after_scan]));
+  msg.header().frame_id(options.pose_frame_id);
+  for (const auto& p : c.trajectory_W_S) {
+    geometry_msgs::msg::dds_::PoseStamped_ ps;
+    ps.header().stamp(transport::to_time_msg(
+        replay_stamp(p.stamp_ns, seq, n, stamps, start, options.rate_scale)));
+    ps.header().frame_id(options.pose_frame_id);
+    ps.pose(transport::to_pose_msg(base_pose(p.T_W_B, options.T_base_sensor)));
+    msg.poses().push_back(std::move(ps));
+  }
+  return msg;
+}
+
+}  // namespace
+
 core::Result<ReplayStats> replay(const transport::Participant& participant,
                                  const KittiSequence& seq, const ReplayOptions& options,
                                  const std::atomic<bool>* stop) {
@@ -175,54 +315,11 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
   ReplayStats stats;
   if (n == 0 || options.loops == 0) return stats;
   const std::size_t total = n * options.loops;
-  // Stamps on the sender's clock (CLOCK_REALTIME + clock_offset_ns), sent on CLOCK_REALTIME.
-  const std::int64_t offset = options.clock_offset_ns;
-  std::int64_t start = options.start_ns != 0 ? options.start_ns
-                                             : realtime_ns() + offset +
-                                                   static_cast<std::int64_t>(options.lead_ms * 1e6);
-  if (options.start_ns == 0 && options.align_ms > 0.0) {
-    const auto grid = static_cast<std::int64_t>(std::llround(options.align_ms * 1e6));
-    start = (start / grid + 1) * grid;
-  }
-  // A loop lasts the sequence plus one scan interval, so stamps keep their spacing across loops.
-  const double step_s =
-      n > 1 ? (seq.times_s[n - 1] - seq.times_s[0]) / static_cast<double>(n - 1) : 0.1;
-  const double loop_s = seq.times_s[n - 1] - seq.times_s[0] + step_s;
-  std::vector<std::int64_t> stamps(total);
-  for (std::size_t k = 0; k < total; ++k) {
-    const double t_s = seq.times_s[k % n] - seq.times_s[0] + static_cast<double>(k / n) * loop_s;
-    stamps[k] = start + std::llround(t_s * 1e9 / options.rate_scale);
-  }
-  std::mt19937_64 rng(options.seed);
-  std::uniform_real_distribution<double> jitter(0.0, std::max(0.0, options.jitter_ms) * 1e6);
-  std::vector<Event> events;
-  events.reserve(2 * total);
-  for (std::size_t k = 0; k < total; ++k) {
-    const Event scan{stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kScan};
-    const bool in_gap =
-        k >= options.pose_gap_first && k < options.pose_gap_first + options.pose_gap_count;
-    if (options.publish_poses && (options.pose_count == 0 || k < options.pose_count) && !in_gap) {
-      // Without jitter the pose leaves first (the sort below is stable): a scan that reaches a
-      // busy daemon late then finds its pose there, rather than waiting for it.
-      events.push_back({stamps[k] - offset + std::llround(jitter(rng)), k, EventKind::kPose});
-    }
-    events.push_back(scan);
-  }
-  // After its scan whatever the jitter: a localiser corrects what it has seen.
-  const auto jitter_bound = static_cast<std::int64_t>(std::ceil(jitter.max())) + 1;
-  for (std::size_t c = 0; c < options.corrections.size(); ++c) {
-    const std::size_t after = options.corrections[c].after_scan;
-    if (after >= n || options.corrections[c].trajectory_W_S.empty()) {
-      return core::Error{"replay.options", "correction " + std::to_string(c) + ": after scan " +
-                                               std::to_string(after) + " of " + std::to_string(n) +
-                                               ", or empty"};
-    }
-    events.push_back(
-        {stamps[after] - offset + jitter_bound - std::llround(options.correction_lead_s * 1e9), c,
-         EventKind::kCorrection});
-  }
-  std::stable_sort(events.begin(), events.end(),
-                   [](const Event& a, const Event& b) { return a.publish_ns < b.publish_ns; });
+  std::int64_t start = 0;
+  const std::vector<std::int64_t> stamps = scan_stamps(seq, n, options, start);
+  auto scheduled = schedule(stamps, n, options);
+  if (!scheduled) return scheduled.error();
+  const std::vector<Event>& events = scheduled.value();
 
   core::PointCloud cloud, transposed;
   std::size_t published_scans = 0;
@@ -248,71 +345,18 @@ core::Result<ReplayStats> replay(const transport::Participant& participant,
       sleep_until_realtime(e.publish_ns);
       poses.value()->write(msg);
     } else if (e.kind == EventKind::kCorrection) {
-      const Correction& c = options.corrections[e.index];
-      transport::PathMsg msg;
-      msg.header().stamp(transport::to_time_msg(stamps[c.after_scan]));
-      msg.header().frame_id(options.pose_frame_id);
-      for (const auto& p : c.trajectory_W_S) {
-        geometry_msgs::msg::dds_::PoseStamped_ ps;
-        ps.header().stamp(transport::to_time_msg(
-            replay_stamp(p.stamp_ns, seq, n, stamps, start, options.rate_scale)));
-        ps.header().frame_id(options.pose_frame_id);
-        ps.pose(transport::to_pose_msg(base_pose(p.T_W_B, options.T_base_sensor)));
-        msg.poses().push_back(std::move(ps));
-      }
+      const transport::PathMsg msg =
+          correction_message(options.corrections[e.index], seq, n, stamps, start, options);
       sleep_until_realtime(e.publish_ns);
       paths->write(msg);
       ++stats.corrections;
     } else {
-      // Organised sweeps (tarmac-sim) go out organised, NaN where a beam returned nothing, as a
-      // spinning LiDAR's driver publishes them.
-      const bool organised = !seq.organised.empty();
-      if (auto read = read_kitti_scan(
-              organised ? seq.organised[e.index % n] : seq.scans[e.index % n], cloud);
-          !read) {
-        return read.error();
-      }
-      if (organised && cloud.size() != seq.rows * seq.cols) {
-        return core::Error{"dataset.scan", seq.organised[e.index % n].string() +
-                                               ": not rows x cols of organised/shape.txt"};
-      }
-      cloud.frame_id = options.frame_id;
-      cloud.stamp_ns = stamps[e.index];
-      std::size_t height = seq.rows, width = seq.cols;
-      transport::PointCloud2Msg msg;
-      if (organised && options.driver) {
-        // The driver's message of the (instantaneous) sweep taken at the scan's stamp.
-        msg = driver_sweep_message(cloud, seq.rows, seq.cols, *options.driver, cloud.stamp_ns, 0.0,
-                                   options.frame_id);
-      } else {
-        if (organised) {
-          if (options.ring_field) {
-            cloud.ring.resize(cloud.size());
-            for (std::size_t i = 0; i < cloud.size(); ++i) {
-              cloud.ring[i] = static_cast<std::uint16_t>(i / seq.cols);
-            }
-          }
-          if (options.layout != ReplayOptions::Layout::kRowsAreBeams) {
-            transpose(cloud, seq.rows, seq.cols, transposed);
-            std::swap(height, width);
-          }
-          if (options.layout == ReplayOptions::Layout::kUnorganised) {
-            drop_no_returns(cloud);  // in firing order, as Hesai's and Velodyne's lists come
-            height = 1;
-          }
-        }
-        msg = transport::to_point_cloud2(cloud);
-        if (organised && height > 1) {
-          msg.height(static_cast<std::uint32_t>(height));
-          msg.width(static_cast<std::uint32_t>(width));
-          msg.row_step(msg.point_step() * msg.width());
-          msg.is_dense(false);
-        }
-      }
+      auto msg = scan_message(seq, n, e.index, stamps[e.index], options, cloud, transposed);
+      if (!msg) return msg.error();
       sleep_until_realtime(e.publish_ns);
       stats.max_late_ms =
           std::max(stats.max_late_ms, static_cast<double>(realtime_ns() - e.publish_ns) / 1e6);
-      clouds.value()->write(msg);
+      clouds.value()->write(msg.value());
       ++published_scans;
       if (options.progress) options.progress(published_scans, total);
     }
