@@ -517,67 +517,40 @@ std::string ground_cells(const SequenceParams& params, const Eigen::Isometry3d& 
 
 }  // namespace
 
-SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
-                              const std::filesystem::path& out_dir) {
-  SequenceResult result;
-  if (std::string e = params.validate(); !e.empty()) {
-    result.error = e;
-    return result;
-  }
-  if (params.path.terrain != scene.terrain()) {
-    result.error = "the drive path's terrain is not the scene's (path.terrain = scene.terrain())";
-    return result;
-  }
-  for (int i = 0; i < params.scan_count() && !params.path.terrain.flat(); ++i) {
-    const Eigen::Vector2d xy = params.path.T_W_base(params.stamp_s(i)).translation().head<2>();
-    if (!params.path.terrain.height_m(xy)) {
-      result.error = "the drive leaves the terrain at scan " + std::to_string(i);
-      return result;
-    }
-  }
-  const std::filesystem::path scans_dir = out_dir / "scans";
-  const std::filesystem::path organised_dir = out_dir / "organised";
+namespace {
+
+/// The columns (truth_cell_m on the world lattice) whose envelope span meets a static object,
+/// each with the first scan that returned a point from that span (−1: none yet); the curbs'
+/// apart (a costmap that blocks cones may still drive over a curb).
+struct ColumnTruth {
+  std::map<std::pair<long, long>, int> columns, curbs;
+};
+
+/// out_dir/scans and out_dir/organised, made and cleared of earlier scans. An error, or "".
+std::string prepare_scan_dirs(const std::filesystem::path& out_dir) {
   std::error_code ec;
-  for (const auto& dir : {scans_dir, organised_dir}) {
+  for (const auto& dir : {out_dir / "scans", out_dir / "organised"}) {
     std::filesystem::create_directories(dir, ec);
-    if (ec) {
-      result.error = dir.string() + ": " + ec.message();
-      return result;
-    }
+    if (ec) return dir.string() + ": " + ec.message();
     for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
       if (entry.is_regular_file() && is_scan_name(entry.path().filename().string())) {
         std::filesystem::remove(entry.path(), ec);
-        if (ec) {
-          result.error = entry.path().string() + ": " + ec.message();
-          return result;
-        }
+        if (ec) return entry.path().string() + ": " + ec.message();
       }
     }
-    if (ec) {
-      result.error = dir.string() + ": " + ec.message();
-      return result;
-    }
+    if (ec) return dir.string() + ": " + ec.message();
   }
-  const int rows = params.lidar.beams;
-  const int cols = params.lidar.azimuth_steps;
-  if (!write_file(organised_dir / "shape.txt",
-                  std::to_string(rows) + " " + std::to_string(cols) + "\n", result.error)) {
-    return result;
-  }
+  return {};
+}
 
-  const Eigen::Isometry3d T_O_W = params.T_O_W();
-  if (!write_file(out_dir / "scene.json", scene.to_json(T_O_W), result.error) ||
-      !write_file(out_dir / "README.txt", readme(params), result.error)) {
-    return result;
-  }
-
-  // Ground truth for the costmap: every column (truth_cell_m on the lattice) whose envelope span
-  // meets a static object, with the first scan that returned a point from that span.
+/// Ground truth for the costmap: every column whose envelope span (above the terrain) meets a
+/// static object, none seen yet.
+ColumnTruth envelope_columns(const Scene& scene, const SequenceParams& params) {
   const double cell = params.truth_cell_m;
   const Terrain& terrain = params.path.terrain;
-  std::map<std::pair<long, long>, int> columns;  // (ix, iy) -> first scan seen, -1 never
-  // The curbs' own, scored apart: a costmap that blocks cones may still drive over a curb.
-  std::map<std::pair<long, long>, int> curb_columns;
+  ColumnTruth truth;
+  auto& columns = truth.columns;
+  auto& curb_columns = truth.curbs;
   for (const Object& o : scene.objects()) {
     if (o.dynamic() || o.kind == "ground") continue;
     const Aabb b = scene.bounds_at(o.id, 0.0);
@@ -608,64 +581,145 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       }
     }
   }
+  return truth;
+}
+
+/// A sweep's returns as scans/NNNNNN.bin holds them: float32 x, y, z, intensity.
+std::string list_bytes(const std::vector<LidarReturn>& returns) {
+  std::string bytes;
+  bytes.reserve(returns.size() * 16);
+  for (const LidarReturn& r : returns) {
+    append_le(bytes, static_cast<float>(r.point_S.x()));
+    append_le(bytes, static_cast<float>(r.point_S.y()));
+    append_le(bytes, static_cast<float>(r.point_S.z()));
+    append_le(bytes, r.intensity);
+  }
+  return bytes;
+}
+
+/// The same sweep organised, beams by azimuth steps (row-major), NaN where a beam returned
+/// nothing: what a spinning LiDAR's driver publishes, beams without return included.
+std::string organised_bytes(const std::vector<LidarReturn>& returns, int rows, int cols,
+                            std::vector<float>& organised) {
+  organised.assign(static_cast<std::size_t>(rows) * static_cast<std::size_t>(cols) * 4,
+                   std::numeric_limits<float>::quiet_NaN());
+  for (const LidarReturn& r : returns) {
+    float* cell = &organised[(static_cast<std::size_t>(r.beam) * static_cast<std::size_t>(cols) +
+                              static_cast<std::size_t>(r.azimuth_step)) *
+                             4];
+    cell[0] = static_cast<float>(r.point_S.x());
+    cell[1] = static_cast<float>(r.point_S.y());
+    cell[2] = static_cast<float>(r.point_S.z());
+    cell[3] = r.intensity;
+  }
+  std::string bytes;
+  for (const float f : organised) append_le(bytes, f);
+  return bytes;
+}
+
+/// Scan i's returns from the envelope span of a static object mark their columns seen.
+void mark_seen(const Scene& scene, const SequenceParams& params,
+               const std::vector<LidarReturn>& returns, const Eigen::Isometry3d& T_W_S, int i,
+               ColumnTruth& truth) {
+  const double cell = params.truth_cell_m;
+  const Terrain& terrain = params.path.terrain;
+  auto& columns = truth.columns;
+  auto& curb_columns = truth.curbs;
+  for (const LidarReturn& r : returns) {
+    if (r.object_id < 0 || r.range_m <= 0.0) continue;
+    const Object& o = scene.objects()[static_cast<std::size_t>(r.object_id)];
+    if (o.dynamic() || o.kind == "ground") continue;
+    const Eigen::Vector3d p_W = T_W_S * (r.point_S * (r.true_range_m / r.range_m));
+    const std::optional<double> ground_z = terrain.height_m(p_W.head<2>());
+    if (!ground_z) continue;
+    const double above_ground_m = p_W.z() - *ground_z;
+    if (above_ground_m < params.envelope_low_m || above_ground_m > params.envelope_high_m) {
+      continue;
+    }
+    const auto key = std::make_pair(static_cast<long>(std::floor(p_W.x() / cell)),
+                                    static_cast<long>(std::floor(p_W.y() / cell)));
+    // A return on the object's surface lies in one of its columns (or on the edge of one).
+    if (auto it = columns.find(key); it != columns.end() && it->second < 0) it->second = i;
+    if (o.kind != "curb") continue;
+    if (auto it = curb_columns.find(key); it != curb_columns.end() && it->second < 0) {
+      it->second = i;
+    }
+  }
+}
+
+/// obstacle_columns.txt's or curb_columns.txt's text.
+std::string column_file(const std::string& what, const SequenceParams& params,
+                        const Eigen::Isometry3d& T_O_W,
+                        const std::map<std::pair<long, long>, int>& first_seen) {
+  std::string text = "# " + what + " columns: cell_m " + number(params.truth_cell_m) +
+                     " envelope_z_m " + number(params.envelope_low_m) + " " +
+                     number(params.envelope_high_m) + "\n# T_world_scene " + pose_line(T_O_W) +
+                     "# ix iy first_seen_scan (-1: no return from its envelope span)\n";
+  for (const auto& [key, first] : first_seen) {
+    text += std::to_string(key.first) + ' ' + std::to_string(key.second) + ' ' +
+            std::to_string(first) + '\n';
+  }
+  return text;
+}
+
+}  // namespace
+
+SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
+                              const std::filesystem::path& out_dir) {
+  SequenceResult result;
+  if (std::string e = params.validate(); !e.empty()) {
+    result.error = e;
+    return result;
+  }
+  if (params.path.terrain != scene.terrain()) {
+    result.error = "the drive path's terrain is not the scene's (path.terrain = scene.terrain())";
+    return result;
+  }
+  for (int i = 0; i < params.scan_count() && !params.path.terrain.flat(); ++i) {
+    const Eigen::Vector2d xy = params.path.T_W_base(params.stamp_s(i)).translation().head<2>();
+    if (!params.path.terrain.height_m(xy)) {
+      result.error = "the drive leaves the terrain at scan " + std::to_string(i);
+      return result;
+    }
+  }
+  const std::filesystem::path scans_dir = out_dir / "scans";
+  const std::filesystem::path organised_dir = out_dir / "organised";
+  std::error_code ec;
+  if (result.error = prepare_scan_dirs(out_dir); !result.error.empty()) return result;
+  const int rows = params.lidar.beams;
+  const int cols = params.lidar.azimuth_steps;
+  if (!write_file(organised_dir / "shape.txt",
+                  std::to_string(rows) + " " + std::to_string(cols) + "\n", result.error)) {
+    return result;
+  }
+
+  const Eigen::Isometry3d T_O_W = params.T_O_W();
+  if (!write_file(out_dir / "scene.json", scene.to_json(T_O_W), result.error) ||
+      !write_file(out_dir / "README.txt", readme(params), result.error)) {
+    return result;
+  }
+
+  const Terrain& terrain = params.path.terrain;
+  ColumnTruth truth = envelope_columns(scene, params);
 
   const Lidar lidar(params.lidar);
   GaussianNoise noise(params.seed);
   std::vector<LidarReturn> returns;
   std::vector<float> organised;
   std::vector<std::size_t> points_per_scan;
-  std::string poses, times, bytes;
+  std::string poses, times;
   std::string boxes = "# T_world_scene " + pose_line(T_O_W);
   const int n = params.scan_count();
   for (int i = 0; i < n; ++i) {
     const double t_s = params.stamp_s(i);
     const Eigen::Isometry3d T_W_S = params.path.T_W_S(t_s);
     lidar.scan(scene, T_W_S, t_s, &noise, returns);
-    bytes.clear();
-    bytes.reserve(returns.size() * 16);
-    for (const LidarReturn& r : returns) {
-      append_le(bytes, static_cast<float>(r.point_S.x()));
-      append_le(bytes, static_cast<float>(r.point_S.y()));
-      append_le(bytes, static_cast<float>(r.point_S.z()));
-      append_le(bytes, r.intensity);
+    if (!write_file(scans_dir / scan_name(i), list_bytes(returns), result.error) ||
+        !write_file(organised_dir / scan_name(i), organised_bytes(returns, rows, cols, organised),
+                    result.error)) {
+      return result;
     }
-    if (!write_file(scans_dir / scan_name(i), bytes, result.error)) return result;
-    // The same sweep organised, beams by azimuth steps (row-major), NaN where a beam returned
-    // nothing: what a spinning LiDAR's driver publishes, beams without return included.
-    organised.assign(static_cast<std::size_t>(rows) * static_cast<std::size_t>(cols) * 4,
-                     std::numeric_limits<float>::quiet_NaN());
-    for (const LidarReturn& r : returns) {
-      float* cell = &organised[(static_cast<std::size_t>(r.beam) * static_cast<std::size_t>(cols) +
-                                static_cast<std::size_t>(r.azimuth_step)) *
-                               4];
-      cell[0] = static_cast<float>(r.point_S.x());
-      cell[1] = static_cast<float>(r.point_S.y());
-      cell[2] = static_cast<float>(r.point_S.z());
-      cell[3] = r.intensity;
-    }
-    bytes.clear();
-    for (const float f : organised) append_le(bytes, f);
-    if (!write_file(organised_dir / scan_name(i), bytes, result.error)) return result;
-    for (const LidarReturn& r : returns) {
-      if (r.object_id < 0 || r.range_m <= 0.0) continue;
-      const Object& o = scene.objects()[static_cast<std::size_t>(r.object_id)];
-      if (o.dynamic() || o.kind == "ground") continue;
-      const Eigen::Vector3d p_W = T_W_S * (r.point_S * (r.true_range_m / r.range_m));
-      const std::optional<double> ground_z = terrain.height_m(p_W.head<2>());
-      if (!ground_z) continue;
-      const double above_ground_m = p_W.z() - *ground_z;
-      if (above_ground_m < params.envelope_low_m || above_ground_m > params.envelope_high_m) {
-        continue;
-      }
-      const auto key = std::make_pair(static_cast<long>(std::floor(p_W.x() / cell)),
-                                      static_cast<long>(std::floor(p_W.y() / cell)));
-      // A return on the object's surface lies in one of its columns (or on the edge of one).
-      if (auto it = columns.find(key); it != columns.end() && it->second < 0) it->second = i;
-      if (o.kind != "curb") continue;
-      if (auto it = curb_columns.find(key); it != curb_columns.end() && it->second < 0) {
-        it->second = i;
-      }
-    }
+    mark_seen(scene, params, returns, T_W_S, i, truth);
     poses += pose_line(params.written_T_O_S(i));
     times += number(t_s) + "\n";
     for (const Object& o : scene.objects()) {
@@ -695,24 +749,12 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       !write_file(out_dir / "dynamic_boxes.txt", boxes, result.error)) {
     return result;
   }
-  const auto column_file = [&](const std::string& what,
-                               const std::map<std::pair<long, long>, int>& first_seen) {
-    std::string text = "# " + what + " columns: cell_m " + number(cell) + " envelope_z_m " +
-                       number(params.envelope_low_m) + " " + number(params.envelope_high_m) +
-                       "\n# T_world_scene " + pose_line(T_O_W) +
-                       "# ix iy first_seen_scan (-1: no return from its envelope span)\n";
-    for (const auto& [key, first] : first_seen) {
-      text += std::to_string(key.first) + ' ' + std::to_string(key.second) + ' ' +
-              std::to_string(first) + '\n';
-    }
-    return text;
-  };
-  if (!write_file(out_dir / "obstacle_columns.txt", column_file("obstacle", columns),
-                  result.error)) {
+  if (!write_file(out_dir / "obstacle_columns.txt",
+                  column_file("obstacle", params, T_O_W, truth.columns), result.error)) {
     return result;
   }
-  if (!curb_columns.empty()) {
-    if (!write_file(out_dir / "curb_columns.txt", column_file("curb", curb_columns),
+  if (!truth.curbs.empty()) {
+    if (!write_file(out_dir / "curb_columns.txt", column_file("curb", params, T_O_W, truth.curbs),
                     result.error)) {
       return result;
     }
