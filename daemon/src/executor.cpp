@@ -155,6 +155,32 @@ class Executor::Impl {
   /// that much since the last tick (on_clock_step() runs first).
   void tick(std::int64_t tick_time_ns, double jitter_ms, std::uint32_t skipped,
             std::int64_t clock_step_ns);
+  /// A tick's stage times and shed items, as the CycleReport carries them.
+  struct StageFigures {
+    double ms[kStageCount] = {};
+    std::uint64_t shed[kStageCount] = {};
+  };
+  /// What the drain found changed besides the scans it selected (into `selected`).
+  struct Drained {
+    bool zones_changed = false, fleet_changed = false;
+  };
+  /// What went out this tick, for the report.
+  struct Published {
+    double stamp_to_publish_ms = -1.0;  ///< newest integrated scan stamp -> costmap handed out
+    std::chrono::steady_clock::time_point done;
+  };
+  /// drain: the queues into the scheduler's slots, the pose buffer, the zones and the peers;
+  /// then the scans due at this tick selected by stamp.
+  Drained drain_inputs(StageFigures& f);
+  /// The mapping stages, scan by scan in (stamp, sensor) order, and the corrections due; the
+  /// totals updated.
+  const Cycle::Tick& map_selected(StageFigures& f);
+  /// The costmap and the 2D ESDF when `update`, published, then the 3D band.
+  Published update_outputs(bool update, const Cycle::Tick& done, StageFigures& f);
+  /// The CycleReport (and every diagnostic_array_every ticks the DiagnosticArray) of this tick.
+  void report_tick(std::chrono::steady_clock::time_point start, const Published& out,
+                   const Cycle::Tick& done, const StageFigures& f, double jitter_ms,
+                   std::uint32_t skipped);
   /// The stamp clock stepped by `step_ns` (a whole number of periods) and ticks now sit at
   /// `tick_time_ns` on it: what was stamped by the old clock beyond the new tick + max_future
   /// (after a backward step) is forgotten — pending scans judged again ("scan.future" /
@@ -218,20 +244,28 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   drops.begin_tick();
   rejections.begin_tick();
   if (clock_step_ns != 0) on_clock_step(clock_step_ns, tick_time_ns);
-  double stage_ms[kStageCount] = {};
-  std::uint64_t shed[kStageCount] = {};
+  StageFigures f;
+  const Drained in = drain_inputs(f);
+  f.ms[kDrain] = ms_between(t_start, Clock::now());
+  const Cycle::Tick& done = map_selected(f);
+  const bool update =
+      !selected.empty() || in.zones_changed || done.rebuilds_completed > 0 || in.fleet_changed;
+  const Published out = update_outputs(update, done, f);
+  report_tick(t_start, out, done, f, jitter_ms, skipped);
+}
 
-  // ---- drain: queues -> scheduler slots, pose buffer, zones; then select by stamp ----
-  const bool zones_changed = inputs->drain(zones, drops, rejections, cycle_index);
+Executor::Impl::Drained Executor::Impl::drain_inputs(StageFigures& f) {
+  Drained d;
+  d.zones_changed = inputs->drain(zones, drops, rejections, cycle_index);
   // Peers' summaries change this vehicle's costmap only once it has one of its own.
-  const bool fleet_changed = fleet && fleet->take(tick_ns, drops, rejections) && have_costmap;
+  d.fleet_changed = fleet && fleet->take(tick_ns, drops, rejections) && have_costmap;
   const auto stats = scheduler.select(tick_ns, poses, selected, drops);
-  shed[kDrain] = stats.deferred_scans;
-  shed[kIngest] = stats.decimated_points;
-  const auto t_drained = Clock::now();
-  stage_ms[kDrain] = ms_between(t_start, t_drained);
+  f.shed[kDrain] = stats.deferred_scans;
+  f.shed[kIngest] = stats.decimated_points;
+  return d;
+}
 
-  // ---- the mapping stages, scan by scan in (stamp, sensor) order (Cycle) ----
+const Cycle::Tick& Executor::Impl::map_selected(StageFigures& f) {
   cycle->begin();
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
@@ -250,12 +284,11 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     scheduler.release(sel.slot);
   }
   const Cycle::Tick& done = cycle->tick();
-  stage_ms[kIngest] = done.ingest_ms;
-  stage_ms[kIntegrate] = done.integrate_ms;
-  stage_ms[kTsdf] = done.tsdf_ms;
-  stage_ms[kRebuild] = done.rebuild_ms;
-  shed[kTsdf] = done.tsdf_shed;
-  const bool rebuilt = done.rebuilds_completed > 0;
+  f.ms[kIngest] = done.ingest_ms;
+  f.ms[kIntegrate] = done.integrate_ms;
+  f.ms[kTsdf] = done.tsdf_ms;
+  f.ms[kRebuild] = done.rebuild_ms;
+  f.shed[kTsdf] = done.tsdf_shed;
 
   // Corrections stamped up to the input horizon (no scan up to their stamp is still pending):
   // every scan before them is in, every later one is to come.
@@ -264,7 +297,6 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
                                           scheduler.oldest_pending_stamp() - 1);
     corrections.apply_before(horizon + 1);
   }
-
   {
     std::lock_guard lock(totals_mutex);  // before the costmap goes out (tests read both)
     totals.scans_integrated += done.scans;
@@ -274,18 +306,20 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     totals.rebuilds_completed += done.rebuilds_completed;
     totals.newest_stamp_ns = newest_stamp_ns;
   }
-
-  if (mapper.rebuilding()) shed[kRebuild] = mapper.rebuild_remaining();  // for the next scans
-  if (rebuilt) {
+  if (mapper.rebuilding()) f.shed[kRebuild] = mapper.rebuild_remaining();  // for the next scans
+  if (done.rebuilds_completed > 0) {
     const auto& cs = mapper.correction_stats();
     spdlog::info(
         "corrections: rebuilt window swapped in ({} scans re-integrated so far, {} TSDF "
         "blocks erased, {} scans rolled out)",
         cs.scans_reintegrated, cs.tsdf_blocks_erased, cs.scans_rolled_out);
   }
+  return done;
+}
 
+Executor::Impl::Published Executor::Impl::update_outputs(bool update, const Cycle::Tick& done,
+                                                         StageFigures& f) {
   // ---- costmap + 2D ESDF, once per tick (when something changed) ----
-  const bool update = !selected.empty() || zones_changed || rebuilt || fleet_changed;
   if (update) {
     // Peers' observations age on the costmap's clock (its newest scan), not the tick's: the
     // same scans and summaries give the same costmap.
@@ -293,7 +327,7 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     cycle->update_costmap(zones, newest_stamp_ns);
     have_costmap = true;
   }
-  stage_ms[kCostmap] = done.costmap_ms;
+  f.ms[kCostmap] = done.costmap_ms;
   const auto t_costmap1 = Clock::now();
 
   // ---- publish the costmap and the ESDF slice: the planner and the safety filter do not wait
@@ -315,27 +349,31 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
   }
   if (fleet && have_costmap) fleet->publish_if_due(tick_ns, mapper);
   const auto t_costmap_out = Clock::now();
+  Published out;
   // Measured, never used to decide: newest integrated scan stamp -> costmap handed to DDS.
-  double stamp_to_publish_ms = -1.0;
   if (update && !selected.empty()) {
-    stamp_to_publish_ms = static_cast<double>(stamp_now() - newest_stamp_ns) / 1e6;
+    out.stamp_to_publish_ms = static_cast<double>(stamp_now() - newest_stamp_ns) / 1e6;
   }
 
   // ---- 3D ESDF band (esdf_band.enabled), from the costmap's ground, then its box out ----
   const bool band = update && cycle->update_esdf_band(zones, newest_stamp_ns);
   const auto t_band1 = Clock::now();
-  stage_ms[kEsdfBand] = done.esdf_band_ms;
+  f.ms[kEsdfBand] = done.esdf_band_ms;
   if (band) {
     const auto& p = config.mapping.esdf_band;
     outputs->publish_band(mapper.esdf_band(), mapper.vehicle_pose().translation().head<2>(),
                           p.publish_radius_m, newest_stamp_ns, config.outputs.frame_id);
   }
-  const auto t_published = Clock::now();
-  stage_ms[kPublish] = ms_between(t_costmap1, t_costmap_out) + ms_between(t_band1, t_published);
+  out.done = Clock::now();
+  f.ms[kPublish] = ms_between(t_costmap1, t_costmap_out) + ms_between(t_band1, out.done);
+  return out;
+}
 
-  // ---- report ----
-  const double cycle_duration = ms_between(t_start, t_published);
-  const bool overrun = reports.set_stages(stage_ms, shed, cycle_duration);
+void Executor::Impl::report_tick(std::chrono::steady_clock::time_point start, const Published& out,
+                                 const Cycle::Tick& done, const StageFigures& f, double jitter_ms,
+                                 std::uint32_t skipped) {
+  const double cycle_duration = ms_between(start, out.done);
+  const bool overrun = reports.set_stages(f.ms, f.shed, cycle_duration);
   transport::CycleReport& report = reports.report();
   report.stamp_ns = newest_stamp_ns;
   report.cycle_index = cycle_index;
@@ -363,12 +401,12 @@ void Executor::Impl::tick(std::int64_t tick_time_ns, double jitter_ms, std::uint
     totals.overruns += overrun ? 1 : 0;
     cycle_ms.add(cycle_duration);
     jitter_ms_window.add(jitter_ms);
-    if (stamp_to_publish_ms >= 0.0) stamp_to_publish.add(stamp_to_publish_ms);
+    if (out.stamp_to_publish_ms >= 0.0) stamp_to_publish.add(out.stamp_to_publish_ms);
   }
   outputs->publish_report(report);
 
   if (cycle_index % config.outputs.diagnostic_array_every == 0) {
-    publish_diagnostics(stage_ms, jitter_ms, overrun);
+    publish_diagnostics(f.ms, jitter_ms, overrun);
   }
   ++cycle_index;
 }
