@@ -514,6 +514,49 @@ TEST(Terrain, AStrayReturnBelowTheFloorLiftsNothingIntoAnObstacle) {
   }
 }
 
+TEST(Terrain, AGlossyFloorsMirrorImagesMakeNeitherADropNorALowerGround) {
+  // A glossy floor (balm_hall's) reflects part of the beams that reach it: the sensor reports
+  // the object the reflected beam hit along the beam's own direction, below the floor, and the
+  // beam "passes" through the floor to it. Here returns 1.1 m apart in a 3 x 2 m patch have
+  // such an image 2 m further on, down to 0.7 m under the floor: more than max_ground_step_m
+  // (0.5), as deep as a pit (balm_hall's lie up to 3 m under its floor). The floor returned there in every scan and holds the vehicle: not a drop, and
+  // its ground is the floor, not the images' depth. (Terrain.ADropBeyondMaxGroundStep... keeps
+  // the pit and the dock edge, which return nothing at the floor's height, as drops.)
+  const Eigen::Vector3f sensor(0.05f, 0.05f, 2.0f);
+  const auto in_patch = [](const Eigen::Vector3f& p) {
+    return p.x() > 3.0f && p.x() < 6.0f && p.y() > -4.0f && p.y() < -2.0f;
+  };
+  std::vector<Eigen::Vector3f> points;
+  std::size_t images = 0;
+  for (int ix = -120; ix <= 120; ++ix) {
+    for (int iy = -120; iy <= 120; ++iy) {
+      const Eigen::Vector3f p(0.1f * ix + 0.013f, 0.1f * iy + 0.017f, 0.05f);
+      points.push_back(p);
+      if (in_patch(p) && ix % 11 == 0 && iy % 11 == 0) {
+        points.push_back(p + 2.0f * (p - sensor).normalized());
+        ++images;
+      }
+    }
+  }
+  ASSERT_GE(images, 4u);
+  const CostmapLayers layers = terrain_costmap(points);
+  const auto cell_of = [&](double x, double y) {
+    const auto cell = layers.costmap.geometry().cell_of(x, y);
+    return std::pair{static_cast<std::uint32_t>(cell->x()), static_cast<std::uint32_t>(cell->y())};
+  };
+  std::size_t lethal = 0, low = 0, cells = 0;
+  for (double x = 3.1; x < 7.5; x += 0.2) {  // the patch and where its images' rays go
+    for (double y = -5.1; y < -2.05; y += 0.2) {
+      const auto [cx, cy] = cell_of(x, y);
+      ++cells;
+      lethal += layers.costmap.at(cx, cy) == kCostLethal ? 1 : 0;
+      low += layers.ground_z_m.at(cx, cy) < -0.1f ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(lethal, 0u) << "of " << cells << " cells";
+  EXPECT_EQ(low, 0u) << "of " << cells << " cells have a ground under the floor";
+}
+
 TEST(DistanceDisplay, ShadesDistanceLinearly_UnknownStaysUnknown) {
   DistanceField field;
   field.dims = {6, 1, 1};

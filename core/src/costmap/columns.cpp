@@ -121,12 +121,23 @@ struct ColumnRules {
   [[nodiscard]] bool observed_count(int known, int gl) const {
     return whole_envelope ? gl >= 0 && gl + top_layers <= nz && known == top_layers : known != 0;
   }
-  /// Whether a column falls away: observed (a return, or a ray passing) more than
-  /// max_ground_step_m below its ground estimate. The edge of a loading dock, a pit, a level
-  /// below seen over a parapet: the ground did not spread there (no slope joins it), and a
-  /// vehicle that drove on would fall, whether the bottom returned or not.
-  [[nodiscard]] bool drops(int lowest_observed, int estimate) const {
-    return lowest_observed >= 0 && static_cast<float>(estimate - lowest_observed) > drop_layers;
+  /// Whether the column at ring slot `sl` falls away: observed (a return, or a ray passing) more
+  /// than max_ground_step_m below its ground estimate, and nothing returned there from within
+  /// that step below the estimate up to where obstacles start. The edge of a loading dock, a
+  /// pit, a level below seen over a parapet: the ground did not spread there (no slope joins
+  /// it), and a vehicle that drove on would fall, whether the bottom returned or not. A floor
+  /// that returned at the estimate holds the vehicle, whatever its mirror images (a glossy
+  /// floor, a puddle) showed under it. The lookups are made only for the rare columns seen that
+  /// deep.
+  [[nodiscard]] bool drops(std::size_t sl, int lowest_observed, int estimate) const {
+    if (lowest_observed < 0 || static_cast<float>(estimate - lowest_observed) <= drop_layers) {
+      return false;
+    }
+    const int z1 = std::min(nz, estimate + lo_layers);
+    for (int z = std::max(0, estimate - static_cast<int>(drop_layers)); z < z1; ++z) {
+      if (map.ring_layer(z)[sl] > 0.0f) return false;
+    }
+    return true;
   }
   /// Whether ring slot `sl` holds a low object in layers [z0, z1).
   [[nodiscard]] bool rises(std::size_t sl, int z0, int z1) const {
@@ -185,7 +196,7 @@ void classify_rows_by_bits(const CostmapPass& pass, const ColumnRules& rules,
         const std::uint64_t occupied = occ_bits[sl] | std::uint64_t{occ_bits[pass.cells_n + sl]}
                                                           << 32;
         const bool obstacle =
-            (occupied & e.obstacle_mask) != 0 || rules.drops(seen_of[i], estimate);
+            (occupied & e.obstacle_mask) != 0 || rules.drops(sl, seen_of[i], estimate);
         // A low object blocks whatever the free rule says of the rest of the envelope.
         const bool low =
             !obstacle && (known & e.seen_mask) != 0 && rules.rises(sl, e.rise_begin, e.rise_end);
@@ -250,7 +261,7 @@ void classify_rows_by_layers(const CostmapPass& pass, const ColumnRules& rules,
       const bool seen = rules.observed_count(any_known[i], gl);
       const int estimate =
           static_cast<int>(estimates[static_cast<std::size_t>(y / pass.g) * pass.gx + x / pass.g]);
-      const bool drop = rules.drops(out.lowest_observed[i], estimate);
+      const bool drop = rules.drops(ring_row + rx, out.lowest_observed[i], estimate);
       // A low object blocks whatever the free rule says of the rest of the envelope.
       const bool low =
           any_obstacle[i] == 0 && any_known[i] != 0 &&

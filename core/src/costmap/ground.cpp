@@ -122,6 +122,7 @@ void find_ground_candidates(const CostmapPass& pass) {
   // Layers 0..31 in the first cell_count() words, 32..63 in the second; ring (storage) order.
   occupied_bits.resize(use_bits ? 2 * cells_n : 0);
   known_bits.resize(use_bits ? 2 * cells_n : 0);
+  out.hovers.resize(cells_n);  // every cell is written below
   if (use_bits) {
     lowest.resize(cells_n);  // every cell is written below
     out.lowest_observed.resize(cells_n);
@@ -165,7 +166,9 @@ void find_ground_candidates(const CostmapPass& pass) {
     }
     for (std::size_t i = static_cast<std::size_t>(y0) * nx; i < static_cast<std::size_t>(y1) * nx;
          ++i) {
-      lowest[i] = ground_candidate(lowest[i], observed[i]);
+      const std::int16_t candidate = ground_candidate(lowest[i], observed[i]);
+      out.hovers[i] = candidate != lowest[i] ? 1 : 0;
+      lowest[i] = candidate;
     }
   });
   if (use_bits) {
@@ -176,14 +179,16 @@ void find_ground_candidates(const CostmapPass& pass) {
         const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
         std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
         std::int16_t* seen = &out.lowest_observed[static_cast<std::size_t>(y) * nx];
+        std::uint8_t* hover = &out.hovers[static_cast<std::size_t>(y) * nx];
         for (int x = 0, rx = map.ring_x(0); x < nx; ++x, rx = rx + 1 == nx ? 0 : rx + 1) {
           const std::size_t sl = ring_row + static_cast<std::size_t>(rx);
           const std::uint64_t b = occupied_bits[sl] | std::uint64_t{occupied_bits[cells_n + sl]}
                                                           << 32;
           const std::uint64_t k = known_bits[sl] | std::uint64_t{known_bits[cells_n + sl]} << 32;
           seen[x] = k == 0 ? std::int16_t{-1} : static_cast<std::int16_t>(std::countr_zero(k));
-          low[x] = b == 0 ? std::int16_t{-1}
-                          : ground_candidate(std::countr_zero(b), std::countr_zero(k));
+          const int occupied = b == 0 ? -1 : std::countr_zero(b);
+          low[x] = ground_candidate(occupied, seen[x]);
+          hover[x] = low[x] != occupied ? 1 : 0;
         }
       }
     });
@@ -205,26 +210,39 @@ void find_coarse_ground(const CostmapPass& pass) {
   // Per coarse cell, a low order statistic of its columns' candidates: the lowest after the
   // lowest tenth is set aside, so a few stray returns under the surface (a glossy floor's
   // mirror images, multipath) do not pull the ground down, while a cell with a little ground
-  // seen beside an object still finds it. Integers, so the order they come in is irrelevant;
-  // tasks own whole coarse rows.
+  // seen beside an object still finds it. Where the candidates of the columns with a surface
+  // (no observed space under their lowest occupied voxel) give a higher ground than all
+  // candidates do, by more than a layer, that higher one: the others' observed space under a
+  // returned floor was seen by rays to its mirror images (a glossy hall floor shows them over
+  // whole metres), not by rays passing under something hovering, which end on the ground.
+  // Integers, so the order they come in is irrelevant; tasks own whole coarse rows.
+  const auto& hovers = out.hovers;
   runner.parallel_for(kRowTasks, [&](std::size_t task) {
     const int cy0 = static_cast<int>(static_cast<std::size_t>(gy) * task / kRowTasks);
     const int cy1 = static_cast<int>(static_cast<std::size_t>(gy) * (task + 1) / kRowTasks);
-    std::array<std::int16_t, 64 * 64> heights;  // g <= 64 (ground_cell_m / voxel)
+    std::array<std::int16_t, 64 * 64> heights, surfaces;  // g <= 64 (ground_cell_m / voxel)
+    const auto low_tenth = [](std::array<std::int16_t, 64 * 64>& h, std::size_t count) {
+      const auto k = static_cast<std::ptrdiff_t>(count / 10);
+      std::nth_element(h.begin(), h.begin() + k, h.begin() + static_cast<std::ptrdiff_t>(count));
+      return h[static_cast<std::size_t>(k)];
+    };
     for (int cy = cy0; cy < cy1; ++cy) {
       for (int cx = 0; cx < gx; ++cx) {
-        std::size_t count = 0;
+        std::size_t count = 0, n_surfaces = 0;
         for (int y = cy * g, y1 = std::min(ny, (cy + 1) * g); y < y1; ++y) {
-          const std::int16_t* low = &lowest[static_cast<std::size_t>(y) * nx];
+          const std::size_t row = static_cast<std::size_t>(y) * nx;
           for (int x = cx * g, x1 = std::min(nx, (cx + 1) * g); x < x1; ++x) {
-            if (low[x] >= 0 && count < heights.size()) heights[count++] = low[x];
+            const std::int16_t low = lowest[row + x];
+            if (low < 0 || count == heights.size()) continue;
+            heights[count++] = low;
+            if (hovers[row + x] == 0) surfaces[n_surfaces++] = low;
           }
         }
         if (count == 0) continue;
-        const auto k = static_cast<std::ptrdiff_t>(count / 10);
-        std::nth_element(heights.begin(), heights.begin() + k,
-                         heights.begin() + static_cast<std::ptrdiff_t>(count));
-        coarse[static_cast<std::size_t>(cy) * gx + cx] = static_cast<float>(heights[k]);
+        const int all = low_tenth(heights, count);
+        const int surface = n_surfaces == 0 ? all : low_tenth(surfaces, n_surfaces);
+        coarse[static_cast<std::size_t>(cy) * gx + cx] =
+            static_cast<float>(surface > all + 1 ? surface : all);
       }
     }
   });
