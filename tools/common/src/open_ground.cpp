@@ -14,6 +14,9 @@ constexpr double kRadiusM = 1.0;    ///< the neighbourhood of a cell
 constexpr double kMaxRiseM = 0.25;  ///< its highest return above the neighbourhood's lowest
 constexpr double kMaxTallM = 0.3;   ///< anything in the neighbourhood above its lowest
 constexpr std::uint32_t kMinReturns = 3;
+constexpr float kStepM = 0.1f;  ///< side-by-side cells' lowest returns this far apart: a step
+constexpr float kLowM = 0.08f;  ///< a cell's returns spread this far: a low object (the default
+                                ///< costmap.min_obstacle_height_m)
 
 /// What render() draws per cell.
 enum Look : std::uint8_t { kNone, kReturns, kLethal, kInscribed, kInflated, kFree, kUnknown };
@@ -61,6 +64,28 @@ const OpenGroundCycle& OpenGroundTracker::observe(const core::Grid2D<std::int8_t
       window_[static_cast<std::size_t>(y) * px + x] = &c.z;
     }
   }
+  // Steps: a cell with returns whose lowest lies kStepM or more from its +x or +y neighbour's
+  // (both cells marked); low objects: a cell whose own returns below the envelope spread kLowM
+  // or more. Cells with fewer than kMinReturns returns are left out, as above.
+  step_.assign(window_.size(), 0);
+  const auto top = static_cast<float>(envelope_m_);
+  const auto lowest_of = [&](std::size_t i) {
+    const std::vector<float>& z = *window_[i];
+    return z.size() < kMinReturns ? std::numeric_limits<float>::quiet_NaN() : z.front();
+  };
+  for (int y = 0; y < py; ++y) {
+    for (int x = 0; x < px; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * px + x;
+      const float z = lowest_of(i);
+      if (std::isnan(z)) continue;
+      const std::vector<float>& own = *window_[i];
+      const auto below_top = std::lower_bound(own.begin(), own.end(), z + top);
+      if (*(below_top - 1) - z >= kLowM) step_[i] = 1;
+      for (const std::size_t j : {x + 1 < px ? i + 1 : i, y + 1 < py ? i + px : i}) {
+        if (j != i && std::abs(lowest_of(j) - z) >= kStepM) step_[i] = step_[j] = 1;
+      }
+    }
+  }
   // The disc of cells whose centres lie within the radius.
   std::vector<std::ptrdiff_t> disc;
   for (int dy = -m; dy <= m; ++dy) {
@@ -75,7 +100,6 @@ const OpenGroundCycle& OpenGroundTracker::observe(const core::Grid2D<std::int8_t
     const auto it = std::lower_bound(z.begin(), z.end(), lo);
     return it != z.end() && *it < hi;
   };
-  const auto top = static_cast<float>(envelope_m_);
   OpenGroundCycle c;
   c.scan = scan;
   last_.assign(static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny), kNone);
@@ -105,6 +129,14 @@ const OpenGroundCycle& OpenGroundTracker::observe(const core::Grid2D<std::int8_t
       if (!clear) continue;
       ++c.cells;
       const int v = costmap.at(static_cast<std::uint32_t>(x), static_cast<std::uint32_t>(y));
+      const bool by_step = std::any_of(disc.begin(), disc.end(), [&](std::ptrdiff_t d) {
+        return step_[static_cast<std::size_t>(i + d)] != 0;
+      });
+      if (!by_step) {
+        ++c.away;
+        c.away_lethal += v == 100 ? 1 : 0;
+        c.away_inscribed += v == 99 ? 1 : 0;
+      }
       if (v == 100) {
         ++c.lethal;
         look = kLethal;
@@ -155,30 +187,38 @@ std::string open_ground_summary(const OpenGroundTracker& tracker) {
     sum.inflated += c.inflated;
     sum.free += c.free;
     sum.unknown += c.unknown;
+    sum.away += c.away;
+    sum.away_lethal += c.away_lethal;
+    sum.away_inscribed += c.away_inscribed;
     if (share(c.lethal, c.cells) > worst || worst_scan < 0) {
       worst = share(c.lethal, c.cells);
       worst_scan = c.scan;
     }
   }
   const std::size_t n = tracker.cycles().size();
-  char line[512];
+  char line[768];
   std::snprintf(line, sizeof line,
                 "open flat ground by the drive's own returns (%zu cycles scored, %.0f cells each "
                 "on average): lethal %.2f %% (worst cycle %.2f %%, scan %d), inscribed %.2f %%, "
-                "inflated %.2f %%, free %.2f %%, unknown %.2f %%",
+                "inflated %.2f %%, free %.2f %%, unknown %.2f %%; away from steps of %.2f m "
+                "and low returns of %.2f m (%.1f %% of it): lethal %.2f %%, inscribed %.2f %%",
                 n, n == 0 ? 0.0 : static_cast<double>(sum.cells) / static_cast<double>(n),
                 share(sum.lethal, sum.cells), worst, worst_scan, share(sum.inscribed, sum.cells),
                 share(sum.inflated, sum.cells), share(sum.free, sum.cells),
-                share(sum.unknown, sum.cells));
+                share(sum.unknown, sum.cells), static_cast<double>(kStepM), static_cast<double>(kLowM),
+                share(sum.away, sum.cells), share(sum.away_lethal, sum.away),
+                share(sum.away_inscribed, sum.away));
   return line;
 }
 
 nlohmann::ordered_json open_ground_json(const OpenGroundTracker& tracker) {
   nlohmann::ordered_json out;
-  out["cycle_fields"] = {"scan", "cells", "lethal", "inscribed", "inflated", "free", "unknown"};
+  out["cycle_fields"] = {"scan",    "cells", "lethal", "inscribed",   "inflated",
+                         "free",    "unknown", "away",  "away_lethal", "away_inscribed"};
   auto& rows = out["per_cycle"] = nlohmann::ordered_json::array();
   for (const OpenGroundCycle& c : tracker.cycles()) {
-    rows.push_back({c.scan, c.cells, c.lethal, c.inscribed, c.inflated, c.free, c.unknown});
+    rows.push_back({c.scan, c.cells, c.lethal, c.inscribed, c.inflated, c.free, c.unknown, c.away,
+                    c.away_lethal, c.away_inscribed});
   }
   return out;
 }

@@ -8,6 +8,13 @@
 /// costmap that reads such a cell lethal or inscribed would stop a vehicle on open ground: on
 /// slopes, a ground model that does not follow the terrain does exactly that (docs/mapping.md,
 /// "Ground").
+///
+/// A kerb or a low object under 0.25 m passes that test, and the costmap must read it lethal
+/// (min_obstacle_height_m, 0.08 m) with its inscribed band round it. So the cycle also counts
+/// the open flat ground away from them: within 1 m, no two side-by-side cells whose lowest
+/// returns differ by 0.1 m or more (a 50 % grade over one cell: no road's, every kerb's face)
+/// and no cell whose own returns spread 0.08 m or more. What reads lethal there has no return
+/// to explain it.
 
 #include <cstdint>
 #include <span>
@@ -31,6 +38,8 @@ struct OpenGroundCycle {
   std::size_t inflated = 0;   ///< reading 1..98
   std::size_t free = 0;       ///< reading 0
   std::size_t unknown = 0;    ///< reading −1
+  std::size_t away = 0;  ///< of the open flat ground cells, those away from steps and low returns
+  std::size_t away_lethal = 0, away_inscribed = 0;  ///< of those, reading 100 and 99
 };
 
 /// Collects the returns of the drive (world frame, cells of the costmap's resolution) and scores
@@ -59,6 +68,7 @@ class OpenGroundTracker {
   std::unordered_map<std::int64_t, Cell> cells_;
   std::vector<OpenGroundCycle> cycles_;
   std::vector<const std::vector<float>*> window_;  ///< observe()'s cells, with a margin
+  std::vector<std::uint8_t> step_;  ///< per window_ cell: a step to a side neighbour, or low returns
   /// The last observed window's cells: kNone, kReturns, or the costmap's read of open ground.
   std::vector<std::uint8_t> last_;
   std::uint32_t last_width_ = 0, last_height_ = 0;

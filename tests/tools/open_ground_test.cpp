@@ -1,0 +1,94 @@
+/// @file The open-ground figure for real data (tools/open_ground.hpp): which cells the returns
+/// show as open flat ground, what the costmap read there, and which of them lie away from
+/// steps and low returns.
+
+#include <cstdint>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <Eigen/Core>
+
+#include "tarmac/core/grid2d.hpp"
+#include "tarmac/tools/open_ground.hpp"
+
+namespace tarmac::tools {
+namespace {
+
+/// Four returns in each 0.2 m cell of x, y in [−6, 6): the road at z = 0 up to y = 1.9, the
+/// pavement a 0.15 m kerb higher from y = 2; a 1 m wall at x ≥ 5, y < −4 (0.3 m or taller:
+/// the ground within 1 m of it is not open).
+std::vector<Eigen::Vector3f> kerbside() {
+  std::vector<Eigen::Vector3f> points;
+  for (int ix = -30; ix < 30; ++ix) {
+    for (int iy = -30; iy < 30; ++iy) {
+      for (const float d : {0.05f, 0.15f}) {
+        for (const float e : {0.05f, 0.15f}) {
+          const float x = 0.2f * ix + d, y = 0.2f * iy + e;
+          points.emplace_back(x, y, y >= 2.0f ? 0.15f : 0.0f);
+          if (ix >= 25 && iy < -20) points.emplace_back(x, y, 1.0f);
+        }
+      }
+    }
+  }
+  return points;
+}
+
+core::Grid2D<std::int8_t> costmap(std::int8_t fill) {
+  core::GridGeometry2D g;
+  g.origin_x_m = -6.0;
+  g.origin_y_m = -6.0;
+  g.resolution_m = 0.2;
+  g.width = 60;
+  g.height = 60;
+  return core::Grid2D<std::int8_t>(g, fill);
+}
+
+TEST(OpenGround, CountsTheFlatGround_AKerbIsFlatButNotAwayFromSteps) {
+  OpenGroundTracker tracker(0.2, 2.8);
+  tracker.add(kerbside());
+  core::Grid2D<std::int8_t> grid = costmap(0);
+  // Lethal along the kerb's top edge, inscribed 1 m either side of it, as the costmap reads a
+  // kerb (min_obstacle_height_m 0.08).
+  for (std::uint32_t x = 0; x < 60; ++x) {
+    for (std::uint32_t y = 35; y < 46; ++y) grid.at(x, y) = y == 40 ? 100 : 99;
+  }
+  const OpenGroundCycle& c = tracker.observe(grid, 7);
+  EXPECT_EQ(c.scan, 7);
+  // Open: all cells with returns (the window's edge cells have fewer neighbours, not fewer
+  // returns), but none within 1 m of the wall, nor the wall's own.
+  EXPECT_GT(c.cells, 2800u);
+  EXPECT_LT(c.cells, 3600u - 50u);
+  EXPECT_EQ(c.lethal, 60u) << "the kerb's 15 cm are open flat ground by the measure";
+  EXPECT_EQ(c.inscribed, 600u);
+  EXPECT_EQ(c.lethal + c.inscribed + c.free, c.cells);
+  // Away from the step: every cell more than 1 m (5 rows) from the two rows the step marks
+  // (39 and 40, either side of the kerb's face), so none of the kerb's band.
+  EXPECT_EQ(c.away, c.cells - 60u * 12u);
+  EXPECT_EQ(c.away_lethal, 0u);
+  EXPECT_EQ(c.away_inscribed, 0u);
+}
+
+TEST(OpenGround, ALethalCellNoReturnExplainsIsCountedAwayFromSteps) {
+  OpenGroundTracker tracker(0.2, 2.8);
+  tracker.add(kerbside());
+  core::Grid2D<std::int8_t> grid = costmap(0);
+  grid.at(10, 10) = 100;  // (−3.9, −3.9): road, no step, no low return within 1 m
+  const OpenGroundCycle& c = tracker.observe(grid, 0);
+  EXPECT_EQ(c.lethal, 1u);
+  EXPECT_EQ(c.away_lethal, 1u);
+}
+
+TEST(OpenGround, ALowReturnTakesItsNeighbourhoodOutOfTheAwayCount) {
+  std::vector<Eigen::Vector3f> points = kerbside();
+  points.emplace_back(-3.9f, -3.9f, 0.1f);  // one return 10 cm up in the road's cell (10, 10)
+  OpenGroundTracker tracker(0.2, 2.8);
+  tracker.add(points);
+  core::Grid2D<std::int8_t> grid = costmap(0);
+  grid.at(10, 10) = 100;
+  const OpenGroundCycle& c = tracker.observe(grid, 0);
+  EXPECT_EQ(c.lethal, 1u) << "10 cm is under the measure's 0.25 m: open flat ground";
+  EXPECT_EQ(c.away_lethal, 0u);
+}
+
+}  // namespace
+}  // namespace tarmac::tools
