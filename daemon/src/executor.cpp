@@ -267,6 +267,7 @@ Executor::Impl::Drained Executor::Impl::drain_inputs(StageFigures& f) {
 
 const Cycle::Tick& Executor::Impl::map_selected(StageFigures& f) {
   cycle->begin();
+  corrections.apply_jumps();  // the drain found them; the map changes here
   for (const auto& sel : selected) {
     const core::PointCloud& cloud = scheduler.cloud(sel.slot);
     // A correction stamped before this scan applies before it (and after every earlier scan).

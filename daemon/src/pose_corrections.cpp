@@ -11,24 +11,29 @@ PoseCorrections::PoseCorrections(const core::CorrectionParams& params, PoseBuffe
                                  core::Mapper& mapper)
     : enabled_(params.enabled), poses_(poses), mapper_(mapper), jumps_(params) {
   scratch_.reserve(1024);
+  jumps_found_.reserve(8);
 }
 
 void PoseCorrections::on_pose(const transport::PoseSample& sample) {
   if (!enabled_) return;
-  if (const auto jump = jumps_.feed({sample.stamp_ns, sample.T_W_B}))
-    on_jump(*jump, sample.stamp_ns);
+  const auto delta = jumps_.feed({sample.stamp_ns, sample.T_W_B});
+  if (!delta) return;
+  const std::size_t rebased = poses_.rebase_before(sample.stamp_ns, *delta);
+  jumps_found_.push_back({*delta, sample.stamp_ns, rebased});
 }
 
-void PoseCorrections::on_jump(const Eigen::Isometry3d& delta, std::int64_t stamp_ns) {
-  const std::size_t rebased = poses_.rebase_before(stamp_ns, delta);
-  const std::uint64_t revised = mapper_.correct_rigid(delta, stamp_ns);
-  ++pose_jumps_;
-  // Rare (a loop closure or a GPS fix), so one log line each.
-  spdlog::warn(
-      "corrections: pose jump at stamp {} ns ({:.3f} m, {:.2f} deg from the prediction): {} "
-      "pose samples and {} retained scans re-expressed, rebuilding",
-      stamp_ns, delta.translation().norm(),
-      Eigen::AngleAxisd(delta.linear()).angle() * 180.0 / M_PI, rebased, revised);
+void PoseCorrections::apply_jumps() {
+  for (const Jump& j : jumps_found_) {
+    const std::uint64_t revised = mapper_.correct_rigid(j.delta, j.stamp_ns);
+    ++pose_jumps_;
+    // Rare (a loop closure or a GPS fix), so one log line each.
+    spdlog::warn(
+        "corrections: pose jump at stamp {} ns ({:.3f} m, {:.2f} deg from the prediction): {} "
+        "pose samples and {} retained scans re-expressed, rebuilding",
+        j.stamp_ns, j.delta.translation().norm(),
+        Eigen::AngleAxisd(j.delta.linear()).angle() * 180.0 / M_PI, j.rebased, revised);
+  }
+  jumps_found_.clear();
 }
 
 void PoseCorrections::apply(std::int64_t made_ns, std::span<const transport::PoseSample> samples) {

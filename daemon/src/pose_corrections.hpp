@@ -1,8 +1,10 @@
 #pragma once
 /// @file The executor's side of pose corrections (DESIGN.md §4, docs/pose_corrections.md): a
-/// jump in the live pose stream is taken as a rigid correction at once; a corrected trajectory
-/// waits for its place in the stamp order. Either revises the pose buffer and the mapper's
-/// retained scans, and the mapper rebuilds its window (the tick's rebuild stage).
+/// jump in the live pose stream is taken as a rigid correction, applied to the map before the
+/// tick's first scan; a corrected trajectory waits for its place in the stamp order. Either
+/// revises the pose buffer and the mapper's retained scans, and the mapper rebuilds its window
+/// (the tick's rebuild stage). The drain step only detects and queues: the map changes in the
+/// mapping step.
 
 #include <atomic>
 #include <cstdint>
@@ -28,9 +30,14 @@ class PoseCorrections {
   PoseCorrections(const core::CorrectionParams& params, PoseBuffer& poses, core::Mapper& mapper);
 
   /// A sample just taken into the pose buffer: one farther than the thresholds from the
-  /// prediction is a jump, and the samples and retained scans before it are re-expressed in
-  /// the corrected frame (T ← Δ · T). Nothing when corrections are disabled.
+  /// prediction is a jump. The samples before it are re-expressed in the corrected frame
+  /// (T ← Δ · T) at once, so the scans selected this tick take poses in that frame; the
+  /// mapper's retained scans by apply_jumps(). Nothing when corrections are disabled.
   void on_pose(const transport::PoseSample& sample);
+  /// The jumps found since the last call, applied to the mapper's retained scans in the order
+  /// found. Before the tick's first scan: every scan integrated after it has its pose in the
+  /// corrected frame.
+  void apply_jumps();
 
   /// A corrected trajectory made at `stamp_ns` waits for its place in the stamp order
   /// (DESIGN.md §3): it is applied after every scan stamped up to `stamp_ns` and before any
@@ -54,7 +61,11 @@ class PoseCorrections {
   [[nodiscard]] Counts counts() const;
 
  private:
-  void on_jump(const Eigen::Isometry3d& delta, std::int64_t stamp_ns);
+  struct Jump {
+    Eigen::Isometry3d delta;
+    std::int64_t stamp_ns = 0;
+    std::size_t rebased = 0;  ///< pose samples re-expressed
+  };
   /// The pose samples `samples` covers are replaced (newer ones re-expressed by the correction
   /// at its end), the mapper's retained scans within it take the revised poses and the rebuild
   /// starts.
@@ -71,6 +82,7 @@ class PoseCorrections {
   core::PoseJumpDetector jumps_;
   std::vector<core::StampedPose> scratch_;
   std::vector<Pending> pending_;  ///< by stamp; corrections are rare
+  std::vector<Jump> jumps_found_;  ///< since the last apply_jumps()
   std::atomic<std::uint64_t> pose_jumps_{0}, trajectories_{0}, late_{0};
 };
 
