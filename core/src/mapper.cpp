@@ -306,9 +306,10 @@ void Mapper::record_tsdf(RetainedScan& scan, const TsdfUpdate& update) {
   scan.tsdf_done = true;
 }
 
-const CostmapLayers& Mapper::update_costmap(std::span<const VirtualZone> zones,
+const CostmapLayers& Mapper::update_costmap(const Eigen::Isometry3d& T_W_B,
+                                            std::span<const VirtualZone> zones,
                                             std::int64_t stamp_ns, TaskRunner& runner) {
-  build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner);
+  build_costmap(map_, params_.costmap, T_W_B, zones, stamp_ns, layers_, runner);
   return layers_;
 }
 
@@ -323,12 +324,13 @@ void Mapper::track_fleet_observations() {
   if (spare_) spare_->track_column_observations(lo, hi);
 }
 
-const CostmapLayers& Mapper::update_costmap(std::span<const VirtualZone> zones,
+const CostmapLayers& Mapper::update_costmap(const Eigen::Isometry3d& T_W_B,
+                                            std::span<const VirtualZone> zones,
                                             std::int64_t stamp_ns, TaskRunner& runner,
                                             const BevPeers* peers, BevFusionCounts& counts) {
   map_.export_column_observed(column_observed_);
   CostmapPeers fleet{peers, column_observed_, stamp_ns, {}};
-  build_costmap(map_, params_.costmap, T_W_B_, zones, stamp_ns, layers_, runner, &fleet);
+  build_costmap(map_, params_.costmap, T_W_B, zones, stamp_ns, layers_, runner, &fleet);
   counts = std::move(fleet.counts);
   return layers_;
 }
@@ -350,10 +352,11 @@ BevSnapshot Mapper::fleet_snapshot() {
   return BevSnapshot{g, own_cells_, column_observed_};
 }
 
-const EsdfBand& Mapper::update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+const EsdfBand& Mapper::update_esdf_band(const Eigen::Isometry3d& T_W_B,
+                                         std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                                          TaskRunner& runner) {
   if (params_.esdf_band.enabled) {
-    build_esdf_band(map_, layers_, params_.costmap, params_.esdf_band, T_W_B_, zones, stamp_ns,
+    build_esdf_band(map_, layers_, params_.costmap, params_.esdf_band, T_W_B, zones, stamp_ns,
                     band_, runner);
   }
   return band_;

@@ -108,20 +108,22 @@ void Cycle::share_with_fleet(const core::BevPeers* peers) {
   peers_ = peers;
 }
 
-const core::CostmapLayers& Cycle::update_costmap(std::span<const core::VirtualZone> zones,
+const core::CostmapLayers& Cycle::update_costmap(const Eigen::Isometry3d& T_W_B,
+                                                 std::span<const core::VirtualZone> zones,
                                                  std::int64_t stamp_ns) {
   const auto t0 = Clock::now();
   const core::CostmapLayers& layers =
-      fleet_ ? mapper_.update_costmap(zones, stamp_ns, runner_, peers_, fleet_counts_)
-             : mapper_.update_costmap(zones, stamp_ns, runner_);
+      fleet_ ? mapper_.update_costmap(T_W_B, zones, stamp_ns, runner_, peers_, fleet_counts_)
+             : mapper_.update_costmap(T_W_B, zones, stamp_ns, runner_);
   tick_.costmap_ms += ms_between(t0, Clock::now());
   return layers;
 }
 
-bool Cycle::update_esdf_band(std::span<const core::VirtualZone> zones, std::int64_t stamp_ns) {
+bool Cycle::update_esdf_band(const Eigen::Isometry3d& T_W_B,
+                             std::span<const core::VirtualZone> zones, std::int64_t stamp_ns) {
   if (!mapper_.params().esdf_band.enabled) return false;
   const auto t0 = Clock::now();
-  mapper_.update_esdf_band(zones, stamp_ns, runner_);
+  mapper_.update_esdf_band(T_W_B, zones, stamp_ns, runner_);
   tick_.esdf_band_ms += ms_between(t0, Clock::now());
   return true;
 }

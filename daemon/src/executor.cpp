@@ -325,7 +325,7 @@ Executor::Impl::Published Executor::Impl::update_outputs(bool update, const Cycl
     // Peers' observations age on the costmap's clock (its newest scan), not the tick's: the
     // same scans and summaries give the same costmap.
     if (fleet) fleet->expire(newest_stamp_ns);
-    cycle->update_costmap(zones, newest_stamp_ns);
+    cycle->update_costmap(mapper.vehicle_pose(), zones, newest_stamp_ns);
     have_costmap = true;
   }
   f.ms[kCostmap] = done.costmap_ms;
@@ -357,7 +357,7 @@ Executor::Impl::Published Executor::Impl::update_outputs(bool update, const Cycl
   }
 
   // ---- 3D ESDF band (esdf_band.enabled), from the costmap's ground, then its box out ----
-  const bool band = update && cycle->update_esdf_band(zones, newest_stamp_ns);
+  const bool band = update && cycle->update_esdf_band(mapper.vehicle_pose(), zones, newest_stamp_ns);
   const auto t_band1 = Clock::now();
   f.ms[kEsdfBand] = done.esdf_band_ms;
   if (band) {

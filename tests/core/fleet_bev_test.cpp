@@ -370,7 +370,7 @@ TEST(FleetBevMapper, BSeesTheWallOnlyASaw_BsOwnCellsKeepTheirClasses) {
   const auto run = [&](Mapper& m, double x, const BevPeers* peers, BevFusionCounts& counts) {
     m.track_fleet_observations();
     m.integrate(m.ingest(ring_scan(kT), base_at(x), T_B_S), runner);
-    m.update_costmap({}, kT, runner, peers, counts);
+    m.update_costmap(m.vehicle_pose(), {}, kT, runner, peers, counts);
   };
   // A at x = 0 sees its ring; its summary goes to B at x = 20 m (A's ring is inside B's 80 m
   // window but beyond what B's own ring shows it).
@@ -437,7 +437,7 @@ TEST(FleetBevMapper, RebuiltWindowAfterACorrection_KeepsTheObservationTimes) {
     m.integrate(m.ingest(ring_scan(k * kT), T_W_B, T_B_S), runner);
     m.rebuild_step(runner);
   }
-  m.update_costmap({}, 3 * kT, runner, nullptr, counts);
+  m.update_costmap(m.vehicle_pose(), {}, 3 * kT, runner, nullptr, counts);
   const BevSnapshot before = m.fleet_snapshot();
   const std::vector<BevState> states(before.state.begin(), before.state.end());
   const std::vector<std::int64_t> times(before.observed_ns.begin(), before.observed_ns.end());
@@ -448,7 +448,7 @@ TEST(FleetBevMapper, RebuiltWindowAfterACorrection_KeepsTheObservationTimes) {
   for (int i = 0; i < 10 && m.rebuilding(); ++i) m.rebuild_step(runner);
   ASSERT_FALSE(m.rebuilding());
   ASSERT_EQ(m.correction_stats().rebuilds_completed, 1u);
-  m.update_costmap({}, 3 * kT, runner, nullptr, counts);
+  m.update_costmap(m.vehicle_pose(), {}, 3 * kT, runner, nullptr, counts);
   const BevSnapshot after = m.fleet_snapshot();
   EXPECT_TRUE(std::equal(states.begin(), states.end(), after.state.begin(), after.state.end()));
   EXPECT_TRUE(

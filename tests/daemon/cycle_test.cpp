@@ -82,14 +82,14 @@ TEST(Cycle, SameMapsAsTheStagesCalledInOrder) {
     const core::FilteredScan scan = by_hand.ingest(cloud, T_W_B, sensor_on_base(), runner);
     by_hand.integrate(scan, runner);
     by_hand.integrate_tsdf(scan, runner);
-    by_hand.update_costmap({}, cloud.stamp_ns, runner);
-    by_hand.update_esdf_band({}, cloud.stamp_ns, runner);
+    by_hand.update_costmap(by_hand.vehicle_pose(), {}, cloud.stamp_ns, runner);
+    by_hand.update_esdf_band(by_hand.vehicle_pose(), {}, cloud.stamp_ns, runner);
 
     cycle.begin();
     const Cycle::ScanResult& r = cycle.scan(cloud, T_W_B, sensor_on_base());
     EXPECT_EQ(r.filtered.points_W.size(), scan.points_W.size());
-    cycle.update_costmap({}, cloud.stamp_ns);
-    EXPECT_EQ(cycle.update_esdf_band({}, cloud.stamp_ns), params.esdf_band.enabled);
+    cycle.update_costmap(cycle.mapper().vehicle_pose(), {}, cloud.stamp_ns);
+    EXPECT_EQ(cycle.update_esdf_band(cycle.mapper().vehicle_pose(), {}, cloud.stamp_ns), params.esdf_band.enabled);
     EXPECT_GT(cycle.tick().ingest_ms + cycle.tick().integrate_ms, 0.0);
     EXPECT_GT(cycle.tick().costmap_ms, 0.0);
   }

@@ -111,7 +111,7 @@ std::string offline_costmap_digest(const config::Config& cfg, std::size_t scans,
   core::Mapper mapper(cfg.mapping);
   run_offline(mapper, cfg, scans, false, ring_lists, driver);
   core::SerialRunner runner;
-  mapper.update_costmap({}, last_stamp_ns, runner);
+  mapper.update_costmap(mapper.vehicle_pose(), {}, last_stamp_ns, runner);
   const auto& cells = mapper.costmap().costmap.cells();
   return tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});
 }
@@ -325,8 +325,8 @@ TEST_F(Daemon, EsdfBand_PublishedBoxEqualsOfflineCore) {
   core::Mapper mapper(cfg.mapping);
   run_offline(mapper, cfg, kScans, false);
   core::SerialRunner runner;
-  mapper.update_costmap({}, last_stamp_ns_, runner);
-  mapper.update_esdf_band({}, last_stamp_ns_, runner);
+  mapper.update_costmap(mapper.vehicle_pose(), {}, last_stamp_ns_, runner);
+  mapper.update_esdf_band(mapper.vehicle_pose(), {}, last_stamp_ns_, runner);
   transport::DistanceMapVolumeMsg want;
   transport::fill_distance_volume(mapper.esdf_band(), mapper.vehicle_pose().translation().head<2>(),
                                   5.0, last_stamp_ns_, "map", want);
@@ -435,7 +435,7 @@ OfflineCorrected offline_corrected(const config::Config& cfg,
   }
   EXPECT_FALSE(mapper.rebuilding());
   out.rebuilds = mapper.correction_stats().rebuilds_completed;
-  mapper.update_costmap({}, 0, runner);
+  mapper.update_costmap(mapper.vehicle_pose(), {}, 0, runner);
   const auto& cells = mapper.costmap().costmap.cells();
   out.costmap_digest =
       tools::digest({reinterpret_cast<const std::uint8_t*>(cells.data()), cells.size()});

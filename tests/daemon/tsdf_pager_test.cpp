@@ -99,7 +99,7 @@ class TsdfPaging : public ::testing::Test {
       T.translation() += shift_W;
       cycle.scan(d.clouds[i], T, d.T_B_S);
     }
-    cycle.update_costmap({}, d.clouds.back().stamp_ns);
+    cycle.update_costmap(cycle.mapper().vehicle_pose(), {}, d.clouds.back().stamp_ns);
     if (pager != nullptr) pager->flush(mapper.tsdf());
   }
 

@@ -36,7 +36,7 @@ RunResult run(const std::filesystem::path& dir, std::size_t threads) {
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
     const auto scan = mapper.ingest(cloud, T_W_B, T_B_S);
     mapper.integrate(scan, pool);
-    mapper.update_costmap({}, 0, pool);
+    mapper.update_costmap(mapper.vehicle_pose(), {}, 0, pool);
     result.path_W.push_back(T_W_B.translation());
   }
   const auto& l = mapper.costmap();

@@ -114,7 +114,7 @@ Drive drive(double tilt_deg, double stop_x_m, bool base_at_sensor = false, doubl
     const Eigen::Isometry3d T_W_B = base_at_sensor ? seq.path.T_W_S(t_s) : seq.path.T_W_base(t_s);
     const auto scan = mapper.ingest(cloud, out.T_O_W * T_W_B, T_B_S);
     mapper.integrate(scan, pool);
-    mapper.update_costmap({}, 0, pool);
+    mapper.update_costmap(mapper.vehicle_pose(), {}, 0, pool);
   }
   const auto& l = mapper.costmap();
   out.layers.costmap = l.costmap.clone();
@@ -293,7 +293,7 @@ void drive_sequence(int scans, const core::MapperParams& params,
     to_cloud(returns, seq.lidar, cloud, scratch);
     const auto scan = mapper.ingest(cloud, seq.path.T_W_base(t_s), T_B_S);
     mapper.integrate(scan, pool);
-    mapper.update_costmap({}, 0, pool);
+    mapper.update_costmap(mapper.vehicle_pose(), {}, 0, pool);
     after(i, t_s, mapper);
   }
 }
@@ -414,7 +414,7 @@ TEST(AirsideMapping, AircraftLoop_EveryCycleShowsWhatWasSeen_NoneFree_FewFalse) 
     const Eigen::Isometry3d T_W_B = seq.value().T_W_S[k] * T_B_S.inverse();
     const auto scan = mapper.ingest(cloud, T_W_B, T_B_S);
     mapper.integrate(scan, pool);
-    mapper.update_costmap({}, 0, pool);
+    mapper.update_costmap(mapper.vehicle_pose(), {}, 0, pool);
     tracker.observe(mapper.costmap().costmap, static_cast<int>(k), T_W_B.translation().head<2>());
   }
   std::filesystem::remove_all(dir);

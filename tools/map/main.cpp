@@ -312,10 +312,10 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     }
     if (r.rebuild.scans > 0)
       run.rebuild_ms.push_back(r.rebuild_ms);  // not the steps waiting to start
-    cycle.update_costmap({}, cloud.stamp_ns);
+    cycle.update_costmap(mapper.vehicle_pose(), {}, cloud.stamp_ns);
     if (fleet) send_summary(*fleet, cloud.stamp_ns);
     // The 3D band (esdf_band.enabled), every scan as the daemon does every cycle.
-    cycle.update_esdf_band({}, cloud.stamp_ns);
+    cycle.update_esdf_band(mapper.vehicle_pose(), {}, cloud.stamp_ns);
     const double f_ms = r.ingest_ms, o_ms = r.integrate_ms, tsdf_ms = r.tsdf_ms;
     const double c_ms = cycle.tick().costmap_ms, b_ms = cycle.tick().esdf_band_ms;
     score_scan(in, mapper, k, n, T_W_B, T_B_S, scan.points_W);
@@ -358,8 +358,8 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     ++run.rebuild_steps_after_end;
   }
   if (run.rebuild_steps_after_end > 0) {
-    mapper.update_costmap({}, cloud.stamp_ns, pool);
-    mapper.update_esdf_band({}, cloud.stamp_ns, pool);
+    mapper.update_costmap(mapper.vehicle_pose(), {}, cloud.stamp_ns, pool);
+    mapper.update_esdf_band(mapper.vehicle_pose(), {}, cloud.stamp_ns, pool);
   }
   run.last_stamp_ns = cloud.stamp_ns;
 }

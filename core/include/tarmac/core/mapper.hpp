@@ -114,8 +114,10 @@ class Mapper {
   /// integrates the scan in stamp order). @pre `scan` is what the last ingest() returned.
   const TsdfUpdate& integrate_tsdf(const FilteredScan& scan, TaskRunner& runner);
   /// Stage 3: rebuilds the costmap and the 2D distance map from the window, around the vehicle
-  /// pose of the last ingested scan; returns them.
-  const CostmapLayers& update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+  /// base pose `T_W_B` (its ground plane, the seeds of the ground, the ego box: vehicle_pose(),
+  /// the newest scan's, for the vehicle's own costmap); returns them.
+  const CostmapLayers& update_costmap(const Eigen::Isometry3d& T_W_B,
+                                      std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                                       TaskRunner& runner);
   /// Fleet sharing (docs/fleet.md): from now on the window records each column's last
   /// observation in the vehicle's envelope (from ground_tolerance_m below the base to
@@ -123,7 +125,8 @@ class Mapper {
   void track_fleet_observations();
   /// Stage 3 with peers' cells fused into the classes before inflation (BevPeers::fuse rules);
   /// `peers` may hold none yet. @pre track_fleet_observations() was called.
-  const CostmapLayers& update_costmap(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+  const CostmapLayers& update_costmap(const Eigen::Isometry3d& T_W_B,
+                                      std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                                       TaskRunner& runner, const BevPeers* peers,
                                       BevFusionCounts& counts);
   /// This vehicle's own cells of the last update_costmap() with peers, for its fleet summary:
@@ -132,8 +135,10 @@ class Mapper {
   BevSnapshot fleet_snapshot();
 
   /// Stage 3b: the 3D ESDF band (esdf_band.hpp) from the window and the costmap of the last
-  /// update_costmap() call; returns it (unchanged when esdf_band.enabled is false).
-  const EsdfBand& update_esdf_band(std::span<const VirtualZone> zones, std::int64_t stamp_ns,
+  /// update_costmap() call, around the vehicle base pose `T_W_B` (that call's); returns it
+  /// (unchanged when esdf_band.enabled is false).
+  const EsdfBand& update_esdf_band(const Eigen::Isometry3d& T_W_B,
+                                   std::span<const VirtualZone> zones, std::int64_t stamp_ns,
                                    TaskRunner& runner);
 
   /// Pose corrections (pose_correction.hpp). With corrections.enabled the mapper retains the
@@ -180,7 +185,8 @@ class Mapper {
   /// The poses of the retained scans, oldest first (for tests and tools).
   void retained_poses(std::vector<StampedPose>& out) const;
 
-  /// The vehicle base pose of the last ingested scan (revised by a correction).
+  /// The vehicle base pose of the last ingested scan (revised by a correction): the pose the
+  /// vehicle's own costmap is built around.
   [[nodiscard]] const Eigen::Isometry3d& vehicle_pose() const { return T_W_B_; }
   [[nodiscard]] const OccupancyMap& occupancy() const { return map_; }
   /// For loading a saved static occupancy layer (OccupancyMap::import_static).

@@ -4,7 +4,7 @@
 /// caller (the stages are timed here, on the steady clock); the caller brings the scans in stamp
 /// order and takes the products:
 ///
-///     begin() → scan() for each scan → update_costmap() → [publish] → update_esdf_band()
+///     begin() → scan() for each scan → update_costmap(pose) → [publish] → update_esdf_band(pose)
 ///
 /// scan() runs ingest (filters, deskew) → integrate (occupancy window) → the TSDF, unless this
 /// tick's TSDF points quota is spent (the scan is then shed from the TSDF, and counted) → one
@@ -81,12 +81,16 @@ class Cycle {
   /// What the last update_costmap() took from peers.
   [[nodiscard]] const core::BevFusionCounts& fleet_counts() const { return fleet_counts_; }
 
-  /// The costmap and the 2D ESDF from the window, once per tick (when something changed).
-  const core::CostmapLayers& update_costmap(std::span<const core::VirtualZone> zones,
+  /// The costmap and the 2D ESDF from the window around the vehicle base pose `T_W_B`
+  /// (core::Mapper::vehicle_pose(): the newest scan's, revised by corrections), once per tick
+  /// (when something changed).
+  const core::CostmapLayers& update_costmap(const Eigen::Isometry3d& T_W_B,
+                                            std::span<const core::VirtualZone> zones,
                                             std::int64_t stamp_ns);
-  /// The 3D ESDF band from the window and this tick's costmap; false (nothing done) when
-  /// esdf_band.enabled is false.
-  bool update_esdf_band(std::span<const core::VirtualZone> zones, std::int64_t stamp_ns);
+  /// The 3D ESDF band from the window and this tick's costmap, around the same `T_W_B`; false
+  /// (nothing done) when esdf_band.enabled is false.
+  bool update_esdf_band(const Eigen::Isometry3d& T_W_B, std::span<const core::VirtualZone> zones,
+                        std::int64_t stamp_ns);
 
   [[nodiscard]] const Tick& tick() const { return tick_; }
   [[nodiscard]] core::Mapper& mapper() { return mapper_; }
