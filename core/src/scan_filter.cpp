@@ -117,7 +117,156 @@ struct CandidateRanges {
     for (std::size_t t = 0; t < kFilterTasks; ++t) m += last[t] - first[t];
     return m;
   }
+
+  /// f(i) for each of task t's candidates, in order.
+  template <typename F>
+  void each(std::size_t t, F&& f) const {
+    for (std::size_t i = first[t]; i < last[t]; ++i) f(i);
+  }
 };
+
+/// A scan's per-point tests (filter_scan's step 1): not finite, too close, in the ego box, or a
+/// candidate, with what the outlier test reads of it (its cell, whether it is near).
+class PointTests {
+ public:
+  PointTests(const FilterParams& params, const Eigen::Isometry3d& T_B_S,
+             const OutlierRegion& region)
+      : params_(params),
+        region_(region),
+        R_B_S_(T_B_S.linear()),
+        t_B_S_(T_B_S.translation()),
+        min_sq_(params.min_range_m * params.min_range_m),
+        outliers_(params.outlier_min_neighbors > 0),
+        inv_cell_(static_cast<float>(1.0 / params.outlier_cell_m)),
+        near_sq_(near_sq_of(params, region)),
+        lanes_(params, T_B_S, inv_cell_, near_sq_, region) {}
+
+  /// Tests the points [begin, end), four at a time where it can, compacting the candidates to
+  /// the front of the range in scratch's candidate arrays; returns the end of the candidates,
+  /// `counts` the points rejected.
+  std::size_t test_range(const Eigen::Vector3f* points, std::size_t begin, std::size_t end,
+                         FilterScratch& scratch, FilterCounts& counts) const {
+    // Locals rather than scratch's members, the counts and this object's: a byte store may
+    // alias anything, and the compiler would reload them after each.
+    FilterCounts c;
+    Eigen::Vector3f* const cand_S = scratch.candidates_S.data();
+    std::uint64_t* const keys = scratch.point_key.data();
+    std::uint32_t* const cells = scratch.point_slot.data();
+    std::uint8_t* const flags = scratch.point_near.data();
+    const bool grid = region_.grid;
+    std::size_t out = begin;
+    std::size_t i = begin;
+    for (; i + 4 <= end; i += 4) {
+      const PointLanes::Found f = lanes_.test(points + i);
+      c.non_finite += static_cast<std::uint64_t>(4 - bit_count(f.finite));
+      c.too_close += static_cast<std::uint64_t>(bit_count(f.close));
+      for (unsigned pass = f.finite & ~f.close; pass != 0; pass &= pass - 1) {
+        const int l = std::countr_zero(pass);
+        const Eigen::Vector3f& p = points[i + static_cast<std::size_t>(l)];
+        if (((f.maybe_ego >> l) & 1u) != 0 && in_ego_box(p)) {
+          ++c.ego_vehicle;
+          continue;
+        }
+        cand_S[out] = p;
+        if (outliers_) {
+          if (grid) {
+            cells[out] = f.index[l];  // read for candidates in the region only
+          } else {
+            // Beyond kCellLimit cells (not keyed): out of the region, the key is not read.
+            keys[out] = ((f.keyed >> l) & 1u) != 0
+                            ? pack_key(f.field[0][l], f.field[1][l], f.field[2][l])
+                            : 0;
+          }
+          flags[out] = static_cast<std::uint8_t>((((f.near >> l) & 1u) != 0 ? kNear : 0) |
+                                                 (((f.region >> l) & 1u) != 0 ? kInRegion : 0));
+        }
+        ++out;
+      }
+    }
+    for (; i < end; ++i) test_point(points[i], scratch, c, out);
+    counts = c;
+    return out;
+  }
+
+ private:
+  /// Near: within the outlier range, as far as the region reaches (the same range for valid
+  /// parameters; a larger, unvalidated one would put near points outside the region the test
+  /// reads).
+  static float near_sq_of(const FilterParams& params, const OutlierRegion& region) {
+    const double near_m = region.near_range_m(params);
+    return static_cast<float>(near_m * near_m);
+  }
+
+  [[nodiscard]] bool in_ego_box(const Eigen::Vector3f& p) const {
+    const Eigen::Vector3d p_B = R_B_S_ * p.cast<double>() + t_B_S_;
+    return (p_B.array() >= params_.ego_box_min_B.array()).all() &&
+           (p_B.array() <= params_.ego_box_max_B.array()).all();
+  }
+
+  /// `p` as the candidate at `out`, which moves on by one.
+  void add_candidate(const Eigen::Vector3f& p, FilterScratch& scratch, std::size_t& out) const {
+    scratch.candidates_S[out] = p;
+    if (outliers_) {
+      std::array<std::int64_t, 3> c{};
+      const bool in_range = cell_of(p, inv_cell_, c);
+      const bool in_region = in_range && region_.holds(c);
+      const std::uint64_t key = in_range ? cell_key(c) : 0;  // not read out of the region
+      if (!region_.grid) {
+        scratch.point_key[out] = key;
+      } else if (in_region) {  // the grid path reads the cell's index instead
+        scratch.point_slot[out] =
+            region_.index((key >> 42) & kField, (key >> 21) & kField, key & kField);
+      }
+      scratch.point_near[out] = static_cast<std::uint8_t>((p.squaredNorm() < near_sq_ ? kNear : 0) |
+                                                          (in_region ? kInRegion : 0));
+    }
+    ++out;
+  }
+
+  /// The tests one point at a time: the reference (and the lanes' fallback).
+  void test_point(const Eigen::Vector3f& p, FilterScratch& scratch, FilterCounts& c,
+                  std::size_t& out) const {
+    if (!p.allFinite()) {
+      ++c.non_finite;
+    } else if (static_cast<double>(p.squaredNorm()) < min_sq_) {
+      ++c.too_close;
+    } else if (params_.ego_box_enabled && in_ego_box(p)) {
+      ++c.ego_vehicle;
+    } else {
+      add_candidate(p, scratch, out);
+    }
+  }
+
+  const FilterParams& params_;
+  const OutlierRegion& region_;
+  Eigen::Matrix3d R_B_S_;
+  Eigen::Vector3d t_B_S_;
+  double min_sq_;
+  bool outliers_;
+  float inv_cell_;
+  float near_sq_;
+  PointLanes lanes_;  ///< the same tests four points at a time
+};
+
+/// Step 1: the per-point tests, each task compacting its candidates to the front of its own
+/// range of the scan; returns the candidates' ranges, `task_counts` the points each task
+/// rejected.
+CandidateRanges find_candidates(const PointCloud& cloud, const PointTests& tests,
+                                FilterScratch& scratch, TaskRunner& runner,
+                                std::array<FilterCounts, kFilterTasks>& task_counts) {
+  const std::size_t n = cloud.size();
+  CandidateRanges ranges;
+  for (std::size_t t = 0; t <= kFilterTasks; ++t) ranges.first[t] = n * t / kFilterTasks;
+  scratch.candidates_S.resize(n);
+  scratch.point_key.resize(n);
+  scratch.point_slot.resize(n);
+  scratch.point_near.resize(n);
+  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+    ranges.last[task] = tests.test_range(cloud.points_S.data(), ranges.first[task],
+                                         ranges.first[task + 1], scratch, task_counts[task]);
+  });
+  return ranges;
+}
 
 /// The isolated-outlier test in the grid of bytes around the sensor (OutlierRegion::grid): the
 /// candidates counted per cell on one thread while the tasks run `to_world(task)`, then
@@ -288,6 +437,91 @@ void isolate_in_table(bool outliers, std::uint32_t needed, const CandidateRanges
   });
 }
 
+/// Where each task's survivors go in the output: task t's from index [t] on ([kFilterTasks]:
+/// the survivors in all).
+using SurvivorOffsets = std::array<std::size_t, kFilterTasks + 1>;
+
+/// Step 2: isolated outliers, counted in the sensor frame: the candidates per cell of the
+/// region (OutlierRegion), in a grid or a hash table, then each near candidate's 27 cells.
+/// Membership only, so the result does not depend on order. Sets scratch.keep per candidate,
+/// and beside the counting puts the candidates in the world frame (scratch.candidates_W);
+/// returns where each task's survivors go.
+SurvivorOffsets find_survivors(const FilterParams& params, const OutlierRegion& region,
+                               const Eigen::Isometry3d& T_W_S, const CandidateRanges& ranges,
+                               FilterScratch& scratch, TaskRunner& runner) {
+  const Eigen::Matrix3f R_W_S = T_W_S.linear().cast<float>();
+  const Eigen::Vector3f t_W_S = T_W_S.translation().cast<float>();
+  const bool outliers = params.outlier_min_neighbors > 0;
+  const auto& cand = scratch.candidates_S;
+  // Itself and outlier_min_neighbors others.
+  const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
+  scratch.candidates_W.resize(cand.size());  // the scan's points, as step 1 sized them
+  scratch.keep.resize(cand.size());
+  SurvivorOffsets kept_before{};  // task t's survivors at t + 1, summed at the end
+  // The candidates go into the world frame beside the counting, in ranges, the survivors
+  // picked from them at the end.
+  const auto to_world = [&](std::size_t task) {
+    ranges.each(task, [&](std::size_t i) { scratch.candidates_W[i] = R_W_S * cand[i] + t_W_S; });
+  };
+  // Whether candidate i survives, `passes` deciding for a near one; booked per task.
+  // (Locals rather than scratch's members: a byte store may alias anything, and the compiler
+  // would reload them after each.)
+  const auto decide = [&](std::size_t task, auto&& passes) {
+    const std::uint8_t* const flags = scratch.point_near.data();
+    std::uint8_t* const keep = scratch.keep.data();
+    const std::size_t begin = ranges.first[task], end = ranges.last[task];
+    std::size_t kept = 0;
+    for (std::size_t i = begin; i < end; ++i) {
+      const bool k = !outliers || (flags[i] & kNear) == 0 || passes(i);
+      keep[i] = k ? 1 : 0;
+      kept += k ? 1 : 0;
+    }
+    kept_before[task + 1] = kept;
+  };
+  if (outliers && region.grid) {
+    isolate_in_grid(region, needed, ranges, scratch, runner, to_world, decide);
+  } else {
+    isolate_in_table(outliers, needed, ranges, scratch, runner, to_world, decide);
+  }
+  for (std::size_t t = 0; t < kFilterTasks; ++t) kept_before[t + 1] += kept_before[t];
+  return kept_before;
+}
+
+/// Step 3: the survivors, in input order, each task writing its own range of `points_W` (and
+/// of `points_S`, when given).
+void write_survivors(const CandidateRanges& ranges, const SurvivorOffsets& kept_before,
+                     const FilterScratch& scratch, TaskRunner& runner,
+                     std::vector<Eigen::Vector3f>& points_W,
+                     std::vector<Eigen::Vector3f>* points_S) {
+  points_W.resize(kept_before[kFilterTasks]);
+  if (points_S != nullptr) points_S->resize(points_W.size());
+  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
+    std::size_t out = kept_before[task];
+    ranges.each(task, [&](std::size_t i) {
+      if (scratch.keep[i] == 0) return;
+      if (points_S != nullptr) (*points_S)[out] = scratch.candidates_S[i];
+      points_W[out++] = scratch.candidates_W[i];
+    });
+  });
+}
+
+/// The scan's counts: `input` points, the tasks' rejections, then of the `candidates` those
+/// `kept`.
+FilterCounts total_counts(std::size_t input,
+                          const std::array<FilterCounts, kFilterTasks>& task_counts,
+                          std::size_t candidates, std::size_t kept) {
+  FilterCounts counts;
+  counts.input = input;
+  for (const FilterCounts& c : task_counts) {
+    counts.non_finite += c.non_finite;
+    counts.too_close += c.too_close;
+    counts.ego_vehicle += c.ego_vehicle;
+  }
+  counts.kept = kept;
+  counts.isolated = candidates - kept;
+  return counts;
+}
+
 }  // namespace
 
 void FilterScratch::reserve(std::size_t points, const FilterParams& params) {
@@ -319,174 +553,14 @@ FilterCounts filter_scan(const PointCloud& cloud, const Eigen::Isometry3d& T_W_S
                          const Eigen::Isometry3d& T_B_S, const FilterParams& params,
                          std::vector<Eigen::Vector3f>& points_W, FilterScratch& scratch,
                          TaskRunner& runner, std::vector<Eigen::Vector3f>* points_S) {
-  const std::size_t n = cloud.size();
-  const double min_sq = params.min_range_m * params.min_range_m;
-  const Eigen::Matrix3f R_W_S = T_W_S.linear().cast<float>();
-  const Eigen::Vector3f t_W_S = T_W_S.translation().cast<float>();
-  const Eigen::Matrix3d R_B_S = T_B_S.linear();
-  const Eigen::Vector3d t_B_S = T_B_S.translation();
-  const bool outliers = params.outlier_min_neighbors > 0;
-  const float inv_cell = static_cast<float>(1.0 / params.outlier_cell_m);
   const OutlierRegion region(params, scratch.grid_cell_limit);
-  // Within the region's reach (the same range for valid parameters; a larger, unvalidated one
-  // would put near points outside the region the test reads).
-  const double near_m = region.near_range_m(params);
-  const float near_sq = static_cast<float>(near_m * near_m);
-
-  // 1. Per-point tests, each task compacting its candidates to the front of its own range.
+  const PointTests tests(params, T_B_S, region);
   std::array<FilterCounts, kFilterTasks> task_counts{};
-  CandidateRanges ranges;
-  auto& first = ranges.first;
-  auto& last = ranges.last;
-  for (std::size_t t = 0; t <= kFilterTasks; ++t) first[t] = n * t / kFilterTasks;
-  scratch.candidates_S.resize(n);
-  scratch.point_key.resize(n);
-  scratch.point_slot.resize(n);
-  scratch.point_near.resize(n);
-  const auto in_ego_box = [&](const Eigen::Vector3f& p) {
-    const Eigen::Vector3d p_B = R_B_S * p.cast<double>() + t_B_S;
-    return (p_B.array() >= params.ego_box_min_B.array()).all() &&
-           (p_B.array() <= params.ego_box_max_B.array()).all();
-  };
-  const auto add_candidate = [&](const Eigen::Vector3f& p, std::size_t& out) {
-    scratch.candidates_S[out] = p;
-    if (outliers) {
-      std::array<std::int64_t, 3> c{};
-      const bool in_range = cell_of(p, inv_cell, c);
-      const bool in_region = in_range && region.holds(c);
-      const std::uint64_t key = in_range ? cell_key(c) : 0;  // not read out of the region
-      if (!region.grid) {
-        scratch.point_key[out] = key;
-      } else if (in_region) {  // the grid path reads the cell's index instead
-        scratch.point_slot[out] =
-            region.index((key >> 42) & kField, (key >> 21) & kField, key & kField);
-      }
-      scratch.point_near[out] = static_cast<std::uint8_t>((p.squaredNorm() < near_sq ? kNear : 0) |
-                                                          (in_region ? kInRegion : 0));
-    }
-    ++out;
-  };
-  // The tests one point at a time: the reference (and the lanes' fallback).
-  const auto test_point = [&](const Eigen::Vector3f& p, FilterCounts& c, std::size_t& out) {
-    if (!p.allFinite()) {
-      ++c.non_finite;
-    } else if (static_cast<double>(p.squaredNorm()) < min_sq) {
-      ++c.too_close;
-    } else if (params.ego_box_enabled && in_ego_box(p)) {
-      ++c.ego_vehicle;
-    } else {
-      add_candidate(p, out);
-    }
-  };
-  const PointLanes lanes(params, T_B_S, inv_cell, near_sq, region);
-  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-    // Locals rather than scratch's members and the task's counts: a byte store may alias
-    // anything, and the compiler would reload them after each.
-    FilterCounts c;
-    const Eigen::Vector3f* const points = cloud.points_S.data();
-    Eigen::Vector3f* const cand_S = scratch.candidates_S.data();
-    std::uint64_t* const keys = scratch.point_key.data();
-    std::uint32_t* const cells = scratch.point_slot.data();
-    std::uint8_t* const flags = scratch.point_near.data();
-    const bool grid = region.grid;
-    const std::size_t end = first[task + 1];
-    std::size_t out = first[task];
-    std::size_t i = first[task];
-    for (; i + 4 <= end; i += 4) {
-      const PointLanes::Found f = lanes.test(points + i);
-      c.non_finite += static_cast<std::uint64_t>(4 - bit_count(f.finite));
-      c.too_close += static_cast<std::uint64_t>(bit_count(f.close));
-      for (unsigned pass = f.finite & ~f.close; pass != 0; pass &= pass - 1) {
-        const int l = std::countr_zero(pass);
-        const Eigen::Vector3f& p = points[i + static_cast<std::size_t>(l)];
-        if (((f.maybe_ego >> l) & 1u) != 0 && in_ego_box(p)) {
-          ++c.ego_vehicle;
-          continue;
-        }
-        cand_S[out] = p;
-        if (outliers) {
-          if (grid) {
-            cells[out] = f.index[l];  // read for candidates in the region only
-          } else {
-            // Beyond kCellLimit cells (not keyed): out of the region, the key is not read.
-            keys[out] = ((f.keyed >> l) & 1u) != 0
-                            ? pack_key(f.field[0][l], f.field[1][l], f.field[2][l])
-                            : 0;
-          }
-          flags[out] = static_cast<std::uint8_t>((((f.near >> l) & 1u) != 0 ? kNear : 0) |
-                                                 (((f.region >> l) & 1u) != 0 ? kInRegion : 0));
-        }
-        ++out;
-      }
-    }
-    for (; i < end; ++i) test_point(points[i], c, out);
-    task_counts[task] = c;
-    last[task] = out;
-  });
-  // Task t's candidates are [first[t], last[t]) (CandidateRanges).
-  const std::size_t m = ranges.count();
-  const auto each_candidate = [&](std::size_t t, auto&& f) {
-    for (std::size_t i = first[t]; i < last[t]; ++i) f(i);
-  };
-
-  // 2. Isolated outliers, counted in the sensor frame: the candidates per cell of the region
-  //    (OutlierRegion), in a grid or a hash table, then each near candidate's 27 cells.
-  //    Membership only, so the result does not depend on order.
-  const auto& cand = scratch.candidates_S;
-  // Itself and outlier_min_neighbors others.
-  const auto needed = static_cast<std::uint32_t>(params.outlier_min_neighbors) + 1;
-  scratch.candidates_W.resize(n);
-  scratch.keep.resize(n);
-  std::array<std::size_t, kFilterTasks + 1> kept_before{};  // task t's survivors at t + 1
-  // The candidates go into the world frame beside the counting, in ranges, the survivors
-  // picked from them at the end.
-  const auto to_world = [&](std::size_t task) {
-    each_candidate(task, [&](std::size_t i) { scratch.candidates_W[i] = R_W_S * cand[i] + t_W_S; });
-  };
-  // Whether candidate i survives, `passes` deciding for a near one; booked per task.
-  // (Locals rather than scratch's members: a byte store may alias anything, and the compiler
-  // would reload them after each.)
-  const auto decide = [&](std::size_t task, auto&& passes) {
-    const std::uint8_t* const flags = scratch.point_near.data();
-    std::uint8_t* const keep = scratch.keep.data();
-    const std::size_t begin = first[task], end = last[task];
-    std::size_t kept = 0;
-    for (std::size_t i = begin; i < end; ++i) {
-      const bool k = !outliers || (flags[i] & kNear) == 0 || passes(i);
-      keep[i] = k ? 1 : 0;
-      kept += k ? 1 : 0;
-    }
-    kept_before[task + 1] = kept;
-  };
-  if (outliers && region.grid) {
-    isolate_in_grid(region, needed, ranges, scratch, runner, to_world, decide);
-  } else {
-    isolate_in_table(outliers, needed, ranges, scratch, runner, to_world, decide);
-  }
-  for (std::size_t t = 0; t < kFilterTasks; ++t) kept_before[t + 1] += kept_before[t];
-
-  // 3. The survivors, in input order, each task writing its own range of the output.
-  points_W.resize(kept_before[kFilterTasks]);
-  if (points_S != nullptr) points_S->resize(points_W.size());
-  runner.parallel_for(kFilterTasks, [&](std::size_t task) {
-    std::size_t out = kept_before[task];
-    each_candidate(task, [&](std::size_t i) {
-      if (scratch.keep[i] == 0) return;
-      if (points_S != nullptr) (*points_S)[out] = cand[i];
-      points_W[out++] = scratch.candidates_W[i];
-    });
-  });
-
-  FilterCounts counts;
-  counts.input = n;
-  for (const FilterCounts& c : task_counts) {
-    counts.non_finite += c.non_finite;
-    counts.too_close += c.too_close;
-    counts.ego_vehicle += c.ego_vehicle;
-  }
-  counts.kept = points_W.size();
-  counts.isolated = m - counts.kept;
-  return counts;
+  const CandidateRanges ranges = find_candidates(cloud, tests, scratch, runner, task_counts);
+  const SurvivorOffsets kept_before =
+      find_survivors(params, region, T_W_S, ranges, scratch, runner);
+  write_survivors(ranges, kept_before, scratch, runner, points_W, points_S);
+  return total_counts(cloud.size(), task_counts, ranges.count(), points_W.size());
 }
 
 }  // namespace tarmac::core

@@ -1,7 +1,8 @@
 #pragma once
 /// @file scan_filter.cpp's per-point tests four points at a time (PointLanes) and the region of
 /// cells its outlier test reads (OutlierRegion). Internal to core/src: included by
-/// scan_filter.cpp only; the one-point reference they must agree with is there (test_point).
+/// scan_filter.cpp only; the one-point reference they must agree with is there
+/// (PointTests::test_point).
 
 #include <algorithm>
 #include <array>
@@ -72,7 +73,7 @@ struct OutlierRegion {
 };
 
 /// filter_scan's per-point tests four points at a time, with the same float arithmetic as the
-/// one-point reference (test_point in filter_scan), so the same decisions: the squared norm
+/// one-point reference (PointTests::test_point), so the same decisions: the squared norm
 /// summed in Eigen's order (x² + (y² + z²)), its comparison with min range² in double done in
 /// float against the smallest float not below it, the cell key's floors in 32-bit lanes (a
 /// lane whose cell coordinate is out of their range takes the reference's 64-bit one).

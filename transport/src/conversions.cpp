@@ -142,6 +142,211 @@ void put_field(PointCloud2Msg& msg, const char* name, std::uint32_t offset, std:
   msg.fields().push_back(field);
 }
 
+/// The fields from_point_cloud2 reads, where each lives in a point record (unset: absent).
+struct CloudFields {
+  std::optional<FieldSlot> x, y, z, intensity, ring, time;
+};
+
+/// Whether a field can be read: a datatype of known size, one value, inside the point record.
+core::Status check_field(const sensor_msgs::msg::dds_::PointField_& f, std::uint32_t point_step) {
+  const std::size_t size = datatype_size(f.datatype());
+  const std::string& name = f.name();
+  if (size == 0) {
+    return reject("bad_datatype",
+                  "field '" + name + "' has unknown datatype " + std::to_string(f.datatype()));
+  }
+  if (f.count() != 1) {
+    return reject("bad_count", "field '" + name + "' has count " + std::to_string(f.count()));
+  }
+  if (std::size_t{f.offset()} + size > point_step) {
+    return reject("field_outside_point", "field '" + name + "' at offset " +
+                                             std::to_string(f.offset()) + " exceeds point_step " +
+                                             std::to_string(point_step));
+  }
+  return core::Ok{};
+}
+
+/// The fields a cloud's points are read from: x, y and z (required), intensity, and the ring and
+/// the time under the names drivers give them (with a driver's `preset`, its own names only,
+/// and they must be there). An error when a field to read cannot be, x, y or z is missing, or
+/// the fields are not the preset's.
+core::Result<CloudFields> find_fields(const PointCloud2Msg& msg,
+                                      const std::optional<DriverFields>& preset) {
+  CloudFields found;
+  for (const auto& f : msg.fields()) {
+    const std::string& name = f.name();
+    // The ring (beam index): `ring`, or Autoware's `channel`. Not Livox's `line`: the driver
+    // makes it from the point's place in its packet, not from a beam.
+    const bool is_ring = preset ? !preset->ring.empty() && name == preset->ring
+                                : name == "ring" || name == "channel";
+    const bool is_time =
+        preset ? name == preset->time
+               : name == "t" || name == "time" || name == "timestamp" || name == "time_stamp";
+    const bool wanted =
+        name == "x" || name == "y" || name == "z" || name == "intensity" || is_ring || is_time;
+    if (!wanted) continue;  // other fields (normals, reflectivity, ...) are ignored
+    const core::Status readable = check_field(f, msg.point_step());
+    if (!readable) return readable.error();
+    const FieldSlot slot{f.offset(), f.datatype()};
+    if (name == "x")
+      found.x = slot;
+    else if (name == "y")
+      found.y = slot;
+    else if (name == "z")
+      found.z = slot;
+    else if (name == "intensity")
+      found.intensity = slot;
+    else if (is_ring && !found.ring)
+      found.ring = slot;  // the first of ring / channel wins
+    else if (is_time && !found.time)
+      found.time = slot;  // the first of t / time / timestamp / time_stamp wins
+  }
+  if (!found.x || !found.y || !found.z) {
+    return reject("missing_xyz", "fields x, y and z are required");
+  }
+  if (preset && (!found.time || found.time->datatype != preset->time_datatype ||
+                 (!preset->ring.empty() && !found.ring))) {
+    std::string want = "field '" + std::string(preset->time) + "' of datatype " +
+                       std::to_string(preset->time_datatype);
+    if (!preset->ring.empty()) want += " and field '" + std::string(preset->ring) + "'";
+    return reject("driver_mismatch", "sensors[].driver expects " + want);
+  }
+  return found;
+}
+
+/// Where a cloud's point records lie in its data: `height` rows of `width` records,
+/// `point_step` bytes apart, the rows `row_step` apart; `swap`: the values are not in this
+/// machine's byte order.
+struct CloudLayout {
+  const std::uint8_t* base;
+  std::size_t width, height, point_step, row_step;
+  bool swap;
+
+  [[nodiscard]] std::size_t size() const { return width * height; }
+  [[nodiscard]] const std::uint8_t* record(std::size_t row, std::size_t col) const {
+    return base + row * row_step + col * point_step;
+  }
+};
+
+/// The cloud's layout; an error when a row cannot hold its points or the data is not the rows.
+core::Result<CloudLayout> cloud_layout(const PointCloud2Msg& msg) {
+  const CloudLayout layout{.base = msg.data().data(),
+                           .width = msg.width(),
+                           .height = msg.height(),
+                           .point_step = msg.point_step(),
+                           .row_step = msg.row_step(),
+                           .swap = msg.is_bigendian() != (std::endian::native == std::endian::big)};
+  if (layout.row_step < layout.width * layout.point_step) {
+    return reject("bad_row_step", "row_step " + std::to_string(layout.row_step) +
+                                      " < width*point_step " +
+                                      std::to_string(layout.width * layout.point_step));
+  }
+  if (msg.data().size() != layout.row_step * layout.height) {
+    return reject("bad_size", "data has " + std::to_string(msg.data().size()) +
+                                  " bytes, row_step*height is " +
+                                  std::to_string(layout.row_step * layout.height));
+  }
+  return layout;
+}
+
+/// The median of up to 31 finite values of a field, spread over the (non-empty) cloud: a few
+/// junk cells (a driver's zero fill) cannot decide it. None when no value sampled is finite.
+std::optional<double> sampled_median(const CloudLayout& layout, FieldSlot field) {
+  std::array<double, 31> sample{};
+  std::size_t taken = 0;
+  const std::size_t n = layout.size();
+  const std::size_t stride = std::max<std::size_t>(1, n / sample.size());
+  for (std::size_t i = 0; i < n && taken < sample.size(); i += stride) {
+    const std::uint8_t* p = layout.record(i / layout.width, i % layout.width);
+    const double v = read_as_double(p + field.offset, field.datatype, layout.swap);
+    if (std::isfinite(v)) sample[taken++] = v;
+  }
+  if (taken == 0) return std::nullopt;
+  const auto mid = sample.begin() + static_cast<std::ptrdiff_t>(taken / 2);
+  std::nth_element(sample.begin(), mid, sample.begin() + static_cast<std::ptrdiff_t>(taken));
+  return *mid;
+}
+
+/// How the (non-empty) cloud's time values become seconds from its stamp: the driver's origin
+/// and unit with a `preset`, whatever the values say; else guessed from the values (time_base);
+/// {0, 1} without a time field, or when no value sampled is finite (nothing to relate: they
+/// read NaN).
+TimeBase cloud_time_base(const CloudLayout& layout, const std::optional<FieldSlot>& time,
+                         const std::optional<DriverFields>& preset, std::int64_t stamp_ns) {
+  if (preset) {
+    const double stamp = static_cast<double>(stamp_ns);
+    return {preset->absolute ? (preset->scale == 1.0 ? stamp * 1e-9 : stamp) : 0.0, preset->scale};
+  }
+  if (!time) return {0.0, 1.0};
+  const std::optional<double> median = sampled_median(layout, *time);
+  return median ? time_base(*median, time->datatype, stamp_ns) : TimeBase{0.0, 1.0};
+}
+
+/// The (non-empty) cloud's points into `out`, in record order: xyz, and intensity, ring and time
+/// where the cloud has them (the time only where `times` relates it to the stamp). (By value:
+/// the loop's constants are then locals, kept in registers across the vectors' growth.)
+void read_points(CloudLayout layout, CloudFields fields, TimeBase times, core::PointCloud& out) {
+  const std::size_t n = layout.size();
+  // Grow geometrically: clouds are parsed into reused buffers, so a slowly growing scan size
+  // costs a few reallocations, not one per scan.
+  const auto grow = [n](auto& v) {
+    if (v.capacity() < n) v.reserve(std::max(n, v.capacity() + v.capacity() / 2));
+  };
+  const FieldSlot x = *fields.x, y = *fields.y, z = *fields.z;
+  const std::optional<FieldSlot>& intensity = fields.intensity;
+  const std::optional<FieldSlot>& ring = fields.ring;
+  const bool swap = layout.swap;
+  grow(out.points_S);
+  if (intensity) grow(out.intensity);
+  if (ring) grow(out.ring);
+  // The slot copied out of the optional, for the loop (GCC 12 warns on the optional there).
+  const bool use_time = fields.time.has_value() && times.scale != 0.0;
+  const FieldSlot time_at = fields.time.value_or(FieldSlot{});
+  if (use_time) grow(out.time_offset_s);
+  const bool native_float_xyz =
+      !swap && x.datatype == pf::FLOAT32 && y.datatype == pf::FLOAT32 && z.datatype == pf::FLOAT32;
+  const bool native_float_intensity = !swap && intensity && intensity->datatype == pf::FLOAT32;
+  for (std::size_t row = 0; row < layout.height; ++row) {
+    for (std::size_t col = 0; col < layout.width; ++col) {
+      const std::uint8_t* p = layout.record(row, col);
+      if (native_float_xyz) {
+        // The common layout (float32 in this machine's byte order): plain loads, same values.
+        float v[3];
+        std::memcpy(&v[0], p + x.offset, 4);
+        std::memcpy(&v[1], p + y.offset, 4);
+        std::memcpy(&v[2], p + z.offset, 4);
+        out.points_S.emplace_back(v[0], v[1], v[2]);
+      } else {
+        out.points_S.emplace_back(
+            static_cast<float>(read_as_double(p + x.offset, x.datatype, swap)),
+            static_cast<float>(read_as_double(p + y.offset, y.datatype, swap)),
+            static_cast<float>(read_as_double(p + z.offset, z.datatype, swap)));
+      }
+      if (intensity && native_float_intensity) {
+        float v;
+        std::memcpy(&v, p + intensity->offset, 4);
+        out.intensity.push_back(v);
+      } else if (intensity) {
+        out.intensity.push_back(
+            static_cast<float>(read_as_double(p + intensity->offset, intensity->datatype, swap)));
+      }
+      if (ring) {
+        const double r = read_as_double(p + ring->offset, ring->datatype, swap);
+        out.ring.push_back(r >= 0.0 && r <= 65535.0 ? static_cast<std::uint16_t>(r) : 0);
+      }
+      if (use_time) {
+        const double t_s =
+            (read_as_double(p + time_at.offset, time_at.datatype, swap) - times.origin) *
+            times.scale;
+        // Far from the stamp: a broken point time, taken as the stamp (not deskewed).
+        out.time_offset_s.push_back(std::abs(t_s) <= kNearStampS
+                                        ? static_cast<float>(t_s)
+                                        : std::numeric_limits<float>::quiet_NaN());
+      }
+    }
+  }
+}
+
 }  // namespace
 
 TimeMsg to_time_msg(std::int64_t stamp_ns) {
@@ -257,160 +462,21 @@ core::Status from_point_cloud2(const PointCloud2Msg& msg, core::PointCloud& out,
   if (notes != nullptr) *notes = CloudNotes{};
   out.frame_id = msg.header().frame_id();
   out.stamp_ns = from_time_msg(msg.header().stamp());
-
-  std::optional<FieldSlot> x, y, z, intensity, ring, time;
-  for (const auto& f : msg.fields()) {
-    const std::size_t size = datatype_size(f.datatype());
-    const std::string& name = f.name();
-    // The ring (beam index): `ring`, or Autoware's `channel`. Not Livox's `line`: the driver
-    // makes it from the point's place in its packet, not from a beam.
-    // With a driver's preset, its own names only.
-    const bool is_ring = preset ? !preset->ring.empty() && name == preset->ring
-                                : name == "ring" || name == "channel";
-    const bool is_time =
-        preset ? name == preset->time
-               : name == "t" || name == "time" || name == "timestamp" || name == "time_stamp";
-    const bool wanted =
-        name == "x" || name == "y" || name == "z" || name == "intensity" || is_ring || is_time;
-    if (!wanted) continue;  // other fields (normals, reflectivity, ...) are ignored
-    if (size == 0) {
-      return reject("bad_datatype",
-                    "field '" + name + "' has unknown datatype " + std::to_string(f.datatype()));
-    }
-    if (f.count() != 1) {
-      return reject("bad_count", "field '" + name + "' has count " + std::to_string(f.count()));
-    }
-    if (std::size_t{f.offset()} + size > msg.point_step()) {
-      return reject("field_outside_point", "field '" + name + "' at offset " +
-                                               std::to_string(f.offset()) + " exceeds point_step " +
-                                               std::to_string(msg.point_step()));
-    }
-    const FieldSlot slot{f.offset(), f.datatype()};
-    if (name == "x")
-      x = slot;
-    else if (name == "y")
-      y = slot;
-    else if (name == "z")
-      z = slot;
-    else if (name == "intensity")
-      intensity = slot;
-    else if (is_ring && !ring)
-      ring = slot;  // the first of ring / channel wins
-    else if (is_time && !time)
-      time = slot;  // the first of t / time / timestamp / time_stamp wins
-  }
-  if (!x || !y || !z) return reject("missing_xyz", "fields x, y and z are required");
-  if (preset &&
-      (!time || time->datatype != preset->time_datatype || (!preset->ring.empty() && !ring))) {
-    std::string want = "field '" + std::string(preset->time) + "' of datatype " +
-                       std::to_string(preset->time_datatype);
-    if (!preset->ring.empty()) want += " and field '" + std::string(preset->ring) + "'";
-    return reject("driver_mismatch", "sensors[].driver expects " + want);
-  }
-
-  const std::size_t width = msg.width();
-  const std::size_t height = msg.height();
-  const std::size_t point_step = msg.point_step();
-  const std::size_t row_step = msg.row_step();
-  if (row_step < width * point_step) {
-    return reject("bad_row_step", "row_step " + std::to_string(row_step) + " < width*point_step " +
-                                      std::to_string(width * point_step));
-  }
-  if (msg.data().size() != row_step * height) {
-    return reject("bad_size", "data has " + std::to_string(msg.data().size()) +
-                                  " bytes, row_step*height is " +
-                                  std::to_string(row_step * height));
-  }
-
-  const bool swap = msg.is_bigendian() != (std::endian::native == std::endian::big);
-  const std::size_t n = width * height;
+  const core::Result<CloudFields> fields = find_fields(msg, preset);
+  if (!fields) return fields.error();
+  const core::Result<CloudLayout> layout = cloud_layout(msg);
+  if (!layout) return layout.error();
   // A grid (height > 1) is a sweep to organise, its cells without a return kept: core's ingest
   // decides its layout (organised_scan.hpp).
+  const std::size_t height = layout.value().height;
   out.grid_rows = height > 1 ? static_cast<std::uint32_t>(height) : 0;
   // An empty cloud is done: its other dimension is unbounded by the data (0 x 4e9 with no
   // bytes passes the size checks) and walking its rows would stall the cycle for seconds.
-  if (n == 0) return core::Ok{};
-  // Grow geometrically: clouds are parsed into reused buffers, so a slowly growing scan size
-  // costs a few reallocations, not one per scan.
-  const auto grow = [n](auto& v) {
-    if (v.capacity() < n) v.reserve(std::max(n, v.capacity() + v.capacity() / 2));
-  };
-  const std::uint8_t* base = msg.data().data();
-  TimeBase times{0.0, 1.0};  // no finite time at all: nothing to relate, all read NaN
-  if (preset) {
-    // The driver's origin and unit, whatever the values say.
-    const double stamp = static_cast<double>(out.stamp_ns);
-    times = {preset->absolute ? (preset->scale == 1.0 ? stamp * 1e-9 : stamp) : 0.0, preset->scale};
-  } else if (time) {
-    // The median of up to 31 finite values spread over the cloud decides: a few junk cells (a
-    // driver's zero fill) cannot.
-    std::array<double, 31> sample{};
-    std::size_t taken = 0;
-    const std::size_t stride = std::max<std::size_t>(1, n / sample.size());
-    for (std::size_t i = 0; i < n && taken < sample.size(); i += stride) {
-      const std::uint8_t* p = base + (i / width) * row_step + (i % width) * point_step;
-      const double v = read_as_double(p + time->offset, time->datatype, swap);
-      if (std::isfinite(v)) sample[taken++] = v;
-    }
-    if (taken > 0) {
-      const auto mid = sample.begin() + static_cast<std::ptrdiff_t>(taken / 2);
-      std::nth_element(sample.begin(), mid, sample.begin() + static_cast<std::ptrdiff_t>(taken));
-      times = time_base(*mid, time->datatype, out.stamp_ns);
-    }
-    if (times.scale == 0.0) {
-      // no deskew for this cloud, counted
-      if (notes != nullptr) notes->time_unrelated = true;
-    }
-  }
-  grow(out.points_S);
-  if (intensity) grow(out.intensity);
-  if (ring) grow(out.ring);
-  // The slot copied out of the optional, for the loop (GCC 12 warns on the optional there).
-  const bool use_time = time.has_value() && times.scale != 0.0;
-  const FieldSlot time_at = time.value_or(FieldSlot{});
-  if (use_time) grow(out.time_offset_s);
-  const bool native_float_xyz = !swap && x->datatype == pf::FLOAT32 && y->datatype == pf::FLOAT32 &&
-                                z->datatype == pf::FLOAT32;
-  const bool native_float_intensity = !swap && intensity && intensity->datatype == pf::FLOAT32;
-  for (std::size_t row = 0; row < height; ++row) {
-    for (std::size_t col = 0; col < width; ++col) {
-      const std::uint8_t* p = base + row * row_step + col * point_step;
-      if (native_float_xyz) {
-        // The common layout (float32 in this machine's byte order): plain loads, same values.
-        float v[3];
-        std::memcpy(&v[0], p + x->offset, 4);
-        std::memcpy(&v[1], p + y->offset, 4);
-        std::memcpy(&v[2], p + z->offset, 4);
-        out.points_S.emplace_back(v[0], v[1], v[2]);
-      } else {
-        out.points_S.emplace_back(
-            static_cast<float>(read_as_double(p + x->offset, x->datatype, swap)),
-            static_cast<float>(read_as_double(p + y->offset, y->datatype, swap)),
-            static_cast<float>(read_as_double(p + z->offset, z->datatype, swap)));
-      }
-      if (intensity && native_float_intensity) {
-        float v;
-        std::memcpy(&v, p + intensity->offset, 4);
-        out.intensity.push_back(v);
-      } else if (intensity) {
-        out.intensity.push_back(
-            static_cast<float>(read_as_double(p + intensity->offset, intensity->datatype, swap)));
-      }
-      if (ring) {
-        const double r = read_as_double(p + ring->offset, ring->datatype, swap);
-        out.ring.push_back(r >= 0.0 && r <= 65535.0 ? static_cast<std::uint16_t>(r) : 0);
-      }
-      if (use_time) {
-        const double t_s =
-            (read_as_double(p + time_at.offset, time_at.datatype, swap) - times.origin) *
-            times.scale;
-        // Far from the stamp: a broken point time, taken as the stamp (not deskewed).
-        out.time_offset_s.push_back(std::abs(t_s) <= kNearStampS
-                                        ? static_cast<float>(t_s)
-                                        : std::numeric_limits<float>::quiet_NaN());
-      }
-    }
-  }
+  if (layout.value().size() == 0) return core::Ok{};
+  const TimeBase times = cloud_time_base(layout.value(), fields.value().time, preset, out.stamp_ns);
+  // A time that cannot be related: no deskew for this cloud, counted.
+  if (times.scale == 0.0 && notes != nullptr) notes->time_unrelated = true;
+  read_points(layout.value(), fields.value(), times, out);
   return core::Ok{};
 }
 

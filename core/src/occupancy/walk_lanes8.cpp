@@ -116,6 +116,294 @@ __attribute__((target("avx512f,avx512dq"))) void set_up_walks(const WindowGeomet
   }
 }
 
+/// The wide walk's lanes between vector loops, per axis where it applies: parameters, parameter
+/// steps, slot steps, event counters; slot, steps left, and `source`: the queue index of the
+/// lane's walk, or −1 once its scalar state lives in WideWalk (after an event or a new batch),
+/// −2 when idle.
+struct WideLanes {
+  static constexpr int kLanes = 8;
+  alignas(64) double t[3][kLanes], dt[3][kLanes];
+  alignas(64) std::int64_t delta[3][kLanes], events[3][kLanes], slot[kLanes], left[kLanes];
+  alignas(64) std::int64_t source[kLanes];
+};
+
+/// The wide walk's helpers are inlined into walk_lanes8: GCC inlines intrinsics-using code only
+/// into a function of the same target, and a call per step would cost more than the step.
+#define TARMAC_LANES8_INLINE __attribute__((target("avx512f,avx512dq"), always_inline)) inline
+
+/// WideLanes in registers, as the vector loop holds them (s: slot, r: steps left, src: source).
+struct LaneRegisters {
+  __m512d tx, ty, tz, dtx, dty, dtz;
+  __m512i dx, dy, dz, ex, ey, ez, s, r, src;
+};
+
+/// The lanes that leave the vector loop: a stepped axis's counter reached 0 (`event`: the ring
+/// wraps or the walk leaves the window), or the walk took its last step (`ended`).
+struct LaneStops {
+  __mmask8 event = 0, ended = 0;
+};
+
+/// The lanes' state into registers, for a vector loop.
+TARMAC_LANES8_INLINE LaneRegisters load_lanes(const WideLanes& lanes) {
+  LaneRegisters v;
+  v.tx = _mm512_load_pd(lanes.t[0]);
+  v.ty = _mm512_load_pd(lanes.t[1]);
+  v.tz = _mm512_load_pd(lanes.t[2]);
+  v.dtx = _mm512_load_pd(lanes.dt[0]);
+  v.dty = _mm512_load_pd(lanes.dt[1]);
+  v.dtz = _mm512_load_pd(lanes.dt[2]);
+  v.s = _mm512_load_si512(lanes.slot);
+  v.dx = _mm512_load_si512(lanes.delta[0]);
+  v.dy = _mm512_load_si512(lanes.delta[1]);
+  v.dz = _mm512_load_si512(lanes.delta[2]);
+  v.ex = _mm512_load_si512(lanes.events[0]);
+  v.ey = _mm512_load_si512(lanes.events[1]);
+  v.ez = _mm512_load_si512(lanes.events[2]);
+  v.r = _mm512_load_si512(lanes.left);
+  v.src = _mm512_load_si512(lanes.source);
+  return v;
+}
+
+/// The lanes' vector state back into `lanes` (for finish() and the event path).
+TARMAC_LANES8_INLINE void store_lanes(WideLanes& lanes, const LaneRegisters& v) {
+  _mm512_store_pd(lanes.t[0], v.tx);
+  _mm512_store_pd(lanes.t[1], v.ty);
+  _mm512_store_pd(lanes.t[2], v.tz);
+  _mm512_store_pd(lanes.dt[0], v.dtx);
+  _mm512_store_pd(lanes.dt[1], v.dty);
+  _mm512_store_pd(lanes.dt[2], v.dtz);
+  _mm512_store_si512(lanes.delta[0], v.dx);
+  _mm512_store_si512(lanes.delta[1], v.dy);
+  _mm512_store_si512(lanes.delta[2], v.dz);
+  _mm512_store_si512(lanes.slot, v.s);
+  _mm512_store_si512(lanes.events[0], v.ex);
+  _mm512_store_si512(lanes.events[1], v.ey);
+  _mm512_store_si512(lanes.events[2], v.ez);
+  _mm512_store_si512(lanes.left, v.r);
+  _mm512_store_si512(lanes.source, v.src);
+}
+
+/// Every lane one step: the stepped axis's parameter, slot and event counter, and the steps
+/// left. Masked arithmetic where the one-at-a-time step branches; the same comparisons of the
+/// same sums, so the same steps. Returns the lanes that must leave the loop, if any.
+TARMAC_LANES8_INLINE LaneStops step_lanes(LaneRegisters& v) {
+  const __m512i one = _mm512_set1_epi64(1);
+  const __m512i zero = _mm512_setzero_si512();
+  // The scalar step's comparisons: x if x < y and x < z, else y if y < z, else z.
+  const __mmask8 x_lt_y = _mm512_cmp_pd_mask(v.tx, v.ty, _CMP_LT_OQ);
+  const __mmask8 x_lt_z = _mm512_cmp_pd_mask(v.tx, v.tz, _CMP_LT_OQ);
+  const __mmask8 y_lt_z = _mm512_cmp_pd_mask(v.ty, v.tz, _CMP_LT_OQ);
+  const auto kx = static_cast<__mmask8>(x_lt_y & x_lt_z);
+  const auto ky = static_cast<__mmask8>(~x_lt_y & y_lt_z);
+  const auto kz = static_cast<__mmask8>(~(kx | ky));
+  v.tx = _mm512_mask_add_pd(v.tx, kx, v.tx, v.dtx);
+  v.ty = _mm512_mask_add_pd(v.ty, ky, v.ty, v.dty);
+  v.tz = _mm512_mask_add_pd(v.tz, kz, v.tz, v.dtz);
+  v.s = _mm512_mask_add_epi64(v.s, kx, v.s, v.dx);
+  v.s = _mm512_mask_add_epi64(v.s, ky, v.s, v.dy);
+  v.s = _mm512_mask_add_epi64(v.s, kz, v.s, v.dz);
+  v.ex = _mm512_mask_sub_epi64(v.ex, kx, v.ex, one);
+  v.ey = _mm512_mask_sub_epi64(v.ey, ky, v.ey, one);
+  v.ez = _mm512_mask_sub_epi64(v.ez, kz, v.ez, one);
+  v.r = _mm512_sub_epi64(v.r, one);
+  LaneStops stops;
+  stops.event = static_cast<__mmask8>(_mm512_cmpeq_epi64_mask(v.ex, zero) |
+                                      _mm512_cmpeq_epi64_mask(v.ey, zero) |
+                                      _mm512_cmpeq_epi64_mask(v.ez, zero));
+  stops.ended = _mm512_cmpeq_epi64_mask(v.r, zero);
+  return stops;
+}
+
+/// The lanes in `ended` take the queue's walks from entry `k` on, in lane order, as take() does,
+/// without the registers going through memory.
+TARMAC_LANES8_INLINE void load_queued(LaneRegisters& v, __mmask8 ended, const WideQueue& q, int k,
+                                      __m512i start_slot) {
+  v.tx = _mm512_mask_expandloadu_pd(v.tx, ended, &q.t[0][k]);
+  v.ty = _mm512_mask_expandloadu_pd(v.ty, ended, &q.t[1][k]);
+  v.tz = _mm512_mask_expandloadu_pd(v.tz, ended, &q.t[2][k]);
+  v.dtx = _mm512_mask_expandloadu_pd(v.dtx, ended, &q.dt[0][k]);
+  v.dty = _mm512_mask_expandloadu_pd(v.dty, ended, &q.dt[1][k]);
+  v.dtz = _mm512_mask_expandloadu_pd(v.dtz, ended, &q.dt[2][k]);
+  v.dx = _mm512_mask_expandloadu_epi64(v.dx, ended, &q.delta[0][k]);
+  v.dy = _mm512_mask_expandloadu_epi64(v.dy, ended, &q.delta[1][k]);
+  v.dz = _mm512_mask_expandloadu_epi64(v.dz, ended, &q.delta[2][k]);
+  v.ex = _mm512_mask_expandloadu_epi64(v.ex, ended, &q.events[0][k]);
+  v.ey = _mm512_mask_expandloadu_epi64(v.ey, ended, &q.events[1][k]);
+  v.ez = _mm512_mask_expandloadu_epi64(v.ez, ended, &q.events[2][k]);
+  v.r = _mm512_mask_expandloadu_epi64(v.r, ended, &q.steps[k]);
+  v.src = _mm512_mask_expandloadu_epi64(v.src, ended, &q.id[k]);
+  v.s = _mm512_mask_mov_epi64(v.s, ended, start_slot);
+}
+
+/// One task's wide walk: the cursor and the queue its walks come from, the lanes, the scalar
+/// state of walks that left the queue, and what the walks book (visits, marks, box). Its public
+/// members are the steps of walk_lanes8.
+template <bool kFlagWords>
+class WideWalk {
+ public:
+  static constexpr int kLanes = WideLanes::kLanes;
+
+  TARMAC_LANES8_INLINE WideWalk(const WindowGeometry& w, const RayStart& start,
+                                const TaskRays& rays, FreeMarks marks, MarkBox& box)
+      : w_(w), start_(start), cursor_(rays), marks_(marks), box_(box) {
+    for (int l = 0; l < kLanes; ++l) lanes_.source[l] = -2;
+  }
+
+  /// Idle lanes take walks, from the queue, refilled as it runs dry. False when the task has
+  /// fewer walks left than there are idle lanes: the lanes then finish one at a time.
+  TARMAC_LANES8_INLINE bool fill_idle_lanes() {
+    for (int l = 0; l < kLanes; ++l) {
+      if (lanes_.source[l] != -2) continue;
+      if (q_.next == q_.len && !refill_queue()) return false;
+      take(l);
+    }
+    return true;
+  }
+
+  /// The lanes' walks, a step of all eight at a time, until a lane meets an event or walks end
+  /// that the queue cannot replace; returns those lanes. Walks that end without an event are
+  /// booked (finish() with no step left) and their lanes take queued walks without leaving
+  /// the loop.
+  TARMAC_LANES8_INLINE LaneStops run_lanes() {
+    // Locals: the marks are 64-bit stores, which may alias the lanes' 64-bit state.
+    std::uint64_t* const bits = marks_.bits;
+    std::uint64_t* const dirty = marks_.dirty;
+    const __m512i start_slot = _mm512_set1_epi64(start_.slot);
+    LaneRegisters v = load_lanes(lanes_);
+    LaneStops stops;
+    while (true) {
+      _mm512_store_si512(lanes_.slot, v.s);
+      for (int l = 0; l < kLanes; ++l) mark_voxel<kFlagWords>(bits, dirty, lanes_.slot[l]);
+      stops = step_lanes(v);
+      if ((stops.ended | stops.event) == 0) continue;
+      const int n_ended = std::popcount(static_cast<unsigned>(stops.ended));
+      if (stops.event != 0 || q_.len - q_.next < n_ended) break;
+      store_lanes(lanes_, v);
+      for (unsigned m = stops.ended; m != 0; m &= m - 1) {
+        visits_ += finish(std::countr_zero(m));
+      }
+      const int k = q_.next;
+      q_.next += n_ended;
+      load_queued(v, stops.ended, q_, k, start_slot);
+    }
+    store_lanes(lanes_, v);
+    return stops;
+  }
+
+  /// The lanes that left the vector loop, one at a time: their events, then the end of their
+  /// walks. A lane whose walk is done (ended, or left the window) becomes idle.
+  TARMAC_LANES8_INLINE void settle(LaneStops stops) {
+    for (unsigned m = static_cast<unsigned>(stops.event | stops.ended); m != 0; m &= m - 1) {
+      const int l = std::countr_zero(m);
+      bool done = ((stops.event >> l) & 1) != 0 && take_events(l);
+      if (!done && ((stops.ended >> l) & 1) != 0) {
+        visits_ += finish(l);  // no step left: the end voxel, if marked, and the box
+        done = true;
+      }
+      if (done) lanes_.source[l] = -2;
+    }
+  }
+
+  /// The walks still in lanes, each to its end one step at a time; the task's visits in all.
+  TARMAC_LANES8_INLINE std::uint64_t finish_busy_lanes() {
+    for (int l = 0; l < kLanes; ++l) {
+      if (lanes_.source[l] != -2) visits_ += finish(l);
+    }
+    return visits_;
+  }
+
+ private:
+  /// The lane's walk's scalar state moves out of the queue (which is about to change, or whose
+  /// entry the lane's events will modify).
+  TARMAC_LANES8_INLINE void own(int l) {
+    const auto k = static_cast<std::size_t>(lanes_.source[l]);
+    if (lanes_.source[l] < 0) return;
+    for (int a = 0; a < 3; ++a) {
+      lane_axes_[l][a] = start_.axis_walk[a][static_cast<std::size_t>(q_.sign[a][k])];
+      lane_axes_[l][a].t_delta = q_.dt[a][k];
+    }
+    lane_steps_[static_cast<std::size_t>(l)] = q_.steps[k];
+    lane_inc_[static_cast<std::size_t>(l)] = q_.inc[k];
+    lanes_.source[l] = -1;
+  }
+
+  /// The next batch of walks into the queue (walks of no step are done on the spot); false
+  /// when the task has none left.
+  TARMAC_LANES8_INLINE bool refill_queue() {
+    for (int l = 0; l < kLanes; ++l) own(l);
+    q_.len = 0;
+    q_.next = 0;
+    set_up_walks<kFlagWords>(w_, start_, cursor_, q_, visits_, marks_, box_);
+    return q_.len > 0;
+  }
+
+  /// Lane l's scalar state with its vector state written in.
+  TARMAC_LANES8_INLINE void scalar(int l) {
+    own(l);
+    for (int a = 0; a < 3; ++a) {
+      lane_axes_[l][a].t_max = lanes_.t[a][l];
+      lane_axes_[l][a].events = static_cast<int>(lanes_.events[a][l]);
+    }
+  }
+
+  /// The rest of lane l's walk one step at a time; its visits in all.
+  TARMAC_LANES8_INLINE std::uint64_t finish(int l) {
+    scalar(l);
+    return finish_walk<kFlagWords>(start_, lane_axes_[l][0], lane_axes_[l][1], lane_axes_[l][2],
+                                   lanes_.slot[l], lanes_.left[l],
+                                   lane_steps_[static_cast<std::size_t>(l)],
+                                   lane_inc_[static_cast<std::size_t>(l)], marks_, box_);
+  }
+
+  /// Lane l takes the queue's next walk (stored lanes; the vector loop takes them by itself).
+  TARMAC_LANES8_INLINE void take(int l) {
+    const auto k = static_cast<std::size_t>(q_.next++);
+    for (int a = 0; a < 3; ++a) {
+      lanes_.t[a][l] = q_.t[a][k];
+      lanes_.dt[a][l] = q_.dt[a][k];
+      lanes_.delta[a][l] = q_.delta[a][k];
+      lanes_.events[a][l] = q_.events[a][k];
+    }
+    lanes_.slot[l] = start_.slot;
+    lanes_.left[l] = q_.steps[k];
+    lanes_.source[l] = q_.id[k];
+  }
+
+  /// Lane l's events (the axes whose counters reached 0), as AxisWalk::advance handles them
+  /// (before the step count); true when the walk left the window, booked here.
+  TARMAC_LANES8_INLINE bool take_events(int l) {
+    scalar(l);
+    bool left_window = false;
+    for (int a = 0; a < 3; ++a) {
+      if (lanes_.events[a][l] != 0) continue;
+      if (!lane_axes_[l][a].on_event(lanes_.slot[l])) {
+        add_walk_box<kFlagWords>(start_, lane_axes_[l][0], lane_axes_[l][1], lane_axes_[l][2],
+                                 box_);
+        visits_ +=
+            static_cast<std::uint64_t>(lane_steps_[static_cast<std::size_t>(l)] - lanes_.left[l]);
+        left_window = true;
+      } else {
+        lanes_.events[a][l] = lane_axes_[l][a].events;
+      }
+    }
+    return left_window;
+  }
+
+  const WindowGeometry& w_;
+  const RayStart& start_;
+  TaskRayCursor cursor_;
+  FreeMarks marks_;
+  MarkBox& box_;
+  std::uint64_t visits_ = 0;
+  // The queue: walks set up and not yet in a lane. The lanes between vector loops, and the
+  // scalar state of the walks that left the queue.
+  WideQueue q_;
+  WideLanes lanes_;
+  AxisWalk lane_axes_[kLanes][3];
+  std::array<std::int64_t, kLanes> lane_steps_{};
+  std::array<bool, kLanes> lane_inc_{};
+};
+
 /// The same walks, eight at a time in the lanes of AVX-512 registers (x86-64 processors that
 /// have it; the caller checks). A lane takes the same steps as the one-at-a-time walk, decided
 /// by the same comparisons of the same sums, so the marks are the same bits. The step, which
@@ -125,225 +413,19 @@ __attribute__((target("avx512f,avx512dq"))) void set_up_walks(const WindowGeomet
 /// only for an event (ring wrap, window exit), which the scalar state handles one lane at a
 /// time, and to set up the next batch.
 /// `tarmac-bench --walk-lanes 1|4|8` compares the walks (docs/performance.md).
-/// The wide walk's lanes between vector loops, per axis where it applies: parameters, parameter
-/// steps, slot steps, event counters; slot, steps left, and `source`: the queue index of the
-/// lane's walk, or −1 once its scalar state lives in lane_axes (after an event or a new batch),
-/// −2 when idle.
-struct WideLanes {
-  static constexpr int kLanes = 8;
-  alignas(64) double t[3][kLanes], dt[3][kLanes];
-  alignas(64) std::int64_t delta[3][kLanes], events[3][kLanes], slot[kLanes], left[kLanes];
-  alignas(64) std::int64_t source[kLanes];
-};
-
-/// The lanes' vector state back into `lanes` (for finish() and the event path).
-__attribute__((target("avx512f,avx512dq"), always_inline)) inline void store_lanes(
-    WideLanes& lanes, __m512d tx, __m512d ty, __m512d tz, __m512d dtx, __m512d dty, __m512d dtz,
-    __m512i dx, __m512i dy, __m512i dz, __m512i s, __m512i ex, __m512i ey, __m512i ez, __m512i r,
-    __m512i src) {
-  _mm512_store_pd(lanes.t[0], tx);
-  _mm512_store_pd(lanes.t[1], ty);
-  _mm512_store_pd(lanes.t[2], tz);
-  _mm512_store_pd(lanes.dt[0], dtx);
-  _mm512_store_pd(lanes.dt[1], dty);
-  _mm512_store_pd(lanes.dt[2], dtz);
-  _mm512_store_si512(lanes.delta[0], dx);
-  _mm512_store_si512(lanes.delta[1], dy);
-  _mm512_store_si512(lanes.delta[2], dz);
-  _mm512_store_si512(lanes.slot, s);
-  _mm512_store_si512(lanes.events[0], ex);
-  _mm512_store_si512(lanes.events[1], ey);
-  _mm512_store_si512(lanes.events[2], ez);
-  _mm512_store_si512(lanes.left, r);
-  _mm512_store_si512(lanes.source, src);
-}
-
 template <bool kFlagWords>
 __attribute__((target("avx512f,avx512dq"))) std::uint64_t walk_lanes8(const WindowGeometry& w,
                                                                       const RayStart& start,
                                                                       const TaskRays& rays,
                                                                       FreeMarks marks,
                                                                       MarkBox& box) {
-  constexpr int kLanes = 8;
   if (!start.inside) return 0;
-  TaskRayCursor cursor(rays);
-  std::uint64_t visits = 0;
-  std::uint64_t* const bits = marks.bits;
-  std::uint64_t* const dirty = marks.dirty;
-
-  // The queue: walks set up and not yet in a lane, as the lanes load them (parameters,
-  // parameter steps, slot steps, event counters per axis; steps; index), and their scalar state.
-  WideQueue q;
-  // The lanes between vector loops (see WideLanes), and the scalar state of walks that left the
-  // queue.
-  WideLanes lanes;
-  AxisWalk lane_axes[kLanes][3];
-  std::array<std::int64_t, kLanes> lane_steps{};
-  std::array<bool, kLanes> lane_inc{};
-
-  // The lane's walk's scalar state moves out of the queue (which is about to change, or whose
-  // entry the lane's events will modify).
-  const auto own = [&](int l) {
-    const auto k = static_cast<std::size_t>(lanes.source[l]);
-    if (lanes.source[l] < 0) return;
-    for (int a = 0; a < 3; ++a) {
-      lane_axes[l][a] = start.axis_walk[a][static_cast<std::size_t>(q.sign[a][k])];
-      lane_axes[l][a].t_delta = q.dt[a][k];
-    }
-    lane_steps[static_cast<std::size_t>(l)] = q.steps[k];
-    lane_inc[static_cast<std::size_t>(l)] = q.inc[k];
-    lanes.source[l] = -1;
-  };
-  // The next batch of walks into the queue (walks of no step are done on the spot); false
-  // when the task has none left.
-  const auto refill_queue = [&] {
-    for (int l = 0; l < kLanes; ++l) own(l);
-    q.len = 0;
-    q.next = 0;
-    set_up_walks<kFlagWords>(w, start, cursor, q, visits, marks, box);
-    return q.len > 0;
-  };
-  // Lane l's scalar state with its vector state written in.
-  const auto scalar = [&](int l) {
-    own(l);
-    for (int a = 0; a < 3; ++a) {
-      lane_axes[l][a].t_max = lanes.t[a][l];
-      lane_axes[l][a].events = static_cast<int>(lanes.events[a][l]);
-    }
-  };
-  // The rest of lane l's walk one step at a time; its visits in all.
-  const auto finish = [&](int l) {
-    scalar(l);
-    return finish_walk<kFlagWords>(
-        start, lane_axes[l][0], lane_axes[l][1], lane_axes[l][2], lanes.slot[l], lanes.left[l],
-        lane_steps[static_cast<std::size_t>(l)], lane_inc[static_cast<std::size_t>(l)], marks, box);
-  };
-  // Lane l takes the queue's next walk (stored lanes; the vector loop takes them by itself).
-  const auto take = [&](int l) {
-    const auto k = static_cast<std::size_t>(q.next++);
-    for (int a = 0; a < 3; ++a) {
-      lanes.t[a][l] = q.t[a][k];
-      lanes.dt[a][l] = q.dt[a][k];
-      lanes.delta[a][l] = q.delta[a][k];
-      lanes.events[a][l] = q.events[a][k];
-    }
-    lanes.slot[l] = start.slot;
-    lanes.left[l] = q.steps[k];
-    lanes.source[l] = q.id[k];
-  };
-
-  for (int l = 0; l < kLanes; ++l) lanes.source[l] = -2;
-  while (true) {
-    // Idle lanes take walks; when the task has fewer left than lanes, the lanes finish one at
-    // a time.
-    bool short_of_walks = false;
-    for (int l = 0; l < kLanes; ++l) {
-      if (lanes.source[l] != -2) continue;
-      if (q.next == q.len && !refill_queue()) {
-        short_of_walks = true;
-        break;
-      }
-      take(l);
-    }
-    if (short_of_walks) {
-      for (int l = 0; l < kLanes; ++l) {
-        if (lanes.source[l] != -2) visits += finish(l);
-      }
-      return visits;
-    }
-    __m512d tx = _mm512_load_pd(lanes.t[0]), ty = _mm512_load_pd(lanes.t[1]),
-            tz = _mm512_load_pd(lanes.t[2]);
-    __m512d dtx = _mm512_load_pd(lanes.dt[0]), dty = _mm512_load_pd(lanes.dt[1]);
-    __m512d dtz = _mm512_load_pd(lanes.dt[2]);
-    __m512i s = _mm512_load_si512(lanes.slot);
-    __m512i dx = _mm512_load_si512(lanes.delta[0]), dy = _mm512_load_si512(lanes.delta[1]);
-    __m512i dz = _mm512_load_si512(lanes.delta[2]);
-    __m512i ex = _mm512_load_si512(lanes.events[0]), ey = _mm512_load_si512(lanes.events[1]);
-    __m512i ez = _mm512_load_si512(lanes.events[2]);
-    __m512i r = _mm512_load_si512(lanes.left);
-    __m512i src = _mm512_load_si512(lanes.source);
-    const __m512i one = _mm512_set1_epi64(1);
-    const __m512i zero = _mm512_setzero_si512();
-    const __m512i start_slot = _mm512_set1_epi64(start.slot);
-    __mmask8 event = 0, ended = 0;
-    while (true) {
-      _mm512_store_si512(lanes.slot, s);
-      for (int l = 0; l < kLanes; ++l) mark_voxel<kFlagWords>(bits, dirty, lanes.slot[l]);
-      // The scalar step's comparisons: x if x < y and x < z, else y if y < z, else z.
-      const __mmask8 x_lt_y = _mm512_cmp_pd_mask(tx, ty, _CMP_LT_OQ);
-      const __mmask8 x_lt_z = _mm512_cmp_pd_mask(tx, tz, _CMP_LT_OQ);
-      const __mmask8 y_lt_z = _mm512_cmp_pd_mask(ty, tz, _CMP_LT_OQ);
-      const auto kx = static_cast<__mmask8>(x_lt_y & x_lt_z);
-      const auto ky = static_cast<__mmask8>(~x_lt_y & y_lt_z);
-      const auto kz = static_cast<__mmask8>(~(kx | ky));
-      tx = _mm512_mask_add_pd(tx, kx, tx, dtx);
-      ty = _mm512_mask_add_pd(ty, ky, ty, dty);
-      tz = _mm512_mask_add_pd(tz, kz, tz, dtz);
-      s = _mm512_mask_add_epi64(s, kx, s, dx);
-      s = _mm512_mask_add_epi64(s, ky, s, dy);
-      s = _mm512_mask_add_epi64(s, kz, s, dz);
-      ex = _mm512_mask_sub_epi64(ex, kx, ex, one);
-      ey = _mm512_mask_sub_epi64(ey, ky, ey, one);
-      ez = _mm512_mask_sub_epi64(ez, kz, ez, one);
-      r = _mm512_sub_epi64(r, one);
-      event = static_cast<__mmask8>(_mm512_cmpeq_epi64_mask(ex, zero) |
-                                    _mm512_cmpeq_epi64_mask(ey, zero) |
-                                    _mm512_cmpeq_epi64_mask(ez, zero));
-      ended = _mm512_cmpeq_epi64_mask(r, zero);
-      if ((ended | event) == 0) continue;
-      const int n_ended = std::popcount(static_cast<unsigned>(ended));
-      if (event != 0 || q.len - q.next < n_ended) break;
-      // Walks that ended without an event: booked here (finish() with no step lanes.left), and
-      // their lanes take queued walks.
-      store_lanes(lanes, tx, ty, tz, dtx, dty, dtz, dx, dy, dz, s, ex, ey, ez, r, src);
-      for (unsigned m = ended; m != 0; m &= m - 1) {
-        visits += finish(std::countr_zero(m));
-      }
-      const int k = q.next;
-      q.next += n_ended;
-      tx = _mm512_mask_expandloadu_pd(tx, ended, &q.t[0][k]);
-      ty = _mm512_mask_expandloadu_pd(ty, ended, &q.t[1][k]);
-      tz = _mm512_mask_expandloadu_pd(tz, ended, &q.t[2][k]);
-      dtx = _mm512_mask_expandloadu_pd(dtx, ended, &q.dt[0][k]);
-      dty = _mm512_mask_expandloadu_pd(dty, ended, &q.dt[1][k]);
-      dtz = _mm512_mask_expandloadu_pd(dtz, ended, &q.dt[2][k]);
-      dx = _mm512_mask_expandloadu_epi64(dx, ended, &q.delta[0][k]);
-      dy = _mm512_mask_expandloadu_epi64(dy, ended, &q.delta[1][k]);
-      dz = _mm512_mask_expandloadu_epi64(dz, ended, &q.delta[2][k]);
-      ex = _mm512_mask_expandloadu_epi64(ex, ended, &q.events[0][k]);
-      ey = _mm512_mask_expandloadu_epi64(ey, ended, &q.events[1][k]);
-      ez = _mm512_mask_expandloadu_epi64(ez, ended, &q.events[2][k]);
-      r = _mm512_mask_expandloadu_epi64(r, ended, &q.steps[k]);
-      src = _mm512_mask_expandloadu_epi64(src, ended, &q.id[k]);
-      s = _mm512_mask_mov_epi64(s, ended, start_slot);
-    }
-    store_lanes(lanes, tx, ty, tz, dtx, dty, dtz, dx, dy, dz, s, ex, ey, ez, r, src);
-    for (unsigned m = static_cast<unsigned>(event | ended); m != 0; m &= m - 1) {
-      const int l = std::countr_zero(m);
-      bool done = false;
-      if (((event >> l) & 1) != 0) {
-        // The stepped axis's event, as AxisWalk::advance handles it (before the step count).
-        scalar(l);
-        for (int a = 0; a < 3; ++a) {
-          if (lanes.events[a][l] != 0) continue;
-          if (!lane_axes[l][a].on_event(lanes.slot[l])) {  // left the window
-            add_walk_box<kFlagWords>(start, lane_axes[l][0], lane_axes[l][1], lane_axes[l][2], box);
-            visits +=
-                static_cast<std::uint64_t>(lane_steps[static_cast<std::size_t>(l)] - lanes.left[l]);
-            done = true;
-          } else {
-            lanes.events[a][l] = lane_axes[l][a].events;
-          }
-        }
-      }
-      if (!done && ((ended >> l) & 1) != 0) {
-        visits += finish(l);  // no step left: the end voxel, if marked, and the box
-        done = true;
-      }
-      if (done) lanes.source[l] = -2;
-    }
-  }
+  WideWalk<kFlagWords> walk(w, start, rays, marks, box);
+  while (walk.fill_idle_lanes()) walk.settle(walk.run_lanes());
+  return walk.finish_busy_lanes();
 }
+
+#undef TARMAC_LANES8_INLINE
 
 }  // namespace
 
