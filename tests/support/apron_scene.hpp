@@ -12,15 +12,19 @@
 
 namespace tarmac::test {
 
-inline core::OccupancyParams apron_window_params() {
+/// A window of nx × ny × nz voxels, its bottom `below_m` under the base, rays up to `range_m`.
+inline core::OccupancyParams window_params(int nx, int ny, int nz, double below_m,
+                                           double range_m) {
   core::OccupancyParams p;
-  p.window_x_vox = 160;
-  p.window_y_vox = 160;
-  p.window_z_vox = 40;
-  p.window_below_m = 3.0;
-  p.max_range_m = 40.0;
+  p.window_x_vox = nx;
+  p.window_y_vox = ny;
+  p.window_z_vox = nz;
+  p.window_below_m = below_m;
+  p.max_range_m = range_m;
   return p;
 }
+
+inline core::OccupancyParams apron_window_params() { return window_params(160, 160, 40, 3.0, 40.0); }
 
 /// Returns filling the box [lo, hi] every 5 cm.
 inline void add_box(std::vector<Eigen::Vector3f>& points, Eigen::Vector3f lo, Eigen::Vector3f hi) {

@@ -131,10 +131,12 @@ struct WideLanes {
 /// into a function of the same target, and a call per step would cost more than the step.
 #define TARMAC_LANES8_INLINE __attribute__((target("avx512f,avx512dq"), always_inline)) inline
 
-/// WideLanes in registers, as the vector loop holds them (s: slot, r: steps left, src: source).
+/// WideLanes in registers, as the vector loop holds them, per axis (t, dt, delta, events) and
+/// per lane (s: slot, r: steps left, src: source). The axis loops below have constant bounds and
+/// unroll: the arrays stay in registers.
 struct LaneRegisters {
-  __m512d tx, ty, tz, dtx, dty, dtz;
-  __m512i dx, dy, dz, ex, ey, ez, s, r, src;
+  __m512d t[3], dt[3];
+  __m512i d[3], e[3], s, r, src;
 };
 
 /// The lanes that leave the vector loop: a stepped axis's counter reached 0 (`event`: the ring
@@ -146,19 +148,13 @@ struct LaneStops {
 /// The lanes' state into registers, for a vector loop.
 TARMAC_LANES8_INLINE LaneRegisters load_lanes(const WideLanes& lanes) {
   LaneRegisters v;
-  v.tx = _mm512_load_pd(lanes.t[0]);
-  v.ty = _mm512_load_pd(lanes.t[1]);
-  v.tz = _mm512_load_pd(lanes.t[2]);
-  v.dtx = _mm512_load_pd(lanes.dt[0]);
-  v.dty = _mm512_load_pd(lanes.dt[1]);
-  v.dtz = _mm512_load_pd(lanes.dt[2]);
+  for (int a = 0; a < 3; ++a) {
+    v.t[a] = _mm512_load_pd(lanes.t[a]);
+    v.dt[a] = _mm512_load_pd(lanes.dt[a]);
+    v.d[a] = _mm512_load_si512(lanes.delta[a]);
+    v.e[a] = _mm512_load_si512(lanes.events[a]);
+  }
   v.s = _mm512_load_si512(lanes.slot);
-  v.dx = _mm512_load_si512(lanes.delta[0]);
-  v.dy = _mm512_load_si512(lanes.delta[1]);
-  v.dz = _mm512_load_si512(lanes.delta[2]);
-  v.ex = _mm512_load_si512(lanes.events[0]);
-  v.ey = _mm512_load_si512(lanes.events[1]);
-  v.ez = _mm512_load_si512(lanes.events[2]);
   v.r = _mm512_load_si512(lanes.left);
   v.src = _mm512_load_si512(lanes.source);
   return v;
@@ -166,19 +162,13 @@ TARMAC_LANES8_INLINE LaneRegisters load_lanes(const WideLanes& lanes) {
 
 /// The lanes' vector state back into `lanes` (for finish() and the event path).
 TARMAC_LANES8_INLINE void store_lanes(WideLanes& lanes, const LaneRegisters& v) {
-  _mm512_store_pd(lanes.t[0], v.tx);
-  _mm512_store_pd(lanes.t[1], v.ty);
-  _mm512_store_pd(lanes.t[2], v.tz);
-  _mm512_store_pd(lanes.dt[0], v.dtx);
-  _mm512_store_pd(lanes.dt[1], v.dty);
-  _mm512_store_pd(lanes.dt[2], v.dtz);
-  _mm512_store_si512(lanes.delta[0], v.dx);
-  _mm512_store_si512(lanes.delta[1], v.dy);
-  _mm512_store_si512(lanes.delta[2], v.dz);
+  for (int a = 0; a < 3; ++a) {
+    _mm512_store_pd(lanes.t[a], v.t[a]);
+    _mm512_store_pd(lanes.dt[a], v.dt[a]);
+    _mm512_store_si512(lanes.delta[a], v.d[a]);
+    _mm512_store_si512(lanes.events[a], v.e[a]);
+  }
   _mm512_store_si512(lanes.slot, v.s);
-  _mm512_store_si512(lanes.events[0], v.ex);
-  _mm512_store_si512(lanes.events[1], v.ey);
-  _mm512_store_si512(lanes.events[2], v.ez);
   _mm512_store_si512(lanes.left, v.r);
   _mm512_store_si512(lanes.source, v.src);
 }
@@ -190,26 +180,23 @@ TARMAC_LANES8_INLINE LaneStops step_lanes(LaneRegisters& v) {
   const __m512i one = _mm512_set1_epi64(1);
   const __m512i zero = _mm512_setzero_si512();
   // The scalar step's comparisons: x if x < y and x < z, else y if y < z, else z.
-  const __mmask8 x_lt_y = _mm512_cmp_pd_mask(v.tx, v.ty, _CMP_LT_OQ);
-  const __mmask8 x_lt_z = _mm512_cmp_pd_mask(v.tx, v.tz, _CMP_LT_OQ);
-  const __mmask8 y_lt_z = _mm512_cmp_pd_mask(v.ty, v.tz, _CMP_LT_OQ);
-  const auto kx = static_cast<__mmask8>(x_lt_y & x_lt_z);
-  const auto ky = static_cast<__mmask8>(~x_lt_y & y_lt_z);
-  const auto kz = static_cast<__mmask8>(~(kx | ky));
-  v.tx = _mm512_mask_add_pd(v.tx, kx, v.tx, v.dtx);
-  v.ty = _mm512_mask_add_pd(v.ty, ky, v.ty, v.dty);
-  v.tz = _mm512_mask_add_pd(v.tz, kz, v.tz, v.dtz);
-  v.s = _mm512_mask_add_epi64(v.s, kx, v.s, v.dx);
-  v.s = _mm512_mask_add_epi64(v.s, ky, v.s, v.dy);
-  v.s = _mm512_mask_add_epi64(v.s, kz, v.s, v.dz);
-  v.ex = _mm512_mask_sub_epi64(v.ex, kx, v.ex, one);
-  v.ey = _mm512_mask_sub_epi64(v.ey, ky, v.ey, one);
-  v.ez = _mm512_mask_sub_epi64(v.ez, kz, v.ez, one);
+  const __mmask8 x_lt_y = _mm512_cmp_pd_mask(v.t[0], v.t[1], _CMP_LT_OQ);
+  const __mmask8 x_lt_z = _mm512_cmp_pd_mask(v.t[0], v.t[2], _CMP_LT_OQ);
+  const __mmask8 y_lt_z = _mm512_cmp_pd_mask(v.t[1], v.t[2], _CMP_LT_OQ);
+  __mmask8 k[3];
+  k[0] = static_cast<__mmask8>(x_lt_y & x_lt_z);
+  k[1] = static_cast<__mmask8>(~x_lt_y & y_lt_z);
+  k[2] = static_cast<__mmask8>(~(k[0] | k[1]));
+  __mmask8 event = 0;
+  for (int a = 0; a < 3; ++a) {
+    v.t[a] = _mm512_mask_add_pd(v.t[a], k[a], v.t[a], v.dt[a]);
+    v.s = _mm512_mask_add_epi64(v.s, k[a], v.s, v.d[a]);
+    v.e[a] = _mm512_mask_sub_epi64(v.e[a], k[a], v.e[a], one);
+    event = static_cast<__mmask8>(event | _mm512_cmpeq_epi64_mask(v.e[a], zero));
+  }
   v.r = _mm512_sub_epi64(v.r, one);
   LaneStops stops;
-  stops.event = static_cast<__mmask8>(_mm512_cmpeq_epi64_mask(v.ex, zero) |
-                                      _mm512_cmpeq_epi64_mask(v.ey, zero) |
-                                      _mm512_cmpeq_epi64_mask(v.ez, zero));
+  stops.event = event;
   stops.ended = _mm512_cmpeq_epi64_mask(v.r, zero);
   return stops;
 }
@@ -218,18 +205,12 @@ TARMAC_LANES8_INLINE LaneStops step_lanes(LaneRegisters& v) {
 /// without the registers going through memory.
 TARMAC_LANES8_INLINE void load_queued(LaneRegisters& v, __mmask8 ended, const WideQueue& q, int k,
                                       __m512i start_slot) {
-  v.tx = _mm512_mask_expandloadu_pd(v.tx, ended, &q.t[0][k]);
-  v.ty = _mm512_mask_expandloadu_pd(v.ty, ended, &q.t[1][k]);
-  v.tz = _mm512_mask_expandloadu_pd(v.tz, ended, &q.t[2][k]);
-  v.dtx = _mm512_mask_expandloadu_pd(v.dtx, ended, &q.dt[0][k]);
-  v.dty = _mm512_mask_expandloadu_pd(v.dty, ended, &q.dt[1][k]);
-  v.dtz = _mm512_mask_expandloadu_pd(v.dtz, ended, &q.dt[2][k]);
-  v.dx = _mm512_mask_expandloadu_epi64(v.dx, ended, &q.delta[0][k]);
-  v.dy = _mm512_mask_expandloadu_epi64(v.dy, ended, &q.delta[1][k]);
-  v.dz = _mm512_mask_expandloadu_epi64(v.dz, ended, &q.delta[2][k]);
-  v.ex = _mm512_mask_expandloadu_epi64(v.ex, ended, &q.events[0][k]);
-  v.ey = _mm512_mask_expandloadu_epi64(v.ey, ended, &q.events[1][k]);
-  v.ez = _mm512_mask_expandloadu_epi64(v.ez, ended, &q.events[2][k]);
+  for (int a = 0; a < 3; ++a) {
+    v.t[a] = _mm512_mask_expandloadu_pd(v.t[a], ended, &q.t[a][k]);
+    v.dt[a] = _mm512_mask_expandloadu_pd(v.dt[a], ended, &q.dt[a][k]);
+    v.d[a] = _mm512_mask_expandloadu_epi64(v.d[a], ended, &q.delta[a][k]);
+    v.e[a] = _mm512_mask_expandloadu_epi64(v.e[a], ended, &q.events[a][k]);
+  }
   v.r = _mm512_mask_expandloadu_epi64(v.r, ended, &q.steps[k]);
   v.src = _mm512_mask_expandloadu_epi64(v.src, ended, &q.id[k]);
   v.s = _mm512_mask_mov_epi64(v.s, ended, start_slot);
