@@ -357,7 +357,8 @@ Executor::Impl::Published Executor::Impl::update_outputs(bool update, const Cycl
   }
 
   // ---- 3D ESDF band (esdf_band.enabled), from the costmap's ground, then its box out ----
-  const bool band = update && cycle->update_esdf_band(mapper.vehicle_pose(), zones, newest_stamp_ns);
+  const bool band =
+      update && cycle->update_esdf_band(mapper.vehicle_pose(), zones, newest_stamp_ns);
   const auto t_band1 = Clock::now();
   f.ms[kEsdfBand] = done.esdf_band_ms;
   if (band) {

@@ -81,7 +81,7 @@ class PoseCorrections {
   core::Mapper& mapper_;
   core::PoseJumpDetector jumps_;
   std::vector<core::StampedPose> scratch_;
-  std::vector<Pending> pending_;  ///< by stamp; corrections are rare
+  std::vector<Pending> pending_;   ///< by stamp; corrections are rare
   std::vector<Jump> jumps_found_;  ///< since the last apply_jumps()
   std::atomic<std::uint64_t> pose_jumps_{0}, trajectories_{0}, late_{0};
 };

@@ -519,9 +519,10 @@ TEST(Terrain, AGlossyFloorsMirrorImagesMakeNeitherADropNorALowerGround) {
   // the object the reflected beam hit along the beam's own direction, below the floor, and the
   // beam "passes" through the floor to it. Here returns 1.1 m apart in a 3 x 2 m patch have
   // such an image 2 m further on, down to 0.7 m under the floor: more than max_ground_step_m
-  // (0.5), as deep as a pit (balm_hall's lie up to 3 m under its floor). The floor returned there in every scan and holds the vehicle: not a drop, and
-  // its ground is the floor, not the images' depth. (Terrain.ADropBeyondMaxGroundStep... keeps
-  // the pit and the dock edge, which return nothing at the floor's height, as drops.)
+  // (0.5), as deep as a pit (balm_hall's lie up to 3 m under its floor). The floor returned there
+  // in every scan and holds the vehicle: not a drop, and its ground is the floor, not the images'
+  // depth. (Terrain.ADropBeyondMaxGroundStep... keeps the pit and the dock edge, which return
+  // nothing at the floor's height, as drops.)
   const Eigen::Vector3f sensor(0.05f, 0.05f, 2.0f);
   const auto in_patch = [](const Eigen::Vector3f& p) {
     return p.x() > 3.0f && p.x() < 6.0f && p.y() > -4.0f && p.y() < -2.0f;

@@ -38,7 +38,7 @@ inline OccupancyUpdateStats integrate(OccupancyMap& map, const Scan& scan) {
 
 /// Reference traversal: voxels crossed by the segment, found by sampling it every 1e-4 voxel.
 inline std::set<std::tuple<int, int, int>> sampled_voxels(const Eigen::Vector3d& a,
-                                                   const Eigen::Vector3d& b, double v) {
+                                                          const Eigen::Vector3d& b, double v) {
   std::set<std::tuple<int, int, int>> out;
   const int n = static_cast<int>((b - a).norm() / v * 1e4) + 1;
   for (int i = 0; i <= n; ++i) {

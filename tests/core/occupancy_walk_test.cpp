@@ -309,6 +309,5 @@ TEST(OccupancyMap, Lanes4Walk_RandomScenesSameAsOneRayAtATime) {
   expect_lanes_walk_same_on_random_scenes(4);
 }
 
-
 }  // namespace
 }  // namespace tarmac::core

@@ -89,7 +89,8 @@ TEST(Cycle, SameMapsAsTheStagesCalledInOrder) {
     const Cycle::ScanResult& r = cycle.scan(cloud, T_W_B, sensor_on_base());
     EXPECT_EQ(r.filtered.points_W.size(), scan.points_W.size());
     cycle.update_costmap(cycle.mapper().vehicle_pose(), {}, cloud.stamp_ns);
-    EXPECT_EQ(cycle.update_esdf_band(cycle.mapper().vehicle_pose(), {}, cloud.stamp_ns), params.esdf_band.enabled);
+    EXPECT_EQ(cycle.update_esdf_band(cycle.mapper().vehicle_pose(), {}, cloud.stamp_ns),
+              params.esdf_band.enabled);
     EXPECT_GT(cycle.tick().ingest_ms + cycle.tick().integrate_ms, 0.0);
     EXPECT_GT(cycle.tick().costmap_ms, 0.0);
   }

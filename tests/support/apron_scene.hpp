@@ -13,8 +13,7 @@
 namespace tarmac::test {
 
 /// A window of nx × ny × nz voxels, its bottom `below_m` under the base, rays up to `range_m`.
-inline core::OccupancyParams window_params(int nx, int ny, int nz, double below_m,
-                                           double range_m) {
+inline core::OccupancyParams window_params(int nx, int ny, int nz, double below_m, double range_m) {
   core::OccupancyParams p;
   p.window_x_vox = nx;
   p.window_y_vox = ny;
@@ -24,7 +23,9 @@ inline core::OccupancyParams window_params(int nx, int ny, int nz, double below_
   return p;
 }
 
-inline core::OccupancyParams apron_window_params() { return window_params(160, 160, 40, 3.0, 40.0); }
+inline core::OccupancyParams apron_window_params() {
+  return window_params(160, 160, 40, 3.0, 40.0);
+}
 
 /// Returns filling the box [lo, hi] every 5 cm.
 inline void add_box(std::vector<Eigen::Vector3f>& points, Eigen::Vector3f lo, Eigen::Vector3f hi) {

@@ -289,11 +289,13 @@ core::FilteredScan Bench::run_tarmac(std::size_t k, const core::PointCloud& clou
   spares_.push_back(
       timed_ms([&] { mapper_.top_up_tsdf_spares(std::numeric_limits<std::size_t>::max()); }));
   spares_cpu_.push_back(process_cpu_ms() - cpu_spares);
-  const double c =
-      opt_.tsdf_only ? 0.0 : staged(ph_cost_, [&] { mapper_.update_costmap(mapper_.vehicle_pose(), {}, 0, runner()); });
+  const double c = opt_.tsdf_only ? 0.0 : staged(ph_cost_, [&] {
+    mapper_.update_costmap(mapper_.vehicle_pose(), {}, 0, runner());
+  });
   // The band stage: its states from the window and this costmap's ground, then the transform.
   if (params_.esdf_band.enabled) {
-    band_.push_back(staged(ph_band_, [&] { mapper_.update_esdf_band(mapper_.vehicle_pose(), {}, 0, runner()); }));
+    band_.push_back(staged(
+        ph_band_, [&] { mapper_.update_esdf_band(mapper_.vehicle_pose(), {}, 0, runner()); }));
   }
   filter_.push_back(f);
   occ_.push_back(o);

@@ -205,16 +205,16 @@ std::string open_ground_summary(const OpenGroundTracker& tracker) {
                 n, n == 0 ? 0.0 : static_cast<double>(sum.cells) / static_cast<double>(n),
                 share(sum.lethal, sum.cells), worst, worst_scan, share(sum.inscribed, sum.cells),
                 share(sum.inflated, sum.cells), share(sum.free, sum.cells),
-                share(sum.unknown, sum.cells), static_cast<double>(kStepM), static_cast<double>(kLowM),
-                share(sum.away, sum.cells), share(sum.away_lethal, sum.away),
-                share(sum.away_inscribed, sum.away));
+                share(sum.unknown, sum.cells), static_cast<double>(kStepM),
+                static_cast<double>(kLowM), share(sum.away, sum.cells),
+                share(sum.away_lethal, sum.away), share(sum.away_inscribed, sum.away));
   return line;
 }
 
 nlohmann::ordered_json open_ground_json(const OpenGroundTracker& tracker) {
   nlohmann::ordered_json out;
-  out["cycle_fields"] = {"scan",    "cells", "lethal", "inscribed",   "inflated",
-                         "free",    "unknown", "away",  "away_lethal", "away_inscribed"};
+  out["cycle_fields"] = {"scan", "cells",   "lethal", "inscribed",   "inflated",
+                         "free", "unknown", "away",   "away_lethal", "away_inscribed"};
   auto& rows = out["per_cycle"] = nlohmann::ordered_json::array();
   for (const OpenGroundCycle& c : tracker.cycles()) {
     rows.push_back({c.scan, c.cells, c.lethal, c.inscribed, c.inflated, c.free, c.unknown, c.away,

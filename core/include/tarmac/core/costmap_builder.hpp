@@ -98,8 +98,9 @@ struct CostmapLayers {
   DistanceFieldScratch scratch;
   std::vector<std::int16_t> lowest_occupied;  ///< per cell, window layer or −1
   std::vector<std::int16_t> lowest_observed;  ///< per cell, window layer or −1 (drops)
-  std::vector<std::uint8_t> hovers;  ///< per cell: 1 when its candidate is the observed space under a hovering voxel
-  std::vector<std::int16_t> ground_layer;     ///< per cell, window layer of the ground voxel
+  std::vector<std::uint8_t>
+      hovers;  ///< per cell: 1 when its candidate is the observed space under a hovering voxel
+  std::vector<std::int16_t> ground_layer;  ///< per cell, window layer of the ground voxel
   std::vector<float> coarse_ground, coarse_filtered, coarse_next;  ///< ground estimate scratch
   std::vector<float> ground_offsets;  ///< coarse cells' offsets from the vehicle's plane
   /// The ground's spread: per coarse cell, the height it was reached at (NaN: not reached) and

@@ -68,7 +68,8 @@ class OpenGroundTracker {
   std::unordered_map<std::int64_t, Cell> cells_;
   std::vector<OpenGroundCycle> cycles_;
   std::vector<const std::vector<float>*> window_;  ///< observe()'s cells, with a margin
-  std::vector<std::uint8_t> step_;  ///< per window_ cell: a step to a side neighbour, or low returns
+  std::vector<std::uint8_t>
+      step_;  ///< per window_ cell: a step to a side neighbour, or low returns
   /// The last observed window's cells: kNone, kReturns, or the costmap's read of open ground.
   std::vector<std::uint8_t> last_;
   std::uint32_t last_width_ = 0, last_height_ = 0;
