@@ -140,6 +140,16 @@ int load_inputs(const Options& opt, Inputs& in) {
     }
   }
 
+  if (const auto file = std::filesystem::path(opt.dataset) / "small_objects.txt";
+      in.safety && std::filesystem::exists(file)) {
+    auto objects = tools::read_small_objects(file);
+    if (!objects) {
+      std::fprintf(stderr, "tarmac-map: %s\n", objects.error().message.c_str());
+      return kExitData;
+    }
+    in.small_objects.emplace(std::move(objects).value());
+  }
+
   if (!in.safety || opt.open_ground) {
     in.open_ground.emplace(params.occupancy.voxel_size_m,
                            params.costmap.vehicle_height_m + params.costmap.clearance_m);
@@ -207,6 +217,10 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
     // slope is not where the pitched base frame puts its origin.
     in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
                        s.T_W_S[k].translation().head<2>(), 20.0, moving_now);
+    if (in.small_objects) {
+      in.small_objects->observe(mapper.costmap().costmap, static_cast<int>(k),
+                                s.T_W_S[k].translation().head<2>());
+    }
   }
   if (in.open_ground) {
     in.open_ground->add(points_W);

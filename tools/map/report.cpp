@@ -88,6 +88,43 @@ void report_open_ground(const Options& opt, const tools::OpenGroundTracker& open
   }
 }
 
+/// Against a tarmac-sim truth: dynamic clearing, the costmap's safety, the small objects.
+void report_truth(const Inputs& in, nlohmann::ordered_json& timing) {
+  if (in.clearing) {
+    const tools::ClearingReport r = in.clearing->report();
+    std::printf(
+        "dynamic clearing: %zu path cells, %zu measured, %zu cleared, %zu not cleared; "
+        "time-to-clear p50 %.2f s, p90 %.2f s, max %.2f s; ghost cells at the end %zu\n"
+        "  of those, %zu left inside the blind zone (nearer than the scan's nearest ground "
+        "return); "
+        "the others: p50 %.2f s, p90 %.2f s, max %.2f s\n",
+        r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
+        r.ghost_cells, r.blind_at_leave, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
+    timing["dynamic_clearing"] = {{"path_cells", r.path_cells},
+                                  {"measured", r.measured},
+                                  {"cleared", r.cleared},
+                                  {"not_cleared", r.not_cleared},
+                                  {"time_to_clear_p50_s", r.p50_s},
+                                  {"time_to_clear_p90_s", r.p90_s},
+                                  {"time_to_clear_max_s", r.max_s},
+                                  {"ghost_cells", r.ghost_cells},
+                                  {"blind_at_leave", r.blind_at_leave},
+                                  {"in_view_p50_s", r.in_view_p50_s},
+                                  {"in_view_p90_s", r.in_view_p90_s},
+                                  {"in_view_max_s", r.in_view_max_s}};
+  }
+  if (in.safety) {
+    std::printf("%s\n", tools::safety_summary(in.safety->report()).c_str());
+    timing["safety"] = tools::safety_json(*in.safety);
+  }
+  if (in.small_objects) {
+    std::printf("%s", tools::small_objects_summary(*in.small_objects,
+                                                   in.cfg.mapping.costmap.min_obstacle_height_m)
+                          .c_str());
+    timing["small_objects"] = tools::small_objects_json(*in.small_objects);
+  }
+}
+
 /// The stage table: per stage, ms per scan (mean, p50, p99, max and the max's scan); returns it
 /// for timing.json.
 nlohmann::ordered_json print_stage_table(const core::MapperParams& params, const Run& run) {
@@ -246,33 +283,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
   timing["static_voxels"] = static_site.size();
   timing["static_promotions"] = run.promotions;
   timing["static_demotions"] = run.demotions;
-  if (in.clearing) {
-    const tools::ClearingReport r = in.clearing->report();
-    std::printf(
-        "dynamic clearing: %zu path cells, %zu measured, %zu cleared, %zu not cleared; "
-        "time-to-clear p50 %.2f s, p90 %.2f s, max %.2f s; ghost cells at the end %zu\n"
-        "  of those, %zu left inside the blind zone (nearer than the scan's nearest ground "
-        "return); "
-        "the others: p50 %.2f s, p90 %.2f s, max %.2f s\n",
-        r.path_cells, r.measured, r.cleared, r.not_cleared, r.p50_s, r.p90_s, r.max_s,
-        r.ghost_cells, r.blind_at_leave, r.in_view_p50_s, r.in_view_p90_s, r.in_view_max_s);
-    timing["dynamic_clearing"] = {{"path_cells", r.path_cells},
-                                  {"measured", r.measured},
-                                  {"cleared", r.cleared},
-                                  {"not_cleared", r.not_cleared},
-                                  {"time_to_clear_p50_s", r.p50_s},
-                                  {"time_to_clear_p90_s", r.p90_s},
-                                  {"time_to_clear_max_s", r.max_s},
-                                  {"ghost_cells", r.ghost_cells},
-                                  {"blind_at_leave", r.blind_at_leave},
-                                  {"in_view_p50_s", r.in_view_p50_s},
-                                  {"in_view_p90_s", r.in_view_p90_s},
-                                  {"in_view_max_s", r.in_view_max_s}};
-  }
-  if (in.safety) {
-    std::printf("%s\n", tools::safety_summary(in.safety->report()).c_str());
-    timing["safety"] = tools::safety_json(*in.safety);
-  }
+  report_truth(in, timing);
   if (in.open_ground) report_open_ground(opt, *in.open_ground, timing);
   if (!run.fleet_messages.empty()) {
     // Each message stands for one period: bytes per second over the messages' periods.

@@ -17,6 +17,7 @@
 #include "tarmac/tools/kitti.hpp"
 #include "tarmac/tools/open_ground.hpp"
 #include "tarmac/tools/safety.hpp"
+#include "tarmac/tools/small_objects.hpp"
 
 namespace tarmac::map_tool {
 
@@ -50,6 +51,8 @@ struct Inputs {
   std::optional<tools::ClearingTracker> clearing;  ///< tarmac-sim's dynamic_boxes.txt
   /// tarmac-sim's obstacle_columns.txt (ground_cells.txt, curb_columns.txt)
   std::optional<tools::SafetyTracker> safety;
+  /// tarmac-sim's small_objects.txt: a score per cone, piece of debris, pole
+  std::optional<tools::SmallObjectTracker> small_objects;
   /// Without a truth (real data), or --open-ground: the open flat ground of the drive's returns.
   std::optional<tools::OpenGroundTracker> open_ground;
   std::vector<tools::Correction> corrections;  ///< --corrections

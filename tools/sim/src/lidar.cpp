@@ -1,5 +1,7 @@
 #include "tarmac/sim/lidar.hpp"
 
+#include "small_objects.hpp"
+
 #include <algorithm>
 #include <bit>
 #include <charconv>
@@ -101,6 +103,8 @@ std::string readme(const SequenceParams& p) {
   s += "                    row-major 3x4), then per scan and moving object 'scan id min_x min_y\n";
   s += "                    min_z max_x max_y max_z': its axis-aligned box in the scene frame at\n";
   s += "                    the scan's stamp, m\n";
+  s += "  small_objects.txt when the scene has any: its cones, debris, poles (at most 1 m\n";
+  s += "                    across) with their boxes, and the returns each gave per scan\n";
   if (!p.path.terrain.flat()) {
     s += "  ground_cells.txt  the ground the vehicle may drive on: cells (lattice ix iy) within\n";
     s += "                    " + number(p.ground_truth_margin_m) +
@@ -709,6 +713,7 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
   std::vector<std::size_t> points_per_scan;
   std::string poses, times;
   std::string boxes = "# T_world_scene " + pose_line(T_O_W);
+  std::map<std::pair<int, int>, int> small_returns;  // (scan, object id) -> returns
   const int n = params.scan_count();
   for (int i = 0; i < n; ++i) {
     const double t_s = params.stamp_s(i);
@@ -720,6 +725,12 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
       return result;
     }
     mark_seen(scene, params, returns, T_W_S, i, truth);
+    for (const LidarReturn& r : returns) {
+      if (r.object_id >= 0 && r.range_m > 0.0 &&
+          small_object(scene.objects()[static_cast<std::size_t>(r.object_id)])) {
+        ++small_returns[{i, r.object_id}];
+      }
+    }
     poses += pose_line(params.written_T_O_S(i));
     times += number(t_s) + "\n";
     for (const Object& o : scene.objects()) {
@@ -752,6 +763,11 @@ SequenceResult write_sequence(const Scene& scene, const SequenceParams& params,
   if (!write_file(out_dir / "obstacle_columns.txt",
                   column_file("obstacle", params, T_O_W, truth.columns), result.error)) {
     return result;
+  }
+  if (const std::string small = small_objects_file(scene, T_O_W, small_returns); !small.empty()) {
+    if (!write_file(out_dir / "small_objects.txt", small, result.error)) return result;
+  } else {
+    std::filesystem::remove(out_dir / "small_objects.txt", ec);  // none stale from an earlier run
   }
   if (!truth.curbs.empty()) {
     if (!write_file(out_dir / "curb_columns.txt", column_file("curb", params, T_O_W, truth.curbs),

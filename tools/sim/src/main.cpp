@@ -66,7 +66,9 @@ int main(int argc, char** argv) {
                  "crates on all three; 90 m), crown (the right lane of a road with a 2 % cross "
                  "fall each side of its crown, shoulders beyond; 90 m) or parking (a ramp down "
                  "9 % in a walled cut to a road and bays 2.25 m below, a 15 cm curb along the "
-                 "right, the road's end under a deck with 3.6 m of headroom; 120 m)")
+                 "right, the road's end under a deck with 3.6 m of headroom; 120 m); debris "
+                 "(5, 10 and 20 cm cubes on an open apron, then two under a parked aircraft; "
+                 "100 m) or apron (the same drive over an empty apron)")
       ->check(CLI::IsMember(
           std::vector<std::string>(sim::kSceneNames.begin(), sim::kSceneNames.end())));
   auto* drift = app.add_option("--drift-m", params.drift_m,

@@ -39,6 +39,9 @@ std::optional<SceneDrive> scene_drive(std::string_view name, std::optional<doubl
     drive = straight(Scene::crowned_road(), {0.0, -2.5}, {90.0, -2.5});
   } else if (name == "parking") {
     drive = straight(Scene::parking_levels(), {0.0, -1.0}, {120.0, -1.0});
+  } else if (name == "debris" || name == "apron") {
+    drive = SceneDrive{name == "debris" ? Scene::debris_apron() : Scene::empty_apron(), {}};
+    drive->path.end_W = {100.0, 0.0};
   }
   if (!drive) return std::nullopt;
   if (speed_mps) drive->path.speed_mps = *speed_mps;

@@ -306,6 +306,22 @@ class Scene {
   ///  - cone_under_deck      (112, 3), r = 0.2, h = 0.5
   static Scene parking_levels();
 
+  /// Foreign object debris on an open apron, then under a parked aircraft (issue 39's scene).
+  /// The drive: y = 0, x from 0 to 100. Cubes standing on the ground, named
+  /// debris_<size>cm_<x> (kind "debris"), at three sizes along three rows, each first seen
+  /// from well beyond 20 m:
+  ///  - x = 25: 10 cm at y = 0.6, 5 cm at y = -1.5, 20 cm at y = 3
+  ///  - x = 45: 10 cm at y = -0.8, 20 cm at y = 1.5, 5 cm at y = 4
+  ///  - x = 65: 10 cm at y = 2, 5 cm at y = 0.5, 20 cm at y = -3
+  /// and the aircraft of airside_default() moved 60 m on (fuselage y = 12, x in [70, 110]; the
+  /// right wing [86, -8, 4] .. [94, 12, 4.4] over the path; engine_right along x from 83 at
+  /// y = 5, z = 2.2, r = 1; gear at (89, 3) and (93, 3)), with 10 cm debris under the wing at
+  /// (88, -1) and beside the front gear at (89, 2.3).
+  static Scene debris_apron();
+  /// An empty apron: the ground plane only (the drive of debris_apron()): nothing may read lethal,
+  /// no debris may be reported.
+  static Scene empty_apron();
+
  private:
   std::vector<Object> objects_;
 };

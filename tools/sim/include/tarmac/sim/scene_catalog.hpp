@@ -17,8 +17,9 @@ struct SceneDrive {
 };
 
 /// Every scene name, in the order tarmac-sim's --help gives them.
-inline constexpr std::array<std::string_view, 8> kSceneNames = {
-    "airside", "terminal", "aircraft", "site", "ramp5", "ramp10", "crown", "parking"};
+inline constexpr std::array<std::string_view, 10> kSceneNames = {
+    "airside", "terminal", "aircraft", "site",   "ramp5",
+    "ramp10",  "crown",    "parking",  "debris", "apron"};
 
 /// The scene called `name` and its drive, at `speed_mps` (nothing: the scene's own speed), the
 /// sensor sensor_height_m above the base; nothing for an unknown name.
