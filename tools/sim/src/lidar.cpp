@@ -1,6 +1,7 @@
 #include "tarmac/sim/lidar.hpp"
 
 #include "small_objects.hpp"
+#include "text_number.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -19,13 +20,6 @@ namespace {
 
 double radians(double deg) {
   return deg * std::numbers::pi / 180.0;
-}
-
-/// Shortest decimal that reads back as the same double (deterministic, locale-independent).
-std::string number(double value) {
-  char buf[64];
-  const auto res = std::to_chars(buf, buf + sizeof(buf), value);
-  return std::string(buf, res.ptr);
 }
 
 void append_le(std::string& bytes, float value) {

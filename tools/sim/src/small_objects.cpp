@@ -1,19 +1,10 @@
 #include "small_objects.hpp"
 
-#include <charconv>
 #include <limits>
 
+#include "text_number.hpp"
+
 namespace tarmac::sim {
-namespace {
-
-/// Shortest decimal that reads back as the same double, as lidar.cpp writes its files.
-std::string number(double value) {
-  char buf[64];
-  const auto res = std::to_chars(buf, buf + sizeof(buf), value);
-  return std::string(buf, res.ptr);
-}
-
-}  // namespace
 
 bool small_object(const Object& o) {
   if (o.dynamic() || o.kind == "ground" || o.kind == "curb") return false;
