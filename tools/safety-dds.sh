@@ -77,6 +77,7 @@ if [ -n "$cyclone" ]; then
   # Cyclone on loopback only (config/cyclonedds_localhost.xml), over UDP as another process's.
   CYCLONEDDS_URI="file://$PWD/config/cyclonedds_localhost.xml" "$bin/tarmac-cyclone-replay" \
     --dataset "$dataset" --domain "$domain" --rate-hz 10 --layout "$cyclone" "${ring[@]}" \
+    --sensor-height "$sensor_height" \
     "${marker[@]}" --pose-readers 2 ${scans:+--scans "$scans"} --idle-s 3 \
     --json "$out/cyclone.json" > "$out/replay.txt" 2> "$out/replay.log"
 else
@@ -102,7 +103,7 @@ fi
 echo "tarmacd (exit $daemon_rc): $(sed -n 's/.*stopped after \(.*\)$/\1/p' "$out/tarmacd.log")"
 echo
 echo "== tarmacd over DDS (tarmac-audit --score) =="
-grep -E '^(safety|scored) ' "$out/audit.txt"
+grep -E '^(safety|scored|small objects) ' "$out/audit.txt"
 echo
 echo "== tarmac-map offline, same sequence and config =="
 grep '^safety ' "$out/offline.txt"

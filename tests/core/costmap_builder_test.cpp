@@ -193,10 +193,20 @@ TEST_F(Envelope, DebrisStaysLethalUntilRaysGoPastWhereItStood) {
   };
   build();
   EXPECT_GE(lethal_round(), 1) << "nothing went past it";
-  scan({}, 1);
+  // The apron whole, with the beams through where it stood, 2 to 6 cm over the apron, landing
+  // on it behind the spot.
+  ASSERT_EQ(map_.low_objects().all().size(), 1u);
+  const Eigen::Vector2f c = map_.low_objects().all()[0].xy_W;
+  const Eigen::Vector3f origin(0.05f, 0.05f, 2.0f);
+  std::vector<Eigen::Vector3f> past;
+  for (const float h : {0.07f, 0.09f, 0.11f}) {
+    const Eigen::Vector3f over(c.x(), c.y(), h);
+    past.push_back(origin + (origin.z() - 0.05f) / (origin.z() - h) * (over - origin));
+  }
+  scan(past, 1);
   build();
   EXPECT_GE(lethal_round(), 1) << "one scan of rays past it is not enough";
-  scan({}, 1);
+  scan(past, 1);
   build();
   EXPECT_EQ(lethal_round(), 0) << "two scans of rays past where it stood";
   EXPECT_EQ(cost_at(3.0, -4.0), kCostFree);

@@ -100,6 +100,7 @@ struct Scoring {
   /// The pose tarmac-replay publishes for each scan (T_world_base, the config's first sensor).
   std::vector<Eigen::Isometry3d> T_W_B;
   std::optional<tools::StampedSafetyScorer> scorer;
+  double min_obstacle_height_m = 0.08;  ///< the config's: lower small objects are not scored
   std::size_t poses = 0;
   std::string error;  ///< the first failure; scoring stops there
 };
@@ -127,6 +128,12 @@ core::Result<Scoring> open_scoring(const std::string& dir, const Eigen::Isometry
     vehicle_xy.push_back(T_W_S.translation().head<2>());
   }
   s.scorer.emplace(std::move(truth).value(), std::move(vehicle_xy), std::move(moving));
+  if (const auto file = std::filesystem::path(dir) / "small_objects.txt";
+      std::filesystem::exists(file)) {
+    auto objects = tools::read_small_objects(file);
+    if (!objects) return objects.error();
+    s.scorer->score_small_objects(std::move(objects).value());
+  }
   return s;
 }
 
@@ -220,6 +227,7 @@ int load_inputs(const Options& opt, config::Config& cfg, std::optional<Scoring>&
       return kExitData;
     }
     scoring.emplace(std::move(opened).value());
+    scoring->min_obstacle_height_m = cfg.mapping.costmap.min_obstacle_height_m;
   }
   return 0;
 }
@@ -446,6 +454,9 @@ void finish_scoring(Scoring& scoring) {
   scoring.scorer->finish();
   const tools::StampedSafetyScorer& sc = *scoring.scorer;
   std::printf("%s\n", tools::safety_summary(sc.tracker().report()).c_str());
+  if (const tools::SmallObjectTracker* small = sc.small_objects(); small != nullptr) {
+    std::printf("%s", tools::small_objects_summary(*small, scoring.min_obstacle_height_m).c_str());
+  }
   std::printf(
       "scored %zu costmaps against %zu of the %zu scans stamped on the pose topic (%s); %zu "
       "costmaps stamped between scans, %zu before the first\n",
@@ -491,6 +502,9 @@ nlohmann::ordered_json summary_json(const Tally& t, const std::optional<Scoring>
                    {"before_first_scan", sc.before_first_scan()},
                    {"error", scoring->error}};
     j["safety"] = tools::safety_json(sc.tracker());
+    if (const tools::SmallObjectTracker* small = sc.small_objects(); small != nullptr) {
+      j["small_objects"] = tools::small_objects_json(*small);
+    }
   }
   return j;
 }

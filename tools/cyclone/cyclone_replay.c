@@ -65,6 +65,7 @@ typedef struct {
   int ring;
   int zero_marker;
   long pose_readers;
+  double sensor_height; /* the base lies this far below the sensor, along the sensor's z */
 } Options;
 
 static void usage(FILE* out) {
@@ -76,6 +77,8 @@ static void usage(FILE* out) {
           "  --lidar-topic T          default rt/tarmac/lidar/front/points\n"
           "  --frame-id F             the cloud's header.frame_id (default lidar_front)\n"
           "  --pose-topic T           default rt/tarmac/pose (frame --pose-frame-id, default map)\n"
+          "  --sensor-height M        the pose sent is the base's, M below the sensor along its z\n"
+          "                           (tarmacd's extrinsic z; default 0: the base is the sensor)\n"
           "  --costmap-topic T        default rt/tarmac/costmap\n"
           "  --diagnostics-topic T    default rt/tarmac/diagnostics\n"
           "  --idle-s S               wait after the last scan for its costmap (default 2)\n"
@@ -406,6 +409,8 @@ static void parse(int argc, char** argv, Options* o) {
       o->pose_frame_id = v;
     else if (strcmp(a, "--domain") == 0)
       o->domain = (int)strtol(v, &end, 10);
+    else if (strcmp(a, "--sensor-height") == 0)
+      o->sensor_height = strtod(v, &end);
     else if (strcmp(a, "--rate-hz") == 0)
       o->rate_hz = strtod(v, &end);
     else if (strcmp(a, "--scans") == 0)
@@ -547,18 +552,19 @@ static int wait_for_tarmacd(const Options* o, const Endpoints* e) {
   }
 }
 
-/* The pose message of a row-major 3x4 T_world_sensor at `stamp`. */
+/* The pose message of the base under a row-major 3x4 T_world_sensor at `stamp`: the sensor's
+ * frame moved `sensor_height` down its own z (a sensor mounted on the vehicle's roof). */
 static void fill_pose(geometry_msgs_msg_dds__PoseWithCovarianceStamped_* pose, const double* T,
-                      int64_t stamp, const char* frame_id) {
+                      double sensor_height, int64_t stamp, const char* frame_id) {
   memset(pose, 0, sizeof *pose);
   pose->header.stamp = to_time(stamp);
   pose->header.frame_id = (char*)frame_id;
   const double R[9] = {T[0], T[1], T[2], T[4], T[5], T[6], T[8], T[9], T[10]};
   double q[4];
   to_quaternion(R, q);
-  pose->pose.pose.position.x = T[3];
-  pose->pose.pose.position.y = T[7];
-  pose->pose.pose.position.z = T[11];
+  pose->pose.pose.position.x = T[3] - sensor_height * T[2];
+  pose->pose.pose.position.y = T[7] - sensor_height * T[6];
+  pose->pose.pose.position.z = T[11] - sensor_height * T[10];
   pose->pose.pose.orientation.x = q[0];
   pose->pose.pose.orientation.y = q[1];
   pose->pose.pose.orientation.z = q[2];
@@ -611,7 +617,7 @@ static Sent send_scans(const Options* o, const Endpoints* e, const double* poses
     }
     const int64_t stamp = start_ns + k * period_ns;
     geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose;
-    fill_pose(&pose, &poses[scan * 12], stamp, o->pose_frame_id);
+    fill_pose(&pose, &poses[scan * 12], o->sensor_height, stamp, o->pose_frame_id);
     sensor_msgs_msg_dds__PointCloud2_ cloud;
     fill_cloud(&cloud, &data, stamp, o->frame_id);
     seen->stamps[k] = stamp;
@@ -698,7 +704,8 @@ int main(int argc, char** argv) {
                NULL,
                0,
                0,
-               1};
+               1,
+               0.0};
   parse(argc, argv, &o);
   long scans = 0;
   double* poses = read_poses(o.dataset, o.max_scans, &scans);

@@ -73,6 +73,7 @@ void StampedSafetyScorer::score(const core::Costmap& costmap, std::int64_t stamp
     if (b.scan == static_cast<int>(scan)) moving_now_.push_back(b);
   }
   tracker_.observe(costmap, static_cast<int>(scan), vehicle_xy_[scan], radius_m_, moving_now_);
+  if (small_) small_->observe(costmap, static_cast<int>(scan), vehicle_xy_[scan], radius_m_);
 }
 
 }  // namespace tarmac::tools

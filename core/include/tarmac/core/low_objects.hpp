@@ -34,7 +34,7 @@ struct LowObjectParams {
   double min_rise_m = 0.08;      ///< costmap.min_obstacle_height_m (the Mapper sets it)
   double max_rise_m = 0.5;       ///< rising returns above this are not low objects'
   double match_radius_m = 0.15;  ///< rising returns this close to a centre are its evidence
-  double clear_radius_m = 0.05;  ///< a ray this close to a centre, under its top, saw through
+  double clear_radius_m = 0.03;  ///< a ray this close to a centre, under its top, saw through
   int confirm_returns = 2;       ///< rising returns that make a candidate an object
   int clear_scans = 2;           ///< scans in a row seeing through an object that remove it
   int candidate_scans = 10;      ///< scans a candidate waits for its next rising return

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -19,6 +20,7 @@
 #include "tarmac/core/result.hpp"
 #include "tarmac/tools/clearing.hpp"
 #include "tarmac/tools/safety.hpp"
+#include "tarmac/tools/small_objects.hpp"
 
 namespace tarmac::tools {
 
@@ -42,7 +44,14 @@ class StampedSafetyScorer {
   /// those older than every scan are counted in before_first_scan().
   void finish();
 
+  /// Also scores each small object (small_objects.txt) in every costmap scored.
+  void score_small_objects(std::vector<SmallObject> objects) { small_.emplace(std::move(objects)); }
+
   [[nodiscard]] const SafetyTracker& tracker() const { return tracker_; }
+  /// The small objects' scores (score_small_objects()), or nullptr.
+  [[nodiscard]] const SmallObjectTracker* small_objects() const {
+    return small_ ? &*small_ : nullptr;
+  }
   [[nodiscard]] std::size_t scans_stamped() const { return scan_stamps_ns_.size(); }
   /// Costmaps scored.
   [[nodiscard]] std::size_t costmaps() const { return tracker_.cycles().size(); }
@@ -58,6 +67,7 @@ class StampedSafetyScorer {
   void score(const core::Costmap& costmap, std::int64_t stamp_ns);
 
   SafetyTracker tracker_;
+  std::optional<SmallObjectTracker> small_;
   double cell_m_;
   double radius_m_;
   std::vector<Eigen::Vector2d> vehicle_xy_;
