@@ -419,6 +419,24 @@ std::vector<Key> make_schema() {
           integer("occupancy.static_demote_scans", 1, 127, "scans",
                   "consecutive scans seeing a static voxel free that clear it",
                   [](Config& c) -> Field { return &c.mapping.occupancy.static_demote_scans; }),
+          real("occupancy.low_object_max_rise_m", 0.1, 2.55, "m",
+               "returns rising up to this above their scan's ground are low objects' evidence "
+               "(from costmap.min_obstacle_height_m up)",
+               [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.max_rise_m; }),
+          integer(
+              "occupancy.low_object_confirm_returns", 1, 1000, "returns",
+              "rising returns (one scan or several) that make a low object lethal",
+              [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.confirm_returns; }),
+          integer("occupancy.low_object_clear_scans", 1, 100, "scans",
+                  "scans in a row with a ray past a low object under its top that remove it",
+                  [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.clear_scans; }),
+          integer(
+              "occupancy.low_object_candidate_scans", 1, 1000, "scans",
+              "scans a single rising return waits for a second before it is dropped",
+              [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.candidate_scans; }),
+          integer("occupancy.low_object_capacity", 0, 1000000, "objects",
+                  "low objects and candidates kept at most (fixed memory; more are counted)",
+                  [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.capacity; }),
           // costmap
           real("costmap.min_obstacle_height_m", 0.0, 10.0, "m",
                "returns this far above the local ground block",

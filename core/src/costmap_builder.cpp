@@ -208,6 +208,7 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
   grow_ground(pass, plane);
   fill_ground_gaps(pass, plane);
   classify_columns(pass);
+  mark_low_objects(pass);
   if (peers != nullptr) {
     out.own_column_class.assign(out.column_class.cells().begin(), out.column_class.cells().end());
     if (peers->peers != nullptr) fuse_peers(pass, *peers);

@@ -151,15 +151,26 @@ Status MapperParams::validate() const {
   return costmap.validate();
 }
 
+namespace {
+/// The occupancy parameters with the low objects' rise threshold taken from the costmap's: one
+/// setting says what height above the ground blocks.
+OccupancyParams occupancy_params(const MapperParams& params) {
+  OccupancyParams p = params.occupancy;
+  p.low_objects.min_rise_m =
+      std::clamp(params.costmap.min_obstacle_height_m, 0.01, p.low_objects.max_rise_m);
+  return p;
+}
+}  // namespace
+
 Mapper::Mapper(const MapperParams& params)
     : params_(params),
-      map_(params.occupancy),
+      map_(occupancy_params(params)),
       tsdf_integrator_(params.tsdf),
       tsdf_(tsdf_integrator_.make_layer()) {
   TARMAC_ASSERT(params.validate().ok(), "MapperParams must be validated first");
   if (params.corrections.enabled) {
     retained_.resize(static_cast<std::size_t>(params.corrections.retain_scans));
-    spare_ = std::make_unique<OccupancyMap>(params.occupancy);
+    spare_ = std::make_unique<OccupancyMap>(occupancy_params(params));
   }
   // Warm-up, so the first cycle costs what the others do: the per-point buffers sized for a
   // 64-beam scan and written once, and one costmap of the empty window (all unknown: it sizes

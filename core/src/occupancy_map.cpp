@@ -56,6 +56,7 @@ Status OccupancyParams::validate() const {
   if (!(window_below_m >= 0.0 && window_below_m <= window_z_vox * voxel_size_m)) {
     return bad("window_below_m", "must be within the window height");
   }
+  if (const Status s = low_objects.validate(); !s.ok()) return s;
   if (static_promote_scans < 0 || static_promote_scans > kCount) {
     return bad("static_promote_scans", "must be in [0, 127]");
   }
@@ -76,7 +77,9 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
       l_hit_(log_odds_of(params.prob_hit)),
       l_miss_(log_odds_of(params.prob_miss)),
       l_min_(log_odds_of(params.clamp_min)),
-      l_max_(log_odds_of(params.clamp_max)) {
+      l_max_(log_odds_of(params.clamp_max)),
+      low_objects_(params.low_objects, params.window_x_vox, params.window_y_vox,
+                   params.voxel_size_m) {
   TARMAC_ASSERT(params.validate().ok(), "OccupancyParams must be validated first");
   const std::size_t n = static_cast<std::size_t>(dims_.x()) * dims_.y() * dims_.z();
   // Padded to whole 64-slot mark words (never marked, always kUnknown): miss_free_word reads and
@@ -95,6 +98,8 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
                         std::numeric_limits<float>::infinity());
   scan_ground2_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
   scan_ground_near_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
+  ground_memory_z_.assign(scan_ground_z_.size(), 0.0f);
+  ground_memory_scan_.assign(scan_ground_z_.size(), 0);
   const std::size_t words = (n + 63) / 64;
   hit_bits_.assign(words, 0);
   floor_bits_.assign(words, 0);
@@ -150,13 +155,15 @@ std::size_t OccupancyMap::memory_bytes() const {
       hit_slots_.capacity() * sizeof(std::uint32_t) +
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
       hit_height_.capacity() * sizeof(float) + hit_rise_.capacity() +
+      ground_memory_z_.capacity() * sizeof(float) +
+      ground_memory_scan_.capacity() * sizeof(std::uint32_t) +
       (ray_order_.capacity() + ray_bucket_count_.capacity()) * sizeof(std::uint32_t) +
       ray_bucket_.capacity() * sizeof(std::uint16_t) +
       brick_bits_.capacity() * sizeof(std::uint64_t) + brick_skip_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_words_) bytes += d.capacity() * sizeof(std::uint64_t);
   for (const auto& c : candidates_) bytes += c.capacity() * sizeof(std::uint32_t);
-  bytes += miss_decision_.capacity();
+  bytes += miss_decision_.capacity() + low_objects_.memory_bytes();
   return bytes;
 }
 
@@ -293,16 +300,19 @@ void OccupancyMap::recenter(const Eigen::Vector3d& position_W, TaskRunner& runne
       lo[a] = target[a];
       hi[a] = min_[a] - 1;
     }
-    if (a < 2 && !column_observed_ns_.empty()) {
-      // The columns leaving: never observed when they come back in.
+    if (a < 2) {
+      // The columns leaving: never observed, no ground remembered, when they come back in.
       const int first =
           std::abs(shift) >= dims_[a] ? 0 : (shift > 0 ? min_[a] + dims_[a] : target[a]);
       const int count = std::min(std::abs(shift), dims_[a]);
       const int nx = dims_.x(), ny = dims_.y();
+      const bool observed = !column_observed_ns_.empty();
       for (int k = 0; k < count; ++k) {
         const int r = wrap(first + k, dims_[a]);
         for (int o = 0; o < (a == 0 ? ny : nx); ++o) {
-          column_observed_ns_[static_cast<std::size_t>(a == 0 ? o * nx + r : r * nx + o)] = 0;
+          const auto q = static_cast<std::size_t>(a == 0 ? o * nx + r : r * nx + o);
+          ground_memory_scan_[q] = 0;
+          if (observed) column_observed_ns_[q] = 0;
         }
       }
     }
@@ -551,6 +561,8 @@ void OccupancyMap::reset() {
   static_->clear();
   for (auto& c : candidates_) c.clear();
   std::fill(column_observed_ns_.begin(), column_observed_ns_.end(), std::int64_t{0});
+  std::fill(ground_memory_scan_.begin(), ground_memory_scan_.end(), std::uint32_t{0});
+  low_objects_.clear();
   std::fill(brick_bits_.begin(), brick_bits_.end(), std::uint64_t{0});
   brick_refresh_row_ = 0;
   update_brick_skips();

@@ -156,6 +156,53 @@ TEST_F(Envelope, LowObjectBlocks_WhateverTheFreeRuleSaysOfTheEnvelopeAbove) {
   EXPECT_EQ(cost_at(-6.0, 6.0), kCostFree);
 }
 
+TEST_F(Envelope, DebrisStaysLethalUntilRaysGoPastWhereItStood) {
+  // 10 cm debris (returns 10 cm over the 5 cm apron) seen in one scan, then scans whose only
+  // return on it lies low on its face, with the apron behind it in its shadow: the voxel's
+  // latest heights are the face's (2 cm), its empty top read free by the rays over it; the
+  // object keeps its evidence (LowObjects). Then the apron seen whole, rays landing behind its
+  // spot under where its top was: it is gone.
+  std::vector<Eigen::Vector3f> debris;
+  box(debris, {2.95f, -4.05f, 0.15f}, {3.05f, -3.95f, 0.15f});
+  scan(debris, 1);
+  build();
+  ASSERT_EQ(cost_at(3.0, -4.0), kCostLethal);
+  const Eigen::Vector2f spot(3.0f, -4.0f);
+  std::vector<Eigen::Vector3f> shadowed;
+  for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
+    for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
+      const Eigen::Vector2f q(x + 0.013f, y + 0.017f);
+      // The shadow: behind the spot, within 15 degrees of its bearing, up to 1 m beyond it.
+      const bool behind = q.norm() > spot.norm() - 0.05f && q.norm() < spot.norm() + 1.0f &&
+                          q.normalized().dot(spot.normalized()) > std::cos(0.26f);
+      if (!behind) shadowed.emplace_back(q.x(), q.y(), 0.05f);
+    }
+  }
+  shadowed.emplace_back(2.95f, -3.99f, 0.07f);  // low on its face
+  SerialRunner runner;
+  for (int i = 0; i < 10; ++i) {
+    map_.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), shadowed, {}, runner);
+  }
+  // Its returns' centre lies on the corner of four cells: one of them is lethal.
+  const auto lethal_round = [&] {
+    int n = 0;
+    for (const double x : {2.9, 3.1}) {
+      for (const double y : {-4.1, -3.9}) n += cost_at(x, y) == kCostLethal ? 1 : 0;
+    }
+    return n;
+  };
+  build();
+  EXPECT_GE(lethal_round(), 1) << "nothing went past it";
+  scan({}, 1);
+  build();
+  EXPECT_GE(lethal_round(), 1) << "one scan of rays past it is not enough";
+  scan({}, 1);
+  build();
+  EXPECT_EQ(lethal_round(), 0) << "two scans of rays past where it stood";
+  EXPECT_EQ(cost_at(3.0, -4.0), kCostFree);
+  EXPECT_TRUE(map_.low_objects().all().empty());
+}
+
 // Windows of more than 64 layers classify columns layer by layer, the others with per-column
 // bit sets (costmap/columns.cpp): on the same scene, all of it well inside both windows, the two
 // give the same ground, classes and costs, under both free rules.

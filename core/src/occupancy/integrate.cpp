@@ -50,10 +50,23 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   hit_height_.resize(points_W.size());
   hit_rise_.resize(points_W.size());
   stats.outside_window += hit_voxels(origin_W, points_W);
+  up_ = up;
   hit_heights(points_W, up);
   // b) Each return's rise above the scan's ground near it; c) one hit per voxel.
   hit_rises(points_W.size());
   apply_hits(points_W, stats);
+  // d) The low objects kept across scans, from the returns' rises.
+  low_objects_.place(min_.x(), min_.y());
+  LowObjects::Scan scan;
+  scan.origin_W = origin_W.cast<float>();
+  scan.up_W = up;
+  scan.points_W = points_W;
+  scan.voxel = std::span<const std::uint32_t>(hit_slot_.data(), points_W.size());
+  scan.column = std::span<const std::uint32_t>(hit_column_.data(), points_W.size());
+  scan.rise_cm = std::span<const std::uint8_t>(hit_rise_.data(), points_W.size());
+  scan.number = scans_integrated_;
+  scan.stamp_ns = observation_stamp_ns_;
+  low_objects_.update(scan);
 }
 
 std::uint64_t OccupancyMap::hit_voxels(const Eigen::Vector3d& origin_W,
@@ -151,22 +164,65 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
   // per column the scan touched (returns stack up in columns: walls, poles), then per return;
   // a return's own column is among them, so its ground is at most its height unless it is the
   // lowest there (a rise below zero reads as none).
+  //
+  // Where the scan returned little round a column (fewer than kDenseColumns of its neighbours
+  // hold a return), the ground there may not have been returned at all: a beam grazing a 10 cm
+  // object at range d from a sensor h up would have landed 0.1·d/h further on, and the ring
+  // below lands d²·Δθ/h nearer (0.7 m at 15 m), so the object's own returns are the lowest
+  // there. The ground remembered from a recent scan that returned densely round the spot
+  // (ground_memory_z_, a world height re-read along today's up axis, so a vehicle pitching onto
+  // a ramp does not tilt it) is the reference then, when lower.
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
+  const std::uint32_t scan = ++scans_integrated_;
+  const double v_m = params_.voxel_size_m;
   for (std::size_t k = 0; k < n_ground_cols_; ++k) {
     const std::uint32_t c = scan_ground_cols_[k];
     const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
     const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
     float lowest = kNoGround, second = kNoGround;
+    int returned = 0;
     for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
       const std::size_t row = static_cast<std::size_t>(y) * nx;
       for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
         const float g = scan_ground_z_[row + x];
+        returned += g == kNoGround ? 0 : 1;
         second = std::min(second, std::max(lowest, g));
         lowest = std::min(lowest, g);
         second = std::min(second, scan_ground2_z_[row + x]);
       }
     }
-    scan_ground_near_z_[c] = second == kNoGround ? lowest : second;
+    float near = second == kNoGround ? lowest : second;
+    const auto ring = [&](int x, int y) {
+      return static_cast<std::size_t>(ring_y(y)) * nx + static_cast<std::size_t>(ring_x(x));
+    };
+    // The column centre's (x, y) in the map frame: heights along up depend on it.
+    const auto centre = [&](int x, int y) {
+      return Eigen::Vector2f(static_cast<float>((min_.x() + x + 0.5) * v_m),
+                             static_cast<float>((min_.y() + y + 0.5) * v_m));
+    };
+    // Remembered only where the two lowest returns round it agree (a floor's mirror images
+    // scatter in depth under it; a ground returns at one height).
+    if (returned >= kDenseColumns) {
+      // (Not on a vehicle on its side: the world height along its up axis is undefined.)
+      if (second != kNoGround && second - lowest <= kGroundAgreeM && up_.z() > 0.1f) {
+        const Eigen::Vector2f xy = centre(cx, cy);
+        ground_memory_z_[ring(cx, cy)] = (near - up_.x() * xy.x() - up_.y() * xy.y()) / up_.z();
+        ground_memory_scan_[ring(cx, cy)] = scan;
+      }
+    } else {
+      for (int y = std::max(0, cy - 1); y <= std::min(ny - 1, cy + 1); ++y) {
+        for (int x = std::max(0, cx - 1); x <= std::min(nx - 1, cx + 1); ++x) {
+          const std::size_t q = ring(x, y);
+          if (ground_memory_scan_[q] == 0 || scan - ground_memory_scan_[q] > kGroundMemoryScans) {
+            continue;
+          }
+          const Eigen::Vector2f xy = centre(x, y);
+          near =
+              std::min(near, up_.x() * xy.x() + up_.y() * xy.y() + up_.z() * ground_memory_z_[q]);
+        }
+      }
+    }
+    scan_ground_near_z_[c] = near;
   }
   // The loops that store bytes read through locals: a byte store may alias anything, and the
   // compiler would reload every member after each.

@@ -27,6 +27,7 @@
 
 #include <Eigen/Core>
 
+#include "tarmac/core/low_objects.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/core/scan_rays.hpp"
 #include "tarmac/core/task_runner.hpp"
@@ -53,11 +54,11 @@ struct OccupancyParams {
   /// How far a beam with no return (or beyond max range) clears free space.
   double clearing_range_m = 30.0;
   /// Heights of returns above the ground are taken against the second-lowest return of the same
-  /// scan within this horizontal radius (one stray return below the ground does not count; a
-  /// beam that grazes a 10 cm object at range d from a sensor
-  /// h up lands on the ground 0.1·d/h further: with 0.4 m and a sensor 2 m up, 10 cm debris is
-  /// marked from the scans taken within about 8 m of it; larger radii met road camber and
-  /// noise on real data, tests/data).
+  /// scan within this horizontal radius (one stray return below the ground does not count).
+  /// Where that scan returned little round the spot (at range, a beam that grazes a 10 cm object
+  /// lands 0.1·d/h further on, and the ring below lands well short), the ground a scan of the
+  /// last second returned densely there is taken instead, when lower. Larger radii met road
+  /// camber and noise on real data (tests/data).
   double ground_radius_m = 0.4;
   /// Static layer: consecutive scans hitting a voxel (it reading occupied throughout) that make it
   /// static, 0 disables the layer, 0..127. Must exceed the scans a moving object covers one voxel
@@ -67,6 +68,9 @@ struct OccupancyParams {
   /// remove it, 1..127: default 10 (1 s at 10 Hz), so sporadic misses (grazing rays, dropped
   /// returns) never clear a building or a parked aircraft.
   int static_demote_scans = 10;
+  /// Low objects kept across scans (low_objects.hpp); min_rise_m is the costmap's
+  /// min_obstacle_height_m (the Mapper sets it).
+  LowObjectParams low_objects;
 
   [[nodiscard]] Status validate() const;
 };
@@ -182,12 +186,16 @@ class OccupancyMap {
   /// Height of the latest returns above the local ground of their own scan, per voxel, in the
   /// same ring order as ring_layer(): the highest return of the latest scan that hit the voxel,
   /// in cm above the second-lowest return of that scan within ground_radius_m of it (the lowest
-  /// where it is alone there; 0..255; 0 also where
+  /// where it is alone there; or the ground remembered there, see ground_radius_m; 0..255; 0
+  /// also where
   /// nothing was returned). Heights within one sweep share one pose, so pose error between
   /// scans cannot look like an object, and they stay after grazing rays clear the voxel (rays
   /// through the empty upper part of a 20 cm voxel over 10 cm debris do not contradict it). The
   /// costmap uses them for objects lower than a voxel.
   [[nodiscard]] const std::uint8_t* ring_layer_rise_cm(int wz) const;
+  /// The low objects kept across scans (debris), with their evidence: integrate() updates
+  /// them from its returns' rises; the costmap reads the confirmed ones as obstacles.
+  [[nodiscard]] const LowObjects& low_objects() const { return low_objects_; }
   [[nodiscard]] int ring_x(int wx) const;
   [[nodiscard]] int ring_y(int wy) const;
 
@@ -310,6 +318,18 @@ class OccupancyMap {
   /// second-lowest return within ground_radius_m (see hit_rises()).
   std::vector<float> scan_ground_near_z_;
   std::vector<std::uint32_t> scan_ground_cols_;  ///< the first n_ground_cols_ (no per-scan fill)
+  /// Per window column, ring order: the ground of the latest scan that returned densely round
+  /// it (kDenseColumns of the columns within ground_radius_m), as a map-frame z, and that
+  /// scan's number (hit_rises()). Read for kGroundMemoryScans scans; forgotten when the column
+  /// leaves the window.
+  std::vector<float> ground_memory_z_;
+  std::vector<std::uint32_t> ground_memory_scan_;
+  static constexpr int kDenseColumns = 4;
+  static constexpr std::uint32_t kGroundMemoryScans = 10;
+  static constexpr float kGroundAgreeM = 0.03f;
+  std::uint32_t scans_integrated_ = 0;  ///< integrate() calls (the memory's clock)
+  LowObjects low_objects_;
+  Eigen::Vector3f up_ = Eigen::Vector3f::UnitZ();  ///< the scan being integrated's up axis
   std::size_t n_ground_cols_ = 0;
   /// Per-scan marks, one bit per window voxel in slot order: the voxels this scan's returns hit,
   /// and, per ray task, the voxels its rays passed through. A bit set costs far less memory

@@ -1,0 +1,188 @@
+// LowObjects: debris kept across scans, confirmed by its rising returns, removed only by rays
+// that went past where it stood.
+
+#include "tarmac/core/low_objects.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace tarmac::core {
+namespace {
+
+constexpr double kVoxel = 0.2;
+constexpr int kN = 100;  // a 20 m window from (0, 0)
+
+/// One scan's returns, built by hand: each with its rise (cm) and its window column.
+struct ScanBuilder {
+  std::vector<Eigen::Vector3f> points;
+  std::vector<std::uint32_t> voxel, column;
+  std::vector<std::uint8_t> rise;
+
+  void add(const Eigen::Vector3f& p, int rise_cm) {
+    points.push_back(p);
+    const int x = static_cast<int>(std::floor(p.x() / kVoxel));
+    const int y = static_cast<int>(std::floor(p.y() / kVoxel));
+    const bool inside = x >= 0 && y >= 0 && x < kN && y < kN;
+    voxel.push_back(inside ? 0u : LowObjects::Scan::kNoColumn);
+    column.push_back(inside ? static_cast<std::uint32_t>(y * kN + x) : 0u);
+    rise.push_back(static_cast<std::uint8_t>(rise_cm));
+  }
+  LowObjects::Scan scan(std::uint32_t number, const Eigen::Vector3f& origin) const {
+    LowObjects::Scan s;
+    s.origin_W = origin;
+    s.points_W = points;
+    s.voxel = voxel;
+    s.column = column;
+    s.rise_cm = rise;
+    s.number = number;
+    s.stamp_ns = static_cast<std::int64_t>(number) * 100'000'000;
+    return s;
+  }
+};
+
+const Eigen::Vector3f kSensor(2.0f, 10.0f, 2.0f);    // 2 m up, looking along +x
+const Eigen::Vector3f kCubeTop(12.0f, 10.0f, 0.1f);  // the front top edge of a 10 cm cube
+
+/// Ground where a beam from the sensor through `at` (a point under 2 m) lands.
+Eigen::Vector3f ground_through(const Eigen::Vector3f& at) {
+  const float t = kSensor.z() / (kSensor.z() - at.z());
+  return kSensor + t * (at - kSensor);
+}
+
+LowObjects make() {
+  LowObjectParams p;
+  EXPECT_TRUE(p.validate().ok());
+  LowObjects objects(p, kN, kN, kVoxel);
+  objects.place(0, 0);
+  return objects;
+}
+
+int confirmed_count(const LowObjects& objects) {
+  int n = 0;
+  for (const LowObject& o : objects.all()) n += objects.confirmed(o) ? 1 : 0;
+  return n;
+}
+
+TEST(LowObjects, TwoRisingReturnsConfirmAndLowReturnsOnTheFaceKeepIt) {
+  LowObjects objects = make();
+  ScanBuilder first;
+  first.add(kCubeTop, 10);
+  objects.update(first.scan(1, kSensor));
+  ASSERT_EQ(objects.all().size(), 1u);
+  EXPECT_EQ(confirmed_count(objects), 0) << "one return is a candidate, not an object";
+  ScanBuilder second;
+  second.add(kCubeTop + Eigen::Vector3f(0.0f, 0.03f, -0.01f), 9);
+  objects.update(second.scan(2, kSensor));
+  ASSERT_EQ(confirmed_count(objects), 1);
+  const std::uint32_t id = objects.all()[0].id;
+  // Fifty scans whose beams land on its face low (rise 2 cm: ground height to the eye) and on
+  // the ground in front of it: nothing that went past it. It stays, with its id.
+  for (std::uint32_t k = 3; k < 53; ++k) {
+    ScanBuilder s;
+    s.add(Eigen::Vector3f(12.0f, 10.0f, 0.02f), 2);
+    s.add(Eigen::Vector3f(11.97f, 10.0f, 0.0f), 0);
+    objects.update(s.scan(k, kSensor));
+  }
+  ASSERT_EQ(confirmed_count(objects), 1);
+  EXPECT_EQ(objects.all()[0].id, id);
+  EXPECT_EQ(objects.all()[0].returns, 2u);
+}
+
+TEST(LowObjects, RaysThatWentPastUnderItsTopRemoveIt) {
+  LowObjects objects = make();
+  ScanBuilder seen;
+  seen.add(kCubeTop, 10);
+  seen.add(kCubeTop + Eigen::Vector3f(0.0f, 0.02f, 0.0f), 10);
+  objects.update(seen.scan(1, kSensor));
+  ASSERT_EQ(confirmed_count(objects), 1);
+  // A beam through where its top was, 5 cm up, lands 0.3 m behind it: gone from there.
+  ScanBuilder past;
+  past.add(ground_through(Eigen::Vector3f(12.0f, 10.0f, 0.05f)), 0);
+  objects.update(past.scan(2, kSensor));
+  EXPECT_EQ(confirmed_count(objects), 1) << "one scan is not enough (clear_scans 2)";
+  // A rising return on it breaks the run.
+  objects.update(seen.scan(3, kSensor));
+  objects.update(past.scan(4, kSensor));
+  EXPECT_EQ(confirmed_count(objects), 1);
+  objects.update(past.scan(5, kSensor));
+  EXPECT_EQ(confirmed_count(objects), 0) << "two scans in a row saw through it";
+  EXPECT_TRUE(objects.all().empty());
+}
+
+TEST(LowObjects, BeamsOverItsTopOrBesideItDoNotRemoveIt) {
+  LowObjects objects = make();
+  ScanBuilder seen;
+  seen.add(kCubeTop, 10);
+  seen.add(kCubeTop, 10);
+  objects.update(seen.scan(1, kSensor));
+  for (std::uint32_t k = 2; k < 20; ++k) {
+    ScanBuilder s;
+    // Over its top (12 cm up), and 10 cm beside it, low.
+    s.add(ground_through(Eigen::Vector3f(12.0f, 10.0f, 0.12f)), 0);
+    s.add(ground_through(Eigen::Vector3f(12.0f, 10.1f, 0.03f)), 0);
+    objects.update(s.scan(k, kSensor));
+  }
+  EXPECT_EQ(confirmed_count(objects), 1);
+}
+
+TEST(LowObjects, ALoneReturnLapsesAndTheWindowDropsWhatLeavesIt) {
+  LowObjects objects = make();
+  ScanBuilder stray;
+  stray.add(Eigen::Vector3f(5.0f, 5.0f, 0.1f), 10);
+  objects.update(stray.scan(1, kSensor));
+  ASSERT_EQ(objects.all().size(), 1u);
+  for (std::uint32_t k = 2; k <= 11; ++k) objects.update(ScanBuilder{}.scan(k, kSensor));
+  EXPECT_TRUE(objects.all().empty()) << "candidate_scans without a second return";
+
+  ScanBuilder seen;
+  seen.add(kCubeTop, 10);
+  seen.add(kCubeTop, 10);
+  objects.update(seen.scan(20, kSensor));
+  ASSERT_EQ(confirmed_count(objects), 1);
+  objects.place(40, 0);  // the window moved 8 m on: x from 8 m
+  EXPECT_EQ(confirmed_count(objects), 1);
+  objects.place(61, 0);  // x from 12.2 m: its centre left
+  EXPECT_TRUE(objects.all().empty());
+}
+
+TEST(LowObjects, ReturnsRisingAboveMaxRiseOrOutsideTheWindowMakeNoObject) {
+  LowObjects objects = make();
+  ScanBuilder s;
+  s.add(Eigen::Vector3f(6.0f, 6.0f, 1.0f), 100);  // a wall's return: not low
+  s.add(Eigen::Vector3f(6.0f, 6.0f, 1.0f), 100);
+  s.add(Eigen::Vector3f(-3.0f, 6.0f, 0.1f), 10);  // outside the window
+  s.add(Eigen::Vector3f(-3.0f, 6.0f, 0.1f), 10);
+  objects.update(s.scan(1, kSensor));
+  EXPECT_TRUE(objects.all().empty());
+}
+
+TEST(LowObjects, CapacityRefusesAndCounts) {
+  LowObjectParams p;
+  p.capacity = 3;
+  ASSERT_TRUE(p.validate().ok());
+  LowObjects objects(p, kN, kN, kVoxel);
+  objects.place(0, 0);
+  ScanBuilder s;
+  for (int k = 0; k < 5; ++k) s.add(Eigen::Vector3f(3.0f + k, 3.0f, 0.1f), 10);
+  objects.update(s.scan(1, kSensor));
+  EXPECT_EQ(objects.all().size(), 3u);
+  EXPECT_EQ(objects.refused(), 2u);
+}
+
+TEST(LowObjects, InvalidParametersAreRefused) {
+  LowObjectParams p;
+  p.clear_radius_m = 0.5;  // beyond the match radius
+  EXPECT_FALSE(p.validate().ok());
+  p = LowObjectParams{};
+  p.max_rise_m = 0.05;  // under min_rise_m
+  EXPECT_FALSE(p.validate().ok());
+  p = LowObjectParams{};
+  p.clear_scans = 0;
+  EXPECT_FALSE(p.validate().ok());
+}
+
+}  // namespace
+}  // namespace tarmac::core
