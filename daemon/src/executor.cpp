@@ -511,6 +511,10 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
   auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
   if (!outputs) return outputs.error();
   impl->outputs = std::move(outputs).value();
+  if (!cfg.outputs.debris_topic.empty()) {
+    impl->outputs->reserve_debris(
+        static_cast<std::size_t>(cfg.mapping.occupancy.low_objects.capacity));
+  }
   if (cfg.fleet.enabled) {
     auto fleet = FleetShare::create(impl->participant, cfg, cfg.mapping.occupancy.voxel_size_m,
                                     impl->drops, impl->rejections);

@@ -113,6 +113,10 @@ bool MapOutputs::publish_band(const core::EsdfBand& band, const Eigen::Vector2d&
   return impl_->band->write(impl_->band_msg);
 }
 
+void MapOutputs::reserve_debris(std::size_t pieces) {
+  impl_->debris_msg.objects().reserve(pieces);
+}
+
 bool MapOutputs::publish_debris(std::span<const core::Debris> debris, std::int64_t stamp_ns,
                                 const std::string& frame_id) {
   if (!impl_->debris) return false;

@@ -72,6 +72,9 @@ class MapOutputs {
   /// also when no band topic was given.
   bool publish_band(const core::EsdfBand& band, const Eigen::Vector2d& centre_W, double radius_m,
                     std::int64_t stamp_ns, const std::string& frame_id);
+  /// Sizes the debris message for `pieces`, so publishing up to that many does not allocate
+  /// (the low objects' capacity bounds the pieces).
+  void reserve_debris(std::size_t pieces);
   /// The debris list (core::extract_debris), in id order. False also when no debris topic was
   /// given.
   bool publish_debris(std::span<const core::Debris> debris, std::int64_t stamp_ns,
