@@ -139,6 +139,7 @@ obstacles=rt/tarmac/virtual_obstacles
 costmap=rt/tarmac/costmap
 slice=rt/tarmac/esdf_slice
 band=rt/tarmac/esdf_band
+debris=rt/tarmac/debris
 report=rt/tarmac/diagnostics
 diag=rt/diagnostics
 fleet=rt/tarmac/fleet/bev
@@ -168,14 +169,14 @@ grant() {  # grant ID PUBLISH_TOPICS SUBSCRIBE_TOPICS [PUBLISH2 SUBSCRIBE2] (ren
   echo '<dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"'
   echo '     xsi:noNamespaceSchemaLocation="http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd">'
   echo '  <permissions>'
-  grant tarmacd "$(topics "$costmap" "$slice" "$band" "$report" "$diag")" \
+  grant tarmacd "$(topics "$costmap" "$slice" "$band" "$debris" "$report" "$diag")" \
     "$(topics "$lidar" "$pose" "$correction" "$obstacles")"
   grant publisher "$(topics "$lidar" "$pose" "$correction")" ""
   grant obstacles "$(topics "$obstacles")" "$(topics "$costmap")"
-  grant monitor "" "$(topics "$lidar" "$pose" "$correction" "$obstacles" "$costmap" "$slice" "$band" "$report" "$diag")" \
+  grant monitor "" "$(topics "$lidar" "$pose" "$correction" "$obstacles" "$costmap" "$slice" "$band" "$debris" "$report" "$diag")" \
     "" "$(in_partition 'tarmac_fleet_*' "$fleet")"
   for v in $vehicles; do
-    grant "tarmacd-$v" "$(topics "$costmap" "$slice" "$band" "$report" "$diag")" \
+    grant "tarmacd-$v" "$(topics "$costmap" "$slice" "$band" "$debris" "$report" "$diag")" \
       "$(topics "$lidar" "$pose" "$correction" "$obstacles")" \
       "$(in_partition "tarmac_fleet_$v" "$fleet")" "$(in_partition 'tarmac_fleet_*' "$fleet")"
   done

@@ -160,6 +160,7 @@ std::vector<Key> make_schema() {
   add_qos_keys<&QosConfig::costmap>(keys, "costmap");
   add_qos_keys<&QosConfig::esdf_slice>(keys, "esdf_slice");
   add_qos_keys<&QosConfig::esdf_band>(keys, "esdf_band");
+  add_qos_keys<&QosConfig::debris>(keys, "debris");
   add_qos_keys<&QosConfig::diagnostics>(keys, "diagnostics");
   keys.insert(
       keys.end(),
@@ -326,6 +327,9 @@ std::vector<Key> make_schema() {
                 [](Config& c) -> Field { return &c.outputs.esdf_slice_topic; }),
           topic("outputs.esdf_band_topic", "tarmac_msgs/DistanceMapVolume (esdf_band.enabled)",
                 [](Config& c) -> Field { return &c.outputs.esdf_band_topic; }),
+          topic("outputs.debris_topic",
+                "tarmac_msgs/DebrisArray, the debris for the ground crew; empty: not published",
+                [](Config& c) -> Field { return &c.outputs.debris_topic; }),
           topic("outputs.cycle_report_topic", "tarmac_msgs/CycleReport, one per tick",
                 [](Config& c) -> Field { return &c.outputs.cycle_report_topic; }),
           topic("outputs.diagnostic_array_topic", "diagnostic_msgs/DiagnosticArray",
@@ -474,6 +478,15 @@ std::vector<Key> make_schema() {
           choice("costmap.free_rule", kFreeRule,
                  "whole_envelope: free only when the whole column up to the vehicle was observed",
                  [](Config& c) -> Field { return choice_field(c.mapping.costmap.free_rule); }),
+          real("costmap.debris_max_height_m", 0.01, 2.55, "m",
+               "a low object (or a cluster of them) this high above the ground at most is debris",
+               [](Config& c) -> Field { return &c.mapping.debris.max_height_m; }),
+          real("costmap.debris_max_footprint_m", 0.01, 10.0, "m",
+               "debris's obstacle columns span at most this along x and along y",
+               [](Config& c) -> Field { return &c.mapping.debris.max_footprint_m; }),
+          real("costmap.debris_clearance_m", 0.0, 10.0, "m",
+               "no other obstacle column this close to debris (a kerb, a wall foot, a wheel)",
+               [](Config& c) -> Field { return &c.mapping.debris.clearance_m; }),
           // esdf_band
           boolean("esdf_band.enabled", "compute the 3D ESDF band every tick and publish it",
                   [](Config& c) -> Field { return &c.mapping.esdf_band.enabled; }),

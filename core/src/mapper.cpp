@@ -137,6 +137,7 @@ Status MapperParams::validate() const {
   if (auto s = tsdf.validate(); !s) return s;
   if (auto s = corrections.validate(); !s) return s;
   if (auto s = esdf_band.validate(); !s) return s;
+  if (auto s = debris.validate(); !s) return s;
   if (esdf_band.enabled) {
     const double top_m = occupancy.window_z_vox * occupancy.voxel_size_m - occupancy.window_below_m;
     if (esdf_band.below_m > occupancy.window_below_m) {
@@ -184,6 +185,9 @@ Mapper::Mapper(const MapperParams& params)
   ground_heights_.reserve(kWarmUpPoints);
   SerialRunner serial;
   build_costmap(map_, params_.costmap, T_W_B_, {}, 0, layers_, serial);
+  const auto objects = static_cast<std::size_t>(params_.occupancy.low_objects.capacity);
+  debris_scratch_.reserve(objects, layers_.column_class.cells().size());
+  debris_.reserve(objects);
   // The 3D band likewise (about 50 MB of states, scratch and field at the default window).
   if (params_.esdf_band.enabled) {
     build_esdf_band(map_, layers_, params_.costmap, params_.esdf_band, T_W_B_, {}, 0, band_,
@@ -321,6 +325,7 @@ const CostmapLayers& Mapper::update_costmap(const Eigen::Isometry3d& T_W_B,
                                             std::span<const VirtualZone> zones,
                                             std::int64_t stamp_ns, TaskRunner& runner) {
   build_costmap(map_, params_.costmap, T_W_B, zones, stamp_ns, layers_, runner);
+  extract_debris(map_.low_objects(), layers_, params_.debris, debris_scratch_, debris_);
   return layers_;
 }
 
@@ -342,6 +347,7 @@ const CostmapLayers& Mapper::update_costmap(const Eigen::Isometry3d& T_W_B,
   map_.export_column_observed(column_observed_);
   CostmapPeers fleet{peers, column_observed_, stamp_ns, {}};
   build_costmap(map_, params_.costmap, T_W_B, zones, stamp_ns, layers_, runner, &fleet);
+  extract_debris(map_.low_objects(), layers_, params_.debris, debris_scratch_, debris_);
   counts = std::move(fleet.counts);
   return layers_;
 }

@@ -347,6 +347,9 @@ Executor::Impl::Published Executor::Impl::update_outputs(bool update, const Cycl
     }
     outputs->publish_slice(layers.obstacle_distance, layers.costmap.geometry(), newest_stamp_ns,
                            config.outputs.frame_id);
+    if (!config.outputs.debris_topic.empty()) {
+      outputs->publish_debris(mapper.debris(), newest_stamp_ns, config.outputs.frame_id);
+    }
   }
   if (fleet && have_costmap) fleet->publish_if_due(tick_ns, mapper);
   const auto t_costmap_out = Clock::now();
@@ -390,6 +393,7 @@ void Executor::Impl::report_tick(std::chrono::steady_clock::time_point start, co
   report.points_in = done.points_in;
   report.points_used = done.points_used;
   report.map_memory_bytes = mapper.occupancy().memory_bytes();
+  report.debris = static_cast<std::uint32_t>(mapper.debris().size());
   if (fleet) fleet->fill_report(tick_ns, cycle->fleet_counts(), report);
   {
     // Before the report goes out, so whoever reads the report and then the totals agrees.
@@ -500,12 +504,17 @@ core::Result<std::unique_ptr<Executor>> Executor::create(const config::Config& c
       cfg.outputs.cycle_report_topic,
       cfg.outputs.diagnostic_array_topic,
       cfg.outputs.obstacle_grid_topic,
-      cfg.outputs.esdf_slice_grid_topic};
+      cfg.outputs.esdf_slice_grid_topic,
+      cfg.outputs.debris_topic};
   transport::OutputQos oq{q.costmap,     q.esdf_slice, q.esdf_band, q.diagnostics,
-                          q.diagnostics, q.costmap,    q.costmap};
+                          q.diagnostics, q.costmap,    q.costmap,   q.debris};
   auto outputs = transport::MapOutputs::create(impl->participant, topics, oq);
   if (!outputs) return outputs.error();
   impl->outputs = std::move(outputs).value();
+  if (!cfg.outputs.debris_topic.empty()) {
+    impl->outputs->reserve_debris(
+        static_cast<std::size_t>(cfg.mapping.occupancy.low_objects.capacity));
+  }
   if (cfg.fleet.enabled) {
     auto fleet = FleetShare::create(impl->participant, cfg, cfg.mapping.occupancy.voxel_size_m,
                                     impl->drops, impl->rejections);

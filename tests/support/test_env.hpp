@@ -59,6 +59,7 @@ enum Domain : std::uint32_t {
   kDomainDaemonLayoutElevation = 155,
   kDomainDaemonLayoutList = 156,
   kDomainDaemonLayoutDriver = 157,
+  kDomainDaemonDebris = 158,
   // Outside clients on Cyclone DDS over UDP (tests/daemon/cyclone_client_test.cpp): 160..169
   kDomainCycloneUdpClouds = 160,
   kDomainCycloneTinyBuffer = 161,

@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tarmac_msgsPubSubTypes.h"
+
 namespace tarmac::transport {
 namespace {
 
@@ -405,6 +407,58 @@ TEST(FleetBev, RoundTripsEveryField_RefusesAnotherFrameAndABadResolution) {
   bad = msg;
   bad.vehicle_id("");
   EXPECT_EQ(from_fleet_bev(bad, "map").error().code, "fleet.malformed");
+}
+
+TEST(DebrisArray, RoundTripsEveryFieldThroughCdr) {
+  core::Debris a;
+  a.id = 7;
+  a.xy_W = Eigen::Vector2d(12.25, -3.5);
+  a.ground_z_m = 0.125;
+  a.height_m = 0.25;      // exact in float32
+  a.footprint_m = 0.375;  // exact in float32
+  a.first_seen_ns = -1'500'000'001;
+  a.last_confirmed_ns = 1'700'000'000'123'456'789;
+  a.returns = 4'000'000'000u;
+  core::Debris b;
+  b.id = 9;
+  b.returns = 2;
+  const std::vector<core::Debris> debris{a, b};
+  DebrisArrayMsg msg;
+  fill_debris_array(debris, 1'700'000'000'000'000'001, "map", msg);
+  // Through Fast DDS's own serialisation: what a subscriber decodes.
+  tarmac_msgs::msg::dds_::DebrisArray_PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.getSerializedSizeProvider(&msg)());
+  ASSERT_TRUE(type.serialize(&msg, &payload));
+  DebrisArrayMsg received;
+  ASSERT_TRUE(type.deserialize(&payload, &received));
+  EXPECT_EQ(from_time_msg(received.header().stamp()), 1'700'000'000'000'000'001);
+  EXPECT_EQ(received.header().frame_id(), "map");
+  const auto back = from_debris_array(received);
+  ASSERT_EQ(back.size(), 2u);
+  EXPECT_EQ(back[0].id, a.id);
+  EXPECT_EQ(back[0].xy_W, a.xy_W);
+  EXPECT_EQ(back[0].ground_z_m, a.ground_z_m);
+  EXPECT_EQ(back[0].height_m, a.height_m);
+  EXPECT_EQ(back[0].footprint_m, a.footprint_m);
+  EXPECT_EQ(back[0].first_seen_ns, a.first_seen_ns);
+  EXPECT_EQ(back[0].last_confirmed_ns, a.last_confirmed_ns);
+  EXPECT_EQ(back[0].returns, a.returns);
+  EXPECT_EQ(back[1].id, b.id);
+  EXPECT_EQ(back[1].returns, b.returns);
+  // Refilled with fewer: the message holds only those.
+  fill_debris_array(std::span<const core::Debris>(debris).first(1), 0, "map", msg);
+  EXPECT_EQ(msg.objects().size(), 1u);
+  fill_debris_array({}, 0, "map", msg);
+  EXPECT_TRUE(msg.objects().empty());
+}
+
+TEST(CycleReport, CarriesTheDebrisCount) {
+  CycleReport r;
+  r.debris = 3;
+  CycleReportMsg msg;
+  fill_cycle_report(r, msg);
+  EXPECT_EQ(msg.debris(), 3u);
+  EXPECT_EQ(from_cycle_report(msg).debris, 3u);
 }
 
 }  // namespace

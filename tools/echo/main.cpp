@@ -84,11 +84,24 @@ void print(const transport::CycleReportMsg& m) {
     stages += buf;
   }
   std::printf(
-      "cycle %llu tick %.3f jitter %.3f ms skipped %u: %.2f/%.0f ms%s, points %llu/%llu%s\n",
+      "cycle %llu tick %.3f jitter %.3f ms skipped %u: %.2f/%.0f ms%s, points %llu/%llu, debris "
+      "%u%s\n",
       static_cast<unsigned long long>(m.cycle_index()), seconds(m.tick_time()), m.wake_jitter_ms(),
       m.skipped_ticks(), m.cycle_duration_ms(), m.cycle_budget_ms(), stages.c_str(),
       static_cast<unsigned long long>(m.points_used()),
-      static_cast<unsigned long long>(m.points_in()), m.overrun() ? " OVERRUN" : "");
+      static_cast<unsigned long long>(m.points_in()), m.debris(), m.overrun() ? " OVERRUN" : "");
+}
+
+void print(const transport::DebrisArrayMsg& m) {
+  std::printf("debris stamp %.3f frame %s: %zu\n", seconds(m.header().stamp()),
+              m.header().frame_id().c_str(), m.objects().size());
+  for (const auto& d : m.objects()) {
+    std::printf(
+        "  id %u at %.2f %.2f (ground z %.2f m) height %.2f m footprint %.2f m, first seen %.3f, "
+        "last confirmed %.3f, %u returns\n",
+        d.id(), d.position().x(), d.position().y(), d.position().z(), d.height_m(), d.footprint_m(),
+        seconds(d.first_seen()), seconds(d.last_confirmed()), d.returns());
+  }
 }
 
 void print(const transport::DiagnosticArrayMsg& m) {
@@ -191,6 +204,9 @@ int main(int argc, char** argv) {
   }
   if (topic == o.esdf_band_topic) {
     return echo<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>(p, topic, q.esdf_band, count);
+  }
+  if (!o.debris_topic.empty() && topic == o.debris_topic) {
+    return echo<tarmac_msgs::msg::dds_::DebrisArray_PubSubType>(p, topic, q.debris, count);
   }
   if (topic == o.cycle_report_topic) {
     return echo<tarmac_msgs::msg::dds_::CycleReport_PubSubType>(p, topic, q.diagnostics, count);

@@ -327,6 +327,7 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     if (r.rebuild.scans > 0)
       run.rebuild_ms.push_back(r.rebuild_ms);  // not the steps waiting to start
     cycle.update_costmap(mapper.vehicle_pose(), {}, cloud.stamp_ns);
+    run.debris_per_scan.push_back(static_cast<std::uint32_t>(mapper.debris().size()));
     if (fleet) send_summary(*fleet, cloud.stamp_ns);
     // The 3D band (esdf_band.enabled), every scan as the daemon does every cycle.
     cycle.update_esdf_band(mapper.vehicle_pose(), {}, cloud.stamp_ns);

@@ -232,6 +232,34 @@ void print_corrections(const core::Mapper& mapper, const Run& run) {
       static_cast<unsigned long long>(cs.tsdf_blocks_erased));
 }
 
+/// debris.json: the debris of the last costmap (the ground crew's list, docs/mapping.md "Debris
+/// report") and the count after each scan.
+core::Status write_debris(const Options& opt, const core::Mapper& mapper, const Run& run) {
+  nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  for (const core::Debris& d : mapper.debris()) {
+    list.push_back({{"id", d.id},
+                    {"x_m", d.xy_W.x()},
+                    {"y_m", d.xy_W.y()},
+                    {"ground_z_m", d.ground_z_m},
+                    {"height_m", d.height_m},
+                    {"footprint_m", d.footprint_m},
+                    {"first_seen_ns", d.first_seen_ns},
+                    {"last_confirmed_ns", d.last_confirmed_ns},
+                    {"returns", d.returns},
+                    {"objects", d.objects}});
+  }
+  const std::uint32_t most =
+      run.debris_per_scan.empty()
+          ? 0
+          : *std::max_element(run.debris_per_scan.begin(), run.debris_per_scan.end());
+  std::printf("debris: %zu at the end (at most %u after one scan)\n", mapper.debris().size(), most);
+  const nlohmann::ordered_json out = {{"frame_id", map_tool::kTsdfFrame},
+                                      {"stamp_ns", run.last_stamp_ns},
+                                      {"debris", list},
+                                      {"per_scan", run.debris_per_scan}};
+  return tools::write_json(std::filesystem::path(opt.out) / "debris.json", out);
+}
+
 }  // namespace
 
 int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, const Run& run,
@@ -321,6 +349,10 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
     std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
     return kExitIo;
   }
+  if (auto w = write_debris(opt, mapper, run); !w) {
+    std::fprintf(stderr, "tarmac-map: %s\n", w.error().message.c_str());
+    return kExitIo;
+  }
   if (params.tsdf.enabled) print_tsdf_summary(opt, params, mapper, run, tsdf_out);
 
   if (params.corrections.enabled) print_corrections(mapper, run);
@@ -347,7 +379,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       "wrote "
       "%s/"
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
-      "timing.json%s%s}\n",
+      "timing.json,debris.json%s%s}\n",
       opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
       tsdf_out.paged        ? (opt.prior.empty()
                                    ? ",tsdf_tiles/,tsdf_vdb/,tsdf.json,mesh.ply"

@@ -80,6 +80,8 @@ struct Run {
   daemon::TsdfPager* pager = nullptr;
   /// --fleet-period: each summary's wire bytes and whether it was a keyframe.
   std::vector<std::pair<std::size_t, bool>> fleet_messages;
+  /// Debris pieces after each scan's costmap (written to debris.json).
+  std::vector<std::uint32_t> debris_per_scan;
 };
 
 }  // namespace tarmac::map_tool

@@ -659,6 +659,7 @@ void fill_cycle_report(const CycleReport& r, CycleReportMsg& msg) {
     m.gaps(p.gaps);
   }
   msg.fleet_newest_age_ms(static_cast<float>(r.fleet_newest_age_ms));
+  msg.debris(r.debris);
 }
 
 CycleReport from_cycle_report(const CycleReportMsg& msg) {
@@ -690,6 +691,7 @@ CycleReport from_cycle_report(const CycleReportMsg& msg) {
                                             p.rejected(), p.gaps()});
   }
   r.fleet_newest_age_ms = msg.fleet_newest_age_ms();
+  r.debris = msg.debris();
   return r;
 }
 

@@ -4,8 +4,8 @@
 /// endianness); nothing about the layout is assumed.
 
 #include <cstdint>
+#include <span>
 #include <string>
-
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -16,6 +16,7 @@
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
 #include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/core/debris.hpp"
 #include "tarmac/core/distance_field.hpp"
 #include "tarmac/core/esdf_band.hpp"
 #include "tarmac/core/fleet_bev.hpp"
@@ -42,6 +43,7 @@ using CycleReportMsg = tarmac_msgs::msg::dds_::CycleReport_;
 using VirtualObstacleArrayMsg = tarmac_msgs::msg::dds_::VirtualObstacleArray_;
 using DiagnosticArrayMsg = diagnostic_msgs::msg::dds_::DiagnosticArray_;
 using FleetBevMsg = tarmac_msgs::msg::dds_::FleetBev_;
+using DebrisArrayMsg = tarmac_msgs::msg::dds_::DebrisArray_;
 
 /// ns since the epoch <-> builtin_interfaces/Time (sec may be negative; nanosec in [0, 1e9)).
 TimeMsg to_time_msg(std::int64_t stamp_ns);
@@ -117,6 +119,13 @@ void fill_cycle_report(const CycleReport& report, CycleReportMsg& msg);
 /// tarmac_msgs/CycleReport -> CycleReport (tools and tests).
 CycleReport from_cycle_report(const CycleReportMsg& msg);
 void fill_diagnostic_array(const DiagnosticReport& report, DiagnosticArrayMsg& msg);
+
+/// Debris -> tarmac_msgs/DebrisArray in `frame_id` (position z: the ground under it), reusing
+/// the message's buffers (debris_conversions.cpp).
+void fill_debris_array(std::span<const core::Debris> debris, std::int64_t stamp_ns,
+                       const std::string& frame_id, DebrisArrayMsg& msg);
+/// tarmac_msgs/DebrisArray -> debris (tools and tests; `objects` is not carried: 0).
+std::vector<core::Debris> from_debris_array(const DebrisArrayMsg& msg);
 
 /// VirtualObstacleArray -> zones (KIND_RESTRICTED -> restricted, every other kind -> no-go).
 /// Rejects polygons with fewer than 3 vertices or non-finite coordinates ("zones.*").

@@ -16,6 +16,7 @@ class MapOutputs::Impl {
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapSlice_PubSubType>> slice;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DistanceMapVolume_PubSubType>> band;
   std::unique_ptr<Writer<tarmac_msgs::msg::dds_::CycleReport_PubSubType>> report;
+  std::unique_ptr<Writer<tarmac_msgs::msg::dds_::DebrisArray_PubSubType>> debris;
   std::unique_ptr<Writer<diagnostic_msgs::msg::dds_::DiagnosticArray_PubSubType>> diagnostics;
   // Kept and refilled: their buffers are reused from tick to tick.
   OccupancyGridMsg costmap_msg;
@@ -24,6 +25,7 @@ class MapOutputs::Impl {
   DistanceMapSliceMsg slice_msg;
   DistanceMapVolumeMsg band_msg;
   CycleReportMsg report_msg;
+  DebrisArrayMsg debris_msg;
   DiagnosticArrayMsg diagnostics_msg;
 };
 
@@ -56,6 +58,12 @@ core::Result<std::unique_ptr<MapOutputs>> MapOutputs::create(const Participant& 
         decltype(impl->band)::element_type::create(participant, topics.esdf_band, qos.esdf_band);
     if (!band) return band.error();
     impl->band = std::move(band).value();
+  }
+  if (!topics.debris.empty()) {
+    auto debris =
+        decltype(impl->debris)::element_type::create(participant, topics.debris, qos.debris);
+    if (!debris) return debris.error();
+    impl->debris = std::move(debris).value();
   }
   auto report = decltype(impl->report)::element_type::create(participant, topics.cycle_report,
                                                              qos.cycle_report);
@@ -103,6 +111,17 @@ bool MapOutputs::publish_band(const core::EsdfBand& band, const Eigen::Vector2d&
   if (!impl_->band) return false;
   fill_distance_volume(band, centre_W, radius_m, stamp_ns, frame_id, impl_->band_msg);
   return impl_->band->write(impl_->band_msg);
+}
+
+void MapOutputs::reserve_debris(std::size_t pieces) {
+  impl_->debris_msg.objects().reserve(pieces);
+}
+
+bool MapOutputs::publish_debris(std::span<const core::Debris> debris, std::int64_t stamp_ns,
+                                const std::string& frame_id) {
+  if (!impl_->debris) return false;
+  fill_debris_array(debris, stamp_ns, frame_id, impl_->debris_msg);
+  return impl_->debris->write(impl_->debris_msg);
 }
 
 bool MapOutputs::publish_report(const CycleReport& report) {

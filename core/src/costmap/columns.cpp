@@ -308,11 +308,7 @@ void mark_low_objects(const CostmapPass& pass) {
     const auto y = static_cast<std::int64_t>(std::floor(o.xy_W.y() / v)) - pass.wmin.y();
     if (x < 0 || y < 0 || x >= pass.nx || y >= pass.ny) continue;
     const auto i = static_cast<std::size_t>(y * pass.nx + x);
-    // On the column's ground (its ground voxel, within a voxel): an object's rise is taken
-    // above its scan's lowest returns round it, which where the ground went unreturned are a
-    // wing's or a roof's.
-    const double base_z = static_cast<double>(o.top_z_W) - static_cast<double>(o.rise_m);
-    if (std::abs(base_z - static_cast<double>(pass.out.ground_z_m.cells()[i])) > v) continue;
+    if (!stands_on_ground(o, static_cast<double>(pass.out.ground_z_m.cells()[i]), v)) continue;
     classes[i] = static_cast<std::uint8_t>(ColumnClass::kObstacle);
     pass.out.esdf_input[i] = CellState::kOccupied;
   }

@@ -34,6 +34,7 @@ struct QosConfig {
   transport::QosSpec costmap = transport::qos::kCostmap;
   transport::QosSpec esdf_slice = transport::qos::kEsdfSlice;
   transport::QosSpec esdf_band = transport::qos::kEsdfBand;
+  transport::QosSpec debris = transport::qos::kDebris;
   transport::QosSpec diagnostics = transport::qos::kDiagnostics;
 };
 
@@ -147,6 +148,9 @@ struct OutputConfig {
   /// esdf_slice_grid_range_m and beyond, −1 unknown). Empty: not published.
   std::string esdf_slice_grid_topic;
   double esdf_slice_grid_range_m = 5.0;
+  /// The debris for the ground crew (tarmac_msgs/DebrisArray, core::Debris), each tick the
+  /// costmap is updated. Empty: not published.
+  std::string debris_topic = transport::topics::kDebris;
   std::uint32_t diagnostic_array_every = 10;  ///< ticks between DiagnosticArray messages
   /// The costmap is reported stale (DiagnosticArray level ERROR, `costmap_stale`) when the
   /// newest scan in it is older than this at tick time, e.g. while no pose arrives.

@@ -20,6 +20,7 @@
 ///  - objects are kept while their centre is inside the occupancy window.
 /// Pure and deterministic: the update reads the scan in point order.
 
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -55,6 +56,15 @@ struct LowObject {
   std::int64_t last_ns = 0;
   std::uint8_t seen_through = 0;  ///< scans in a row that saw through it
 };
+
+/// Whether `o` stands on a column whose ground (CostmapLayers::ground_z_m) is `ground_z_m`: its
+/// base (top less rise) within one voxel of it. An object's rise is taken above its scan's
+/// lowest returns round it, which where the ground went unreturned are a wing's or a roof's.
+/// The costmap marks only such objects lethal, and only they can be debris.
+inline bool stands_on_ground(const LowObject& o, double ground_z_m, double voxel_m) {
+  const double base_z = static_cast<double>(o.top_z_W) - static_cast<double>(o.rise_m);
+  return !(std::abs(base_z - ground_z_m) > voxel_m);
+}
 
 class LowObjects {
  public:

@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 
 #include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/core/debris.hpp"
 #include "tarmac/core/deskew.hpp"
 #include "tarmac/core/esdf_band.hpp"
 #include "tarmac/core/occupancy_map.hpp"
@@ -31,6 +32,7 @@ struct MapperParams {
   TsdfParams tsdf;
   CorrectionParams corrections;
   EsdfBandParams esdf_band;
+  DebrisParams debris;  ///< YAML costmap.debris_*
 
   [[nodiscard]] Status validate() const;
 };
@@ -192,6 +194,8 @@ class Mapper {
   /// For loading a saved static occupancy layer (OccupancyMap::import_static).
   [[nodiscard]] OccupancyMap& occupancy() { return map_; }
   [[nodiscard]] const CostmapLayers& costmap() const { return layers_; }
+  /// The debris of the last update_costmap() (debris.hpp), in id order.
+  [[nodiscard]] const std::vector<Debris>& debris() const { return debris_; }
   [[nodiscard]] const EsdfBand& esdf_band() const { return band_; }
   [[nodiscard]] const MapperParams& params() const { return params_; }
   [[nodiscard]] const TsdfLayer& tsdf() const { return tsdf_; }
@@ -232,6 +236,8 @@ class Mapper {
   std::vector<Eigen::Vector3f> rebuild_points_W_;
   CorrectionStats correction_stats_;
   CostmapLayers layers_;
+  std::vector<Debris> debris_;
+  DebrisScratch debris_scratch_;
   std::vector<std::int64_t> column_observed_;  ///< fleet: own observation times, costmap order
   std::vector<BevState> own_cells_;            ///< fleet: the snapshot's states
   EsdfBand band_;

@@ -60,6 +60,7 @@ struct CycleReport {
   std::string config_hash;
   std::vector<FleetPeerReport> fleet_peers;  ///< empty with fleet sharing off
   double fleet_newest_age_ms = -1.0;         ///< tick time minus the newest peer cell used; -1 none
+  std::uint32_t debris = 0;  ///< debris pieces in the latest costmap's debris report
 };
 
 /// The DiagnosticArray tarmacd publishes now and then: one status with key/value pairs.

@@ -1,14 +1,16 @@
 #pragma once
 /// @file tarmacd's DDS outputs, in core types: the costmap (nav_msgs/OccupancyGrid), the ESDF
 /// slice (tarmac_msgs/DistanceMapSlice), the 3D ESDF band (tarmac_msgs/DistanceMapVolume), the
-/// per-tick tarmac_msgs/CycleReport and a diagnostic_msgs/DiagnosticArray. Each writer keeps its
-/// message and refills it, so publishing does not allocate on our side after the first tick (Fast
-/// DDS serialises into its own pool).
+/// per-tick tarmac_msgs/CycleReport, the debris (tarmac_msgs/DebrisArray) and a
+/// diagnostic_msgs/DiagnosticArray. Each writer keeps its message and refills it, so publishing
+/// does not allocate on our side after the first tick (Fast DDS serialises into its own pool).
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 
+#include "tarmac/core/debris.hpp"
 #include "tarmac/core/distance_field.hpp"
 #include "tarmac/core/esdf_band.hpp"
 #include "tarmac/core/grid2d.hpp"
@@ -29,6 +31,8 @@ struct OutputTopics {
   std::string obstacle_grid;
   /// Empty: none. The 2D ESDF shaded as an OccupancyGrid, for rviz2 (core::to_distance_display).
   std::string esdf_slice_grid;
+  /// Empty: none. The debris for the ground crew (tarmac_msgs/DebrisArray).
+  std::string debris;
 };
 
 struct OutputQos {
@@ -39,6 +43,7 @@ struct OutputQos {
   QosSpec diagnostic_array = qos::kDiagnostics;
   QosSpec obstacle_grid = qos::kCostmap;
   QosSpec esdf_slice_grid = qos::kCostmap;  // as the costmap: rviz2's Map display reads it so
+  QosSpec debris = qos::kDebris;
 };
 
 class MapOutputs {
@@ -67,6 +72,13 @@ class MapOutputs {
   /// also when no band topic was given.
   bool publish_band(const core::EsdfBand& band, const Eigen::Vector2d& centre_W, double radius_m,
                     std::int64_t stamp_ns, const std::string& frame_id);
+  /// Sizes the debris message for `pieces`, so publishing up to that many does not allocate
+  /// (the low objects' capacity bounds the pieces).
+  void reserve_debris(std::size_t pieces);
+  /// The debris list (core::extract_debris), in id order. False also when no debris topic was
+  /// given.
+  bool publish_debris(std::span<const core::Debris> debris, std::int64_t stamp_ns,
+                      const std::string& frame_id);
   bool publish_report(const CycleReport& report);
   bool publish_diagnostics(const DiagnosticReport& report);
 

@@ -35,6 +35,9 @@ inline constexpr QosSpec kCostmap{Reliability::kReliable, Durability::kTransient
 inline constexpr QosSpec kEsdfSlice{Reliability::kBestEffort, Durability::kVolatile, 1};
 /// 3D ESDF band out: best effort, keep last 1 (megabytes per sample; the newest only).
 inline constexpr QosSpec kEsdfBand{Reliability::kBestEffort, Durability::kVolatile, 1};
+/// Debris out: reliable, transient local, keep last 1 (a ground-crew tablet that joins late gets
+/// the current list at once).
+inline constexpr QosSpec kDebris{Reliability::kReliable, Durability::kTransientLocal, 1};
 /// Diagnostics out: reliable, keep last 20 (the auditor must not miss a cycle).
 inline constexpr QosSpec kDiagnostics{Reliability::kReliable, Durability::kVolatile, 20};
 /// Fleet summaries, in and out: reliable (a lost change message costs its receiver every change
@@ -50,6 +53,7 @@ inline constexpr const char* kVirtualObstacles = "rt/tarmac/virtual_obstacles";
 inline constexpr const char* kCostmap = "rt/tarmac/costmap";
 inline constexpr const char* kEsdfSlice = "rt/tarmac/esdf_slice";
 inline constexpr const char* kEsdfBand = "rt/tarmac/esdf_band";
+inline constexpr const char* kDebris = "rt/tarmac/debris";
 inline constexpr const char* kDiagnostics = "rt/tarmac/diagnostics";
 inline constexpr const char* kDiagnosticArray = "rt/diagnostics";
 }  // namespace topics

@@ -1,0 +1,121 @@
+// The debris report (core::extract_debris through the Mapper) on the simulator's scenes: nothing on
+// the empty apron, and the 10 and 20 cm cubes of `--scene debris` reported with ids that hold
+// from scan to scan, the 5 cm one (under min_obstacle_height_m) not.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <map>
+#include <optional>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tarmac/core/mapper.hpp"
+#include "tarmac/core/organised_scan.hpp"
+#include "tarmac/core/task_runner.hpp"
+#include "tarmac/sim/lidar.hpp"
+#include "tarmac/sim/scene_catalog.hpp"
+
+namespace tarmac {
+namespace {
+
+/// Drives `name` from x = start_x to x = stop_x, calling `each` with the debris after every scan.
+void drive(const char* name, double start_x, double stop_x,
+           const std::function<void(int, const std::vector<core::Debris>&)>& each) {
+  auto scene = sim::scene_drive(name, std::nullopt, 2.0);
+  ASSERT_TRUE(scene.has_value());
+  sim::SequenceParams seq;
+  seq.path = scene->path;
+  seq.path.start_W = {start_x, 0.0};
+  seq.lidar.beams = 64;
+  const sim::Lidar lidar(seq.lidar);
+  core::MapperParams params;
+  params.tsdf.enabled = false;  // not read by the debris
+  core::Mapper mapper(params);
+  core::SerialRunner runner;
+  Eigen::Isometry3d T_B_S = Eigen::Isometry3d::Identity();
+  T_B_S.translation().z() = seq.path.sensor_height_m;
+  std::vector<sim::LidarReturn> returns;
+  core::PointCloud cloud;
+  core::OrganisedScratch scratch;
+  const auto rows = static_cast<std::size_t>(seq.lidar.beams);
+  const auto cols = static_cast<std::size_t>(seq.lidar.azimuth_steps);
+  const int scans = static_cast<int>((stop_x - start_x) / seq.path.speed_mps * seq.rate_hz) + 1;
+  for (int i = 0; i < scans; ++i) {
+    const double t_s = seq.stamp_s(i);
+    lidar.scan(scene->scene, seq.path.T_W_S(t_s), t_s, nullptr, returns);
+    cloud.clear();
+    cloud.stamp_ns = static_cast<std::int64_t>(std::llround(t_s * 1e9));
+    cloud.points_S.assign(rows * cols,
+                          Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+    for (const auto& r : returns) {
+      cloud.points_S[static_cast<std::size_t>(r.beam) * cols +
+                     static_cast<std::size_t>(r.azimuth_step)] = r.point_S.cast<float>();
+    }
+    core::split_organised(cloud, rows, cols, scratch);
+    const auto scan = mapper.ingest(cloud, seq.path.T_W_base(t_s), T_B_S);
+    mapper.integrate(scan, runner);
+    mapper.update_costmap(mapper.vehicle_pose(), {}, cloud.stamp_ns, runner);
+    each(i, mapper.debris());
+  }
+}
+
+TEST(DebrisScene, EmptyApron_NoDebrisInAnyScan) {
+  int scans = 0;
+  drive("apron", 5.0, 20.0, [&](int i, const std::vector<core::Debris>& debris) {
+    ++scans;
+    EXPECT_TRUE(debris.empty()) << "scan " << i << ": " << debris.size() << " pieces, the first at "
+                                << debris.front().xy_W.transpose();
+  });
+  EXPECT_GT(scans, 40);
+}
+
+TEST(DebrisScene, CubesAreReportedWithIdsThatHold_TheFiveCentimetreOneNot) {
+  // The first row at x = 25: 10 cm at y = 0.6, 5 cm at y = −1.5, 20 cm at y = 3.0.
+  const auto near = [](const core::Debris& d, double x, double y) {
+    return (d.xy_W - Eigen::Vector2d(x, y)).norm() < 0.3;
+  };
+  // Every cube of 10 and 20 cm in the scene (small_objects.txt).
+  const std::vector<Eigen::Vector2d> cubes = {{25.0, 0.6}, {25.0, 3.0},  {45.0, -0.8}, {45.0, 1.5},
+                                              {65.0, 2.0}, {65.0, -3.0}, {88.0, -1.0}, {89.0, 2.3}};
+  const auto a_cube = [&](const core::Debris& d) {
+    return std::any_of(cubes.begin(), cubes.end(),
+                       [&](const Eigen::Vector2d& c) { return near(d, c.x(), c.y()); });
+  };
+  std::map<std::uint32_t, int> first_scan;  // id -> scan it first appeared
+  std::optional<std::uint32_t> id_10cm, id_20cm;
+  std::vector<core::Debris> last;
+  drive("debris", 5.0, 22.0, [&](int i, const std::vector<core::Debris>& debris) {
+    for (const core::Debris& d : debris) {
+      first_scan.try_emplace(d.id, i);
+      EXPECT_TRUE(a_cube(d)) << "scan " << i << ": debris at " << d.xy_W.transpose();
+      EXPECT_LE(d.height_m, 0.3);
+      // One id per cube: once named, a cube keeps its id.
+      if (near(d, 25.0, 0.6)) {
+        if (!id_10cm) id_10cm = d.id;
+        EXPECT_EQ(d.id, *id_10cm) << "scan " << i;
+      }
+      if (near(d, 25.0, 3.0)) {
+        if (!id_20cm) id_20cm = d.id;
+        EXPECT_EQ(d.id, *id_20cm) << "scan " << i;
+      }
+    }
+    last = debris;
+  });
+  ASSERT_TRUE(id_10cm.has_value()) << "the 10 cm cube never reported";
+  ASSERT_TRUE(id_20cm.has_value()) << "the 20 cm cube never reported";
+  EXPECT_NE(*id_10cm, *id_20cm);
+  ASSERT_GE(last.size(), 2u);
+  for (const core::Debris& d : last) {
+    EXPECT_LT(d.first_seen_ns, d.last_confirmed_ns);
+    EXPECT_GE(d.returns, 2u);
+    EXPECT_NEAR(d.ground_z_m, 0.0, 0.05);
+    EXPECT_LE(d.footprint_m, 0.5);
+  }
+}
+
+}  // namespace
+}  // namespace tarmac
