@@ -75,11 +75,15 @@ void LowObjects::add_to_index(std::uint32_t k) {
   indexed_column_[k] = static_cast<std::uint32_t>(c);
   next_[k] = head_[c];
   head_[c] = k;
+  flag_reach(c, 1);
+}
+
+void LowObjects::flag_reach(std::size_t c, std::uint8_t value) {
   const int cx = static_cast<int>(c % static_cast<std::size_t>(nx_));
   const int cy = static_cast<int>(c / static_cast<std::size_t>(nx_));
   for (int y = std::max(0, cy - kReach); y <= std::min(ny_ - 1, cy + kReach); ++y) {
     for (int x = std::max(0, cx - kReach); x <= std::min(nx_ - 1, cx + kReach); ++x) {
-      near_[static_cast<std::size_t>(y) * nx_ + x] = 1;
+      near_[static_cast<std::size_t>(y) * nx_ + x] = value;
     }
   }
 }
@@ -97,13 +101,7 @@ void LowObjects::unindex() {
   for (const std::uint32_t col : indexed_column_) {
     const auto c = static_cast<std::size_t>(col);
     head_[c] = kNone;
-    const int cx = static_cast<int>(c % static_cast<std::size_t>(nx_));
-    const int cy = static_cast<int>(c / static_cast<std::size_t>(nx_));
-    for (int y = std::max(0, cy - kReach); y <= std::min(ny_ - 1, cy + kReach); ++y) {
-      for (int x = std::max(0, cx - kReach); x <= std::min(nx_ - 1, cx + kReach); ++x) {
-        near_[static_cast<std::size_t>(y) * nx_ + x] = 0;
-      }
-    }
+    flag_reach(c, 0);
   }
 }
 

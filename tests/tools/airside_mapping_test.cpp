@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/sim_cloud.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/organised_scan.hpp"
 #include "tarmac/daemon/thread_pool.hpp"
@@ -29,22 +30,7 @@ namespace {
 
 using core::ColumnClass;
 
-/// A sweep's returns as the organised cloud a spinning LiDAR's driver publishes (beams by
-/// azimuth steps, NaN where nothing returned), split as tarmacd splits it: the returns and the
-/// beams without return, which observe the envelope above the sensor (FreeRule::kWholeEnvelope).
-void to_cloud(const std::vector<sim::LidarReturn>& returns, const sim::LidarParams& lidar,
-              core::PointCloud& cloud, core::OrganisedScratch& scratch) {
-  const auto rows = static_cast<std::size_t>(lidar.beams);
-  const auto cols = static_cast<std::size_t>(lidar.azimuth_steps);
-  cloud.clear();
-  cloud.points_S.assign(rows * cols,
-                        Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
-  for (const auto& r : returns) {
-    cloud.points_S[static_cast<std::size_t>(r.beam) * cols +
-                   static_cast<std::size_t>(r.azimuth_step)] = r.point_S.cast<float>();
-  }
-  core::split_organised(cloud, rows, cols, scratch);
-}
+using test::to_cloud;
 
 /// The same sweep as a driver that publishes lists sends it (HesaiLidar_ROS_2.0, velodyne
 /// without organize_cloud): the returns only, in firing order, each with its ring; the mapper

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/sim_cloud.hpp"
 #include "tarmac/core/mapper.hpp"
 #include "tarmac/core/organised_scan.hpp"
 #include "tarmac/core/task_runner.hpp"
@@ -41,21 +42,12 @@ void drive(const char* name, double start_x, double stop_x,
   std::vector<sim::LidarReturn> returns;
   core::PointCloud cloud;
   core::OrganisedScratch scratch;
-  const auto rows = static_cast<std::size_t>(seq.lidar.beams);
-  const auto cols = static_cast<std::size_t>(seq.lidar.azimuth_steps);
   const int scans = static_cast<int>((stop_x - start_x) / seq.path.speed_mps * seq.rate_hz) + 1;
   for (int i = 0; i < scans; ++i) {
     const double t_s = seq.stamp_s(i);
     lidar.scan(scene->scene, seq.path.T_W_S(t_s), t_s, nullptr, returns);
-    cloud.clear();
+    test::to_cloud(returns, seq.lidar, cloud, scratch);
     cloud.stamp_ns = static_cast<std::int64_t>(std::llround(t_s * 1e9));
-    cloud.points_S.assign(rows * cols,
-                          Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
-    for (const auto& r : returns) {
-      cloud.points_S[static_cast<std::size_t>(r.beam) * cols +
-                     static_cast<std::size_t>(r.azimuth_step)] = r.point_S.cast<float>();
-    }
-    core::split_organised(cloud, rows, cols, scratch);
     const auto scan = mapper.ingest(cloud, seq.path.T_W_base(t_s), T_B_S);
     mapper.integrate(scan, runner);
     mapper.update_costmap(mapper.vehicle_pose(), {}, cloud.stamp_ns, runner);

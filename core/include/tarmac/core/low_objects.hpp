@@ -109,6 +109,8 @@ class LowObjects {
   void index();
   void unindex();
   void add_to_index(std::uint32_t k);
+  /// Sets near_ over the columns within kReach of window column c.
+  void flag_reach(std::size_t c, std::uint8_t value);
   /// The object within match radius nearest to xy (kNone if none), searching the 3×3 columns.
   [[nodiscard]] std::uint32_t nearest(const Eigen::Vector2f& xy, std::int64_t column) const;
   void evidence(std::uint32_t k, const Eigen::Vector3f& p, float rise_m, const Scan& scan);
