@@ -125,7 +125,8 @@ std::string small_objects_summary(const SmallObjectTracker& tracker, double min_
     near += o.cycles_near;
     lethal += o.cycles_lethal;
     const double held = share(o.cycles_lethal, o.cycles_near);
-    if (o.cycles_near > 0 && held < worst) {
+    // The first object scored sets it: with every object at 100 % the worst is one of them.
+    if (o.cycles_near > 0 && (worst_name == "-" || held < worst)) {
       worst = held;
       worst_name = o.name;
     }
