@@ -291,7 +291,7 @@ std::size_t Mapper::top_up_tsdf_spares(std::size_t max_blocks) {
   return n.block_equivalents();
 }
 
-OccupancyUpdateStats Mapper::integrate(const FilteredScan& scan, TaskRunner& runner) {
+OccupancyUpdate Mapper::integrate(const FilteredScan& scan, TaskRunner& runner) {
   TARMAC_ASSERT(is_last_ingested(scan), "Mapper::integrate takes the last ingest()'s scan");
   map_.recenter(scan.T_W_B.translation(), runner);
   map_.set_observation_stamp(scan.stamp_ns);

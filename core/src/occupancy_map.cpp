@@ -119,6 +119,9 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   // empty each scan zero-filled ~150 KB per scan.
   scan_ground_cols_.assign(static_cast<std::size_t>(dims_.x()) * dims_.y() + 1, 0);
   hit_slots_.assign(kReservedHitSlots, 0);
+  hit_before_.assign(kReservedHitSlots, 0.0f);
+  hit_rise_before_.assign(kReservedHitSlots, 0);
+  changed_columns_.assign((static_cast<std::size_t>(dims_.x()) * dims_.y() + 63) / 64, 0);
   bricks_ = (dims_.array() + ((1 << kBrickShift) - 1)) / (1 << kBrickShift);
   brick_bits_.assign((static_cast<std::size_t>(bricks_.prod()) + 63) / 64, 0);
   brick_skip_.assign(static_cast<std::size_t>(bricks_.prod()), 0);
@@ -130,6 +133,19 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   warm(ray_order_, kReservedHitSlots);
   warm(ray_bucket_, kReservedHitSlots);
   ray_bucket_count_.assign(kBucketTasks * kDirBuckets, 0);
+}
+
+bool ChangedColumns::contains(int x, int y) const {
+  if (x < 0 || y < 0 || x >= width_ || y >= height_ || bits_.empty()) return false;
+  const auto col = static_cast<std::size_t>(wrap(ring_y0_ + y, height_)) * width_ +
+                   static_cast<std::size_t>(wrap(ring_x0_ + x, width_));
+  return ((bits_[col >> 6] >> (col & 63)) & 1) != 0;
+}
+
+std::size_t ChangedColumns::count() const {
+  std::size_t n = 0;
+  for (const std::uint64_t w : bits_) n += static_cast<std::size_t>(std::popcount(w));
+  return n;
 }
 
 int OccupancyMap::walk_lanes() const {
@@ -556,6 +572,7 @@ void OccupancyMap::reset() {
   std::fill(hit_floor_.begin(), hit_floor_.end(), kNoHitFloor);
   std::fill(state_.begin(), state_.end(), std::uint8_t{0});
   std::fill(floor_bits_.begin(), floor_bits_.end(), std::uint64_t{0});
+  std::fill(changed_columns_.begin(), changed_columns_.end(), std::uint64_t{0});
   // The static layer too: a rebuild re-derives it from the retained scans (what was static
   // before the correction sits in the uncorrected frame).
   static_->clear();

@@ -96,6 +96,7 @@ void Cycle::add_to_tick(const ScanResult& r) {
   ++tick_.scans;
   tick_.points_in += r.filtered.counts.input;
   tick_.points_used += r.filtered.counts.kept;
+  tick_.columns_changed += r.occupancy.changed.count();
   tick_.ingest_ms += r.ingest_ms;
   tick_.integrate_ms += r.integrate_ms;
   tick_.tsdf_ms += r.tsdf_ms;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <mutex>
 #include <utility>
 
@@ -394,6 +395,8 @@ void Executor::Impl::report_tick(std::chrono::steady_clock::time_point start, co
   report.points_used = done.points_used;
   report.map_memory_bytes = mapper.occupancy().memory_bytes();
   report.debris = static_cast<std::uint32_t>(mapper.debris().size());
+  report.columns_changed = static_cast<std::uint32_t>(
+      std::min<std::uint64_t>(done.columns_changed, std::numeric_limits<std::uint32_t>::max()));
   if (fleet) fleet->fill_report(tick_ns, cycle->fleet_counts(), report);
   {
     // Before the report goes out, so whoever reads the report and then the totals agrees.

@@ -31,7 +31,7 @@ struct Scan {
   std::vector<Eigen::Vector3f> clearing;
 };
 
-inline OccupancyUpdateStats integrate(OccupancyMap& map, const Scan& scan) {
+inline OccupancyUpdate integrate(OccupancyMap& map, const Scan& scan) {
   SerialRunner runner;
   return map.integrate(scan.origin, scan.points, scan.clearing, runner);
 }

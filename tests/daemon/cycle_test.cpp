@@ -56,6 +56,10 @@ TEST(Cycle, TsdfQuota_ShedsTheScanThatWouldPassItAndRestartsEachTick) {
   EXPECT_EQ(second.tsdf, nullptr);
   EXPECT_TRUE(second.tsdf_shed);
   EXPECT_GT(second.occupancy.voxel_visits, 0u);  // the occupancy still takes the scan
+  // The tick sums what each scan changed.
+  const std::size_t second_changed = second.occupancy.changed.count();
+  EXPECT_GT(second_changed, 0u);
+  EXPECT_GT(cycle.tick().columns_changed, second_changed);
   EXPECT_EQ(cycle.tick().scans, 2u);
   EXPECT_EQ(cycle.tick().tsdf_scans, 1u);
   EXPECT_EQ(cycle.tick().tsdf_shed, 1u);
@@ -64,6 +68,7 @@ TEST(Cycle, TsdfQuota_ShedsTheScanThatWouldPassItAndRestartsEachTick) {
 
   cycle.begin();  // a new tick: a new quota
   EXPECT_EQ(cycle.tick().scans, 0u);
+  EXPECT_EQ(cycle.tick().columns_changed, 0u);
   const Cycle::ScanResult& third = cycle.scan(b, base_at(0.1), sensor_on_base());
   EXPECT_NE(third.tsdf, nullptr);
   EXPECT_EQ(cycle.tick().tsdf_shed, 0u);

@@ -461,5 +461,14 @@ TEST(CycleReport, CarriesTheDebrisCount) {
   EXPECT_EQ(from_cycle_report(msg).debris, 3u);
 }
 
+TEST(CycleReport, CarriesTheColumnsChanged) {
+  CycleReport r;
+  r.columns_changed = 160'000;
+  CycleReportMsg msg;
+  fill_cycle_report(r, msg);
+  EXPECT_EQ(msg.columns_changed(), 160'000u);
+  EXPECT_EQ(from_cycle_report(msg).columns_changed, 160'000u);
+}
+
 }  // namespace
 }  // namespace tarmac::transport

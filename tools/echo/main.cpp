@@ -84,12 +84,13 @@ void print(const transport::CycleReportMsg& m) {
     stages += buf;
   }
   std::printf(
-      "cycle %llu tick %.3f jitter %.3f ms skipped %u: %.2f/%.0f ms%s, points %llu/%llu, debris "
-      "%u%s\n",
+      "cycle %llu tick %.3f jitter %.3f ms skipped %u: %.2f/%.0f ms%s, points %llu/%llu, columns "
+      "changed %u, debris %u%s\n",
       static_cast<unsigned long long>(m.cycle_index()), seconds(m.tick_time()), m.wake_jitter_ms(),
       m.skipped_ticks(), m.cycle_duration_ms(), m.cycle_budget_ms(), stages.c_str(),
       static_cast<unsigned long long>(m.points_used()),
-      static_cast<unsigned long long>(m.points_in()), m.debris(), m.overrun() ? " OVERRUN" : "");
+      static_cast<unsigned long long>(m.points_in()), m.columns_changed(), m.debris(),
+      m.overrun() ? " OVERRUN" : "");
 }
 
 void print(const transport::DebrisArrayMsg& m) {

@@ -319,7 +319,7 @@ void run_sequence(const Options& opt, Inputs& in, core::Mapper& mapper, daemon::
     const daemon::Cycle::ScanResult& r = cycle.scan(cloud, T_W_B, T_B_S);
     const core::FilteredScan& scan = r.filtered;
     const core::FilterCounts& counts = scan.counts;
-    const core::OccupancyUpdateStats& occ = r.occupancy;
+    const core::OccupancyUpdate& occ = r.occupancy;
     if (r.tsdf != nullptr) {
       run.tsdf_samples += r.tsdf->samples;
       run.tsdf_updates += r.tsdf->voxel_updates;

@@ -660,6 +660,7 @@ void fill_cycle_report(const CycleReport& r, CycleReportMsg& msg) {
   }
   msg.fleet_newest_age_ms(static_cast<float>(r.fleet_newest_age_ms));
   msg.debris(r.debris);
+  msg.columns_changed(r.columns_changed);
 }
 
 CycleReport from_cycle_report(const CycleReportMsg& msg) {
@@ -692,6 +693,7 @@ CycleReport from_cycle_report(const CycleReportMsg& msg) {
   }
   r.fleet_newest_age_ms = msg.fleet_newest_age_ms();
   r.debris = msg.debris();
+  r.columns_changed = msg.columns_changed();
   return r;
 }
 

@@ -37,15 +37,55 @@ struct MissLanes {
                 OccupancyMap::kUnknown} {}
 };
 
+/// The window columns (one bit each, ring order) whose voxels the apply pass changed: ORed in by
+/// every apply task, relaxed atomics (the union does not depend on the tasks' order).
+struct ColumnMarks {
+  std::uint64_t* bits;
+  std::size_t plane;  ///< voxels per layer: slot s is in column s mod plane
+
+  /// Columns [first, first + 64) of `cols` (bit k: column first + k), all inside the layer.
+  void add_run(std::size_t first, std::uint64_t cols) const {
+    if (cols == 0) return;
+    const std::size_t w = first >> 6;
+    const unsigned shift = first & 63;
+    add_word(w, cols << shift);
+    if (shift != 0) add_word(w + 1, cols >> (64 - shift));
+  }
+  void add_word(std::size_t w, std::uint64_t cols) const {
+    if (cols == 0) return;
+    std::atomic_ref<std::uint64_t> word(bits[w]);
+    // Most words already hold these columns (layers above one another): read before writing.
+    if ((word.load(std::memory_order_relaxed) & cols) != cols) {
+      word.fetch_or(cols, std::memory_order_relaxed);
+    }
+  }
+  /// The columns of mark word `wi`'s voxels in `voxels`: the word may run into the next layer
+  /// (or layers, in a window smaller than 64 columns), whose columns start again at 0.
+  void add(std::size_t wi, std::uint64_t voxels) const {
+    std::size_t col = (wi << 6) % plane;
+    while (voxels != 0) {
+      const std::size_t in_layer = plane - col;
+      if (in_layer >= 64) {
+        add_run(col, voxels);
+        return;
+      }
+      add_run(col, voxels & ((std::uint64_t{1} << in_layer) - 1));
+      voxels >>= in_layer;
+      col = 0;
+    }
+  }
+};
+
 /// The miss of every voxel of one mark word (64 consecutive slots at `l`, bit k of `marks`
 /// for slot k) that reads free or unknown, four lanes at a time: the same arithmetic as one at a
 /// time (kUnknown counts as 0, then max(l + miss, min)); unmarked and occupied lanes are
 /// written back unchanged. Sets in `occupied` the marked voxels reading occupied (left to the
-/// caller's static-layer logic), in `void_heights` those that reach the lower clamp now and in
-/// `at_floor` every free one that reads the lower clamp after the miss.
+/// caller's static-layer logic), in `void_heights` those that reach the lower clamp now, in
+/// `at_floor` every free one that reads the lower clamp after the miss and in `changed` those
+/// whose log-odds the miss changed.
 inline void miss_free_word(float* l, std::uint64_t marks, const MissLanes& c,
                            std::uint64_t& occupied, std::uint64_t& void_heights,
-                           std::uint64_t& at_floor) {
+                           std::uint64_t& at_floor, std::uint64_t& changed) {
   const Int4 lane = {1, 2, 4, 8};
   for (int g = 0; g < 16; ++g) {
     const auto nibble = static_cast<std::int32_t>((marks >> (4 * g)) & 15);
@@ -66,6 +106,7 @@ inline void miss_free_word(float* l, std::uint64_t marks, const MissLanes& c,
     occupied |= std::uint64_t{lane_bits(marked & (v > c.zero))} << (4 * g);
     void_heights |= std::uint64_t{lane_bits(voided)} << (4 * g);
     at_floor |= std::uint64_t{lane_bits(free & (next == c.min))} << (4 * g);
+    changed |= std::uint64_t{lane_bits(free & (next != v))} << (4 * g);
   }
 }
 
@@ -81,7 +122,8 @@ struct ApplyPass {
   const MissLanes& lanes;
   float l_miss, l_min;
   std::vector<std::uint32_t>& candidates;
-  std::uint64_t updates = 0;  ///< misses given (voxels at the floor count: a miss holds them)
+  ColumnMarks changed_columns;  ///< the columns of the voxels whose log-odds a miss changed
+  std::uint64_t updates = 0;    ///< misses given (voxels at the floor count: a miss holds them)
   /// Column observation times (OccupancyMap::track_column_observations), or nullptr: the
   /// columns of marked voxels in band layers get `stamp`. Two tasks may store the same stamp
   /// into one column (other layers): relaxed atomic stores.
@@ -147,10 +189,11 @@ struct ApplyPass {
     std::uint64_t& at_floor = floor_bits[wi];
     const std::size_t base = wi << 6;
     std::uint64_t occupied = 0;  // marked voxels reading occupied: left to miss_occupied()
+    std::uint64_t changed = 0;
     if (bit_count(marks) >= kDenseWord) {
       // Mostly free space near the sensor: the whole word's voxels four at a time.
       std::uint64_t void_heights = 0;
-      miss_free_word(log_odds + base, marks, lanes, occupied, void_heights, at_floor);
+      miss_free_word(log_odds + base, marks, lanes, occupied, void_heights, at_floor, changed);
       for (; void_heights != 0; void_heights &= void_heights - 1) {
         rise_cm[base + static_cast<std::size_t>(std::countr_zero(void_heights))] = 0;
       }
@@ -170,9 +213,12 @@ struct ApplyPass {
           if (l > l_min) rise_cm[s] = 0;
           at_floor |= std::uint64_t{1} << (s & 63);
         }
+        if (next != l) changed |= std::uint64_t{1} << (s & 63);
         l = next;  // a miss only lowers
       }
     }
+    // (A rise is voided only with its log-odds lowered: the log-odds say what changed.)
+    changed_columns.add(wi, changed);
     for (; occupied != 0; occupied &= occupied - 1) {
       candidates.push_back(
           static_cast<std::uint32_t>(base + static_cast<std::size_t>(std::countr_zero(occupied))));

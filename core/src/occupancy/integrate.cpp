@@ -35,7 +35,7 @@ constexpr float kNoGround = std::numeric_limits<float>::infinity();
 
 void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
                                   std::span<const Eigen::Vector3f> points_W,
-                                  const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats) {
+                                  const Eigen::Vector3d& up_W, OccupancyUpdate& stats) {
   // a) Per return: its slot and window column, or none (beyond max range or outside the
   //    window), and its height along up_W; and the scan's own ground: the lowest return
   //    per window column (only the columns this scan touched are reset next time).
@@ -238,8 +238,7 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
   }
 }
 
-void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
-                              OccupancyUpdateStats& stats) {
+void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdate& stats) {
   const std::size_t n_points = points_W.size();
   const double v_m = params_.voxel_size_m;
   const std::uint32_t* const slot_of_hit = hit_slot_.data();
@@ -247,7 +246,11 @@ void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
   // One hit per voxel, in point order (promotions enter the static layer in that order).
   const int promote = params_.static_promote_scans;
   hit_slots_.resize(std::max(hit_slots_.size(), n_points));
+  hit_before_.resize(hit_slots_.size());
+  hit_rise_before_.resize(hit_slots_.size());
   std::uint32_t* const first_hits = hit_slots_.data();
+  float* const before = hit_before_.data();
+  std::uint8_t* const rise_before = hit_rise_before_.data();
   std::size_t n_first = 0;
   float* const log_odds = log_odds_.data();
   std::uint8_t* const state = state_.data();
@@ -278,8 +281,10 @@ void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
     if ((word & bit) == 0) {
       word |= bit;
       floor_bits[s >> 6] &= ~bit;  // a hit lifts it off the lower clamp
-      first_hits[n_first++] = s;
       float& l = log_odds[s];
+      before[n_first] = l;
+      rise_before[n_first] = rise_cm[s];
+      first_hits[n_first++] = s;
       // Reading free or unknown until now: its lowest return starts again from this one.
       const bool was_occupied = l > 0.0f;
       hit_floor[s] = was_occupied ? std::min(hit_floor[s], here) : here;
@@ -304,8 +309,18 @@ void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
     }
   }
   n_hit_slots_ = n_first;
+  // The columns the hits changed: a voxel at the upper clamp hit again with the same highest
+  // return did not change.
+  const std::size_t plane = static_cast<std::size_t>(dims_.x()) * dims_.y();
+  std::uint64_t* const changed = changed_columns_.data();
+  for (std::size_t k = 0; k < n_first; ++k) {
+    const std::uint32_t s = first_hits[k];
+    if (log_odds[s] != before[k] || rise_cm[s] != rise_before[k]) {
+      const std::size_t col = s % plane;
+      changed[col >> 6] |= std::uint64_t{1} << (col & 63);
+    }
+  }
   if (!column_observed_ns_.empty()) {
-    const std::size_t plane = static_cast<std::size_t>(dims_.x()) * dims_.y();
     for (std::size_t k = 0; k < n_first; ++k) {
       const std::size_t z = first_hits[k] / plane;
       if (in_band_[z] != 0) column_observed_ns_[first_hits[k] - z * plane] = observation_stamp_ns_;
@@ -315,12 +330,13 @@ void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W,
   stats.promotions += promotions;
 }
 
-OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
-                                             std::span<const Eigen::Vector3f> points_W,
-                                             std::span<const Eigen::Vector3f> clearing_dirs_W,
-                                             TaskRunner& runner, const Eigen::Vector3d& up_W) {
-  OccupancyUpdateStats stats;
+OccupancyUpdate OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
+                                        std::span<const Eigen::Vector3f> points_W,
+                                        std::span<const Eigen::Vector3f> clearing_dirs_W,
+                                        TaskRunner& runner, const Eigen::Vector3d& up_W) {
+  OccupancyUpdate stats;
   if (!placed_) recenter(origin_W);
+  std::fill(changed_columns_.begin(), changed_columns_.end(), std::uint64_t{0});
   const double max_range = params_.max_range_m;
   const double clear_range = params_.clearing_range_m;
 
@@ -386,9 +402,17 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
 
   runner.parallel_for(kApplyTasks, [&](std::size_t task) {
     candidates_[task].clear();
-    ApplyPass pass{task_bits,        hit_bits_.data(), floor_bits_.data(),
-                   log_odds_.data(), rise_cm_.data(),  miss_lanes,
-                   l_miss_,          l_min_,           candidates_[task]};
+    ApplyPass pass{
+        task_bits,
+        hit_bits_.data(),
+        floor_bits_.data(),
+        log_odds_.data(),
+        rise_cm_.data(),
+        miss_lanes,
+        l_miss_,
+        l_min_,
+        candidates_[task],
+        ColumnMarks{changed_columns_.data(), static_cast<std::size_t>(dims_.x()) * dims_.y()}};
     if (!column_observed_ns_.empty()) {
       pass.column_stamp = column_observed_ns_.data();
       pass.in_band = in_band_.data();
@@ -414,10 +438,12 @@ OccupancyUpdateStats OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   stats.rays = n_rays;
   for (const auto v : task_visits) stats.voxel_visits += v;
   for (const auto u : task_updates) stats.miss_updates += u;
+  stats.changed = ChangedColumns(changed_columns_, dims_.x(), dims_.y(), ring_min[0], ring_min[1],
+                                 Eigen::Vector2i(min_.x(), min_.y()));
   return stats;
 }
 
-void OccupancyMap::miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats) {
+void OccupancyMap::miss_occupied(TaskRunner& runner, OccupancyUpdate& stats) {
   // a) Decide, reading only (so that no decision sees another's write): which of the occupied
   //    voxels a ray crossed this scan get a miss. A voxel with observed free space below it and
   //    none above (unknown, or occupied) is the underside of something: an aircraft's belly,
@@ -475,6 +501,8 @@ void OccupancyMap::miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats
       const std::size_t s = list[k];
       float& l = log_odds_[s];
       std::uint8_t& st = state_[s];
+      const float l_before = l;
+      const std::uint8_t rise_before = rise_cm_[s];
       if ((st & kStatic) == 0) {
         l = after_miss(l, l_miss_, l_min_);  // reads occupied: never kUnknown
         if (l <= 0.0f) {  // reads free: the run of hits is broken, the heights are void
@@ -490,6 +518,10 @@ void OccupancyMap::miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats
       } else {
         ++st;
         l = std::max(l + l_miss_, l_hit_);  // a static voxel reads at least one hit
+      }
+      if (l != l_before || rise_cm_[s] != rise_before) {
+        const std::size_t col = s % layer;
+        changed_columns_[col >> 6] |= std::uint64_t{1} << (col & 63);
       }
     }
   }

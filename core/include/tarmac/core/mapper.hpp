@@ -110,7 +110,7 @@ class Mapper {
   std::size_t top_up_tsdf_spares(std::size_t max_blocks);
   /// Stage 2: moves the window with the vehicle and integrates `scan`; returns the voxels it
   /// updated (counts). @pre `scan` is what the last ingest() returned.
-  OccupancyUpdateStats integrate(const FilteredScan& scan, TaskRunner& runner);
+  OccupancyUpdate integrate(const FilteredScan& scan, TaskRunner& runner);
   /// Stage 2b: integrates `scan` into the TSDF (sparse, whole site); returns the blocks it
   /// updated. Empty when tsdf.enabled is false, or during a rebuild (rebuild_step() then
   /// integrates the scan in stamp order). @pre `scan` is what the last ingest() returned.

@@ -78,8 +78,42 @@ struct OccupancyParams {
 /// Integer voxel coordinates on the world lattice: voxel i covers [i·v, (i+1)·v).
 using VoxelIndex = Eigen::Vector3i;
 
-/// What one scan changed, for later stages and reports.
-struct OccupancyUpdateStats {
+/// The window columns one integrate() changed: those where a voxel's log-odds or sub-voxel rise
+/// (OccupancyMap::ring_layer_rise_cm) now differs from before the scan. A view of the map's
+/// storage, valid until its next integrate() or reset() (a recenter() in between does not move
+/// it: it keeps the window of its scan); empty before the first.
+class ChangedColumns {
+ public:
+  ChangedColumns() = default;
+  /// `bits`: one per window column in ring order (ring_y · width + ring_x); `ring_x0`, `ring_y0`:
+  /// the ring column of window column (0, 0); `window_min`: its world voxel index (x, y).
+  ChangedColumns(std::span<const std::uint64_t> bits, int width, int height, int ring_x0,
+                 int ring_y0, Eigen::Vector2i window_min)
+      : bits_(bits),
+        width_(width),
+        height_(height),
+        ring_x0_(ring_x0),
+        ring_y0_(ring_y0),
+        window_min_(std::move(window_min)) {}
+  /// Whether window column (x, y), counted from the window's lowest corner like the costmap's
+  /// cells, changed; false outside the window.
+  [[nodiscard]] bool contains(int x, int y) const;
+  /// How many columns changed.
+  [[nodiscard]] std::size_t count() const;
+  /// World voxel index (x, y) of window column (0, 0) when the scan was integrated.
+  [[nodiscard]] const Eigen::Vector2i& window_min() const { return window_min_; }
+  [[nodiscard]] int width() const { return width_; }
+  [[nodiscard]] int height() const { return height_; }
+
+ private:
+  std::span<const std::uint64_t> bits_;
+  int width_ = 0, height_ = 0, ring_x0_ = 0, ring_y0_ = 0;
+  Eigen::Vector2i window_min_{0, 0};
+};
+
+/// What one scan changed, for later stages and reports: the columns, and counts.
+struct OccupancyUpdate {
+  ChangedColumns changed;            ///< the window columns whose voxels this scan changed
   std::uint64_t rays = 0;            ///< rays cast (returns + clearing beams)
   std::uint64_t hit_updates = 0;     ///< voxels updated as occupied
   std::uint64_t miss_updates = 0;    ///< voxels updated as free
@@ -135,11 +169,11 @@ class OccupancyMap {
   /// `up_W` is the vehicle's up axis (its base frame's z in the world frame): heights of returns
   /// above the scan's ground (ring_layer_rise_cm) are measured along it, so a world frame that
   /// is not gravity-aligned does not tilt them. A zero or non-finite `up_W` is taken as +z.
-  OccupancyUpdateStats integrate(const Eigen::Vector3d& origin_W,
-                                 std::span<const Eigen::Vector3f> points_W,
-                                 std::span<const Eigen::Vector3f> clearing_dirs_W,
-                                 TaskRunner& runner,
-                                 const Eigen::Vector3d& up_W = Eigen::Vector3d::UnitZ());
+  /// Returns the columns it changed (later stages need look at no other) and counts.
+  OccupancyUpdate integrate(const Eigen::Vector3d& origin_W,
+                            std::span<const Eigen::Vector3f> points_W,
+                            std::span<const Eigen::Vector3f> clearing_dirs_W, TaskRunner& runner,
+                            const Eigen::Vector3d& up_W = Eigen::Vector3d::UnitZ());
 
   /// Per window column, the time of its last observation (fleet sharing, docs/fleet.md): a
   /// return, or a ray passing, in one of the window-relative layers [band_lo, band_hi] (the
@@ -254,7 +288,7 @@ class OccupancyMap {
   /// integrate()'s hit pass: each return's slot, column, height and rise above the scan's ground,
   /// then one hit per voxel in point order (the static layer's promotions too).
   void integrate_hits(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vector3f> points_W,
-                      const Eigen::Vector3d& up_W, OccupancyUpdateStats& stats);
+                      const Eigen::Vector3d& up_W, OccupancyUpdate& stats);
   /// integrate_hits' steps. Each return's slot and window column (hit_slot_, kNoSlot for none:
   /// not finite, beyond max range or outside the window); returns those outside the window.
   std::uint64_t hit_voxels(const Eigen::Vector3d& origin_W,
@@ -264,10 +298,10 @@ class OccupancyMap {
   /// Each return's rise (cm) above the scan's second-lowest return within ground_radius_m.
   void hit_rises(std::size_t n_points);
   /// One hit per voxel in point order, its static-layer state and its sub-voxel heights.
-  void apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdateStats& stats);
+  void apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdate& stats);
   /// integrate()'s last step: the misses of the occupied voxels a ray crossed (candidates_),
   /// decided against the map as the free-space misses left it, then applied.
-  void miss_occupied(TaskRunner& runner, OccupancyUpdateStats& stats);
+  void miss_occupied(TaskRunner& runner, OccupancyUpdate& stats);
   /// Clears the floor bits of slots [first, first + count) (their log-odds are being rewritten).
   void clear_floor_bits(std::size_t first, std::size_t count);
   /// The brick of a voxel given by its ring coordinates: bricks are 8³ voxels of ring space
@@ -342,6 +376,13 @@ class OccupancyMap {
   /// skips it without reading its log-odds. Every other write of a voxel's log-odds clears
   /// its bit (a clear bit says nothing).
   std::vector<std::uint64_t> floor_bits_;
+  /// One bit per window column, ring order: the columns the scan being integrated changed
+  /// (integrate()'s ChangedColumns; cleared as the next scan starts).
+  std::vector<std::uint64_t> changed_columns_;
+  /// Per voxel the hit pass updates (hit_slots_' order): its log-odds and rise before the scan,
+  /// to tell whether the hits changed it.
+  std::vector<float> hit_before_;
+  std::vector<std::uint8_t> hit_rise_before_;
   std::vector<std::vector<std::uint64_t>> free_bits_;
   /// Large windows only: per ray task, one bit per mark word its rays marked (a word of these
   /// covers 4096 voxels), so the apply pass reads only those words.

@@ -39,7 +39,7 @@ class Cycle {
   /// the scan in stamp order).
   struct ScanResult {
     core::FilteredScan filtered;  ///< what ingest() left (a view, valid until the next scan())
-    core::OccupancyUpdateStats occupancy;
+    core::OccupancyUpdate occupancy;
     const core::TsdfUpdate* tsdf = nullptr;
     bool tsdf_shed = false;
     core::RebuildStep rebuild;  ///< scans == 0: no rebuild step ran
@@ -54,6 +54,9 @@ class Cycle {
     std::uint64_t tsdf_points = 0;  ///< counted against the quota
     std::uint64_t points_in = 0;    ///< returns received
     std::uint64_t points_used = 0;  ///< kept by the filters
+    /// Window columns whose voxels the tick's scans changed, each scan's summed (a column two
+    /// scans changed counts twice).
+    std::uint64_t columns_changed = 0;
     std::uint64_t scans_reintegrated = 0;
     std::uint64_t rebuilds_completed = 0;  ///< rebuilt windows swapped in
     double ingest_ms = 0.0, integrate_ms = 0.0, tsdf_ms = 0.0, rebuild_ms = 0.0;

@@ -61,6 +61,9 @@ struct CycleReport {
   std::vector<FleetPeerReport> fleet_peers;  ///< empty with fleet sharing off
   double fleet_newest_age_ms = -1.0;         ///< tick time minus the newest peer cell used; -1 none
   std::uint32_t debris = 0;  ///< debris pieces in the latest costmap's debris report
+  /// Window columns the tick's scans changed (each scan's summed): 0 while scans arrive says
+  /// they add nothing to the map.
+  std::uint32_t columns_changed = 0;
 };
 
 /// The DiagnosticArray tarmacd publishes now and then: one status with key/value pairs.
