@@ -118,6 +118,15 @@ Status CostmapParams::validate() const {
   return Ok{};
 }
 
+std::int64_t standing_cell(const LowObject& o, const Grid2D<float>& ground_z_m) {
+  const GridGeometry2D& g = ground_z_m.geometry();
+  const auto c = g.cell_of(o.xy_W.x(), o.xy_W.y());
+  if (!c) return -1;
+  const std::int64_t i = static_cast<std::int64_t>(c->y()) * g.width + c->x();
+  const auto ground = static_cast<double>(ground_z_m.cells()[static_cast<std::size_t>(i)]);
+  return stands_on_ground(o, ground, g.resolution_m) ? i : -1;
+}
+
 std::uint8_t nav2_cost(double distance_m, const CostmapParams& p) {
   if (distance_m <= 0.0) return 254;
   if (distance_m <= p.inscribed_radius_m) return 253;

@@ -46,13 +46,6 @@ std::uint32_t find(std::vector<std::uint32_t>& parent, std::uint32_t k) {
   return k;
 }
 
-/// The costmap's cell of a map-frame point, or -1 outside.
-std::int64_t cell_index(const GridGeometry2D& g, double x, double y) {
-  const auto c = g.cell_of(x, y);
-  if (!c) return -1;
-  return static_cast<std::int64_t>(c->y()) * g.width + c->x();
-}
-
 /// Chains the confirmed objects whose centres lie within kDebrisLinkM into pieces: fills
 /// scratch.order (by x, then index) and scratch.parent (roots are the lowest slot).
 void link_objects(const LowObjects& objects, DebrisScratch& s) {
@@ -152,7 +145,7 @@ bool small_and_apart(const LowObjects& objects, const CostmapLayers& layers,
   s.blob.clear();
   for (const std::uint32_t k : members) {
     // On the grid: every member stands on its column's ground, checked before.
-    const auto c = static_cast<std::uint32_t>(cell_index(g, all[k].xy_W.x(), all[k].xy_W.y()));
+    const auto c = static_cast<std::uint32_t>(standing_cell(all[k], layers.ground_z_m));
     if (s.in_blob[c] == 0) {
       s.in_blob[c] = 1;
       s.blob.push_back(c);
@@ -174,7 +167,6 @@ bool small_and_apart(const LowObjects& objects, const CostmapLayers& layers,
 bool sum_piece(const LowObjects& objects, const CostmapLayers& layers,
                std::span<const std::uint32_t> members, Debris& d) {
   const auto all = objects.all();
-  const GridGeometry2D& g = layers.column_class.geometry();
   d = Debris{};
   d.id = std::numeric_limits<std::uint32_t>::max();
   d.first_seen_ns = std::numeric_limits<std::int64_t>::max();
@@ -182,11 +174,7 @@ bool sum_piece(const LowObjects& objects, const CostmapLayers& layers,
   double wx = 0.0, wy = 0.0, weight = 0.0;
   for (const std::uint32_t k : members) {
     const LowObject& o = all[k];
-    const std::int64_t c = cell_index(g, o.xy_W.x(), o.xy_W.y());
-    if (c < 0 ||
-        !stands_on_ground(o, static_cast<double>(layers.ground_z_m.cells()[c]), g.resolution_m)) {
-      return false;
-    }
+    if (standing_cell(o, layers.ground_z_m) < 0) return false;
     d.id = std::min(d.id, o.id);
     wx += static_cast<double>(o.returns) * o.xy_W.x();
     wy += static_cast<double>(o.returns) * o.xy_W.y();

@@ -126,6 +126,23 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
     }
   });
 
+  // Confirmed low objects, as the costmap marks them (standing_cell): occupied from their
+  // column's ground voxel up to the voxel of their top, so a 10 cm piece of debris the voxels
+  // lost is in the band as it is in the slice.
+  const LowObjects& objects = map.low_objects();
+  for (const LowObject& o : objects.all()) {
+    if (!objects.confirmed(o)) continue;
+    const std::int64_t c = standing_cell(o, layers.ground_z_m);
+    if (c < 0) continue;
+    const int top = static_cast<int>(std::floor(static_cast<double>(o.top_z_W) / v)) - wmin.z();
+    const int lz0 = std::max(0, layers.ground_layer[static_cast<std::size_t>(c)] - z0);
+    const int lz1 = std::min(nb - 1, top - z0);
+    for (int lz = lz0; lz <= lz1; ++lz) {
+      out.states[static_cast<std::size_t>(lz) * plane + static_cast<std::size_t>(c)] =
+          CellState::kOccupied;
+    }
+  }
+
   // Virtual zones, in their order (each voxel's result does not depend on it: zones only add),
   // on the cells the costmap burns them into (its geometry is the window's).
   for (const auto& zone : zones) {

@@ -167,7 +167,9 @@ std::size_t OccupancyMap::memory_bytes() const {
       (scan_ground_z_.capacity() + scan_ground2_z_.capacity() + scan_ground_near_z_.capacity()) *
           sizeof(float) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
-      (hit_bits_.capacity() + floor_bits_.capacity()) * sizeof(std::uint64_t) +
+      (hit_bits_.capacity() + floor_bits_.capacity() + changed_columns_.capacity()) *
+          sizeof(std::uint64_t) +
+      hit_before_.capacity() * sizeof(float) + hit_rise_before_.capacity() +
       hit_slots_.capacity() * sizeof(std::uint32_t) +
       (hit_slot_.capacity() + hit_column_.capacity()) * sizeof(std::uint32_t) +
       hit_height_.capacity() * sizeof(float) + hit_rise_.capacity() +

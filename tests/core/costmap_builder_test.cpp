@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tarmac/core/esdf_band.hpp"
+
 #include "../support/apron_scene.hpp"
 
 namespace tarmac::core {
@@ -193,6 +195,32 @@ TEST_F(Envelope, DebrisStaysLethalUntilRaysGoPastWhereItStood) {
   };
   build();
   EXPECT_GE(lethal_round(), 1) << "nothing went past it";
+  // The 3D band agrees with the slice: the lethal cell's column holds an occupied voxel, though
+  // the voxel's own heights (the face's 2 cm) no longer rise.
+  EsdfBandParams bp;
+  bp.enabled = true;
+  EsdfBand band;
+  build_esdf_band(map_, layers_, params(), bp, Eigen::Isometry3d::Identity(), {}, 0, band, runner);
+  const GridGeometry2D& g = layers_.costmap.geometry();
+  int lethal_columns = 0, in_band = 0;
+  for (const double x : {2.9, 3.1}) {
+    for (const double y : {-4.1, -3.9}) {
+      if (cost_at(x, y) != kCostLethal) continue;
+      ++lethal_columns;
+      const auto cell = g.cell_of(x, y);
+      const std::size_t plane = g.cell_count();
+      for (int lz = 0; lz < band.field.dims.z(); ++lz) {
+        const std::size_t i =
+            lz * plane + static_cast<std::size_t>(cell->y()) * g.width + cell->x();
+        if (band.states[i] == CellState::kOccupied) {
+          ++in_band;
+          break;
+        }
+      }
+    }
+  }
+  EXPECT_GE(lethal_columns, 1);
+  EXPECT_EQ(in_band, lethal_columns) << "every lethal cell of the debris is in the band";
   // The apron whole, with the beams through where it stood, 2 to 6 cm over the apron, landing
   // on it behind the spot.
   ASSERT_EQ(map_.low_objects().all().size(), 1u);

@@ -301,14 +301,11 @@ void classify_columns(const CostmapPass& pass) {
 void mark_low_objects(const CostmapPass& pass) {
   const LowObjects& objects = pass.map.low_objects();
   auto& classes = pass.out.column_class.cells();
-  const double v = pass.v;
   for (const LowObject& o : objects.all()) {
     if (!objects.confirmed(o)) continue;
-    const auto x = static_cast<std::int64_t>(std::floor(o.xy_W.x() / v)) - pass.wmin.x();
-    const auto y = static_cast<std::int64_t>(std::floor(o.xy_W.y() / v)) - pass.wmin.y();
-    if (x < 0 || y < 0 || x >= pass.nx || y >= pass.ny) continue;
-    const auto i = static_cast<std::size_t>(y * pass.nx + x);
-    if (!stands_on_ground(o, static_cast<double>(pass.out.ground_z_m.cells()[i]), v)) continue;
+    const std::int64_t c = standing_cell(o, pass.out.ground_z_m);
+    if (c < 0) continue;
+    const auto i = static_cast<std::size_t>(c);
     classes[i] = static_cast<std::uint8_t>(ColumnClass::kObstacle);
     pass.out.esdf_input[i] = CellState::kOccupied;
   }

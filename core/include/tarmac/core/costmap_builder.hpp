@@ -146,6 +146,12 @@ void build_costmap(const OccupancyMap& map, const CostmapParams& params,
                    std::int64_t stamp_ns, CostmapLayers& out, TaskRunner& runner,
                    CostmapPeers* peers = nullptr);
 
+/// The index of the cell of `ground_z_m` (CostmapLayers::ground_z_m) whose column low object `o`
+/// stands on (stands_on_ground, at the grid's resolution), or -1 when its centre lies outside
+/// the grid or it does not stand on that cell's ground. Confirmed objects standing on their
+/// cell's ground are what the costmap marks lethal, the 3D band occupied, and debris is made of.
+std::int64_t standing_cell(const LowObject& o, const Grid2D<float>& ground_z_m);
+
 /// Nav2 inflation cost (0..254 scale: 254 lethal, 253 inscribed) at a distance from an obstacle.
 std::uint8_t nav2_cost(double distance_m, const CostmapParams& params);
 /// Nav2's OccupancyGrid translation of a 0..254 cost: 0→0, 253→99, 254→100, 1..252→1..98.

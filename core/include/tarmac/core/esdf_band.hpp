@@ -9,7 +9,9 @@
 ///    (CostmapLayers::ground_layer) is an obstacle, at any height in the band — above the
 ///    vehicle's envelope too (this is what the 2D projection cannot say);
 ///  - a voxel from the ground voxel up to that height is an obstacle when its latest returns rise
-///    at least min_obstacle_height above their scan's ground (the 10 cm debris rule);
+///    at least min_obstacle_height above their scan's ground (the 10 cm debris rule), and so are
+///    the voxels from the ground voxel up to a confirmed low object's top where the costmap marks
+///    it (standing_cell);
 ///  - the ground voxel and what lies below it are not obstacles (free when observed);
 ///  - unobserved voxels are unknown (UnknownPolicy: NaN distance, or obstacles);
 ///  - active virtual zones: every band voxel inside a no-go zone's polygon and z range is an
