@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -17,6 +16,7 @@
 #include "tarmac/daemon/thread_pool.hpp"
 
 #include "../support/apron_scene.hpp"
+#include "occupancy_test_util.hpp"
 
 namespace tarmac::core {
 namespace {
@@ -68,11 +68,9 @@ std::string compare(const OccupancyMap& map, const Snapshot& a, const Snapshot& 
 }
 
 TEST(OccupancyChanged, RandomScenesReturnExactlyTheColumnsWhoseVoxelsChanged) {
-  std::mt19937_64 rng(7);
-  const auto u = [&](double a, double b) {
-    return std::uniform_real_distribution<double>(a, b)(rng);
-  };
-  const auto pick = [&](int a, int b) { return std::uniform_int_distribution<int>(a, b)(rng); };
+  occupancy_test::RandomDraws draw(7);
+  const auto u = [&](double a, double b) { return draw.real(a, b); };
+  const auto pick = [&](int a, int b) { return draw.pick(a, b); };
   daemon::ThreadPool pool(2);
   SerialRunner serial;
   std::size_t changed_total = 0, scans = 0;

@@ -3,6 +3,8 @@
 /// traversal of a segment, and a check of what the window holds.
 
 #include <cstddef>
+#include <cstdint>
+#include <random>
 #include <set>
 #include <string>
 #include <tuple>
@@ -24,6 +26,19 @@ inline OccupancyParams small_params() {
   p.clearing_range_m = 5.0;
   return p;
 }
+
+/// Draws for the random-scene tests, from one seeded generator: the same scenes every run.
+class RandomDraws {
+ public:
+  explicit RandomDraws(std::uint64_t seed) : rng_(seed) {}
+  /// Uniform in [a, b).
+  double real(double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng_); }
+  /// Uniform in [a, b].
+  int pick(int a, int b) { return std::uniform_int_distribution<int>(a, b)(rng_); }
+
+ private:
+  std::mt19937_64 rng_;
+};
 
 struct Scan {
   Eigen::Vector3d origin;

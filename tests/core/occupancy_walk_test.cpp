@@ -197,11 +197,9 @@ void expect_lanes_walk_breaks_ties_the_same(int lanes) {
 // the origin's voxel or on the lattice, non-finite returns, zero and NaN clearing directions,
 // scans of fewer rays than lanes, on one thread and two. Counts and log-odds must be the same.
 void expect_lanes_walk_same_on_random_scenes(int lanes) {
-  std::mt19937_64 rng(42);
-  const auto u = [&](double a, double b) {
-    return std::uniform_real_distribution<double>(a, b)(rng);
-  };
-  const auto pick = [&](int a, int b) { return std::uniform_int_distribution<int>(a, b)(rng); };
+  RandomDraws draw(42);
+  const auto u = [&](double a, double b) { return draw.real(a, b); };
+  const auto pick = [&](int a, int b) { return draw.pick(a, b); };
   daemon::ThreadPool pool(2);
   SerialRunner serial;
   int scans = 0;
