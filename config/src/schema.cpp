@@ -487,6 +487,10 @@ std::vector<Key> make_schema() {
           real("costmap.debris_clearance_m", 0.0, 10.0, "m",
                "no other obstacle column this close to debris (a kerb, a wall foot, a wheel)",
                [](Config& c) -> Field { return &c.mapping.debris.clearance_m; }),
+          integer("costmap.debris_min_scans", 1, 1000, "scans",
+                  "debris is listed once some object of it rose in this many scans (lethal "
+                  "in the costmap from its first)",
+                  [](Config& c) -> Field { return &c.mapping.debris.min_scans; }),
           // esdf_band
           boolean("esdf_band.enabled", "compute the 3D ESDF band every tick and publish it",
                   [](Config& c) -> Field { return &c.mapping.esdf_band.enabled; }),

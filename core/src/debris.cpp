@@ -22,6 +22,7 @@ Status DebrisParams::validate() const {
   if (!(clearance_m >= 0.0 && clearance_m <= 10.0)) {
     return bad("debris_clearance_m", "must be in [0, 10]");
   }
+  if (min_scans < 1 || min_scans > 1000) return bad("debris_min_scans", "must be in [1, 1000]");
   return Ok{};
 }
 
@@ -186,6 +187,7 @@ bool sum_piece(const LowObjects& objects, const CostmapLayers& layers,
     d.first_seen_ns = std::min(d.first_seen_ns, o.first_ns);
     d.last_confirmed_ns = std::max(d.last_confirmed_ns, o.last_ns);
     d.returns += o.returns;
+    d.scans = std::max(d.scans, o.scans);
     ++d.objects;
   }
   d.xy_W = Eigen::Vector2d(wx / weight, wy / weight);  // confirmed: returns >= 1 each
@@ -217,6 +219,7 @@ void extract_debris(const LowObjects& objects, const CostmapLayers& layers,
     Debris d;
     if (!sum_piece(objects, layers, s.piece, d)) continue;
     if (!(d.height_m <= params.max_height_m + 1e-6)) continue;
+    if (d.scans < static_cast<std::uint32_t>(params.min_scans)) continue;
     if (!small_and_apart(objects, layers, params, s.piece, s, d)) continue;
     out.push_back(d);
   }

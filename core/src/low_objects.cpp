@@ -137,6 +137,7 @@ void LowObjects::evidence(std::uint32_t k, const Eigen::Vector3f& p, float rise_
     o.rise_m = rise_m;
     o.top_z_W = p.z();
   }
+  if (o.returns == 0 || o.last_scan != scan.number) ++o.scans;
   ++o.returns;
   o.last_scan = scan.number;
   o.last_ns = scan.stamp_ns;

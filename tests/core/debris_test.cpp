@@ -77,7 +77,15 @@ class World {
     layers_.ground_z_m.at(c->x(), c->y()) = z;
   }
 
-  std::vector<Debris> debris(const DebrisParams& p = {}) {
+  /// The rules below one scan decides: listed from the scan that confirmed it (min_scans 1).
+  /// The scan count has its own test, with the defaults.
+  static DebrisParams at_once() {
+    DebrisParams p;
+    p.min_scans = 1;
+    return p;
+  }
+
+  std::vector<Debris> debris(const DebrisParams& p = at_once()) {
     std::vector<Debris> out;
     extract_debris(objects_, layers_, p, scratch_, out);
     return out;
@@ -118,7 +126,28 @@ TEST(Debris, LoneCube_IsDebrisWithItsEvidence) {
   EXPECT_EQ(d[0].first_seen_ns, kScanNs);
   EXPECT_EQ(d[0].last_confirmed_ns, 2 * kScanNs);
   EXPECT_EQ(d[0].returns, 3u);
+  EXPECT_EQ(d[0].scans, 2u);
   EXPECT_EQ(d[0].objects, 1u);
+}
+
+TEST(Debris, ConfirmedInOneScan_IsListedOnceASecondScanSeesItRise) {
+  World w;
+  w.object(10.1f, 10.1f, 10);  // two rising returns: lethal from this scan
+  w.scan();
+  ASSERT_EQ(w.objects().all().size(), 1u);
+  EXPECT_TRUE(w.objects().confirmed(w.objects().all()[0]));
+  EXPECT_TRUE(w.debris(DebrisParams{}).empty()) << "one scan: lethal, not yet listed";
+  w.scan();  // a scan with no return on it changes nothing
+  EXPECT_TRUE(w.debris(DebrisParams{}).empty());
+  w.object(10.1f, 10.1f, 9, 1);
+  w.scan();
+  const auto d = w.debris(DebrisParams{});
+  ASSERT_EQ(d.size(), 1u);
+  EXPECT_EQ(d[0].scans, 2u);
+  EXPECT_EQ(d[0].returns, 3u);
+  DebrisParams three;
+  three.min_scans = 3;
+  EXPECT_TRUE(w.debris(three).empty());
 }
 
 TEST(Debris, Candidate_IsNotDebris) {
@@ -158,7 +187,7 @@ TEST(Debris, ObstacleBeyondTheClearance_LeavesItDebris) {
   w.scan();
   w.obstacle(10.7, 10.1);  // 0.6 m away
   EXPECT_EQ(w.debris().size(), 1u);
-  DebrisParams wide;
+  DebrisParams wide = World::at_once();
   wide.clearance_m = 0.6;
   EXPECT_TRUE(w.debris(wide).empty());
 }
@@ -168,7 +197,7 @@ TEST(Debris, TallerThanTheLimit_IsNotDebris) {
   w.object(10.1f, 10.1f, 35);
   w.scan();
   EXPECT_TRUE(w.debris().empty());
-  DebrisParams tall;
+  DebrisParams tall = World::at_once();
   tall.max_height_m = 0.4;
   EXPECT_EQ(w.debris(tall).size(), 1u);
 }
@@ -229,6 +258,11 @@ TEST(Debris, Params_RefuseOutOfRange) {
   EXPECT_FALSE(p.validate().ok());
   p = DebrisParams{};
   p.clearance_m = -0.1;
+  EXPECT_FALSE(p.validate().ok());
+  p = DebrisParams{};
+  p.min_scans = 0;
+  EXPECT_FALSE(p.validate().ok());
+  p.min_scans = 1001;
   EXPECT_FALSE(p.validate().ok());
 }
 

@@ -89,6 +89,7 @@ TEST(LowObjects, TwoRisingReturnsConfirmAndLowReturnsOnTheFaceKeepIt) {
   ASSERT_EQ(confirmed_count(objects), 1);
   EXPECT_EQ(objects.all()[0].id, id);
   EXPECT_EQ(objects.all()[0].returns, 2u);
+  EXPECT_EQ(objects.all()[0].scans, 2u) << "one rising return in each of two scans";
 }
 
 TEST(LowObjects, RaysThatWentPastUnderItsTopRemoveIt) {
@@ -98,6 +99,7 @@ TEST(LowObjects, RaysThatWentPastUnderItsTopRemoveIt) {
   seen.add(kCubeTop + Eigen::Vector3f(0.0f, 0.02f, 0.0f), 10);
   objects.update(seen.scan(1, kSensor));
   ASSERT_EQ(confirmed_count(objects), 1);
+  EXPECT_EQ(objects.all()[0].scans, 1u) << "two returns, one scan";
   // A beam through where its top was, 5 cm up, lands 0.3 m behind it: gone from there.
   ScanBuilder past;
   past.add(ground_through(Eigen::Vector3f(12.0f, 10.0f, 0.05f)), 0);

@@ -246,6 +246,7 @@ core::Status write_debris(const Options& opt, const core::Mapper& mapper, const 
                     {"first_seen_ns", d.first_seen_ns},
                     {"last_confirmed_ns", d.last_confirmed_ns},
                     {"returns", d.returns},
+                    {"scans", d.scans},
                     {"objects", d.objects}});
   }
   const std::uint32_t most =

@@ -13,7 +13,9 @@
 ///     at most max_footprint_m along x and along y, and no other obstacle column lies within
 ///     clearance_m of them. A kerb's row and a wall are too long, a wheel joins the vehicle
 ///     over it, debris beside a cone is not "apart". Two debris pieces closer than clearance_m
-///     withhold each other: the costmap still shows both lethal.
+///     withhold each other: the costmap still shows both lethal;
+///  3. it is listed once some object of it had rising returns in min_scans scans (a spot one
+///     scan saw rising is lethal at once; the crew is sent out when a second scan agrees).
 /// The id of a piece is the smallest id of its objects: it lasts while that object is kept (a
 /// piece that gains an older object takes that object's id).
 /// Pure and deterministic; extract_debris allocates only when there are more objects or cells
@@ -34,6 +36,9 @@ struct DebrisParams {
   double max_height_m = 0.3;     ///< highest rise above the ground of a piece that is debris
   double max_footprint_m = 0.5;  ///< its obstacle cells' extent along x and along y, at most
   double clearance_m = 0.5;      ///< no other obstacle column this close to its cells
+  /// Listed only once some object of it had rising returns in this many scans: one scan's pair
+  /// of returns is enough to make a spot lethal, not to send the crew out to it.
+  int min_scans = 2;
 
   [[nodiscard]] Status validate() const;
 };
@@ -50,6 +55,7 @@ struct Debris {
   std::int64_t first_seen_ns = 0;      ///< earliest first_ns of its objects
   std::int64_t last_confirmed_ns = 0;  ///< latest last_ns (a rising return on it)
   std::uint32_t returns = 0;           ///< rising returns on it, all scans
+  std::uint32_t scans = 0;             ///< most scans with a rising return on one of its objects
   std::uint32_t objects = 0;           ///< low objects in the piece
 };
 

@@ -50,6 +50,7 @@ struct LowObject {
   float top_z_W = 0.0f;                            ///< map-frame z of its highest rising return
   float rise_m = 0.0f;                             ///< that return's height above its scan's ground
   std::uint32_t returns = 0;                       ///< rising returns on it, all scans
+  std::uint32_t scans = 0;                         ///< scans with a rising return on it
   std::uint32_t first_scan = 0;                    ///< scan numbers (LowObjects::Scan::number)
   std::uint32_t last_scan = 0;                     ///< the latest scan with a rising return on it
   std::int64_t first_ns = 0;                       ///< stamps of those scans
