@@ -125,6 +125,8 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
   bricks_ = (dims_.array() + ((1 << kBrickShift) - 1)) / (1 << kBrickShift);
   brick_bits_.assign((static_cast<std::size_t>(bricks_.prod()) + 63) / 64, 0);
   brick_skip_.assign(static_cast<std::size_t>(bricks_.prod()), 0);
+  brick_run_up_.assign(brick_skip_.size(), 0);
+  brick_run_down_.assign(brick_skip_.size(), 0);
   update_brick_skips();
   warm(hit_slot_, kReservedHitSlots);
   warm(hit_column_, kReservedHitSlots);
@@ -177,7 +179,8 @@ std::size_t OccupancyMap::memory_bytes() const {
       ground_memory_scan_.capacity() * sizeof(std::uint32_t) +
       (ray_order_.capacity() + ray_bucket_count_.capacity()) * sizeof(std::uint32_t) +
       ray_bucket_.capacity() * sizeof(std::uint16_t) +
-      brick_bits_.capacity() * sizeof(std::uint64_t) + brick_skip_.capacity();
+      brick_bits_.capacity() * sizeof(std::uint64_t) + brick_skip_.capacity() +
+      brick_run_up_.capacity() + brick_run_down_.capacity();
   for (const auto& b : free_bits_) bytes += b.capacity() * sizeof(std::uint64_t);
   for (const auto& d : dirty_words_) bytes += d.capacity() * sizeof(std::uint64_t);
   for (const auto& c : candidates_) bytes += c.capacity() * sizeof(std::uint32_t);

@@ -102,16 +102,19 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen
   for (int a = 0; a < 2; ++a) {
     if (dims_[a] % kBrick != 0) thinnest = std::min(thinnest, dims_[a] % kBrick);
   }
+  const int thinnest_z = dims_.z() % kBrick != 0 ? dims_.z() % kBrick : kBrick;
   const std::size_t nx = static_cast<std::size_t>(dims_.x());
   const std::size_t ny = static_cast<std::size_t>(dims_.y());
   bool at_origin = true;  // the origin's own voxel is not looked at
   double t_entry = 0.0;   // when the walk entered the voxel it stands in
   for (;;) {
-    const int skip = brick_skip_[brick_of_ring(w.ring[0], w.ring[1], w.ring[2])];
+    const std::size_t brick = brick_of_ring(w.ring[0], w.ring[1], w.ring[2]);
+    const int skip = brick_skip_[brick];
     if (skip > 0) {
-      // Nothing occupied in this brick, nor in the skip − 1 bricks round it in x and y: to the
-      // voxel past that box (in z, past this brick). Along each axis, the voxels to its side
-      // ahead (ring coordinates; the ring's end is a brick's end too).
+      // Nothing occupied in this brick, nor in the skip − 1 bricks round it in x and y, in its
+      // layer of bricks and in the run of layers ahead whose skip there is at least as large:
+      // to the voxel past that box. Along each axis, the voxels to its side ahead (ring
+      // coordinates; the ring's end is a brick's end too; each brick counted as the thinnest).
       int to_exit[3] = {0, 0, 0};
       double t_exit_of[3] = {kNone, kNone, kNone};
       for (int a = 0; a < 3; ++a) {
@@ -120,6 +123,10 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen
         to_exit[a] =
             w.step[a] > 0 ? std::min(lo + kBrick, dims_[a]) - w.ring[a] : w.ring[a] - lo + 1;
         if (a < 2) to_exit[a] += (skip - 1) * thinnest;
+        if (a == 2) {
+          to_exit[a] +=
+              (w.step[a] > 0 ? brick_run_up_[brick] : brick_run_down_[brick]) * thinnest_z;
+        }
         t_exit_of[a] = w.t_ahead(a, to_exit[a]);
       }
       const int exit_axis = Walk::first_of(t_exit_of);
@@ -234,6 +241,27 @@ void OccupancyMap::update_brick_skips() {
         brick_skip_[(static_cast<std::size_t>(bz) * nby + by) * nbx + bx] =
             static_cast<std::uint8_t>(best);
       }
+    }
+  }
+  // The runs of layers along z (round the ring, at most nbz - 1 layers each way).
+  const std::size_t layer = static_cast<std::size_t>(nbx) * static_cast<std::size_t>(nby);
+  for (std::size_t c = 0; c < layer; ++c) {
+    for (int bz = 0; bz < nbz; ++bz) {
+      const std::size_t b = static_cast<std::size_t>(bz) * layer + c;
+      const int own = brick_skip_[b];
+      int up = 0, down = 0;
+      if (own > 0) {
+        while (up < nbz - 1 &&
+               brick_skip_[static_cast<std::size_t>(wrap(bz + up + 1, nbz)) * layer + c] >= own) {
+          ++up;
+        }
+        while (down < nbz - 1 &&
+               brick_skip_[static_cast<std::size_t>(wrap(bz - down - 1, nbz)) * layer + c] >= own) {
+          ++down;
+        }
+      }
+      brick_run_up_[b] = static_cast<std::uint8_t>(up);
+      brick_run_down_[b] = static_cast<std::uint8_t>(down);
     }
   }
   bricks_dirty_ = false;

@@ -422,6 +422,10 @@ class OccupancyMap {
   /// without return passes through is empty, and these 12 KB (default window) stay in cache
   /// where the log-odds (25 MB) do not. They decide how fast the walk goes, never its result.
   std::vector<std::uint8_t> brick_skip_;
+  /// Per brick with a skip: how many layers of bricks above it (up) and below it (down), in a
+  /// row round the ring, have a skip at least its own at the same x and y: the box of its skip
+  /// holds nothing occupied through them too, and the walk crosses them in the same step.
+  std::vector<std::uint8_t> brick_run_up_, brick_run_down_;
   bool bricks_dirty_ = false;                    ///< a flag changed since update_brick_skips()
   std::vector<std::uint8_t> brick_row_scratch_;  ///< update_brick_skips()' distances along x
 };
