@@ -96,9 +96,11 @@ std::uint64_t stop_at_occupied(const OccupancyMap& map, const Eigen::Vector3d& o
   scale.assign(n, 1.0f);
   constexpr std::size_t kChunk = 512;
   const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  const VoxelIndex origin_voxel = map.voxel_of(origin_W);
   runner.parallel_for(chunks, [&](std::size_t c) {
     for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
-      const double t = map.first_occupied(origin_W, dirs_W[i].cast<double>(), clear_range_m);
+      const double t =
+          map.first_occupied(origin_W, origin_voxel, dirs_W[i].cast<double>(), clear_range_m);
       if (t < clear_range_m) scale[i] = static_cast<float>(t / clear_range_m);
     }
   });

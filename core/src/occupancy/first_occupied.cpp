@@ -72,7 +72,9 @@ struct Walk {
     v[a] += d;
     rel[a] += d;
     if (rel[a] < 0 || rel[a] >= dims[a]) return false;
-    ring[a] = wrap(ring[a] + d, dims[a]);
+    // Inside the window after the move, so |d| < dims[a]: one fold brings the ring back.
+    const int r = ring[a] + d;
+    ring[a] = r < 0 ? r + dims[a] : (r >= dims[a] ? r - dims[a] : r);
     t_next[a] = t_ahead(a, 1);
     return true;
   }
@@ -82,7 +84,11 @@ struct Walk {
 
 double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
                                     double max_t) const {
-  const VoxelIndex v0 = voxel_of(origin_W);
+  return first_occupied(origin_W, voxel_of(origin_W), dir_W, max_t);
+}
+
+double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const VoxelIndex& v0,
+                                    const Eigen::Vector3d& dir_W, double max_t) const {
   if (!in_window(v0)) return kNone;
   constexpr int kBrick = 1 << kBrickShift;
   Walk w;

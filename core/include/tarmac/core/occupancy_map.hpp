@@ -201,6 +201,10 @@ class OccupancyMap {
   /// crosses bricks of 8³ voxels that hold nothing occupied in one step (first_occupied.cpp).
   [[nodiscard]] double first_occupied(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
                                       double max_t) const;
+  /// The same, with `origin_voxel` = voxel_of(origin_W) computed once for many rays.
+  [[nodiscard]] double first_occupied(const Eigen::Vector3d& origin_W,
+                                      const VoxelIndex& origin_voxel, const Eigen::Vector3d& dir_W,
+                                      double max_t) const;
   [[nodiscard]] VoxelIndex voxel_of(const Eigen::Vector3d& p_W) const;
 
   /// Lowest-corner voxel of the window (inclusive) and its size in voxels.
