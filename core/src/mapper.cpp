@@ -97,10 +97,14 @@ std::uint64_t stop_at_occupied(const OccupancyMap& map, const Eigen::Vector3d& o
   constexpr std::size_t kChunk = 512;
   const std::size_t chunks = (n + kChunk - 1) / kChunk;
   const VoxelIndex origin_voxel = map.voxel_of(origin_W);
+  // Most beams without return point at the sky: those above everything the map holds over
+  // their sector need no walk (SkyHorizon; the answer is the walk's).
+  const SkyHorizon sky = map.sky_horizon(origin_W);
   runner.parallel_for(chunks, [&](std::size_t c) {
     for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
-      const double t =
-          map.first_occupied(origin_W, origin_voxel, dirs_W[i].cast<double>(), clear_range_m);
+      const Eigen::Vector3d dir = dirs_W[i].cast<double>();
+      if (sky.clears(dir)) continue;
+      const double t = map.first_occupied(origin_W, origin_voxel, dir, clear_range_m);
       if (t < clear_range_m) scale[i] = static_cast<float>(t / clear_range_m);
     }
   });

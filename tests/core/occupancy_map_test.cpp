@@ -562,6 +562,137 @@ TEST(OccupancyMap, FirstOccupied_SameAsBruteForce_WhileObjectsComeGoAndTheWindow
   EXPECT_LT(found, checked * 9 / 10) << "too few rays crossed empty space";
 }
 
+TEST(OccupancyMap, SkyHorizon_ClearsOnlyRaysTheBruteForceFindsNothingOn) {
+  // The sky horizon lets a scan's beams without return skip their walk. It must never clear a
+  // ray that meets an occupied voxel, for any max_t: checked against the brute force over the
+  // whole window with the window scrolled across the ring's end in all three axes (bricks cut
+  // in two at the seam), boxes above and below the sensor at every azimuth, rays from level to
+  // straight up. And it must clear most rays that pass over everything, or it saves nothing.
+  auto params = small_params();
+  params.window_x_vox = 101;
+  params.window_y_vox = 94;
+  params.window_z_vox = 21;
+  params.max_range_m = 12.0;
+  OccupancyMap map(params);
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::Vector3d position(0.05, 0.05, 0.05);
+  std::size_t cleared = 0, free_rays = 0, blocked = 0, checked = 0, aimed = 0;
+  for (int scan_no = 0; scan_no < 30; ++scan_no) {
+    Scan scan{position, {}, {}};
+    for (int b = 0; b < 8; ++b) {  // small boxes from 1 m below the sensor to 1.5 m above it,
+      // out to the window's edges (where the bricks cut by the ring's seam lie)
+      const Eigen::Vector3d c =
+          position + Eigen::Vector3d(9.8 * u(rng), 9.2 * u(rng), 0.25 + 1.25 * u(rng));
+      for (int i = 0; i < 40; ++i) {
+        scan.points.push_back(
+            (c + Eigen::Vector3d(0.3 * u(rng), 0.3 * u(rng), 0.2 * u(rng))).cast<float>());
+      }
+    }
+    for (int i = 0; i < 300; ++i) {  // ground 1.5 m below
+      scan.points.push_back(
+          (position + Eigen::Vector3d(6.0 * u(rng), 6.0 * u(rng), -1.5)).cast<float>());
+    }
+    for (int i = 0; i < 400; ++i) {
+      scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), 0.3 * u(rng)).normalized());
+    }
+    map.recenter(position);
+    integrate(map, scan);
+    const SkyHorizon sky = map.sky_horizon(position);
+    // A ray aimed at the centre of any occupied voxel meets it: never cleared. Every voxel of
+    // the window, so the bricks the ring's seam cuts in two are checked whatever the scan.
+    const VoxelIndex own = map.voxel_of(position);
+    const Eigen::Vector3i dims = map.window_size();
+    for (int z = 0; z < dims.z(); ++z)
+      for (int y = 0; y < dims.y(); ++y)
+        for (int x = 0; x < dims.x(); ++x) {
+          const VoxelIndex q = map.window_min() + VoxelIndex(x, y, z);
+          if (q == own || !(map.log_odds(q) > 0.0f)) continue;
+          const Eigen::Vector3d at = (q.cast<double>() + Eigen::Vector3d::Constant(0.5)) * 0.2;
+          ++aimed;
+          EXPECT_FALSE(sky.clears((at - position).normalized()))
+              << "scan " << scan_no << " voxel " << q.transpose();
+        }
+    for (int r = 0; r < 80; ++r) {
+      Eigen::Vector3d dir(u(rng), u(rng), 0.0);
+      if (r % 4 != 0) dir.z() = (r % 4 == 1 ? 0.05 : 0.6) * (u(rng) + 1.0);  // r % 4 == 0: level
+      if (r == 1) dir = Eigen::Vector3d(0.0, 0.0, 1.0);
+      dir.normalize();
+      const double want = first_occupied_brute_force(map, position, dir, 100.0);
+      ++checked;
+      if (std::isinf(want)) {
+        ++free_rays;
+        if (sky.clears(dir)) ++cleared;
+      } else {
+        ++blocked;
+        EXPECT_FALSE(sky.clears(dir))
+            << "scan " << scan_no << " ray " << r << " meets a voxel at " << want << " m";
+      }
+    }
+    position += Eigen::Vector3d(2.4 * u(rng), 2.4 * u(rng), 0.4 * u(rng));
+  }
+  // Enough of each kind for the checks above to mean something (how much the horizon clears
+  // where it should is the next test's).
+  EXPECT_GT(blocked, checked / 10) << "too few rays met anything to test the horizon";
+  EXPECT_GT(cleared, checked / 20) << "too few cleared rays checked (of " << free_rays << " free)";
+  EXPECT_GT(aimed, 1000u);
+}
+
+TEST(OccupancyMap, SkyHorizon_ClearsEveryRayAboveTheObjectsRound) {
+  // Objects 5 to 8 m away all round, their tops at most 1 m over the sensor: the horizon is
+  // drawn from bricks (1.6 m wide at 0.2 m) with their highest occupied voxel, and a voxel's
+  // margin each way, so every ray rising faster than (1 + 0.2 + 0.2) / (5 − 1.6 − 0.2) must be
+  // cleared, whatever its azimuth; a level ray towards an object must not be.
+  auto params = small_params();
+  params.max_range_m = 12.0;
+  OccupancyMap map(params);
+  const Eigen::Vector3d origin(0.3, -0.1, 0.1);
+  Scan scan{origin, {}, {}};
+  std::mt19937_64 rng(2);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int i = 0; i < 3000; ++i) {
+    const double az = 2.0 * M_PI * u(rng), r = 5.0 + 3.0 * u(rng);
+    scan.points.push_back(
+        (origin + Eigen::Vector3d(r * std::cos(az), r * std::sin(az), -1.0 + 1.95 * u(rng)))
+            .cast<float>());
+  }
+  map.recenter(origin);
+  integrate(map, scan);
+  const SkyHorizon sky = map.sky_horizon(origin);
+  const double steep = 1.4 / 3.2;
+  int level_blocked = 0;
+  for (int k = 0; k < 720; ++k) {
+    const double az = 2.0 * M_PI * k / 720.0;
+    const Eigen::Vector3d across(std::cos(az), std::sin(az), 0.0);
+    EXPECT_TRUE(sky.clears((across + Eigen::Vector3d(0, 0, steep * 1.001)).normalized()))
+        << "azimuth " << az;
+    if (!sky.clears(across)) ++level_blocked;
+  }
+  EXPECT_EQ(level_blocked, 720) << "objects stand all round at the sensor's height";
+}
+
+TEST(OccupancyMap, SkyHorizon_BoxOverTheSensor_ClearsNothing) {
+  // A box overhead (a wing over the vehicle): every rising ray may meet it; none is cleared,
+  // not even the ones that miss it (the horizon cannot tell them apart).
+  OccupancyMap map(small_params());
+  const Eigen::Vector3d origin(0.1, 0.1, 0.1);
+  Scan scan{origin, {}, {}};
+  for (int i = 0; i < 50; ++i) {
+    scan.points.emplace_back(0.1f + 0.01f * static_cast<float>(i % 7), 0.1f, 1.5f);
+  }
+  map.recenter(origin);
+  integrate(map, scan);
+  const SkyHorizon sky = map.sky_horizon(origin);
+  EXPECT_FALSE(sky.clears(Eigen::Vector3d(0.0, 0.0, 1.0)));
+  EXPECT_FALSE(sky.clears(Eigen::Vector3d(1.0, 0.0, 1.0).normalized()));
+  // Without it, the same rays are cleared.
+  OccupancyMap empty(small_params());
+  empty.recenter(origin);
+  EXPECT_TRUE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, 1.0).normalized()));
+  EXPECT_FALSE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, -0.1).normalized()))
+      << "a descending ray is never cleared";
+}
+
 TEST(OccupancyMap, Deterministic_ForOneTwoAndFourThreads) {
   auto params = small_params();
   params.window_x_vox = 200;

@@ -30,14 +30,17 @@ constexpr int kMaxBrickSkip = 15;  // fits brick_skip_'s bytes
 struct Walk {
   Eigen::Vector3d origin;
   double voxel = 0.0;
+  double inv_voxel = 0.0;
   int step[3] = {0, 0, 0};
+  double dir[3] = {0.0, 0.0, 0.0};
   double inv_dir[3] = {0.0, 0.0, 0.0};
   int v[3] = {0, 0, 0};
   int rel[3] = {0, 0, 0};
   int ring[3] = {0, 0, 0};
   double t_next[3] = {0.0, 0.0, 0.0};
 
-  /// Crossing time of the j-th boundary ahead along `a` (j = 1: the next); j ≥ 1.
+  /// Crossing time of the j-th boundary ahead along `a` (j = 1: the next); j ≥ 1. Always this
+  /// expression of the boundary's index, so that equal boundaries give equal times.
   [[nodiscard]] double t_ahead(int a, int j) const {
     const int i = step[a] > 0 ? v[a] + j : v[a] - j + 1;  // the boundary's world index
     return (static_cast<double>(i) * voxel - origin[a]) * inv_dir[a];
@@ -51,23 +54,28 @@ struct Walk {
     return a;
   }
   /// Boundaries ahead along `b` that the voxel-by-voxel walk crosses before the crossing at
-  /// `t` on axis `a`: earlier, or at the same time on a lower axis. At most `limit`.
-  [[nodiscard]] int crossed_before(int b, double t, int a, int limit) const {
-    const auto before = [&](int j) {
-      const double tb = t_ahead(b, j);
-      return tb < t || (tb == t && b < a);
-    };
-    // From where the ray is at t, then settled on the crossing times themselves.
-    const std::int64_t at = floor_to_int((origin[b] + t / inv_dir[b]) / voxel);
-    std::int64_t guess = step[b] > 0 ? at - v[b] : v[b] - at;
+  /// `t` on axis `a`: earlier, or at the same time on a lower axis. At most `limit`. `after`
+  /// gets the crossing time of the boundary past those (the next one once they are crossed).
+  [[nodiscard]] int crossed_before(int b, double t, int a, int limit, double& after) const {
+    const auto before = [&](double tb) { return tb < t || (tb == t && b < a); };
+    // A guess from where the ray is at t, then settled on the crossing times themselves (any
+    // guess in [0, limit] settles to the same count: the times grow with j).
+    const std::int64_t at = floor_to_int((origin[b] + t * dir[b]) * inv_voxel);
+    const std::int64_t guess = step[b] > 0 ? at - v[b] : v[b] - at;
     int j = static_cast<int>(std::clamp<std::int64_t>(guess, 0, limit));
-    while (j < limit && before(j + 1)) ++j;
-    while (j > 0 && !before(j)) --j;
+    after = t_ahead(b, j + 1);
+    while (j < limit && before(after)) after = t_ahead(b, ++j + 1);
+    while (j > 0) {
+      const double tj = t_ahead(b, j);
+      if (before(tj)) break;
+      after = tj;
+      --j;
+    }
     return j;
   }
-  /// Moves `n` voxels along `a`; false when that leaves the window (`dims`).
-  bool move(int a, int n, const Eigen::Vector3i& dims) {
-    if (n == 0) return true;
+  /// Moves `n` ≥ 1 voxels along `a`, where the next boundary's crossing is `t_after` (t_ahead(a,
+  /// n + 1) before the move); false when that leaves the window (`dims`).
+  bool move(int a, int n, double t_after, const Eigen::Vector3i& dims) {
     const int d = step[a] * n;
     v[a] += d;
     rel[a] += d;
@@ -75,7 +83,7 @@ struct Walk {
     // Inside the window after the move, so |d| < dims[a]: one fold brings the ring back.
     const int r = ring[a] + d;
     ring[a] = r < 0 ? r + dims[a] : (r >= dims[a] ? r - dims[a] : r);
-    t_next[a] = t_ahead(a, 1);
+    t_next[a] = t_after;
     return true;
   }
 };
@@ -94,8 +102,10 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Voxel
   Walk w;
   w.origin = origin_W;
   w.voxel = params_.voxel_size_m;
+  w.inv_voxel = 1.0 / params_.voxel_size_m;
   for (int a = 0; a < 3; ++a) {
     w.step[a] = dir_W[a] > 0.0 ? 1 : (dir_W[a] < 0.0 ? -1 : 0);
+    w.dir[a] = dir_W[a];
     w.inv_dir[a] = w.step[a] == 0 ? 0.0 : 1.0 / dir_W[a];
     w.v[a] = v0[a];
     w.rel[a] = v0[a] - min_[a];
@@ -139,13 +149,19 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Voxel
       const double t_exit = t_exit_of[exit_axis];
       if (!(t_exit < max_t)) return kNone;
       int crossed[3] = {0, 0, 0};
+      double after[3] = {kNone, kNone, kNone};
       for (int b = 0; b < 3; ++b) {
         if (w.step[b] == 0) continue;
-        crossed[b] =
-            b == exit_axis ? to_exit[b] : w.crossed_before(b, t_exit, exit_axis, to_exit[b] - 1);
+        if (b == exit_axis) {
+          crossed[b] = to_exit[b];
+          after[b] = w.t_ahead(b, to_exit[b] + 1);
+        } else {
+          crossed[b] = w.crossed_before(b, t_exit, exit_axis, to_exit[b] - 1, after[b]);
+        }
       }
       for (int a = 0; a < 3; ++a) {
-        if (!w.move(a, crossed[a], dims_)) return kNone;  // a box: the ray does not come back
+        if (crossed[a] == 0) continue;
+        if (!w.move(a, crossed[a], after[a], dims_)) return kNone;  // a box: it does not come back
       }
       t_entry = t_exit;
       at_origin = false;
@@ -160,9 +176,119 @@ double OccupancyMap::first_occupied(const Eigen::Vector3d& origin_W, const Voxel
     const int a = Walk::first_of(w.t_next);
     t_entry = w.t_next[a];
     if (!(t_entry < max_t)) return kNone;
-    if (!w.move(a, 1, dims_)) return kNone;
+    if (!w.move(a, 1, w.t_ahead(a, 2), dims_)) return kNone;
     at_origin = false;
   }
+}
+
+double SkyHorizon::turn(double x, double y) {
+  // The "diamond angle": 0 along +x, 1 along +y, 2 along -x, 3 along -y, 4 round again.
+  if (y >= 0.0) return x >= 0.0 ? y / (x + y) : 1.0 - x / (y - x);
+  return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
+}
+
+bool SkyHorizon::clears(const Eigen::Vector3d& dir_W) const {
+  if (overhead_ || !(dir_W.z() >= 0.0)) return false;
+  const double x = dir_W.x(), y = dir_W.y(), z = dir_W.z();
+  if (x == 0.0 && y == 0.0) return true;  // straight up: its own column, nothing flagged over it
+  const double s = slope_[static_cast<std::size_t>(sector(turn(x, y)))];
+  // z > s · run, squared (both sides ≥ 0 when s ≥ 0); the boxes' margin of a voxel dwarfs
+  // the rounding.
+  return s < 0.0 || z * z > s * s * (x * x + y * y);
+}
+
+SkyHorizon OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W) const {
+  // Each flagged brick whose occupied voxels reach above the origin, as the world boxes its
+  // ring voxels stand for (a brick across the ring's seam is two pieces along that axis), from
+  // the brick's x-y extent and its highest occupied voxel, grown by a voxel each way against
+  // rounding in the walk. A beam that does not descend is at the box's height or below only
+  // while nearer than the box's nearest horizontal distance, so the box's top over that
+  // distance bounds the slope of the beams that can touch it; the box's sectors (those of its
+  // corners, and one more each side) take the largest.
+  SkyHorizon sky;
+  constexpr int kBrick = 1 << kBrickShift;
+  constexpr int kN = SkyHorizon::kSectors;
+  const double v = params_.voxel_size_m;
+  const Eigen::Vector3d& o = origin_W;
+  // World voxel intervals [lo, hi) of ring interval [r0, r1) along `a`: one or two pieces.
+  const auto world_pieces = [&](int a, int r0, int r1, int(&lo)[2], int(&hi)[2]) {
+    const int seam = wrap(min_[a], dims_[a]);
+    const auto world = [&](int r) { return min_[a] + wrap(r - seam, dims_[a]); };
+    if (r0 < seam && seam < r1) {
+      lo[0] = world(r0), hi[0] = lo[0] + (seam - r0);
+      lo[1] = min_[a], hi[1] = min_[a] + (r1 - seam);
+      return 2;
+    }
+    lo[0] = world(r0), hi[0] = lo[0] + (r1 - r0);
+    return 1;
+  };
+  const auto ring_end = [&](int a, int b) { return std::min((b + 1) * kBrick, dims_[a]); };
+  const auto nx = static_cast<std::size_t>(dims_.x()), ny = static_cast<std::size_t>(dims_.y());
+  // World z index of the brick's highest voxel reading occupied; INT_MIN when none does (the
+  // flags may be stale).
+  const auto highest_occupied = [&](int bx, int by, int bz) {
+    int best = std::numeric_limits<int>::min();
+    for (int rz = bz * kBrick; rz < ring_end(2, bz); ++rz) {
+      const int wz = min_.z() + wrap(rz - wrap(min_.z(), dims_.z()), dims_.z());
+      bool any = false;
+      for (int ry = by * kBrick; ry < ring_end(1, by) && !any && wz > best; ++ry) {
+        const float* line = log_odds_.data() + (static_cast<std::size_t>(rz) * ny + ry) * nx;
+        for (int rx = bx * kBrick; rx < ring_end(0, bx); ++rx) any = any || line[rx] > 0.0f;
+      }
+      if (any) best = wz;
+    }
+    return best;
+  };
+  // Raises the horizon over the box [x0, x1] × [y0, y1] (relative to the origin) to `top` over
+  // its nearest horizontal distance; false when the box stands over the origin's column.
+  const auto raise = [&](double x0, double x1, double y0, double y1, double top) {
+    const double near = std::hypot(std::max({x0, -x1, 0.0}), std::max({y0, -y1, 0.0}));
+    if (!(near > 0.0)) return false;
+    const double slope = top / near;
+    double t[4] = {SkyHorizon::turn(x0, y0), SkyHorizon::turn(x1, y0), SkyHorizon::turn(x0, y1),
+                   SkyHorizon::turn(x1, y1)};
+    // Not round the origin, so the box spans less than half a turn (2): a wider span of the
+    // raw values means that it crosses turn 0.
+    if (*std::max_element(t, t + 4) - *std::min_element(t, t + 4) > 2.0) {
+      for (double& x : t) x += x < 2.0 ? 4.0 : 0.0;
+    }
+    const int first = static_cast<int>(std::floor(*std::min_element(t, t + 4) * (kN / 4.0))) - 1;
+    const int last = static_cast<int>(std::floor(*std::max_element(t, t + 4) * (kN / 4.0))) + 1;
+    for (int k = first; k <= last; ++k) {
+      double& s = sky.slope_[static_cast<std::size_t>(wrap(k, kN))];
+      s = std::max(s, slope);
+    }
+    return true;
+  };
+  for (int bz = 0; bz < bricks_.z(); ++bz) {
+    int zlo[2], zhi[2];
+    const int nz = world_pieces(2, bz * kBrick, ring_end(2, bz), zlo, zhi);
+    const int layer_top = nz == 2 ? std::max(zhi[0], zhi[1]) : zhi[0];  // exclusive
+    if (!((layer_top + 1) * v - o.z() > 0.0)) continue;  // the layer lies below the origin
+    for (int by = 0; by < bricks_.y(); ++by) {
+      for (int bx = 0; bx < bricks_.x(); ++bx) {
+        const std::size_t b = (static_cast<std::size_t>(bz) * bricks_.y() + by) * bricks_.x() + bx;
+        if (((brick_bits_[b >> 6] >> (b & 63)) & 1U) == 0) continue;
+        const int top_z = highest_occupied(bx, by, bz);
+        if (top_z == std::numeric_limits<int>::min()) continue;
+        const double top = (top_z + 2) * v - o.z();  // the voxel's top, and a voxel's margin
+        if (!(top > 0.0)) continue;
+        int xlo[2], xhi[2], ylo[2], yhi[2];
+        const int pieces_x = world_pieces(0, bx * kBrick, ring_end(0, bx), xlo, xhi);
+        const int pieces_y = world_pieces(1, by * kBrick, ring_end(1, by), ylo, yhi);
+        for (int i = 0; i < pieces_x; ++i) {
+          for (int j = 0; j < pieces_y; ++j) {
+            if (!raise((xlo[i] - 1) * v - o.x(), (xhi[i] + 1) * v - o.x(), (ylo[j] - 1) * v - o.y(),
+                       (yhi[j] + 1) * v - o.y(), top)) {
+              sky.overhead_ = true;  // over the origin's column: every rising beam may meet it
+              return sky;
+            }
+          }
+        }
+      }
+    }
+  }
+  return sky;
 }
 
 void OccupancyMap::flag_brick(std::size_t slot) {

@@ -19,6 +19,7 @@
 /// The window's log-odds are the combined result (static voxels read occupied), so the costmap
 /// and the ESDF read one array. Unknown stays unknown: only rays change a voxel.
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -125,6 +126,30 @@ struct OccupancyUpdate {
 
 struct StaticStore;
 
+/// The sky round one origin, as the window's bricks flagged occupied draw it: per azimuth sector
+/// the steepest rise over horizontal run at which a beam from the origin can still touch such a
+/// brick above the origin (OccupancyMap::sky_horizon). A beam that does not descend and rises
+/// more steeply than its sector's horizon touches none of them, so first_occupied() would walk
+/// it to its end and find nothing: the beams without return of a scan are mostly such beams.
+/// Only a shortcut: clears() is false wherever it cannot be sure.
+class SkyHorizon {
+ public:
+  /// True when OccupancyMap::first_occupied(origin, `dir_W`, any max_t) is infinity for
+  /// certain: `dir_W` does not descend and passes above every flagged brick of its sector.
+  [[nodiscard]] bool clears(const Eigen::Vector3d& dir_W) const;
+
+ private:
+  friend class OccupancyMap;
+  static constexpr int kSectors = 1024;
+  /// Sector of a horizontal direction (x, y) ≠ 0: a pseudo-angle that grows with the angle.
+  [[nodiscard]] static double turn(double x, double y);
+  [[nodiscard]] static int sector(double turn) {
+    return std::min(kSectors - 1, static_cast<int>(turn * (kSectors / 4.0)));
+  }
+  std::vector<double> slope_ = std::vector<double>(kSectors, -1.0);  ///< -1: nothing above
+  bool overhead_ = false;  ///< a flagged brick reaching above the origin is over its column
+};
+
 /// The rolling window. Move-only (tens of MB). Not thread-safe: one writer.
 class OccupancyMap {
  public:
@@ -206,6 +231,8 @@ class OccupancyMap {
                                       const VoxelIndex& origin_voxel, const Eigen::Vector3d& dir_W,
                                       double max_t) const;
   [[nodiscard]] VoxelIndex voxel_of(const Eigen::Vector3d& p_W) const;
+  /// The sky round `origin_W` (SkyHorizon), from the brick flags first_occupied() reads.
+  [[nodiscard]] SkyHorizon sky_horizon(const Eigen::Vector3d& origin_W) const;
 
   /// Lowest-corner voxel of the window (inclusive) and its size in voxels.
   [[nodiscard]] const VoxelIndex& window_min() const { return min_; }
