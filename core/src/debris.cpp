@@ -31,6 +31,7 @@ void DebrisScratch::reserve(std::size_t objects, std::size_t cells) {
   parent.reserve(objects);
   members.reserve(objects);
   piece.reserve(objects);
+  standing.reserve(objects);
   in_blob.assign(cells, 0);
   // A piece's blob stops growing past the footprint limit; a few hundred cells cover any
   // limit a config allows at the usual resolutions, and more only grows once.
@@ -136,17 +137,13 @@ bool crowded(const CostmapLayers& layers, const std::array<int, 4>& box, double 
   return false;
 }
 
-/// The obstacle-cell checks of one piece (its objects: `members`): its blob small and apart.
-/// Sets its footprint. Leaves scratch.in_blob clear.
-bool small_and_apart(const LowObjects& objects, const CostmapLayers& layers,
-                     const DebrisParams& params, std::span<const std::uint32_t> members,
-                     DebrisScratch& s, Debris& d) {
-  const auto all = objects.all();
+/// The obstacle-cell checks of one piece (its objects' cells: scratch.standing, from sum_piece):
+/// its blob small and apart. Sets its footprint. Leaves scratch.in_blob clear.
+bool small_and_apart(const CostmapLayers& layers, const DebrisParams& params, DebrisScratch& s,
+                     Debris& d) {
   const GridGeometry2D& g = layers.column_class.geometry();
   s.blob.clear();
-  for (const std::uint32_t k : members) {
-    // On the grid: every member stands on its column's ground, checked before.
-    const auto c = static_cast<std::uint32_t>(standing_cell(all[k], layers.ground_z_m));
+  for (const std::uint32_t c : s.standing) {
     if (s.in_blob[c] == 0) {
       s.in_blob[c] = 1;
       s.blob.push_back(c);
@@ -164,10 +161,13 @@ bool small_and_apart(const LowObjects& objects, const CostmapLayers& layers,
   return ok;
 }
 
-/// Sums one piece's objects into a Debris; false when one of them is not on its ground.
+/// Sums one piece's objects into a Debris, and puts the cells they stand on in `cells`; false
+/// when one of them is not on its ground.
 bool sum_piece(const LowObjects& objects, const CostmapLayers& layers,
-               std::span<const std::uint32_t> members, Debris& d) {
+               std::span<const std::uint32_t> members, std::vector<std::uint32_t>& cells,
+               Debris& d) {
   const auto all = objects.all();
+  cells.clear();
   d = Debris{};
   d.id = std::numeric_limits<std::uint32_t>::max();
   d.first_seen_ns = std::numeric_limits<std::int64_t>::max();
@@ -175,7 +175,9 @@ bool sum_piece(const LowObjects& objects, const CostmapLayers& layers,
   double wx = 0.0, wy = 0.0, weight = 0.0;
   for (const std::uint32_t k : members) {
     const LowObject& o = all[k];
-    if (standing_cell(o, layers.ground_z_m) < 0) return false;
+    const std::int64_t cell = standing_cell(o, layers.ground_z_m);
+    if (cell < 0) return false;
+    cells.push_back(static_cast<std::uint32_t>(cell));
     d.id = std::min(d.id, o.id);
     wx += static_cast<double>(o.returns) * o.xy_W.x();
     wy += static_cast<double>(o.returns) * o.xy_W.y();
@@ -217,10 +219,10 @@ void extract_debris(const LowObjects& objects, const CostmapLayers& layers,
       s.piece.push_back(static_cast<std::uint32_t>(s.members[i] & 0xffffffffu));
     }
     Debris d;
-    if (!sum_piece(objects, layers, s.piece, d)) continue;
+    if (!sum_piece(objects, layers, s.piece, s.standing, d)) continue;
     if (!(d.height_m <= params.max_height_m + 1e-6)) continue;
     if (d.scans < static_cast<std::uint32_t>(params.min_scans)) continue;
-    if (!small_and_apart(objects, layers, params, s.piece, s, d)) continue;
+    if (!small_and_apart(layers, params, s, d)) continue;
     out.push_back(d);
   }
   std::sort(out.begin(), out.end(), [](const Debris& a, const Debris& b) { return a.id < b.id; });

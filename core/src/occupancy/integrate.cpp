@@ -438,8 +438,7 @@ OccupancyUpdate OccupancyMap::integrate(const Eigen::Vector3d& origin_W,
   stats.rays = n_rays;
   for (const auto v : task_visits) stats.voxel_visits += v;
   for (const auto u : task_updates) stats.miss_updates += u;
-  stats.changed = ChangedColumns(changed_columns_, dims_.x(), dims_.y(), ring_min[0], ring_min[1],
-                                 Eigen::Vector2i(min_.x(), min_.y()));
+  stats.changed = ChangedColumns(changed_columns_, dims_.x(), dims_.y(), ring_min[0], ring_min[1]);
   return stats;
 }
 

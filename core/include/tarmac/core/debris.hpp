@@ -61,12 +61,13 @@ struct Debris {
 
 /// Working memory of extract_debris, kept between calls.
 struct DebrisScratch {
-  std::vector<std::uint32_t> order;    ///< confirmed objects (indices into all()), by x
-  std::vector<std::uint32_t> parent;   ///< union-find over `order`'s slots
-  std::vector<std::uint64_t> members;  ///< (piece's root slot << 32) | object index, sorted
-  std::vector<std::uint32_t> piece;    ///< one piece's object indices
-  std::vector<std::uint8_t> in_blob;   ///< per costmap cell: part of the piece being tested
-  std::vector<std::uint32_t> blob;     ///< that piece's cells
+  std::vector<std::uint32_t> order;     ///< confirmed objects (indices into all()), by x
+  std::vector<std::uint32_t> parent;    ///< union-find over `order`'s slots
+  std::vector<std::uint64_t> members;   ///< (piece's root slot << 32) | object index, sorted
+  std::vector<std::uint32_t> piece;     ///< one piece's object indices
+  std::vector<std::uint32_t> standing;  ///< the costmap cell each of them stands on, as `piece`
+  std::vector<std::uint8_t> in_blob;    ///< per costmap cell: part of the piece being tested
+  std::vector<std::uint32_t> blob;      ///< that piece's cells
   /// Sizes everything for `objects` low objects and `cells` costmap cells.
   void reserve(std::size_t objects, std::size_t cells);
 };

@@ -87,29 +87,19 @@ class ChangedColumns {
  public:
   ChangedColumns() = default;
   /// `bits`: one per window column in ring order (ring_y · width + ring_x); `ring_x0`, `ring_y0`:
-  /// the ring column of window column (0, 0); `window_min`: its world voxel index (x, y).
+  /// the ring column of window column (0, 0).
   ChangedColumns(std::span<const std::uint64_t> bits, int width, int height, int ring_x0,
-                 int ring_y0, Eigen::Vector2i window_min)
-      : bits_(bits),
-        width_(width),
-        height_(height),
-        ring_x0_(ring_x0),
-        ring_y0_(ring_y0),
-        window_min_(std::move(window_min)) {}
+                 int ring_y0)
+      : bits_(bits), width_(width), height_(height), ring_x0_(ring_x0), ring_y0_(ring_y0) {}
   /// Whether window column (x, y), counted from the window's lowest corner like the costmap's
   /// cells, changed; false outside the window.
   [[nodiscard]] bool contains(int x, int y) const;
   /// How many columns changed.
   [[nodiscard]] std::size_t count() const;
-  /// World voxel index (x, y) of window column (0, 0) when the scan was integrated.
-  [[nodiscard]] const Eigen::Vector2i& window_min() const { return window_min_; }
-  [[nodiscard]] int width() const { return width_; }
-  [[nodiscard]] int height() const { return height_; }
 
  private:
   std::span<const std::uint64_t> bits_;
   int width_ = 0, height_ = 0, ring_x0_ = 0, ring_y0_ = 0;
-  Eigen::Vector2i window_min_{0, 0};
 };
 
 /// What one scan changed, for later stages and reports: the columns, and counts.
