@@ -470,34 +470,64 @@ TEST(OccupancyMap, Params_RangesAreBounded) {
   EXPECT_FALSE(p.validate().ok());
 }
 
-/// Brute force over the window: how far along `dir` from `origin` the ray enters the first
-/// occupied voxel past the origin's (the slab test on each), or infinity within `max_t`.
-double first_occupied_brute_force(const OccupancyMap& map, const Eigen::Vector3d& origin,
-                                  const Eigen::Vector3d& dir, double max_t) {
-  const double v = map.params().voxel_size_m;
+/// Calls `fn` with every voxel of the window that reads occupied, but the one holding `origin`.
+template <typename Fn>
+void for_each_occupied(const OccupancyMap& map, const Eigen::Vector3d& origin, Fn&& fn) {
   const VoxelIndex own = map.voxel_of(origin);
-  double best = std::numeric_limits<double>::infinity();
   const Eigen::Vector3i dims = map.window_size();
   for (int z = 0; z < dims.z(); ++z)
     for (int y = 0; y < dims.y(); ++y)
       for (int x = 0; x < dims.x(); ++x) {
         const VoxelIndex q = map.window_min() + VoxelIndex(x, y, z);
-        if (q == own || !(map.log_odds(q) > 0.0f)) continue;
-        double enter = -std::numeric_limits<double>::infinity();
-        double leave = std::numeric_limits<double>::infinity();
-        for (int a = 0; a < 3; ++a) {
-          const double lo = q[a] * v, hi = (q[a] + 1) * v;
-          if (dir[a] == 0.0) {
-            if (origin[a] < lo || origin[a] >= hi) enter = leave = 0.0;  // never inside
-            continue;
-          }
-          const double t0 = (lo - origin[a]) / dir[a], t1 = (hi - origin[a]) / dir[a];
-          enter = std::max(enter, std::min(t0, t1));
-          leave = std::min(leave, std::max(t0, t1));
-        }
-        if (enter < leave && enter >= 0.0 && enter < max_t) best = std::min(best, enter);
+        if (q != own && map.log_odds(q) > 0.0f) fn(q);
       }
+}
+
+/// Brute force over the window: how far along `dir` from `origin` the ray enters the first
+/// occupied voxel past the origin's (the slab test on each), or infinity within `max_t`.
+double first_occupied_brute_force(const OccupancyMap& map, const Eigen::Vector3d& origin,
+                                  const Eigen::Vector3d& dir, double max_t) {
+  const double v = map.params().voxel_size_m;
+  double best = std::numeric_limits<double>::infinity();
+  for_each_occupied(map, origin, [&](const VoxelIndex& q) {
+    double enter = -std::numeric_limits<double>::infinity();
+    double leave = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      const double lo = q[a] * v, hi = (q[a] + 1) * v;
+      if (dir[a] == 0.0) {
+        if (origin[a] < lo || origin[a] >= hi) enter = leave = 0.0;  // never inside
+        continue;
+      }
+      const double t0 = (lo - origin[a]) / dir[a], t1 = (hi - origin[a]) / dir[a];
+      enter = std::max(enter, std::min(t0, t1));
+      leave = std::min(leave, std::max(t0, t1));
+    }
+    if (enter < leave && enter >= 0.0 && enter < max_t) best = std::min(best, enter);
+  });
   return best;
+}
+
+/// A window that is not a multiple of the brick (8 voxels) in any axis, rays to 12 m.
+OccupancyParams odd_window_params() {
+  auto params = small_params();
+  params.window_x_vox = 101;
+  params.window_y_vox = 94;
+  params.window_z_vox = 21;
+  params.max_range_m = 12.0;
+  return params;
+}
+
+/// Ground 1.5 m below the scan's origin, and free space everywhere round it (misses clear what
+/// left).
+void add_ground_and_free_space(Scan& scan, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int i = 0; i < 300; ++i) {
+    scan.points.push_back(
+        (scan.origin + Eigen::Vector3d(6.0 * u(rng), 6.0 * u(rng), -1.5)).cast<float>());
+  }
+  for (int i = 0; i < 400; ++i) {
+    scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), 0.3 * u(rng)).normalized());
+  }
 }
 
 TEST(OccupancyMap, FirstOccupied_SameAsBruteForce_WhileObjectsComeGoAndTheWindowMoves) {
@@ -506,11 +536,7 @@ TEST(OccupancyMap, FirstOccupied_SameAsBruteForce_WhileObjectsComeGoAndTheWindow
   // the voxel a brute force over every occupied voxel finds. A window that is not a multiple of
   // the brick in any axis, scrolled across the ring's end; boxes that appear, move and vanish;
   // rays from near the sensor in every direction, most of them near the horizontal.
-  auto params = small_params();
-  params.window_x_vox = 101;
-  params.window_y_vox = 94;
-  params.window_z_vox = 21;
-  params.max_range_m = 12.0;
+  auto params = odd_window_params();
   params.static_promote_scans = 3;
   OccupancyMap map(params);
   std::mt19937_64 rng(5);
@@ -529,13 +555,7 @@ TEST(OccupancyMap, FirstOccupied_SameAsBruteForce_WhileObjectsComeGoAndTheWindow
                 .cast<float>());
       }
     }
-    for (int i = 0; i < 300; ++i) {  // ground 1.5 m below
-      scan.points.push_back(
-          (position + Eigen::Vector3d(6.0 * u(rng), 6.0 * u(rng), -1.5)).cast<float>());
-    }
-    for (int i = 0; i < 400; ++i) {  // free space everywhere round: misses clear what left
-      scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), 0.3 * u(rng)).normalized());
-    }
+    add_ground_and_free_space(scan, rng);
     map.recenter(position);
     integrate(map, scan);
     for (int r = 0; r < 60; ++r) {
@@ -567,13 +587,8 @@ TEST(OccupancyMap, SkyHorizon_ClearsOnlyRaysTheBruteForceFindsNothingOn) {
   // ray that meets an occupied voxel, for any max_t: checked against the brute force over the
   // whole window with the window scrolled across the ring's end in all three axes (bricks cut
   // in two at the seam), boxes above and below the sensor at every azimuth, rays from level to
-  // straight up. And it must clear most rays that pass over everything, or it saves nothing.
-  auto params = small_params();
-  params.window_x_vox = 101;
-  params.window_y_vox = 94;
-  params.window_z_vox = 21;
-  params.max_range_m = 12.0;
-  OccupancyMap map(params);
+  // straight up.
+  OccupancyMap map(odd_window_params());
   std::mt19937_64 rng(11);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   Eigen::Vector3d position(0.05, 0.05, 0.05);
@@ -589,30 +604,18 @@ TEST(OccupancyMap, SkyHorizon_ClearsOnlyRaysTheBruteForceFindsNothingOn) {
             (c + Eigen::Vector3d(0.3 * u(rng), 0.3 * u(rng), 0.2 * u(rng))).cast<float>());
       }
     }
-    for (int i = 0; i < 300; ++i) {  // ground 1.5 m below
-      scan.points.push_back(
-          (position + Eigen::Vector3d(6.0 * u(rng), 6.0 * u(rng), -1.5)).cast<float>());
-    }
-    for (int i = 0; i < 400; ++i) {
-      scan.clearing.push_back(Eigen::Vector3f(u(rng), u(rng), 0.3 * u(rng)).normalized());
-    }
+    add_ground_and_free_space(scan, rng);
     map.recenter(position);
     integrate(map, scan);
     const SkyHorizon sky = map.sky_horizon(position);
     // A ray aimed at the centre of any occupied voxel meets it: never cleared. Every voxel of
     // the window, so the bricks the ring's seam cuts in two are checked whatever the scan.
-    const VoxelIndex own = map.voxel_of(position);
-    const Eigen::Vector3i dims = map.window_size();
-    for (int z = 0; z < dims.z(); ++z)
-      for (int y = 0; y < dims.y(); ++y)
-        for (int x = 0; x < dims.x(); ++x) {
-          const VoxelIndex q = map.window_min() + VoxelIndex(x, y, z);
-          if (q == own || !(map.log_odds(q) > 0.0f)) continue;
-          const Eigen::Vector3d at = (q.cast<double>() + Eigen::Vector3d::Constant(0.5)) * 0.2;
-          ++aimed;
-          EXPECT_FALSE(sky.clears((at - position).normalized()))
-              << "scan " << scan_no << " voxel " << q.transpose();
-        }
+    for_each_occupied(map, position, [&](const VoxelIndex& q) {
+      const Eigen::Vector3d at = (q.cast<double>() + Eigen::Vector3d::Constant(0.5)) * 0.2;
+      ++aimed;
+      EXPECT_FALSE(sky.clears((at - position).normalized()))
+          << "scan " << scan_no << " voxel " << q.transpose();
+    });
     for (int r = 0; r < 80; ++r) {
       Eigen::Vector3d dir(u(rng), u(rng), 0.0);
       if (r % 4 != 0) dir.z() = (r % 4 == 1 ? 0.05 : 0.6) * (u(rng) + 1.0);  // r % 4 == 0: level
