@@ -694,6 +694,9 @@ TEST(OccupancyMap, SkyHorizon_BoxOverTheSensor_ClearsNothing) {
   EXPECT_TRUE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, 1.0).normalized()));
   EXPECT_FALSE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, -0.1).normalized()))
       << "a descending ray is never cleared";
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(empty.sky_horizon(origin).clears(Eigen::Vector3d(nan, 0.0, 1.0)));
+  EXPECT_FALSE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, nan)));
 }
 
 TEST(OccupancyMap, Deterministic_ForOneTwoAndFourThreads) {

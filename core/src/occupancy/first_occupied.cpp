@@ -190,6 +190,7 @@ double SkyHorizon::turn(double x, double y) {
 bool SkyHorizon::clears(const Eigen::Vector3d& dir_W) const {
   if (overhead_ || !(dir_W.z() >= 0.0)) return false;
   const double x = dir_W.x(), y = dir_W.y(), z = dir_W.z();
+  if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) return false;
   if (x == 0.0 && y == 0.0) return true;  // straight up: its own column, nothing flagged over it
   const double s = slope_[static_cast<std::size_t>(sector(turn(x, y)))];
   // z > s · run, squared (both sides ≥ 0 when s ≥ 0); the boxes' margin of a voxel dwarfs
