@@ -7,6 +7,9 @@
 /// voxels visited, depend only on the voxel the walk stands in. That lets it jump across a box
 /// of bricks that holds nothing occupied and land in exactly the state the voxel-by-voxel walk
 /// would reach, so the flags change how fast it goes, never what it returns.
+///
+/// Most beams without return need no walk at all: the same flags draw the sky round the sensor
+/// (OccupancyMap::sky_horizon), and a beam that rises above it would find nothing.
 
 #include <algorithm>
 #include <cmath>
