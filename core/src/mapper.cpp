@@ -86,11 +86,11 @@ std::uint64_t clip_at_ground(const Eigen::Vector3d& up, double ground_h, double 
 /// below, no longer an underside, and the rays passing under it would empty it). Each direction
 /// is scaled to the share of `clear_range_m` it clears (OccupancyMap::integrate); one that would
 /// clear less than a voxel is dropped. Reads only, each beam on its own: the same for any
-/// runner. `scale` is scratch. Returns the number shortened or dropped.
+/// runner. `scale` and `sky` are scratch. Returns the number shortened or dropped.
 std::uint64_t stop_at_occupied(const OccupancyMap& map, const Eigen::Vector3d& origin_W,
                                double clear_range_m, double voxel_m,
                                std::vector<Eigen::Vector3f>& dirs_W, std::vector<float>& scale,
-                               TaskRunner& runner) {
+                               SkyHorizon& sky, TaskRunner& runner) {
   if (!(clear_range_m > 0.0) || dirs_W.empty()) return 0;
   const std::size_t n = dirs_W.size();
   scale.assign(n, 1.0f);
@@ -99,7 +99,7 @@ std::uint64_t stop_at_occupied(const OccupancyMap& map, const Eigen::Vector3d& o
   const VoxelIndex origin_voxel = map.voxel_of(origin_W);
   // Most beams without return point at the sky: those above everything the map holds over
   // their sector need no walk (SkyHorizon; the answer is the walk's).
-  const SkyHorizon sky = map.sky_horizon(origin_W);
+  map.sky_horizon(origin_W, sky);
   runner.parallel_for(chunks, [&](std::size_t c) {
     for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
       const Eigen::Vector3d dir = dirs_W[i].cast<double>();
@@ -246,7 +246,7 @@ FilteredScan Mapper::ingest(const PointCloud& cloud, const Eigen::Isometry3d& T_
       params_.occupancy.clearing_range_m, clearing_W_);
   counts.no_returns_stopped =
       stop_at_occupied(map_, sensor_W_, params_.occupancy.clearing_range_m,
-                       params_.occupancy.voxel_size_m, clearing_W_, no_return_scale_, runner);
+                       params_.occupancy.voxel_size_m, clearing_W_, no_return_scale_, sky_, runner);
   if (!retained_.empty()) {
     if (rebuilding_ && next_seq_ >= retained_.size() &&
         cursor_seq_ <= next_seq_ - retained_.size()) {
@@ -488,7 +488,8 @@ RebuildStep Mapper::rebuild_step(TaskRunner& runner) {
         ground_below_sensor(r.T_W_B, T_W_S.translation(), rebuild_points_W_, ground_heights_),
         params_.occupancy.clearing_range_m, rebuild_clearing_W_);
     stop_at_occupied(*spare_, T_W_S.translation(), params_.occupancy.clearing_range_m,
-                     params_.occupancy.voxel_size_m, rebuild_clearing_W_, no_return_scale_, runner);
+                     params_.occupancy.voxel_size_m, rebuild_clearing_W_, no_return_scale_, sky_,
+                     runner);
     spare_->recenter(r.T_W_B.translation());
     spare_->set_observation_stamp(r.stamp_ns);
     spare_->integrate(T_W_S.translation(), rebuild_points_W_, rebuild_clearing_W_, runner,

@@ -607,7 +607,8 @@ TEST(OccupancyMap, SkyHorizon_ClearsOnlyRaysTheBruteForceFindsNothingOn) {
     add_ground_and_free_space(scan, rng);
     map.recenter(position);
     integrate(map, scan);
-    const SkyHorizon sky = map.sky_horizon(position);
+    SkyHorizon sky;
+    map.sky_horizon(position, sky);
     // A ray aimed at the centre of any occupied voxel meets it: never cleared. Every voxel of
     // the window, so the bricks the ring's seam cuts in two are checked whatever the scan.
     for_each_occupied(map, position, [&](const VoxelIndex& q) {
@@ -661,7 +662,8 @@ TEST(OccupancyMap, SkyHorizon_ClearsEveryRayAboveTheObjectsRound) {
   }
   map.recenter(origin);
   integrate(map, scan);
-  const SkyHorizon sky = map.sky_horizon(origin);
+  SkyHorizon sky;
+  map.sky_horizon(origin, sky);
   const double steep = 1.4 / 3.2;
   int level_blocked = 0;
   for (int k = 0; k < 720; ++k) {
@@ -685,18 +687,21 @@ TEST(OccupancyMap, SkyHorizon_BoxOverTheSensor_ClearsNothing) {
   }
   map.recenter(origin);
   integrate(map, scan);
-  const SkyHorizon sky = map.sky_horizon(origin);
+  SkyHorizon sky;
+  EXPECT_FALSE(sky.clears(Eigen::Vector3d(0.0, 0.0, 1.0))) << "not drawn yet: clears nothing";
+  map.sky_horizon(origin, sky);
   EXPECT_FALSE(sky.clears(Eigen::Vector3d(0.0, 0.0, 1.0)));
   EXPECT_FALSE(sky.clears(Eigen::Vector3d(1.0, 0.0, 1.0).normalized()));
-  // Without it, the same rays are cleared.
+  // Without it, the same rays are cleared: the same SkyHorizon redrawn keeps nothing of before.
   OccupancyMap empty(small_params());
   empty.recenter(origin);
-  EXPECT_TRUE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, 1.0).normalized()));
-  EXPECT_FALSE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, -0.1).normalized()))
+  empty.sky_horizon(origin, sky);
+  EXPECT_TRUE(sky.clears(Eigen::Vector3d(1.0, 0.0, 1.0).normalized()));
+  EXPECT_FALSE(sky.clears(Eigen::Vector3d(1.0, 0.0, -0.1).normalized()))
       << "a descending ray is never cleared";
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_FALSE(empty.sky_horizon(origin).clears(Eigen::Vector3d(nan, 0.0, 1.0)));
-  EXPECT_FALSE(empty.sky_horizon(origin).clears(Eigen::Vector3d(1.0, 0.0, nan)));
+  EXPECT_FALSE(sky.clears(Eigen::Vector3d(nan, 0.0, 1.0)));
+  EXPECT_FALSE(sky.clears(Eigen::Vector3d(1.0, 0.0, nan)));
 }
 
 TEST(OccupancyMap, Deterministic_ForOneTwoAndFourThreads) {

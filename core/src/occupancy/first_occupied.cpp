@@ -201,7 +201,7 @@ bool SkyHorizon::clears(const Eigen::Vector3d& dir_W) const {
   return s < 0.0 || z * z > s * s * (x * x + y * y);
 }
 
-SkyHorizon OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W) const {
+void OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& sky) const {
   // Each flagged brick whose occupied voxels reach above the origin, as the world boxes its
   // ring voxels stand for (a brick across the ring's seam is two pieces along that axis), from
   // the brick's x-y extent and its highest occupied voxel, grown by a voxel each way against
@@ -209,7 +209,8 @@ SkyHorizon OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W) const {
   // while nearer than the box's nearest horizontal distance, so the box's top over that
   // distance bounds the slope of the beams that can touch it; the box's sectors (those of its
   // corners, and one more each side) take the largest.
-  SkyHorizon sky;
+  sky.slope_.fill(-1.0);
+  sky.overhead_ = false;
   constexpr int kBrick = 1 << kBrickShift;
   constexpr int kN = SkyHorizon::kSectors;
   const double v = params_.voxel_size_m;
@@ -285,14 +286,13 @@ SkyHorizon OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W) const {
             if (!raise((xlo[i] - 1) * v - o.x(), (xhi[i] + 1) * v - o.x(), (ylo[j] - 1) * v - o.y(),
                        (yhi[j] + 1) * v - o.y(), top)) {
               sky.overhead_ = true;  // over the origin's column: every rising beam may meet it
-              return sky;
+              return;
             }
           }
         }
       }
     }
   }
-  return sky;
 }
 
 void OccupancyMap::flag_brick(std::size_t slot) {

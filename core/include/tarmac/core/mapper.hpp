@@ -246,6 +246,7 @@ class Mapper {
   std::vector<Eigen::Vector3f> rebuild_clearing_W_;
   std::vector<Eigen::Vector3f> no_return_scratch_S_;  ///< accepted directions when not retained
   std::vector<float> no_return_scale_;  ///< stop_at_occupied's share of each beam cleared
+  SkyHorizon sky_;                      ///< stop_at_occupied's sky round the sensor
   std::vector<float> ground_heights_;   ///< returns' heights for the ground under the sensor
   FilterScratch filter_scratch_;
   PointCloud deskewed_;   ///< the scan after deskew (points only), reused

@@ -136,8 +136,12 @@ class SkyHorizon {
   [[nodiscard]] static int sector(double turn) {
     return std::min(kSectors - 1, static_cast<int>(turn * (kSectors / 4.0)));
   }
-  std::vector<double> slope_ = std::vector<double>(kSectors, -1.0);  ///< -1: nothing above
-  bool overhead_ = false;  ///< a flagged brick reaching above the origin is over its column
+  /// Per sector; -1: nothing above the origin. A fixed array: drawn each scan on the executor's
+  /// threads, which allocate nothing in steady state.
+  std::array<double, kSectors> slope_{};
+  /// A flagged brick reaching above the origin is over its column; true until first drawn, so
+  /// that a SkyHorizon never drawn clears nothing.
+  bool overhead_ = true;
 };
 
 /// The rolling window. Move-only (tens of MB). Not thread-safe: one writer.
@@ -221,8 +225,9 @@ class OccupancyMap {
                                       const VoxelIndex& origin_voxel, const Eigen::Vector3d& dir_W,
                                       double max_t) const;
   [[nodiscard]] VoxelIndex voxel_of(const Eigen::Vector3d& p_W) const;
-  /// The sky round `origin_W` (SkyHorizon), from the brick flags first_occupied() reads.
-  [[nodiscard]] SkyHorizon sky_horizon(const Eigen::Vector3d& origin_W) const;
+  /// Draws the sky round `origin_W` into `out` (SkyHorizon), from the brick flags
+  /// first_occupied() reads.
+  void sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& out) const;
 
   /// Lowest-corner voxel of the window (inclusive) and its size in voxels.
   [[nodiscard]] const VoxelIndex& window_min() const { return min_; }
