@@ -190,6 +190,10 @@ double SkyHorizon::turn(double x, double y) {
   return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
 }
 
+int SkyHorizon::sector(double turn) {
+  return std::min(kSectors - 1, static_cast<int>(turn * (kSectors / 4.0)));
+}
+
 bool SkyHorizon::clears(const Eigen::Vector3d& dir_W) const {
   if (overhead_ || !(dir_W.z() >= 0.0)) return false;
   const double x = dir_W.x(), y = dir_W.y(), z = dir_W.z();
@@ -215,13 +219,13 @@ void OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& sky)
   constexpr int kN = SkyHorizon::kSectors;
   const double v = params_.voxel_size_m;
   const Eigen::Vector3d& o = origin_W;
+  const std::array<int, 3> seam = ring_origin();  // the ring index of the window's lowest voxel
   // World voxel intervals [lo, hi) of ring interval [r0, r1) along `a`: one or two pieces.
   const auto world_pieces = [&](int a, int r0, int r1, int(&lo)[2], int(&hi)[2]) {
-    const int seam = wrap(min_[a], dims_[a]);
-    const auto world = [&](int r) { return min_[a] + wrap(r - seam, dims_[a]); };
-    if (r0 < seam && seam < r1) {
-      lo[0] = world(r0), hi[0] = lo[0] + (seam - r0);
-      lo[1] = min_[a], hi[1] = min_[a] + (r1 - seam);
+    const auto world = [&](int r) { return min_[a] + wrap(r - seam[a], dims_[a]); };
+    if (r0 < seam[a] && seam[a] < r1) {
+      lo[0] = world(r0), hi[0] = lo[0] + (seam[a] - r0);
+      lo[1] = min_[a], hi[1] = min_[a] + (r1 - seam[a]);
       return 2;
     }
     lo[0] = world(r0), hi[0] = lo[0] + (r1 - r0);
@@ -234,7 +238,7 @@ void OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& sky)
   const auto highest_occupied = [&](int bx, int by, int bz) {
     int best = std::numeric_limits<int>::min();
     for (int rz = bz * kBrick; rz < ring_end(2, bz); ++rz) {
-      const int wz = min_.z() + wrap(rz - wrap(min_.z(), dims_.z()), dims_.z());
+      const int wz = min_.z() + wrap(rz - seam[2], dims_.z());
       bool any = false;
       for (int ry = by * kBrick; ry < ring_end(1, by) && !any && wz > best; ++ry) {
         const float* line = log_odds_.data() + (static_cast<std::size_t>(rz) * ny + ry) * nx;
@@ -273,7 +277,7 @@ void OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& sky)
     for (int by = 0; by < bricks_.y(); ++by) {
       for (int bx = 0; bx < bricks_.x(); ++bx) {
         const std::size_t b = (static_cast<std::size_t>(bz) * bricks_.y() + by) * bricks_.x() + bx;
-        if (((brick_bits_[b >> 6] >> (b & 63)) & 1U) == 0) continue;
+        if (!brick_flagged(b)) continue;
         const int top_z = highest_occupied(bx, by, bz);
         if (top_z == std::numeric_limits<int>::min()) continue;
         const double top = (top_z + 2) * v - o.z();  // the voxel's top, and a voxel's margin
@@ -346,8 +350,7 @@ void OccupancyMap::update_brick_skips() {
     for (int by = 0; by < nby; ++by) {
       const std::size_t row = (static_cast<std::size_t>(bz) * nby + by) * nbx;
       const auto flagged = [&](int bx) {
-        const std::size_t b = row + static_cast<std::size_t>(bx);
-        return ((brick_bits_[b >> 6] >> (b & 63)) & 1U) != 0;
+        return brick_flagged(row + static_cast<std::size_t>(bx));
       };
       int d = cap;
       for (int k = 0; k < 2 * nbx; ++k) {  // forward, twice round: the wrap's distances too

@@ -19,7 +19,6 @@
 /// The window's log-odds are the combined result (static voxels read occupied), so the costmap
 /// and the ESDF read one array. Unknown stays unknown: only rays change a voxel.
 
-#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -131,11 +130,10 @@ class SkyHorizon {
  private:
   friend class OccupancyMap;
   static constexpr int kSectors = 1024;
-  /// Sector of a horizontal direction (x, y) ≠ 0: a pseudo-angle that grows with the angle.
+  /// A horizontal direction (x, y) ≠ 0 as a pseudo-angle in [0, 4] that grows with the angle.
   [[nodiscard]] static double turn(double x, double y);
-  [[nodiscard]] static int sector(double turn) {
-    return std::min(kSectors - 1, static_cast<int>(turn * (kSectors / 4.0)));
-  }
+  /// The sector of a turn.
+  [[nodiscard]] static int sector(double turn);
   /// Per sector; -1: nothing above the origin. A fixed array: drawn each scan on the executor's
   /// threads, which allocate nothing in steady state.
   std::array<double, kSectors> slope_{};
@@ -341,6 +339,10 @@ class OccupancyMap {
   /// Flags the brick of `slot` as holding an occupied voxel (first_occupied() reads it);
   /// update_brick_skips() must run before the next walk.
   void flag_brick(std::size_t slot);
+  /// Whether brick `b` (brick_of_ring()) is flagged.
+  [[nodiscard]] bool brick_flagged(std::size_t b) const {
+    return ((brick_bits_[b >> 6] >> (b & 63)) & 1U) != 0;
+  }
   /// Recomputes the flags of the next `rows` rows of bricks (round robin) from the log-odds, so
   /// that bricks whose occupied voxels were cleared stop costing the walk time.
   void refresh_bricks(int rows);
