@@ -274,11 +274,13 @@ Eigen::Vector3f OccupancyMap::ground_plane(int cx, int cy, int r, float second) 
   const float band = second + kPlaneBandM;
   const int x0 = std::max(0, cx - r), x1 = std::min(nx - 1, cx + r);
   const int y0 = std::max(0, cy - r), y1 = std::min(ny - 1, cy + r);
-  // A step between neighbouring columns (a kerb, an object's own column) is no plane: a fit
-  // through it would lift the reference at its foot towards its top.
+  // A step between neighbouring columns as high as an obstacle (low_objects.min_rise_m, the
+  // costmap's min_obstacle_height_m: a kerb, an object's own column) is no plane: a fit through
+  // it would lift the reference at its foot towards its top.
+  const auto step = static_cast<float>(params_.low_objects.min_rise_m);
   const auto jumps = [&](float g, std::size_t other) {
     const float h = scan_ground_z_[other];
-    return h <= band && std::abs(h - g) >= kPlaneJumpM;
+    return h <= band && std::abs(h - g) >= step;
   };
   double n = 0, su = 0, sw = 0, suu = 0, sww = 0, suw = 0, sz = 0, suz = 0, swz = 0;
   for (int y = y0; y <= y1; ++y) {

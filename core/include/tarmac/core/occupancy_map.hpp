@@ -326,7 +326,8 @@ class OccupancyMap {
   void hit_rises(std::span<const Eigen::Vector3f> points_W);
   /// The ground plane through the scan's lowest returns of the columns within r of (cx, cy),
   /// kPlaneMarginM lowered: (height at the column's centre, slope along x, along y); slope x
-  /// NaN where the columns do not fix one (too few, along a line, steeper than kPlaneMaxSlope).
+  /// NaN where the columns do not fix one (too few, along a line, steeper than kPlaneMaxSlope,
+  /// across a step as high as low_objects.min_rise_m).
   [[nodiscard]] Eigen::Vector3f ground_plane(int cx, int cy, int r, float second) const;
   /// One hit per voxel in point order, its static-layer state and its sub-voxel heights.
   void apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdate& stats);
@@ -406,7 +407,6 @@ class OccupancyMap {
   static constexpr double kPlaneSpread = 0.5;
   static constexpr double kPlaneMaxSlope = 0.35;
   static constexpr float kPlaneMarginM = 0.03f;
-  static constexpr float kPlaneJumpM = 0.06f;
   std::uint32_t scans_integrated_ = 0;  ///< integrate() calls (the memory's clock)
   LowObjects low_objects_;
   Eigen::Vector3f up_ = Eigen::Vector3f::UnitZ();  ///< the scan being integrated's up axis
