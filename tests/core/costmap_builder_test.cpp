@@ -475,8 +475,7 @@ TEST(Terrain, ABankAt25PercentIsGround_AKerbAndLowBoxesStillBlock) {
   // returns lie 10–12 cm under it: against them alone, the bank rose into a band of low
   // objects. Against the ground plane through those columns it does not rise; the kerb's step
   // fits no plane and still blocks, and 10 cm boxes on the bank and on its top block.
-  const auto height = [](float x, float y) {
-    (void)x;
+  const auto height = [](float y) {
     if (y > 4.0f) return std::min(0.25f * (y - 4.0f), 0.2f);
     return y < -4.0f ? 0.10f : 0.0f;
   };
@@ -484,14 +483,14 @@ TEST(Terrain, ABankAt25PercentIsGround_AKerbAndLowBoxesStillBlock) {
   for (float x = -12.0f; x <= 12.0f; x += 0.1f) {
     for (float y = -12.0f; y <= 12.0f; y += 0.1f) {
       const float fx = x + 0.013f, fy = y + 0.017f;
-      points.emplace_back(fx, fy, height(fx, fy) + 0.05f);
+      points.emplace_back(fx, fy, height(fy) + 0.05f);
     }
   }
   const Eigen::Vector2f on_slope(-6.0f, 4.4f), on_top(6.0f, 7.0f);
   for (const Eigen::Vector2f& b : {on_slope, on_top}) {
-    const float base = height(b.x(), b.y() - 0.1f) + 0.05f;
+    const float base = height(b.y() - 0.1f) + 0.05f;
     test::add_box(points, {b.x() - 0.1f, b.y() - 0.1f, base},
-                  {b.x() + 0.1f, b.y() + 0.1f, height(b.x(), b.y() + 0.1f) + 0.15f});
+                  {b.x() + 0.1f, b.y() + 0.1f, height(b.y() + 0.1f) + 0.15f});
   }
   const CostmapLayers layers = terrain_costmap(points);
   const auto cost_at = [&](double x, double y) {
