@@ -98,7 +98,6 @@ OccupancyMap::OccupancyMap(const OccupancyParams& params)
                         std::numeric_limits<float>::infinity());
   scan_ground2_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
   scan_ground_near_z_.assign(scan_ground_z_.size(), std::numeric_limits<float>::infinity());
-  scan_ground_plane_.assign(scan_ground_z_.size(), Eigen::Vector3f::Zero());
   ground_memory_z_.assign(scan_ground_z_.size(), 0.0f);
   ground_memory_scan_.assign(scan_ground_z_.size(), 0);
   const std::size_t words = (n + 63) / 64;
@@ -169,7 +168,6 @@ std::size_t OccupancyMap::memory_bytes() const {
       hit_floor_.capacity() + scan_rays_.memory_bytes() + static_bytes() +
       (scan_ground_z_.capacity() + scan_ground2_z_.capacity() + scan_ground_near_z_.capacity()) *
           sizeof(float) +
-      scan_ground_plane_.capacity() * sizeof(Eigen::Vector3f) +
       scan_ground_cols_.capacity() * sizeof(std::uint32_t) +
       (hit_bits_.capacity() + floor_bits_.capacity() + changed_columns_.capacity()) *
           sizeof(std::uint64_t) +

@@ -30,8 +30,6 @@ using namespace occupancy;  // NOLINT(google-build-using-namespace): this file i
 
 /// A window column the scan has no return in: its lowest return is +inf.
 constexpr float kNoGround = std::numeric_limits<float>::infinity();
-/// ground_plane()'s slope where the columns round a column fix no plane.
-constexpr float kNoPlane = std::numeric_limits<float>::quiet_NaN();
 
 }  // namespace
 
@@ -55,7 +53,7 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   up_ = up;
   hit_heights(points_W, up);
   // b) Each return's rise above the scan's ground near it; c) one hit per voxel.
-  hit_rises(points_W);
+  hit_rises(points_W.size());
   apply_hits(points_W, stats);
   // d) The low objects kept across scans, from the returns' rises.
   low_objects_.place(min_.x(), min_.y());
@@ -156,8 +154,7 @@ void OccupancyMap::hit_heights(std::span<const Eigen::Vector3f> points_W,
   n_ground_cols_ = n_touched;
 }
 
-void OccupancyMap::hit_rises(std::span<const Eigen::Vector3f> points_W) {
-  const std::size_t n_points = points_W.size();
+void OccupancyMap::hit_rises(std::size_t n_points) {
   const int nx = dims_.x(), ny = dims_.y();
   const std::uint32_t* const slot_of_hit = hit_slot_.data();
   // Rise above the second-lowest return of this scan within ground_radius_m (an object cannot
@@ -182,26 +179,19 @@ void OccupancyMap::hit_rises(std::span<const Eigen::Vector3f> points_W) {
     const std::uint32_t c = scan_ground_cols_[k];
     const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
     const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
-    float lowest = kNoGround, second = kNoGround, highest = -kNoGround;
+    float lowest = kNoGround, second = kNoGround;
     int returned = 0;
     for (int y = std::max(0, cy - r); y <= std::min(ny - 1, cy + r); ++y) {
       const std::size_t row = static_cast<std::size_t>(y) * nx;
       for (int x = std::max(0, cx - r); x <= std::min(nx - 1, cx + r); ++x) {
         const float g = scan_ground_z_[row + x];
         returned += g == kNoGround ? 0 : 1;
-        highest = std::max(highest, g == kNoGround ? highest : g);
         second = std::min(second, std::max(lowest, g));
         lowest = std::min(lowest, g);
         second = std::min(second, scan_ground2_z_[row + x]);
       }
     }
     float near = second == kNoGround ? lowest : second;
-    // Fitted only where some column lies more than the plane's margin over the second-lowest:
-    // elsewhere it could lift the reference only by extrapolating, and without it the rise is
-    // the larger one, the safe side.
-    scan_ground_plane_[c] = returned >= kPlaneColumns && highest - second > kPlaneMarginM
-                                ? ground_plane(cx, cy, r, second)
-                                : Eigen::Vector3f(0.0f, kNoPlane, 0.0f);
     const auto ring = [&](int x, int y) {
       return static_cast<std::size_t>(ring_y(y)) * nx + static_cast<std::size_t>(ring_x(x));
     };
@@ -216,11 +206,7 @@ void OccupancyMap::hit_rises(std::span<const Eigen::Vector3f> points_W) {
       // (Not on a vehicle on its side: the world height along its up axis is undefined.)
       if (second != kNoGround && second - lowest <= kGroundAgreeM && up_.z() > 0.1f) {
         const Eigen::Vector2f xy = centre(cx, cy);
-        // On a slope the second-lowest lies downhill of the column: the plane says where the
-        // ground passes under the column itself.
-        const Eigen::Vector3f& plane = scan_ground_plane_[c];
-        const float here = std::isnan(plane.y()) ? near : std::max(near, plane.x());
-        ground_memory_z_[ring(cx, cy)] = (here - up_.x() * xy.x() - up_.y() * xy.y()) / up_.z();
+        ground_memory_z_[ring(cx, cy)] = (near - up_.x() * xy.x() - up_.y() * xy.y()) / up_.z();
         ground_memory_scan_[ring(cx, cy)] = scan;
       }
     } else {
@@ -244,81 +230,12 @@ void OccupancyMap::hit_rises(std::span<const Eigen::Vector3f> points_W) {
   const float* const height = hit_height_.data();
   const std::uint32_t* const column = hit_column_.data();
   const float* const ground_near = scan_ground_near_z_.data();
-  const Eigen::Vector3f* const plane_of = scan_ground_plane_.data();
-  const auto first_x = static_cast<float>((min_.x() + 0.5) * v_m);
-  const auto first_y = static_cast<float>((min_.y() + 0.5) * v_m);
-  const auto v = static_cast<float>(v_m);
   for (std::size_t i = 0; i < n_points; ++i) {
     if (slot_of_hit[i] == kNoSlot) continue;
-    const std::uint32_t c = column[i];
-    float ground_z = ground_near[c];
-    const Eigen::Vector3f& plane = plane_of[c];
-    if (!std::isnan(plane.y())) {
-      // The ground surface under the return itself, from the plane through its column.
-      const float du = points_W[i].x() - (first_x + static_cast<float>(c % nx) * v);
-      const float dw = points_W[i].y() - (first_y + static_cast<float>(c / nx) * v);
-      ground_z = std::max(ground_z, plane.x() + plane.y() * du + plane.z() * dw);
-    }
+    const float ground_z = ground_near[column[i]];
     rise_of_hit[i] = static_cast<std::uint8_t>(
         std::clamp(static_cast<int>((height[i] - ground_z) * 100.0f), 0, 255));
   }
-}
-
-Eigen::Vector3f OccupancyMap::ground_plane(int cx, int cy, int r, float second) const {
-  // Least squares over the columns' lowest returns that lie within kPlaneBandM of the
-  // second-lowest (a wall's or a car's foot seen above the ground would tilt it), offsets in
-  // columns from (cx, cy), heights from `second`.
-  const Eigen::Vector3f none(0.0f, kNoPlane, 0.0f);
-  if (second == kNoGround) return none;
-  const int nx = dims_.x(), ny = dims_.y();
-  const float band = second + kPlaneBandM;
-  const int x0 = std::max(0, cx - r), x1 = std::min(nx - 1, cx + r);
-  const int y0 = std::max(0, cy - r), y1 = std::min(ny - 1, cy + r);
-  // A step between neighbouring columns as high as an obstacle (low_objects.min_rise_m, the
-  // costmap's min_obstacle_height_m: a kerb, an object's own column) is no plane: a fit through
-  // it would lift the reference at its foot towards its top.
-  const auto step = static_cast<float>(params_.low_objects.min_rise_m);
-  const auto jumps = [&](float g, std::size_t other) {
-    const float h = scan_ground_z_[other];
-    return h <= band && std::abs(h - g) >= step;
-  };
-  double n = 0, su = 0, sw = 0, suu = 0, sww = 0, suw = 0, sz = 0, suz = 0, swz = 0;
-  for (int y = y0; y <= y1; ++y) {
-    const std::size_t row = static_cast<std::size_t>(y) * nx;
-    for (int x = x0; x <= x1; ++x) {
-      const float g = scan_ground_z_[row + x];
-      if (!(g <= band)) continue;
-      if ((x < x1 && jumps(g, row + x + 1)) || (y < y1 && jumps(g, row + nx + x))) return none;
-      const double u = x - cx, w = y - cy, z = g - second;
-      n += 1;
-      su += u;
-      sw += w;
-      suu += u * u;
-      sww += w * w;
-      suw += u * w;
-      sz += z;
-      suz += u * z;
-      swz += w * z;
-    }
-  }
-  if (n < kPlaneColumns) return none;
-  // The columns must spread across both directions: the smaller eigenvalue of their offsets'
-  // covariance, in columns², at least kPlaneSpread (a ring's single line of columns does not
-  // say how the ground falls across it).
-  const double mu = su / n, mw = sw / n;
-  const double cuu = suu / n - mu * mu, cww = sww / n - mw * mw, cuw = suw / n - mu * mw;
-  const double half = 0.5 * (cuu + cww);
-  const double spread = half - std::sqrt(0.25 * (cuu - cww) * (cuu - cww) + cuw * cuw);
-  if (spread < kPlaneSpread) return none;
-  // Centred normal equations: the slopes from the covariances, then the height at (cx, cy).
-  const double mz = sz / n, cuz = suz / n - mu * mz, cwz = swz / n - mw * mz;
-  const double det = cuu * cww - cuw * cuw;
-  const double gu = (cww * cuz - cuw * cwz) / det, gw = (cuu * cwz - cuw * cuz) / det;
-  const double v = params_.voxel_size_m;
-  if (std::hypot(gu, gw) > kPlaneMaxSlope * v) return none;
-  const double at_centre = mz - gu * mu - gw * mw;
-  return {static_cast<float>(second + at_centre - kPlaneMarginM), static_cast<float>(gu / v),
-          static_cast<float>(gw / v)};
 }
 
 void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdate& stats) {

@@ -54,9 +54,7 @@ struct OccupancyParams {
   /// How far a beam with no return (or beyond max range) clears free space.
   double clearing_range_m = 30.0;
   /// Heights of returns above the ground are taken against the second-lowest return of the same
-  /// scan within this horizontal radius (one stray return below the ground does not count), or
-  /// the ground plane through the lowest returns of the columns there where that is higher
-  /// (a slope; not across a step: docs/mapping.md, "Sub-voxel heights").
+  /// scan within this horizontal radius (one stray return below the ground does not count).
   /// Where that scan returned little round the spot (at range, a beam that grazes a 10 cm object
   /// lands 0.1·d/h further on, and the ring below lands well short), the ground a scan of the
   /// last second returned densely there is taken instead, when lower. Larger radii met road
@@ -321,14 +319,8 @@ class OccupancyMap {
                            std::span<const Eigen::Vector3f> points_W);
   /// Each return's height along `up` and the scan's two lowest returns per window column.
   void hit_heights(std::span<const Eigen::Vector3f> points_W, const Eigen::Vector3f& up);
-  /// Each return's rise (cm) above the scan's ground near it: the second-lowest return within
-  /// ground_radius_m, or the ground plane through the columns there where it lies higher.
-  void hit_rises(std::span<const Eigen::Vector3f> points_W);
-  /// The ground plane through the scan's lowest returns of the columns within r of (cx, cy),
-  /// kPlaneMarginM lowered: (height at the column's centre, slope along x, along y); slope x
-  /// NaN where the columns do not fix one (too few, along a line, steeper than kPlaneMaxSlope,
-  /// across a step as high as low_objects.min_rise_m).
-  [[nodiscard]] Eigen::Vector3f ground_plane(int cx, int cy, int r, float second) const;
+  /// Each return's rise (cm) above the scan's second-lowest return within ground_radius_m.
+  void hit_rises(std::size_t n_points);
   /// One hit per voxel in point order, its static-layer state and its sub-voxel heights.
   void apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdate& stats);
   /// integrate()'s last step: the misses of the occupied voxels a ray crossed (candidates_),
@@ -387,8 +379,6 @@ class OccupancyMap {
   /// Per scan, for the columns that hold a return: the ground under a return's rise, the
   /// second-lowest return within ground_radius_m (see hit_rises()).
   std::vector<float> scan_ground_near_z_;
-  /// Per scan, for the columns that hold a return: ground_plane() round them.
-  std::vector<Eigen::Vector3f> scan_ground_plane_;
   std::vector<std::uint32_t> scan_ground_cols_;  ///< the first n_ground_cols_ (no per-scan fill)
   /// Per window column, ring order: the ground of the latest scan that returned densely round
   /// it (kDenseColumns of the columns within ground_radius_m), as a map-frame z, and that
@@ -399,14 +389,6 @@ class OccupancyMap {
   static constexpr int kDenseColumns = 4;
   static constexpr std::uint32_t kGroundMemoryScans = 10;
   static constexpr float kGroundAgreeM = 0.03f;
-  /// ground_plane(): the columns it takes (lowest return within kPlaneBandM of the
-  /// second-lowest round it), how many, how spread (columns²), how steep a plane counts as
-  /// ground, and how far under the fit the reference lies (range noise).
-  static constexpr float kPlaneBandM = 0.3f;
-  static constexpr int kPlaneColumns = 8;
-  static constexpr double kPlaneSpread = 0.5;
-  static constexpr double kPlaneMaxSlope = 0.35;
-  static constexpr float kPlaneMarginM = 0.03f;
   std::uint32_t scans_integrated_ = 0;  ///< integrate() calls (the memory's clock)
   LowObjects low_objects_;
   Eigen::Vector3f up_ = Eigen::Vector3f::UnitZ();  ///< the scan being integrated's up axis
