@@ -413,9 +413,14 @@ VoxelIndex OccupancyMap::voxel_of_slot(std::size_t s) const {
   const auto nx = static_cast<std::size_t>(dims_.x()), ny = static_cast<std::size_t>(dims_.y());
   const int rings[3] = {static_cast<int>(s % nx), static_cast<int>((s / nx) % ny),
                         static_cast<int>(s / (nx * ny))};
+  const std::array<int, 3> seam = ring_origin();
   VoxelIndex v;
-  for (int a = 0; a < 3; ++a) v[a] = min_[a] + wrap(rings[a] - wrap(min_[a], dims_[a]), dims_[a]);
+  for (int a = 0; a < 3; ++a) v[a] = world_of_ring(a, rings[a], seam[a]);
   return v;
+}
+
+int OccupancyMap::world_of_ring(int a, int r, int seam) const {
+  return min_[a] + wrap(r - seam, dims_[a]);
 }
 
 bool OccupancyMap::is_static(const VoxelIndex& v) const {

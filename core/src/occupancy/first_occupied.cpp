@@ -222,7 +222,7 @@ void OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& sky)
   const std::array<int, 3> seam = ring_origin();  // the ring index of the window's lowest voxel
   // World voxel intervals [lo, hi) of ring interval [r0, r1) along `a`: one or two pieces.
   const auto world_pieces = [&](int a, int r0, int r1, int(&lo)[2], int(&hi)[2]) {
-    const auto world = [&](int r) { return min_[a] + wrap(r - seam[a], dims_[a]); };
+    const auto world = [&](int r) { return world_of_ring(a, r, seam[a]); };
     if (r0 < seam[a] && seam[a] < r1) {
       lo[0] = world(r0), hi[0] = lo[0] + (seam[a] - r0);
       lo[1] = min_[a], hi[1] = min_[a] + (r1 - seam[a]);
@@ -238,7 +238,7 @@ void OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& sky)
   const auto highest_occupied = [&](int bx, int by, int bz) {
     int best = std::numeric_limits<int>::min();
     for (int rz = bz * kBrick; rz < ring_end(2, bz); ++rz) {
-      const int wz = min_.z() + wrap(rz - seam[2], dims_.z());
+      const int wz = world_of_ring(2, rz, seam[2]);
       bool any = false;
       for (int ry = by * kBrick; ry < ring_end(1, by) && !any && wz > best; ++ry) {
         const float* line = log_odds_.data() + (static_cast<std::size_t>(rz) * ny + ry) * nx;
@@ -276,8 +276,7 @@ void OccupancyMap::sky_horizon(const Eigen::Vector3d& origin_W, SkyHorizon& sky)
     if (!((layer_top + 1) * v - o.z() > 0.0)) continue;  // the layer lies below the origin
     for (int by = 0; by < bricks_.y(); ++by) {
       for (int bx = 0; bx < bricks_.x(); ++bx) {
-        const std::size_t b = (static_cast<std::size_t>(bz) * bricks_.y() + by) * bricks_.x() + bx;
-        if (!brick_flagged(b)) continue;
+        if (!brick_flagged(brick_of_ring(bx * kBrick, by * kBrick, bz * kBrick))) continue;
         const int top_z = highest_occupied(bx, by, bz);
         if (top_z == std::numeric_limits<int>::min()) continue;
         const double top = (top_z + 2) * v - o.z();  // the voxel's top, and a voxel's margin

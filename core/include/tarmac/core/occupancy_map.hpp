@@ -309,6 +309,8 @@ class OccupancyMap {
                       bool take);
   /// Ring index of the window's first voxel, per axis.
   [[nodiscard]] std::array<int, 3> ring_origin() const;
+  /// World index along axis `a` of the voxels at ring index `r` (`seam`: ring_origin()[a]).
+  [[nodiscard]] int world_of_ring(int a, int r, int seam) const;
   /// integrate()'s hit pass: each return's slot, column, height and rise above the scan's ground,
   /// then one hit per voxel in point order (the static layer's promotions too).
   void integrate_hits(const Eigen::Vector3d& origin_W, std::span<const Eigen::Vector3f> points_W,
