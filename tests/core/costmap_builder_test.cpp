@@ -63,6 +63,14 @@ class Envelope : public ::testing::Test {
                               static_cast<std::uint32_t>(cell->y()));
   }
 
+  /// The obstacle_rule bits of the cell at (x, y).
+  std::uint8_t rule_at(double x, double y) const {
+    const auto cell = layers_.costmap.geometry().cell_of(x, y);
+    EXPECT_TRUE(cell.has_value());
+    return layers_.obstacle_rule[static_cast<std::size_t>(cell->y()) * layers_.costmap.width() +
+                                 static_cast<std::size_t>(cell->x())];
+  }
+
   void build(const CostmapParams& cp = params(), std::span<const VirtualZone> zones = {},
              std::int64_t stamp_ns = 0) {
     SerialRunner runner;
@@ -88,6 +96,9 @@ TEST_F(Envelope, WingAboveVehicleDoesNotBlock_ConeOnGroundDoes) {
   EXPECT_EQ(cost_at(-6.0, 3.7), kCostInscribed);  // 0.7 m from the cone
   EXPECT_EQ(cost_at(9.0, -9.0), kCostFree);
   EXPECT_NEAR(layers_.ground_z_m.at(80, 80), 0.1, 1e-6);  // centre of the ground voxel [0, 0.2)
+  EXPECT_NE(rule_at(-6.0, 3.0) & obstacle_rule::kVoxel, 0) << "the cone's voxels block";
+  EXPECT_EQ(rule_at(6.0, 0.0), 0) << "under the wing";
+  EXPECT_EQ(rule_at(-6.0, 3.7), 0) << "inscribed, not an obstacle";
 }
 
 TEST_F(Envelope, Peers_FillWhatThisVehicleDidNotSee_InflatedLikeItsOwn_OwnNewerCellsKept) {
@@ -125,6 +136,9 @@ TEST_F(Envelope, Peers_FillWhatThisVehicleDidNotSee_InflatedLikeItsOwn_OwnNewerC
   EXPECT_EQ(cost_at(14.1, 5.1), kCostFree);
   EXPECT_EQ(cost_at(6.1, 6.1), kCostFree) << "this vehicle's newer observation is kept";
   EXPECT_EQ(cost_at(-6.1, -6.1), kCostLethal) << "the peer's newer observation wins";
+  EXPECT_EQ(rule_at(14.1, 0.1), obstacle_rule::kPeer);
+  EXPECT_EQ(rule_at(-6.1, -6.1), obstacle_rule::kPeer);
+  EXPECT_EQ(rule_at(6.1, 6.1), 0);
   EXPECT_EQ(fleet.counts.cells, 4u);
   EXPECT_EQ(fleet.counts.occupied, 2u);
   EXPECT_EQ(fleet.counts.cells_by_peer.at("tug-b"), 4u);
@@ -156,6 +170,8 @@ TEST_F(Envelope, LowObjectBlocks_WhateverTheFreeRuleSaysOfTheEnvelopeAbove) {
   build(params());
   EXPECT_EQ(cost_at(3.0, -4.0), kCostLethal);
   EXPECT_EQ(cost_at(-6.0, 6.0), kCostFree);
+  EXPECT_NE(rule_at(3.0, -4.0) & obstacle_rule::kRise, 0) << "its voxel's latest returns rise";
+  EXPECT_EQ(rule_at(3.0, -4.0) & (obstacle_rule::kVoxel | obstacle_rule::kDrop), 0);
 }
 
 TEST_F(Envelope, DebrisStaysLethalUntilRaysGoPastWhereItStood) {
@@ -195,6 +211,16 @@ TEST_F(Envelope, DebrisStaysLethalUntilRaysGoPastWhereItStood) {
   };
   build();
   EXPECT_GE(lethal_round(), 1) << "nothing went past it";
+  // The cell of the face's return: its voxel's latest heights (2 cm) no longer rise, and the
+  // kept object alone holds it. Its neighbours, which nothing returned from since, still rise.
+  EXPECT_EQ(rule_at(2.95, -3.99), obstacle_rule::kLowObject);
+  for (const double x : {2.9, 3.1}) {
+    for (const double y : {-4.1, -3.9}) {
+      if (cost_at(x, y) != kCostLethal) continue;
+      EXPECT_NE(rule_at(x, y) & (obstacle_rule::kRise | obstacle_rule::kLowObject), 0);
+      EXPECT_EQ(rule_at(x, y) & (obstacle_rule::kVoxel | obstacle_rule::kDrop), 0);
+    }
+  }
   // The 3D band agrees with the slice: the lethal cell's column holds an occupied voxel, though
   // the voxel's own heights (the face's 2 cm) no longer rise.
   EsdfBandParams bp;
@@ -267,6 +293,7 @@ TEST(ColumnClasses, TallWindowLayerByLayerEqualsTheBitSets) {
     EXPECT_EQ(layers[0].ground_z_m.cells(), layers[1].ground_z_m.cells());
     EXPECT_EQ(layers[0].column_class.cells(), layers[1].column_class.cells());
     EXPECT_EQ(layers[0].costmap.cells(), layers[1].costmap.cells());
+    EXPECT_EQ(layers[0].obstacle_rule, layers[1].obstacle_rule);
     EXPECT_GT(
         std::count(layers[1].costmap.cells().begin(), layers[1].costmap.cells().end(), kCostLethal),
         0);
@@ -562,12 +589,19 @@ TEST(Terrain, ADropBeyondMaxGroundStepIsAHazard_TheGroundBeforeItIsNot) {
     return layers.costmap.at(static_cast<std::uint32_t>(cell->x()),
                              static_cast<std::uint32_t>(cell->y()));
   };
+  const auto rule_at = [&](double x, double y) {
+    const auto cell = layers.costmap.geometry().cell_of(x, y);
+    return layers.obstacle_rule[static_cast<std::size_t>(cell->y()) * layers.costmap.width() +
+                                static_cast<std::size_t>(cell->x())];
+  };
   for (const double y : {-8.0, -3.0, 0.0, 4.0, 8.0}) {
     EXPECT_EQ(cost_at(6.9, y), kCostLethal) << "over the road below the edge, y = " << y;
+    EXPECT_EQ(rule_at(6.9, y), obstacle_rule::kDrop) << "y = " << y;
     EXPECT_EQ(cost_at(9.0, y), kCostLethal) << "the road below, y = " << y;
     EXPECT_NE(cost_at(4.5, y), kCostLethal) << "the dock's top before its edge, y = " << y;
   }
   EXPECT_EQ(cost_at(-6.7, 0.0), kCostLethal) << "the pit";
+  EXPECT_EQ(rule_at(-6.7, 0.0), obstacle_rule::kDrop);
   EXPECT_NE(cost_at(-6.0, 3.0), kCostLethal) << "the ground beside it";
 }
 

@@ -44,6 +44,14 @@ CellState esdf_state(std::uint8_t column_class) {
                                                                    : CellState::kFree;
 }
 
+/// The obstacle_rule bit of the first column rule that fired (they are tried in this order).
+std::uint8_t first_rule(bool voxel, bool drop, bool rise) {
+  return voxel  ? obstacle_rule::kVoxel
+         : drop ? obstacle_rule::kDrop
+         : rise ? obstacle_rule::kRise
+                : std::uint8_t{0};
+}
+
 std::uint8_t column_class(bool obstacle, bool known) {
   return static_cast<std::uint8_t>(obstacle ? ColumnClass::kObstacle
                                    : known  ? ColumnClass::kFree
@@ -176,6 +184,7 @@ void classify_rows_by_bits(const CostmapPass& pass, const ColumnRules& rules,
   const std::int16_t* __restrict seen_of = out.lowest_observed.data();
   std::uint8_t* __restrict cls = out.column_class.cells().data();
   CellState* __restrict esdf_in = out.esdf_input.data();
+  std::uint8_t* __restrict rule_of = out.obstacle_rule.data();
   const std::uint32_t* __restrict occ_bits = out.occupied_bits.data();
   const std::uint32_t* __restrict obs_bits = out.known_bits.data();
   for (int y = y0; y < y1; ++y) {
@@ -195,13 +204,14 @@ void classify_rows_by_bits(const CostmapPass& pass, const ColumnRules& rules,
         const std::uint64_t known = obs_bits[sl] | std::uint64_t{obs_bits[pass.cells_n + sl]} << 32;
         const std::uint64_t occupied = occ_bits[sl] | std::uint64_t{occ_bits[pass.cells_n + sl]}
                                                           << 32;
-        const bool obstacle =
-            (occupied & e.obstacle_mask) != 0 || rules.drops(sl, seen_of[i], estimate);
+        const bool voxel = (occupied & e.obstacle_mask) != 0;
+        const bool drop = !voxel && rules.drops(sl, seen_of[i], estimate);
         // A low object blocks whatever the free rule says of the rest of the envelope.
-        const bool low =
-            !obstacle && (known & e.seen_mask) != 0 && rules.rises(sl, e.rise_begin, e.rise_end);
-        cls[i] = column_class(obstacle || low, rules.observed(known, e));
+        const bool low = !voxel && !drop && (known & e.seen_mask) != 0 &&
+                         rules.rises(sl, e.rise_begin, e.rise_end);
+        cls[i] = column_class(voxel || drop || low, rules.observed(known, e));
         esdf_in[i] = esdf_state(cls[i]);
+        rule_of[i] = first_rule(voxel, drop, low);
       }
     }
   }
@@ -261,13 +271,15 @@ void classify_rows_by_layers(const CostmapPass& pass, const ColumnRules& rules,
       const bool seen = rules.observed_count(any_known[i], gl);
       const int estimate =
           static_cast<int>(estimates[static_cast<std::size_t>(y / pass.g) * pass.gx + x / pass.g]);
-      const bool drop = rules.drops(ring_row + rx, out.lowest_observed[i], estimate);
+      const bool voxel = any_obstacle[i] != 0;
+      const bool drop = !voxel && rules.drops(ring_row + rx, out.lowest_observed[i], estimate);
       // A low object blocks whatever the free rule says of the rest of the envelope.
       const bool low =
-          any_obstacle[i] == 0 && any_known[i] != 0 &&
+          !voxel && !drop && any_known[i] != 0 &&
           rules.rises(ring_row + rx, std::max(0, gl), std::min(pass.nz, gl + rules.lo_layers));
-      classes[i] = column_class(any_obstacle[i] != 0 || drop || low, seen);
+      classes[i] = column_class(voxel || drop || low, seen);
       out.esdf_input[i] = esdf_state(classes[i]);
+      out.obstacle_rule[i] = first_rule(voxel, drop, low);
     }
   }
 }
@@ -278,6 +290,7 @@ void classify_columns(const CostmapPass& pass) {
   auto& out = pass.out;
   const std::size_t cells = pass.geometry.cell_count();
   out.ground_layer.resize(cells);
+  out.obstacle_rule.resize(cells);
   out.any_known.resize(pass.use_bits ? 0 : cells);
   out.any_obstacle.resize(pass.use_bits ? 0 : cells);
   // The rounded estimate per coarse cell, once per coarse cell instead of once per column
@@ -308,6 +321,7 @@ void mark_low_objects(const CostmapPass& pass) {
     const auto i = static_cast<std::size_t>(c);
     classes[i] = static_cast<std::uint8_t>(ColumnClass::kObstacle);
     pass.out.esdf_input[i] = CellState::kOccupied;
+    pass.out.obstacle_rule[i] |= obstacle_rule::kLowObject;
   }
 }
 
@@ -316,7 +330,16 @@ void fuse_peers(const CostmapPass& pass, CostmapPeers& peers) {
   std::span<std::uint8_t> classes(out.column_class.cells());
   peers.counts = peers.peers->fuse(pass.geometry, peers.own_observed_ns, peers.now_ns, classes);
   if (peers.counts.cells == 0) return;
-  for (std::size_t i = 0; i < classes.size(); ++i) out.esdf_input[i] = esdf_state(classes[i]);
+  constexpr auto kObstacle = static_cast<std::uint8_t>(ColumnClass::kObstacle);
+  for (std::size_t i = 0; i < classes.size(); ++i) {
+    out.esdf_input[i] = esdf_state(classes[i]);
+    // The own class is kept where the peers did not fill the cell.
+    if (classes[i] != kObstacle) {
+      out.obstacle_rule[i] = 0;
+    } else if (out.own_column_class[i] != kObstacle) {
+      out.obstacle_rule[i] = obstacle_rule::kPeer;
+    }
+  }
 }
 
 }  // namespace tarmac::core::costmap

@@ -89,7 +89,7 @@ void grow_ground(const CostmapPass& pass, const GroundPlane& plane);
 /// 5. Rejected and empty coarse cells filled from their neighbours, then from the plane.
 void fill_ground_gaps(const CostmapPass& pass, const GroundPlane& plane);
 /// 6. Every column's ground and class against the vehicle's envelope: out.ground_layer,
-///    out.ground_z_m, out.column_class, out.esdf_input.
+///    out.ground_z_m, out.column_class, out.esdf_input, out.obstacle_rule.
 void classify_columns(const CostmapPass& pass);
 /// 6b. The occupancy map's confirmed low objects (debris kept across scans) block their cells,
 /// whatever the voxels say (low_objects.hpp).

@@ -88,11 +88,32 @@ struct VirtualZone {
 /// Per-cell class before inflation.
 enum class ColumnClass : std::uint8_t { kFree = 0, kObstacle = 1, kUnknown = 2, kVirtual = 3 };
 
+/// Why a cell is an obstacle: the bits of CostmapLayers::obstacle_rule. The column's own rules
+/// are tried in this order and only the first that fires is set (the later ones are not
+/// evaluated); a confirmed low object and a peer's cell add theirs. For whoever asks why a cell
+/// is lethal (tarmac-map's reports, docs/tools.md); the costs never read them.
+namespace obstacle_rule {
+/// An occupied voxel in the envelope, min_obstacle_height_m or more above the column's ground.
+inline constexpr std::uint8_t kVoxel = 1;
+/// The column falls away more than max_ground_step_m below its ground (a dock edge, a pit).
+inline constexpr std::uint8_t kDrop = 2;
+/// The latest returns of a voxel below the voxel rule's reach rise min_obstacle_height_m above
+/// their own scan's ground next to them (OccupancyMap::ring_layer_rise_cm).
+inline constexpr std::uint8_t kRise = 4;
+/// A confirmed low object standing on the cell (debris kept across scans, low_objects.hpp).
+inline constexpr std::uint8_t kLowObject = 8;
+/// A peer's obstacle fused in where this vehicle's own cell was not one (docs/fleet.md).
+inline constexpr std::uint8_t kPeer = 16;
+}  // namespace obstacle_rule
+
 /// Everything one costmap update produces (reused across cycles: no allocation after warm-up).
 struct CostmapLayers {
   Costmap costmap;                    ///< 0..100, −1 unknown (OccupancyGrid values)
   Grid2D<float> ground_z_m;           ///< local ground height estimate per cell
   Grid2D<std::uint8_t> column_class;  ///< ColumnClass per cell
+  /// Per cell, the obstacle_rule bits that made it an obstacle (0: none did). A virtual zone's
+  /// cells are ColumnClass::kVirtual, whatever their bits say.
+  std::vector<std::uint8_t> obstacle_rule;
   std::vector<CellState> esdf_input;  ///< obstacles (incl. virtual zones) for the 2D ESDF
   DistanceField obstacle_distance;    ///< exact 2D distance to the nearest obstacle cell
   DistanceFieldScratch scratch;
