@@ -8,7 +8,9 @@
 #include <gtest/gtest.h>
 #include <Eigen/Core>
 
+#include "tarmac/core/costmap_builder.hpp"
 #include "tarmac/core/grid2d.hpp"
+#include "tarmac/tools/lethal_causes.hpp"
 #include "tarmac/tools/open_ground.hpp"
 
 namespace tarmac::tools {
@@ -88,6 +90,55 @@ TEST(OpenGround, ALowReturnTakesItsNeighbourhoodOutOfTheAwayCount) {
   const OpenGroundCycle& c = tracker.observe(grid, 0);
   EXPECT_EQ(c.lethal, 1u) << "10 cm is under the measure's 0.25 m: open flat ground";
   EXPECT_EQ(c.away_lethal, 0u);
+}
+
+TEST(OpenGround, GivenTheCostmapsRules_CountsEachLethalCellUnderItsFirstRule) {
+  namespace rule = core::obstacle_rule;
+  OpenGroundTracker tracker(0.2, 2.8);
+  tracker.add(kerbside());
+  core::Grid2D<std::int8_t> grid = costmap(0);
+  std::vector<std::uint8_t> classes(60 * 60, static_cast<std::uint8_t>(core::ColumnClass::kFree));
+  std::vector<std::uint8_t> rules(60 * 60, 0);
+  const auto lethal = [&](std::uint32_t x, std::uint32_t y, std::uint8_t bits,
+                          core::ColumnClass cls) {
+    grid.at(x, y) = 100;
+    classes[y * 60 + x] = static_cast<std::uint8_t>(cls);
+    rules[y * 60 + x] = bits;
+  };
+  // The kerb's face: 40 cells by the rise rule (one with a kept low object too), 20 by a voxel.
+  for (std::uint32_t x = 0; x < 60; ++x) {
+    lethal(x, 40, x < 40 ? rule::kRise : rule::kVoxel, core::ColumnClass::kObstacle);
+  }
+  rules[40 * 60 + 3] |= rule::kLowObject;
+  // Away from the kerb: a kept low object, a virtual zone over a voxel, an unknown cell that the
+  // unknown policy costs lethal.
+  lethal(10, 10, rule::kLowObject, core::ColumnClass::kObstacle);
+  lethal(12, 10, rule::kVoxel, core::ColumnClass::kVirtual);
+  lethal(14, 10, 0, core::ColumnClass::kUnknown);
+  const OpenGroundCycle& c = tracker.observe(grid, 0, LethalCauseView{classes, rules});
+  const auto n = [](const LethalCauseCounts& counts, LethalCause cause) {
+    return counts.cells[static_cast<std::size_t>(cause)];
+  };
+  EXPECT_EQ(c.lethal, 63u);
+  EXPECT_EQ(c.lethal_by_cause.total(), 63u);
+  EXPECT_EQ(n(c.lethal_by_cause, LethalCause::kRise), 40u);
+  EXPECT_EQ(n(c.lethal_by_cause, LethalCause::kVoxel), 20u);
+  EXPECT_EQ(n(c.lethal_by_cause, LethalCause::kLowObject), 1u);
+  EXPECT_EQ(n(c.lethal_by_cause, LethalCause::kZone), 1u);
+  EXPECT_EQ(n(c.lethal_by_cause, LethalCause::kOther), 1u);
+  EXPECT_EQ(c.away_lethal_by_cause.total(), 3u);
+  EXPECT_EQ(n(c.away_lethal_by_cause, LethalCause::kLowObject), 1u);
+  EXPECT_NE(open_ground_summary(tracker).find("its lethal cells by rule: voxel 31.7 %, rise "
+                                              "63.5 %, low_object 1.6 %, zone 1.6 %, other 1.6 % "
+                                              "(away from steps and low returns: low_object "
+                                              "33.3 %, zone 33.3 %, other 33.3 %)"),
+            std::string::npos)
+      << open_ground_summary(tracker);
+  // Without the rules (a costmap received over DDS), nothing is counted or printed.
+  OpenGroundTracker plain(0.2, 2.8);
+  plain.add(kerbside());
+  EXPECT_EQ(plain.observe(grid, 0).lethal_by_cause.total(), 0u);
+  EXPECT_EQ(open_ground_summary(plain).find("by rule"), std::string::npos);
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <unistd.h>
 #include <nlohmann/json.hpp>
 
+#include "tarmac/core/costmap_builder.hpp"
 #include "tarmac/sim/lidar.hpp"
 #include "tarmac/sim/scene.hpp"
 #include "tarmac/sim/scene_catalog.hpp"
@@ -57,6 +58,17 @@ TEST(Safety, ScoresLethalNearFreeInflatedUnknownAndFalseLethal) {
   EXPECT_EQ(c.lethal_cells, 2u);
   EXPECT_EQ(c.false_lethal, 1u);
   EXPECT_DOUBLE_EQ(c.share_lethal(), 0.25);
+  EXPECT_EQ(c.false_lethal_by_cause.total(), 0u) << "no rules given";
+  // Given the costmap's rules: the false lethal cell counted under the one that made it.
+  std::vector<std::uint8_t> classes(400, static_cast<std::uint8_t>(core::ColumnClass::kFree));
+  std::vector<std::uint8_t> rules(400, 0);
+  classes[2 * 20 + 2] = classes[10 * 20 + 11] =
+      static_cast<std::uint8_t>(core::ColumnClass::kObstacle);
+  rules[2 * 20 + 2] = core::obstacle_rule::kDrop;
+  rules[10 * 20 + 11] = core::obstacle_rule::kVoxel;
+  const SafetyCycle why = score_costmap(map, truth, 1, {0.0, 0.0}, 20.0, {}, {classes, rules});
+  EXPECT_EQ(why.false_lethal_by_cause.total(), 1u);
+  EXPECT_EQ(why.false_lethal_by_cause.cells[static_cast<std::size_t>(LethalCause::kDrop)], 1u);
   // Out of the radius: nothing counted.
   const SafetyCycle far = score_costmap(map, truth, 1, {100.0, 0.0}, 20.0);
   EXPECT_EQ(far.visible, 0u);

@@ -199,6 +199,8 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
                 const Eigen::Isometry3d& T_W_B, const Eigen::Isometry3d& T_B_S,
                 std::span<const Eigen::Vector3f> points_W) {
   const tools::KittiSequence& s = in.seq;
+  const core::CostmapLayers& layers = mapper.costmap();
+  const tools::LethalCauseView causes{layers.column_class.cells(), layers.obstacle_rule};
   if (in.clearing) {
     // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
     const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
@@ -216,7 +218,7 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
     // The vehicle's position: the base under the sensor (as tarmac-audit takes it), which on a
     // slope is not where the pitched base frame puts its origin.
     in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
-                       s.T_W_S[k].translation().head<2>(), 20.0, moving_now);
+                       s.T_W_S[k].translation().head<2>(), 20.0, moving_now, causes);
     if (in.small_objects) {
       in.small_objects->observe(mapper.costmap().costmap, static_cast<int>(k),
                                 s.T_W_S[k].translation().head<2>());
@@ -226,7 +228,7 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
     in.open_ground->add(points_W);
     // Every 10th scan and the last: a full-window pass each.
     if (k % 10 == 9 || k + 1 == n) {
-      in.open_ground->observe(mapper.costmap().costmap, static_cast<int>(k));
+      in.open_ground->observe(mapper.costmap().costmap, static_cast<int>(k), causes);
     }
   }
 }

@@ -181,6 +181,7 @@ core::Status write_window_outputs(const std::filesystem::path& out, const core::
     writes.push_back(tools::write_npy(out / "esdf_band.npy", band.field.distance_m, shape_band));
   }
   writes.push_back(tools::write_npy(out / "costmap.npy", layers.costmap.cells(), shape2));
+  writes.push_back(tools::write_npy(out / "obstacle_rule.npy", layers.obstacle_rule, shape2));
   writes.push_back(
       tools::write_png(out / "costmap.png", render_costmap(layers), dims.x(), dims.y()));
   writes.push_back(
@@ -219,6 +220,9 @@ core::Status write_window_outputs(const std::filesystem::path& out, const core::
   }
   files["costmap.npy"] =
       "int8 nav_msgs/OccupancyGrid values: 0 free .. 99 inscribed, 100 lethal, -1 unknown";
+  files["obstacle_rule.npy"] =
+      "uint8 per costmap cell, why it is an obstacle (0: it is not): 1 occupied voxel, 2 drop, 4 "
+      "rise, 8 kept low object, 16 peer's cell (bits; docs/tools.md)";
   files["costmap.png"] =
       "white free, yellow-orange inflated, dark red inscribed, black lethal, slate unknown, "
       "magenta virtual zone; north up";

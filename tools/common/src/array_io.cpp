@@ -53,6 +53,11 @@ core::Status write_npy(const std::filesystem::path& file, std::span<const std::i
   return write_npy_raw(file, "|i1", data.data(), data.size_bytes(), shape);
 }
 
+core::Status write_npy(const std::filesystem::path& file, std::span<const std::uint8_t> data,
+                       const std::vector<std::size_t>& shape) {
+  return write_npy_raw(file, "|u1", data.data(), data.size_bytes(), shape);
+}
+
 core::Status NpyBands::open(const std::filesystem::path& file, std::size_t rows, std::size_t cols) {
   file_ = file;
   cols_ = cols;

@@ -43,7 +43,7 @@ void OpenGroundTracker::add(std::span<const Eigen::Vector3f> points_W) {
 }
 
 const OpenGroundCycle& OpenGroundTracker::observe(const core::Grid2D<std::int8_t>& costmap,
-                                                  int scan) {
+                                                  int scan, const LethalCauseView& causes) {
   const core::GridGeometry2D& g = costmap.geometry();
   const int m = static_cast<int>(std::ceil(kRadiusM / cell_m_ - 1e-9));
   const int nx = static_cast<int>(g.width), ny = static_cast<int>(g.height);
@@ -129,6 +129,7 @@ const OpenGroundCycle& OpenGroundTracker::observe(const core::Grid2D<std::int8_t
       if (!clear) continue;
       ++c.cells;
       const int v = costmap.at(static_cast<std::uint32_t>(x), static_cast<std::uint32_t>(y));
+      const std::size_t cell = static_cast<std::size_t>(y) * nx + x;
       const bool by_step = std::any_of(disc.begin(), disc.end(), [&](std::ptrdiff_t d) {
         return step_[static_cast<std::size_t>(i + d)] != 0;
       });
@@ -136,9 +137,11 @@ const OpenGroundCycle& OpenGroundTracker::observe(const core::Grid2D<std::int8_t
         ++c.away;
         c.away_lethal += v == 100 ? 1 : 0;
         c.away_inscribed += v == 99 ? 1 : 0;
+        if (v == 100) c.away_lethal_by_cause.add(causes, cell);
       }
       if (v == 100) {
         ++c.lethal;
+        c.lethal_by_cause.add(causes, cell);
         look = kLethal;
       } else if (v == 99) {
         ++c.inscribed;
@@ -190,6 +193,8 @@ std::string open_ground_summary(const OpenGroundTracker& tracker) {
     sum.away += c.away;
     sum.away_lethal += c.away_lethal;
     sum.away_inscribed += c.away_inscribed;
+    sum.lethal_by_cause += c.lethal_by_cause;
+    sum.away_lethal_by_cause += c.away_lethal_by_cause;
     if (share(c.lethal, c.cells) > worst || worst_scan < 0) {
       worst = share(c.lethal, c.cells);
       worst_scan = c.scan;
@@ -208,7 +213,12 @@ std::string open_ground_summary(const OpenGroundTracker& tracker) {
                 share(sum.unknown, sum.cells), static_cast<double>(kStepM),
                 static_cast<double>(kLowM), share(sum.away, sum.cells),
                 share(sum.away_lethal, sum.away), share(sum.away_inscribed, sum.away));
-  return line;
+  std::string summary = line;
+  if (sum.lethal_by_cause.total() > 0) {
+    summary += "; its lethal cells by rule: " + sum.lethal_by_cause.shares() +
+               " (away from steps and low returns: " + sum.away_lethal_by_cause.shares() + ")";
+  }
+  return summary;
 }
 
 nlohmann::ordered_json open_ground_json(const OpenGroundTracker& tracker) {
@@ -220,6 +230,13 @@ nlohmann::ordered_json open_ground_json(const OpenGroundTracker& tracker) {
     rows.push_back({c.scan, c.cells, c.lethal, c.inscribed, c.inflated, c.free, c.unknown, c.away,
                     c.away_lethal, c.away_inscribed});
   }
+  LethalCauseCounts all, away;
+  for (const OpenGroundCycle& c : tracker.cycles()) {
+    all += c.lethal_by_cause;
+    away += c.away_lethal_by_cause;
+  }
+  out["lethal_by_rule"] = all.json();
+  out["away_lethal_by_rule"] = away.json();
   return out;
 }
 

@@ -204,7 +204,7 @@ std::vector<std::uint8_t> reachable_ground(const ObstacleTruth& truth, std::int6
 
 SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
                           const Eigen::Vector2d& vehicle_xy, double radius_m,
-                          std::span<const DynamicBox> moving) {
+                          std::span<const DynamicBox> moving, const LethalCauseView& causes) {
   SafetyCycle c;
   c.scan = scan;
   const auto& g = costmap.geometry();
@@ -259,7 +259,10 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
       if (d2 <= kGroundRadiusM * kGroundRadiusM && truth.is_ground(ox + cx, oy + cy) &&
           !near(cx, cy, is_column) && !under_moving()) {
         ++c.ground_cells;
-        if (v == core::kCostLethal) ++c.ground_lethal;
+        if (v == core::kCostLethal) {
+          ++c.ground_lethal;
+          c.ground_lethal_by_cause.add(causes, static_cast<std::size_t>(cy * w + cx));
+        }
         if (reachable[static_cast<std::size_t>(cy * w + cx)] != 0) {
           ++c.reach_cells;
           if (v == core::kCostLethal) ++c.reach_lethal;
@@ -269,7 +272,10 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
       if (v == core::kCostLethal) {
         ++c.lethal_cells;
         // Within one cell of a moving object: not false (a ghost further off is).
-        if (!under_moving() && !near(cx, cy, is_column)) ++c.false_lethal;
+        if (!under_moving() && !near(cx, cy, is_column)) {
+          ++c.false_lethal;
+          c.false_lethal_by_cause.add(causes, static_cast<std::size_t>(cy * w + cx));
+        }
       }
       if (d2 <= kOpenRadiusM * kOpenRadiusM && truth.is_ground(ox + cx, oy + cy) &&
           !near(cx, cy, is_column)) {
@@ -302,8 +308,9 @@ SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& tru
 
 const SafetyCycle& SafetyTracker::observe(const core::Costmap& costmap, int scan,
                                           const Eigen::Vector2d& vehicle_xy, double radius_m,
-                                          std::span<const DynamicBox> moving) {
-  cycles_.push_back(score_costmap(costmap, truth_, scan, vehicle_xy, radius_m, moving));
+                                          std::span<const DynamicBox> moving,
+                                          const LethalCauseView& causes) {
+  cycles_.push_back(score_costmap(costmap, truth_, scan, vehicle_xy, radius_m, moving, causes));
   return cycles_.back();
 }
 
@@ -356,6 +363,8 @@ SafetyReport SafetyTracker::report() const {
     r.read_unknown += c.read_unknown;
     r.lethal_cells += c.lethal_cells;
     r.false_lethal += c.false_lethal;
+    r.false_lethal_by_cause += c.false_lethal_by_cause;
+    r.ground_lethal_by_cause += c.ground_lethal_by_cause;
     if (c.lethal_cells > 0) {
       r.worst_false_share = std::max(r.worst_false_share, static_cast<double>(c.false_lethal) /
                                                               static_cast<double>(c.lethal_cells));
@@ -415,6 +424,10 @@ std::string safety_summary(const SafetyReport& r) {
                   100.0 * r.worst_curb_share, r.worst_curb_scan, 100.0 * r.mean_curb_share);
     summary += line;
   }
+  if (r.false_lethal_by_cause.total() + r.ground_lethal_by_cause.total() > 0) {
+    summary += "; by rule, false lethal: " + r.false_lethal_by_cause.shares() +
+               ", ground read lethal: " + r.ground_lethal_by_cause.shares();
+  }
   return summary;
 }
 
@@ -446,7 +459,9 @@ nlohmann::ordered_json safety_json(const SafetyTracker& tracker) {
                               {"curbs", r.curbs},
                               {"worst_curb_share", r.worst_curb_share},
                               {"worst_curb_scan", r.worst_curb_scan},
-                              {"mean_curb_share", r.mean_curb_share}};
+                              {"mean_curb_share", r.mean_curb_share},
+                              {"false_lethal_by_rule", r.false_lethal_by_cause.json()},
+                              {"ground_lethal_by_rule", r.ground_lethal_by_cause.json()}};
   j["cycle_fields"] = {"scan",          "visible",       "lethal_near",  "read_free",
                        "read_inflated", "read_unknown",  "lethal_cells", "false_lethal",
                        "ground_cells",  "ground_lethal", "curb_visible", "curb_lethal_near",

@@ -14,10 +14,13 @@
 
 namespace tarmac::tools {
 
-/// Writes a C-order array of float32 ('<f4') or int8 ('|i1') with the given shape.
+/// Writes a C-order array of float32 ('<f4'), int8 ('|i1') or uint8 ('|u1') with the given
+/// shape.
 core::Status write_npy(const std::filesystem::path& file, std::span<const float> data,
                        const std::vector<std::size_t>& shape);
 core::Status write_npy(const std::filesystem::path& file, std::span<const std::int8_t> data,
+                       const std::vector<std::size_t>& shape);
+core::Status write_npy(const std::filesystem::path& file, std::span<const std::uint8_t> data,
                        const std::vector<std::size_t>& shape);
 
 /// Writes an RGB image, rows top to bottom, 3 bytes per pixel.

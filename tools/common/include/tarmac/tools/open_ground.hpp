@@ -26,6 +26,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "tarmac/core/grid2d.hpp"
+#include "tarmac/tools/lethal_causes.hpp"
 
 namespace tarmac::tools {
 
@@ -40,6 +41,9 @@ struct OpenGroundCycle {
   std::size_t unknown = 0;    ///< reading −1
   std::size_t away = 0;  ///< of the open flat ground cells, those away from steps and low returns
   std::size_t away_lethal = 0, away_inscribed = 0;  ///< of those, reading 100 and 99
+  /// The lethal cells (all, and those away from steps and low returns) by the rule that made
+  /// them lethal, when observe() was given the costmap's rules.
+  LethalCauseCounts lethal_by_cause, away_lethal_by_cause;
 };
 
 /// Collects the returns of the drive (world frame, cells of the costmap's resolution) and scores
@@ -51,8 +55,10 @@ class OpenGroundTracker {
   /// One scan's returns in the world frame (z up).
   void add(std::span<const Eigen::Vector3f> points_W);
   /// Scores `costmap` (values 0..100, −1; resolution cell_m, origin a lattice point) against the
-  /// open flat ground of the returns added so far.
-  const OpenGroundCycle& observe(const core::Grid2D<std::int8_t>& costmap, int scan);
+  /// open flat ground of the returns added so far. `causes`, when known, are the costmap's
+  /// rules: its lethal cells are then counted by the rule that made them lethal.
+  const OpenGroundCycle& observe(const core::Grid2D<std::int8_t>& costmap, int scan,
+                                 const LethalCauseView& causes = {});
   [[nodiscard]] const std::vector<OpenGroundCycle>& cycles() const { return cycles_; }
   /// The last observed window as RGB, rows top (max y) to bottom, 3 bytes per cell: open flat
   /// ground by what the costmap read there (lethal red, inscribed orange, inflated yellow, free

@@ -17,6 +17,7 @@
 #include "tarmac/core/grid2d.hpp"
 #include "tarmac/core/result.hpp"
 #include "tarmac/tools/clearing.hpp"
+#include "tarmac/tools/lethal_causes.hpp"
 
 namespace tarmac::tools {
 
@@ -98,6 +99,9 @@ struct SafetyCycle {
   /// ones reading lethal (the ground model taking ground for an obstacle).
   std::size_t ground_cells = 0;
   std::size_t ground_lethal = 0;
+  /// The false lethal cells and the ground cells read lethal by the rule that made them lethal,
+  /// when score_costmap was given the costmap's rules.
+  LethalCauseCounts false_lethal_by_cause, ground_lethal_by_cause;
   /// Of those, the ones the vehicle can drive to inside the costmap's window: joined to the
   /// ground under it by ground cells (never an obstacle column) whose heights step by at most
   /// kReachStepM. Ground the window holds no way to (an upper level beyond walls whose ramp lies
@@ -133,6 +137,7 @@ struct SafetyReport {
   double worst_false_share = 0.0;  ///< max over cycles of false_lethal / lethal_cells
   double worst_open_known = 1.0, mean_open_known = 1.0;  ///< SafetyCycle::share_open_known
   std::size_t ground_cells = 0, ground_lethal = 0;       ///< summed over cycles
+  LethalCauseCounts false_lethal_by_cause, ground_lethal_by_cause;  ///< summed over cycles
   /// SafetyCycle::share_ground_lethal: the worst cycle (and its scan; −1: no cycle read any
   /// ground lethal) and the mean over the cycles with ground cells.
   double worst_ground_lethal = 0.0, mean_ground_lethal = 0.0;
@@ -159,10 +164,13 @@ inline constexpr double kReachStepM = 0.1;
 /// Scores one costmap (values 0..100, −1) whose cells lie on the truth's lattice (the costmap's
 /// resolution must equal cell_m and its origin a lattice point). `moving` are the moving
 /// objects' boxes at this scan (tarmac-sim's dynamic_boxes.txt), scene frame. The obstacle
-/// figures are taken within radius_m, the ground figure within kGroundRadiusM.
+/// figures are taken within radius_m, the ground figure within kGroundRadiusM. `causes`, when
+/// known, are the costmap's rules: the false lethal cells and the ground read lethal are then
+/// counted by the rule that made them lethal.
 SafetyCycle score_costmap(const core::Costmap& costmap, const ObstacleTruth& truth, int scan,
                           const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0,
-                          std::span<const DynamicBox> moving = {});
+                          std::span<const DynamicBox> moving = {},
+                          const LethalCauseView& causes = {});
 
 /// Accumulates cycles into a report.
 class SafetyTracker {
@@ -170,7 +178,8 @@ class SafetyTracker {
   explicit SafetyTracker(ObstacleTruth truth) : truth_(std::move(truth)) {}
   const SafetyCycle& observe(const core::Costmap& costmap, int scan,
                              const Eigen::Vector2d& vehicle_xy, double radius_m = 20.0,
-                             std::span<const DynamicBox> moving = {});
+                             std::span<const DynamicBox> moving = {},
+                             const LethalCauseView& causes = {});
   [[nodiscard]] SafetyReport report() const;
   [[nodiscard]] const std::vector<SafetyCycle>& cycles() const { return cycles_; }
 
