@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <tuple>
 
 namespace tarmac::core {
 
@@ -48,7 +49,8 @@ std::size_t LowObjects::memory_bytes() const {
   return objects_.capacity() * sizeof(LowObject) +
          (head_.capacity() + next_.capacity() + indexed_column_.capacity()) *
              sizeof(std::uint32_t) +
-         near_.capacity() + touched_.capacity() + saw_through_.capacity();
+         near_.capacity() + touched_.capacity() + saw_through_.capacity() +
+         rising_.capacity() * sizeof(std::uint32_t);
 }
 
 void LowObjects::clear() {
@@ -188,43 +190,58 @@ void LowObjects::update(const Scan& scan) {
   const float max_rise = static_cast<float>(params_.max_rise_m);
   const auto min_cm = static_cast<int>(std::ceil(params_.min_rise_m * 100.0 - 1e-6));
   const auto max_cm = static_cast<int>(std::floor(params_.max_rise_m * 100.0 + 1e-6));
-  for (std::size_t i = 0; i < scan.points_W.size(); ++i) {
-    if (scan.voxel[i] == Scan::kNoColumn) continue;
-    const std::uint32_t c = scan.column[i];
+  const auto rising = [&](std::size_t i) {
     const int rise = scan.rise_cm[i];
-    const bool rising = rise >= min_cm && rise <= max_cm;
-    if (!rising && near_[c] == 0) continue;
+    return scan.voxel[i] != Scan::kNoColumn && rise >= min_cm && rise <= max_cm;
+  };
+  // 1. The rising returns, in an order of their own (by x, y, z): which object a return joins
+  //    and where it moves the centre depend on the order they come in, and a driver's layout
+  //    (rows by beam or by firing, or a list) must not change the map.
+  rising_.clear();
+  for (std::size_t i = 0; i < scan.points_W.size(); ++i) {
+    if (rising(i)) rising_.push_back(static_cast<std::uint32_t>(i));
+  }
+  std::sort(rising_.begin(), rising_.end(), [&](std::uint32_t a, std::uint32_t b) {
+    const Eigen::Vector3f &p = scan.points_W[a], &q = scan.points_W[b];
+    return std::tie(p.x(), p.y(), p.z()) < std::tie(q.x(), q.y(), q.z());
+  });
+  for (const std::uint32_t i : rising_) {
     const Eigen::Vector3f& p = scan.points_W[i];
     const Eigen::Vector2f xy = p.head<2>();
     const std::int64_t column = column_of(xy);
     if (column < 0) continue;
-    if (rising) {
-      const float rise_m = static_cast<float>(rise) * 0.01f;
-      std::uint32_t k = nearest(xy, column);
-      if (k == kNone) {
-        if (objects_.size() >= static_cast<std::size_t>(params_.capacity)) {
-          ++refused_;
-          continue;
-        }
-        k = static_cast<std::uint32_t>(objects_.size());
-        LowObject o;
-        o.id = next_id_++;
-        o.xy_W = xy;
-        o.top_z_W = p.z();
-        o.rise_m = rise_m;
-        o.first_scan = scan.number;
-        o.first_ns = scan.stamp_ns;
-        objects_.push_back(o);
-        next_.push_back(kNone);
-        indexed_column_.push_back(0);
-        touched_.push_back(0);
-        saw_through_.push_back(0);
-        add_to_index(k);
+    const float rise_m = static_cast<float>(scan.rise_cm[i]) * 0.01f;
+    std::uint32_t k = nearest(xy, column);
+    if (k == kNone) {
+      if (objects_.size() >= static_cast<std::size_t>(params_.capacity)) {
+        ++refused_;
+        continue;
       }
-      evidence(k, p, std::clamp(rise_m, min_rise, max_rise), scan);
-      continue;
+      k = static_cast<std::uint32_t>(objects_.size());
+      LowObject o;
+      o.id = next_id_++;
+      o.xy_W = xy;
+      o.top_z_W = p.z();
+      o.rise_m = rise_m;
+      o.first_scan = scan.number;
+      o.first_ns = scan.stamp_ns;
+      objects_.push_back(o);
+      next_.push_back(kNone);
+      indexed_column_.push_back(0);
+      touched_.push_back(0);
+      saw_through_.push_back(0);
+      add_to_index(k);
     }
-    // Not rising: does its ray show an object near it gone?
+    evidence(k, p, std::clamp(rise_m, min_rise, max_rise), scan);
+  }
+  // 2. The other returns near an object: does its ray show the object gone? Only an object no
+  //    rising return touched this scan can be seen through (expire()), and its centre did not
+  //    move in step 1, so their order does not matter.
+  for (std::size_t i = 0; i < scan.points_W.size(); ++i) {
+    if (scan.voxel[i] == Scan::kNoColumn || rising(i) || near_[scan.column[i]] == 0) continue;
+    const Eigen::Vector3f& p = scan.points_W[i];
+    const std::int64_t column = column_of(p.head<2>());
+    if (column < 0) continue;
     const int cx = static_cast<int>(column % nx_), cy = static_cast<int>(column / nx_);
     for (int y = std::max(0, cy - kReach); y <= std::min(ny_ - 1, cy + kReach); ++y) {
       for (int x = std::max(0, cx - kReach); x <= std::min(nx_ - 1, cx + kReach); ++x) {

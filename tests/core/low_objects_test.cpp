@@ -92,6 +92,52 @@ TEST(LowObjects, TwoRisingReturnsConfirmAndLowReturnsOnTheFaceKeepIt) {
   EXPECT_EQ(objects.all()[0].scans, 2u) << "one rising return in each of two scans";
 }
 
+TEST(LowObjects, TheOrderOfTheReturnsChangesNothing) {
+  // Rising returns 12 cm apart in a row (match radius 15 cm): whichever comes first makes an
+  // object, the next joins it and moves its centre, the third is then too far and makes
+  // another. Taken in the order they came, a driver's layout (rows by beam, by firing, a list)
+  // would decide which. Then a beam that goes past under the second object's top, among the
+  // rising returns of a second scan.
+  const std::vector<Eigen::Vector3f> rising{{12.0f, 10.0f, 0.1f},
+                                            {12.12f, 10.0f, 0.1f},
+                                            {12.24f, 10.0f, 0.1f},
+                                            {15.0f, 8.0f, 0.1f},
+                                            {15.01f, 8.01f, 0.09f}};
+  const Eigen::Vector3f past = ground_through(Eigen::Vector3f(15.0f, 8.0f, 0.05f));
+  const std::vector<std::vector<int>> orders{
+      {0, 1, 2, 3, 4, 5}, {5, 4, 3, 2, 1, 0}, {2, 0, 5, 4, 1, 3}};
+  std::vector<std::vector<LowObject>> results;
+  for (const std::vector<int>& order : orders) {
+    LowObjects objects = make();
+    for (std::uint32_t number = 1; number <= 3; ++number) {
+      ScanBuilder s;
+      for (const int k : order) {
+        // Scan 1 has every rising return, scans 2 and 3 the first three and the beam past.
+        if (k == 5) {
+          if (number > 1) s.add(past, 0);
+        } else if (number == 1 || k < 3) {
+          s.add(rising[static_cast<std::size_t>(k)], 10);
+        }
+      }
+      objects.update(s.scan(number, kSensor));
+    }
+    results.emplace_back(objects.all().begin(), objects.all().end());
+  }
+  ASSERT_EQ(results[0].size(), 2u) << "the object the beam went past is gone";
+  for (std::size_t r = 1; r < results.size(); ++r) {
+    ASSERT_EQ(results[r].size(), results[0].size()) << "order " << r;
+    for (std::size_t k = 0; k < results[0].size(); ++k) {
+      const LowObject &a = results[0][k], &b = results[r][k];
+      EXPECT_EQ(a.id, b.id) << "order " << r << ", object " << k;
+      EXPECT_EQ(a.xy_W, b.xy_W) << "order " << r << ", object " << k;
+      EXPECT_EQ(a.top_z_W, b.top_z_W);
+      EXPECT_EQ(a.returns, b.returns);
+      EXPECT_EQ(a.scans, b.scans);
+      EXPECT_EQ(a.seen_through, b.seen_through);
+    }
+  }
+}
+
 TEST(LowObjects, RaysThatWentPastUnderItsTopRemoveIt) {
   LowObjects objects = make();
   ScanBuilder seen;

@@ -18,7 +18,8 @@
 ///  - a candidate (fewer returns than confirm) lapses after candidate_scans scans without
 ///    another: a lone stray return is no object;
 ///  - objects are kept while their centre is inside the occupancy window.
-/// Pure and deterministic: the update reads the scan in point order.
+/// Pure and deterministic, and independent of the order of the scan's returns (a driver's
+/// layout): the rising returns are taken in an order of their own.
 
 #include <cmath>
 #include <cstdint>
@@ -135,6 +136,7 @@ class LowObjects {
   std::vector<std::uint32_t> indexed_column_;  ///< per object: the column it is listed in
   std::vector<std::uint8_t> near_;  ///< per window column: an object within kReach columns
   std::vector<std::uint8_t> touched_, saw_through_;  ///< per object, this scan
+  std::vector<std::uint32_t> rising_;  ///< this scan's rising returns (indices), sorted
   std::uint32_t next_id_ = 1;
   std::uint64_t refused_ = 0;
 };
