@@ -35,7 +35,9 @@ std::string_view lethal_cause_name(LethalCause cause);
 struct LethalCauseView {
   std::span<const std::uint8_t> column_class, obstacle_rule;
 
-  [[nodiscard]] bool known() const { return !obstacle_rule.empty(); }
+  [[nodiscard]] bool known() const {
+    return !obstacle_rule.empty() && column_class.size() == obstacle_rule.size();
+  }
   /// The cause of lethal cell `cell`. @pre known() and cell in range
   [[nodiscard]] LethalCause of(std::size_t cell) const;
 };
