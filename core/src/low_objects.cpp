@@ -43,6 +43,9 @@ LowObjects::LowObjects(const LowObjectParams& params, int nx, int ny, double vox
   indexed_column_.reserve(cap);
   touched_.reserve(cap);
   saw_through_.reserve(cap);
+  // A scan's rising returns: room for a 64 × 1024 sweep of which every return rose, so the
+  // update never grows it on the executor's threads for such sensors (256 KiB).
+  rising_.reserve(std::size_t{64} * 1024);
 }
 
 std::size_t LowObjects::memory_bytes() const {
