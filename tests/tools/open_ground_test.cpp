@@ -134,6 +134,22 @@ TEST(OpenGround, GivenTheCostmapsRules_CountsEachLethalCellUnderItsFirstRule) {
                                               "33.3 %, zone 33.3 %, other 33.3 %)"),
             std::string::npos)
       << open_ground_summary(tracker);
+  // obstacle_rule.png: each lethal cell in its rule's colour (rows north up), the rest grey.
+  const std::vector<std::uint8_t> rgb = render_lethal_causes(grid, LethalCauseView{classes, rules});
+  const auto pixel = [&](std::uint32_t x, std::uint32_t y) {
+    const std::uint8_t* p = &rgb[((59 - y) * 60 + x) * 3];
+    return std::vector<std::uint8_t>{p[0], p[1], p[2]};
+  };
+  const auto colour = [](LethalCause cause) {
+    const std::uint8_t* c = kLethalCauseColour[static_cast<std::size_t>(cause)];
+    return std::vector<std::uint8_t>{c[0], c[1], c[2]};
+  };
+  EXPECT_EQ(pixel(3, 40), colour(LethalCause::kRise)) << "rise and a kept object: the rise first";
+  EXPECT_EQ(pixel(50, 40), colour(LethalCause::kVoxel));
+  EXPECT_EQ(pixel(10, 10), colour(LethalCause::kLowObject));
+  EXPECT_EQ(pixel(12, 10), colour(LethalCause::kZone));
+  EXPECT_EQ(pixel(14, 10), colour(LethalCause::kOther));
+  EXPECT_EQ(pixel(20, 20), (std::vector<std::uint8_t>{230, 230, 230}));
   // Without the rules (a costmap received over DDS), nothing is counted or printed.
   OpenGroundTracker plain(0.2, 2.8);
   plain.add(kerbside());

@@ -13,6 +13,7 @@
 #include "tarmac/core/tsdf_io.hpp"
 #include "tarmac/core/tsdf_mesh.hpp"
 #include "tarmac/tools/array_io.hpp"
+#include "tarmac/tools/lethal_causes.hpp"
 #include "tarmac/tools/mesh_io.hpp"
 #include "tarmac/tools/stats.hpp"
 
@@ -183,6 +184,11 @@ core::Status write_window_outputs(const std::filesystem::path& out, const core::
   writes.push_back(tools::write_npy(out / "costmap.npy", layers.costmap.cells(), shape2));
   writes.push_back(tools::write_npy(out / "obstacle_rule.npy", layers.obstacle_rule, shape2));
   writes.push_back(
+      tools::write_png(out / "obstacle_rule.png",
+                       tools::render_lethal_causes(
+                           layers.costmap, {layers.column_class.cells(), layers.obstacle_rule}),
+                       dims.x(), dims.y()));
+  writes.push_back(
       tools::write_png(out / "costmap.png", render_costmap(layers), dims.x(), dims.y()));
   writes.push_back(
       tools::write_png(out / "esdf_slice.png", render_distance(slice, 5.0), dims.x(), dims.y()));
@@ -223,6 +229,10 @@ core::Status write_window_outputs(const std::filesystem::path& out, const core::
   files["obstacle_rule.npy"] =
       "uint8 per costmap cell, why it is an obstacle (0: it is not): 1 occupied voxel, 2 drop, 4 "
       "rise, 8 kept low object, 16 peer's cell (bits; docs/tools.md)";
+  files["obstacle_rule.png"] =
+      "lethal cells by the rule that made them: occupied voxel black, drop purple, rise orange, "
+      "kept low object red, peer cyan, zone magenta, other grey; unknown slate, the rest light "
+      "grey; north up";
   files["costmap.png"] =
       "white free, yellow-orange inflated, dark red inscribed, black lethal, slate unknown, "
       "magenta virtual zone; north up";

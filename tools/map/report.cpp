@@ -380,7 +380,7 @@ int report(const Options& opt, const Inputs& in, const core::Mapper& mapper, con
       "wrote "
       "%s/"
       "{map.json,occupancy.npy,esdf.npy,esdf_slice.npy,esdf_slice.png,costmap.npy,costmap.png,"
-      "obstacle_rule.npy,"
+      "obstacle_rule.npy,obstacle_rule.png,"
       "timing.json,debris.json%s%s}\n",
       opt.out.c_str(), window_out.have_band ? ",esdf_band.npy" : "",
       tsdf_out.paged        ? (opt.prior.empty()

@@ -10,7 +10,11 @@
 #include <string>
 #include <string_view>
 
+#include <vector>
+
 #include <nlohmann/json_fwd.hpp>
+
+#include "tarmac/core/grid2d.hpp"
 
 namespace tarmac::tools {
 
@@ -58,5 +62,16 @@ struct LethalCauseCounts {
   /// {"voxel": n, "drop": n, ...}: every cause, in the enum's order.
   [[nodiscard]] nlohmann::ordered_json json() const;
 };
+
+/// The costmap as RGB, rows top (max y) to bottom, 3 bytes per cell: each lethal cell in the
+/// colour of its cause (kLethalCauseColour), unknown cells slate, the others light grey.
+/// tarmac-map's obstacle_rule.png. @pre view.known(), on the costmap's cells
+std::vector<std::uint8_t> render_lethal_causes(const core::Costmap& costmap,
+                                               const LethalCauseView& view);
+/// Per cause, in the enum's order: voxel black, drop purple, rise orange, low object red, peer
+/// cyan, zone magenta, other grey.
+inline constexpr std::uint8_t kLethalCauseColour[kLethalCauses][3] = {
+    {0, 0, 0},     {130, 40, 200}, {240, 140, 0},  {220, 30, 30},
+    {0, 170, 200}, {200, 0, 200},  {110, 110, 110}};
 
 }  // namespace tarmac::tools
