@@ -205,7 +205,7 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
     // The base sits on the ground (--sensor-height): its z is the ground's near the vehicle.
     const Eigen::Vector3d sensor_W = T_W_B * T_B_S.translation();
     in.clearing->observe(
-        static_cast<int>(k), s.times_s[k], mapper.costmap().column_class, sensor_W.head<2>(),
+        static_cast<int>(k), s.times_s[k], layers.column_class, sensor_W.head<2>(),
         tools::blind_radius_from_ground(sensor_W, points_W, T_W_B.translation().z()));
   }
   if (in.safety) {
@@ -217,10 +217,10 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
     }
     // The vehicle's position: the base under the sensor (as tarmac-audit takes it), which on a
     // slope is not where the pitched base frame puts its origin.
-    in.safety->observe(mapper.costmap().costmap, static_cast<int>(k),
-                       s.T_W_S[k].translation().head<2>(), 20.0, moving_now, causes);
+    in.safety->observe(layers.costmap, static_cast<int>(k), s.T_W_S[k].translation().head<2>(),
+                       20.0, moving_now, causes);
     if (in.small_objects) {
-      in.small_objects->observe(mapper.costmap().costmap, static_cast<int>(k),
+      in.small_objects->observe(layers.costmap, static_cast<int>(k),
                                 s.T_W_S[k].translation().head<2>());
     }
   }
@@ -228,7 +228,7 @@ void score_scan(Inputs& in, const core::Mapper& mapper, std::size_t k, std::size
     in.open_ground->add(points_W);
     // Every 10th scan and the last: a full-window pass each.
     if (k % 10 == 9 || k + 1 == n) {
-      in.open_ground->observe(mapper.costmap().costmap, static_cast<int>(k), causes);
+      in.open_ground->observe(layers.costmap, static_cast<int>(k), causes);
     }
   }
 }
