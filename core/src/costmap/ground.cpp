@@ -32,7 +32,24 @@ std::int16_t ground_candidate(int lowest_occupied, int lowest_observed) {
                                                                          : lowest_occupied);
 }
 
-/// sequential streams, which the prefetchers follow; all 40 at once were twice as slow).
+/// The layer of the ground a scan last returned densely round the column at ring slot
+/// `ring_slot`, for a column with no occupied voxel; −1 where none did or it lies outside the
+/// window. Far from the sensor a ring lands on a surface falling away (a ramp going down 30 m
+/// off) where the same ring's rays, landing a little further in earlier scans, passed a few
+/// centimetres over it: those misses emptied the voxels that hold the surface, and one return
+/// does not make them occupied again. Without it the ground there is filled from the level
+/// before it, and the rays beyond, which pass under that, read as a drop. A surface that has
+/// gone (a trailer's bed) shows free space under it, and ground_candidate() then takes the
+/// lowest observed voxel instead, as for any hovering surface.
+int remembered_layer(const CostmapPass& pass, std::size_t ring_slot) {
+  const float z = pass.map.remembered_ground_z(ring_slot);
+  if (std::isnan(z)) return -1;
+  const int layer = static_cast<int>(std::floor(z / pass.v)) - pass.wmin.z();
+  return layer >= 0 && layer < pass.nz ? layer : -1;
+}
+
+/// The layer-bits pass reads the layers in groups of this many (four sequential streams, which
+/// the prefetchers follow; all 40 at once were twice as slow).
 constexpr int kLayerGroup = 4;
 /// Columns per block of the layer-bits pass: a group's words for a block stay in L1.
 constexpr std::size_t kBitsBlock = 2048;
@@ -164,11 +181,18 @@ void find_ground_candidates(const CostmapPass& pass) {
         });
       }
     }
-    for (std::size_t i = static_cast<std::size_t>(y0) * nx; i < static_cast<std::size_t>(y1) * nx;
-         ++i) {
-      const std::int16_t candidate = ground_candidate(lowest[i], observed[i]);
-      out.hovers[i] = candidate != lowest[i] ? 1 : 0;
-      lowest[i] = candidate;
+    for (int y = y0; y < y1; ++y) {
+      const std::size_t ring_row = static_cast<std::size_t>(map.ring_y(y)) * nx;
+      for (int x = 0; x < nx; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * nx + static_cast<std::size_t>(x);
+        const int occupied =
+            lowest[i] >= 0
+                ? lowest[i]
+                : remembered_layer(pass, ring_row + static_cast<std::size_t>(map.ring_x(x)));
+        const std::int16_t candidate = ground_candidate(occupied, observed[i]);
+        out.hovers[i] = candidate != occupied ? 1 : 0;
+        lowest[i] = candidate;
+      }
     }
   });
   if (use_bits) {
@@ -186,7 +210,7 @@ void find_ground_candidates(const CostmapPass& pass) {
                                                           << 32;
           const std::uint64_t k = known_bits[sl] | std::uint64_t{known_bits[cells_n + sl]} << 32;
           seen[x] = k == 0 ? std::int16_t{-1} : static_cast<std::int16_t>(std::countr_zero(k));
-          const int occupied = b == 0 ? -1 : std::countr_zero(b);
+          const int occupied = b != 0 ? std::countr_zero(b) : remembered_layer(pass, sl);
           low[x] = ground_candidate(occupied, seen[x]);
           hover[x] = low[x] != occupied ? 1 : 0;
         }

@@ -21,6 +21,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <vector>
@@ -256,6 +257,13 @@ class OccupancyMap {
   [[nodiscard]] const LowObjects& low_objects() const { return low_objects_; }
   [[nodiscard]] int ring_x(int wx) const;
   [[nodiscard]] int ring_y(int wy) const;
+  /// The ground the latest scan that returned densely round the column at ring slot `ring_slot`
+  /// (ring_y(wy)·window_x + ring_x(wx)) returned there (hit_rises()), as a map-frame z, however
+  /// long ago, while the column stays in the window; NaN where none did.
+  [[nodiscard]] float remembered_ground_z(std::size_t ring_slot) const {
+    return ground_memory_scan_[ring_slot] != 0 ? ground_memory_z_[ring_slot]
+                                               : std::numeric_limits<float>::quiet_NaN();
+  }
 
   /// Copies the window into `out` in window order (z slowest, x fastest) starting at window_min().
   void export_log_odds(std::vector<float>& out) const;
@@ -384,8 +392,9 @@ class OccupancyMap {
   std::vector<std::uint32_t> scan_ground_cols_;  ///< the first n_ground_cols_ (no per-scan fill)
   /// Per window column, ring order: the ground of the latest scan that returned densely round
   /// it (kDenseColumns of the columns within ground_radius_m), as a map-frame z, and that
-  /// scan's number (hit_rises()). Read for kGroundMemoryScans scans; forgotten when the column
-  /// leaves the window.
+  /// scan's number (hit_rises()). Rises read it for kGroundMemoryScans scans, the costmap's
+  /// ground (remembered_ground_z()) for as long as it lasts; forgotten when the column leaves
+  /// the window.
   std::vector<float> ground_memory_z_;
   std::vector<std::uint32_t> ground_memory_scan_;
   static constexpr int kDenseColumns = 4;
