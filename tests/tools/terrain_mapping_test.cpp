@@ -1,6 +1,7 @@
 // The costmap through the Mapper on tarmac-sim's terrain scenes: the ground the simulator's rings
 // give at range, as the vehicle approaches it.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -62,6 +63,32 @@ TEST(TerrainMapping, ARampFallingAwaySeenByFarRingsIsNoDrop) {
       });
   EXPECT_GT(checked, 10000u);
   EXPECT_EQ(lethal, 0u) << "of " << checked << " ramp cell-cycles; the first: " << first;
+}
+
+TEST(TerrainMapping, TheOrderOfACloudsPointsChangesNoCostmap) {
+  // The parking scene's ramp, walls and lower level, each cloud as sent and reversed: the
+  // ground a sparse column's rise is taken from is the ground remembered round it, which the
+  // dense columns of the same scan write; in any order of the points, the same.
+  core::Mapper as_sent(test::without_tsdf()), reversed(test::without_tsdf());
+  core::PointCloud backwards;
+  int compared = 0;
+  test::simulate("parking", 40.0, 49.0,
+                 [&](int i, const core::PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
+                     const Eigen::Isometry3d& T_B_S) {
+                   backwards = cloud;
+                   std::reverse(backwards.points_S.begin(), backwards.points_S.end());
+                   std::reverse(backwards.intensity.begin(), backwards.intensity.end());
+                   std::reverse(backwards.ring.begin(), backwards.ring.end());
+                   std::reverse(backwards.no_return_S.begin(), backwards.no_return_S.end());
+                   test::map_scan(as_sent, cloud, T_W_B, T_B_S);
+                   test::map_scan(reversed, backwards, T_W_B, T_B_S);
+                   ASSERT_EQ(as_sent.costmap().costmap.cells(), reversed.costmap().costmap.cells())
+                       << "scan " << i;
+                   ASSERT_EQ(as_sent.costmap().obstacle_rule, reversed.costmap().obstacle_rule)
+                       << "scan " << i;
+                   ++compared;
+                 });
+  EXPECT_GT(compared, 25);
 }
 
 }  // namespace

@@ -175,8 +175,22 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
   const int r = static_cast<int>(std::lround(params_.ground_radius_m / params_.voxel_size_m));
   const std::uint32_t scan = ++scans_integrated_;
   const double v_m = params_.voxel_size_m;
+  const auto ring = [&](int x, int y) {
+    return static_cast<std::size_t>(ring_y(y)) * nx + static_cast<std::size_t>(ring_x(x));
+  };
+  // The column centre's (x, y) in the map frame: heights along up depend on it.
+  const auto centre = [&](int x, int y) {
+    return Eigen::Vector2f(static_cast<float>((min_.x() + x + 0.5) * v_m),
+                           static_cast<float>((min_.y() + y + 0.5) * v_m));
+  };
+  // Two passes, so that no column's ground depends on the order the scan's points came in: the
+  // first takes every column's own ground and remembers the dense ones'; the second lowers the
+  // sparse columns' to the ground remembered round them, this scan's included. The sparse
+  // columns are gathered at the list's front as the first pass meets them.
+  std::uint32_t* const cols = scan_ground_cols_.data();
+  std::size_t n_sparse = 0;
   for (std::size_t k = 0; k < n_ground_cols_; ++k) {
-    const std::uint32_t c = scan_ground_cols_[k];
+    const std::uint32_t c = cols[k];
     const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
     const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
     float lowest = kNoGround, second = kNoGround;
@@ -191,35 +205,34 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
         second = std::min(second, scan_ground2_z_[row + x]);
       }
     }
-    float near = second == kNoGround ? lowest : second;
-    const auto ring = [&](int x, int y) {
-      return static_cast<std::size_t>(ring_y(y)) * nx + static_cast<std::size_t>(ring_x(x));
-    };
-    // The column centre's (x, y) in the map frame: heights along up depend on it.
-    const auto centre = [&](int x, int y) {
-      return Eigen::Vector2f(static_cast<float>((min_.x() + x + 0.5) * v_m),
-                             static_cast<float>((min_.y() + y + 0.5) * v_m));
-    };
+    scan_ground_near_z_[c] = second == kNoGround ? lowest : second;
+    if (returned < kDenseColumns) {
+      std::swap(cols[k], cols[n_sparse++]);
+      continue;
+    }
     // Remembered only where the two lowest returns round it agree (a floor's mirror images
-    // scatter in depth under it; a ground returns at one height).
-    if (returned >= kDenseColumns) {
-      // (Not on a vehicle on its side: the world height along its up axis is undefined.)
-      if (second != kNoGround && second - lowest <= kGroundAgreeM && up_.z() > 0.1f) {
-        const Eigen::Vector2f xy = centre(cx, cy);
-        ground_memory_z_[ring(cx, cy)] = (near - up_.x() * xy.x() - up_.y() * xy.y()) / up_.z();
-        ground_memory_scan_[ring(cx, cy)] = scan;
-      }
-    } else {
-      for (int y = std::max(0, cy - 1); y <= std::min(ny - 1, cy + 1); ++y) {
-        for (int x = std::max(0, cx - 1); x <= std::min(nx - 1, cx + 1); ++x) {
-          const std::size_t q = ring(x, y);
-          if (ground_memory_scan_[q] == 0 || scan - ground_memory_scan_[q] > kGroundMemoryScans) {
-            continue;
-          }
-          const Eigen::Vector2f xy = centre(x, y);
-          near =
-              std::min(near, up_.x() * xy.x() + up_.y() * xy.y() + up_.z() * ground_memory_z_[q]);
+    // scatter in depth under it; a ground returns at one height). (Not on a vehicle on its
+    // side: the world height along its up axis is undefined.)
+    if (second != kNoGround && second - lowest <= kGroundAgreeM && up_.z() > 0.1f) {
+      const Eigen::Vector2f xy = centre(cx, cy);
+      ground_memory_z_[ring(cx, cy)] =
+          (scan_ground_near_z_[c] - up_.x() * xy.x() - up_.y() * xy.y()) / up_.z();
+      ground_memory_scan_[ring(cx, cy)] = scan;
+    }
+  }
+  for (std::size_t k = 0; k < n_sparse; ++k) {
+    const std::uint32_t c = cols[k];
+    const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
+    const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
+    float near = scan_ground_near_z_[c];
+    for (int y = std::max(0, cy - 1); y <= std::min(ny - 1, cy + 1); ++y) {
+      for (int x = std::max(0, cx - 1); x <= std::min(nx - 1, cx + 1); ++x) {
+        const std::size_t q = ring(x, y);
+        if (ground_memory_scan_[q] == 0 || scan - ground_memory_scan_[q] > kGroundMemoryScans) {
+          continue;
         }
+        const Eigen::Vector2f xy = centre(x, y);
+        near = std::min(near, up_.x() * xy.x() + up_.y() * xy.y() + up_.z() * ground_memory_z_[q]);
       }
     }
     scan_ground_near_z_[c] = near;
