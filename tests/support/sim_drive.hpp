@@ -2,6 +2,7 @@
 /// @file Drives the Mapper through a tarmac-sim scene, for the tests that judge its costmap on
 /// the simulator's scenes (debris, terrain).
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -56,6 +57,15 @@ inline void map_scan(core::Mapper& mapper, const core::PointCloud& cloud,
   const auto scan = mapper.ingest(cloud, T_W_B, T_B_S);
   mapper.integrate(scan, runner);
   mapper.update_costmap(mapper.vehicle_pose(), {}, cloud.stamp_ns, runner);
+}
+
+/// `cloud` with its points in the reverse order (another driver's layout of the same sweep).
+inline void reverse_points(const core::PointCloud& cloud, core::PointCloud& out) {
+  out = cloud;
+  std::reverse(out.points_S.begin(), out.points_S.end());
+  std::reverse(out.intensity.begin(), out.intensity.end());
+  std::reverse(out.ring.begin(), out.ring.end());
+  std::reverse(out.no_return_S.begin(), out.no_return_S.end());
 }
 
 /// The mapper's defaults without the TSDF, which neither the costmap nor the debris read.

@@ -100,11 +100,7 @@ TEST(DebrisScene, TheOrderOfACloudsPointsChangesNoCostmap) {
   simulate("debris", 8.0, 20.0,
            [&](int i, const core::PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                const Eigen::Isometry3d& T_B_S) {
-             backwards = cloud;
-             std::reverse(backwards.points_S.begin(), backwards.points_S.end());
-             std::reverse(backwards.intensity.begin(), backwards.intensity.end());
-             std::reverse(backwards.ring.begin(), backwards.ring.end());
-             std::reverse(backwards.no_return_S.begin(), backwards.no_return_S.end());
+             test::reverse_points(cloud, backwards);
              map_scan(as_sent, cloud, T_W_B, T_B_S);
              map_scan(reversed, backwards, T_W_B, T_B_S);
              const core::CostmapLayers &a = as_sent.costmap(), &b = reversed.costmap();

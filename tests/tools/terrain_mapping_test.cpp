@@ -75,11 +75,7 @@ TEST(TerrainMapping, TheOrderOfACloudsPointsChangesNoCostmap) {
   test::simulate("parking", 40.0, 49.0,
                  [&](int i, const core::PointCloud& cloud, const Eigen::Isometry3d& T_W_B,
                      const Eigen::Isometry3d& T_B_S) {
-                   backwards = cloud;
-                   std::reverse(backwards.points_S.begin(), backwards.points_S.end());
-                   std::reverse(backwards.intensity.begin(), backwards.intensity.end());
-                   std::reverse(backwards.ring.begin(), backwards.ring.end());
-                   std::reverse(backwards.no_return_S.begin(), backwards.no_return_S.end());
+                   test::reverse_points(cloud, backwards);
                    test::map_scan(as_sent, cloud, T_W_B, T_B_S);
                    test::map_scan(reversed, backwards, T_W_B, T_B_S);
                    ASSERT_EQ(as_sent.costmap().costmap.cells(), reversed.costmap().costmap.cells())
