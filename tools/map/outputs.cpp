@@ -36,7 +36,8 @@ std::vector<std::uint8_t> render_costmap(const core::CostmapLayers& layers) {
       if (cls == core::ColumnClass::kVirtual) {
         r = 200, g = 0, b = 200;  // virtual zone: magenta
       } else if (c == core::kCostUnknown) {
-        r = 70, g = 80, b = 110;  // unknown: slate blue
+        r = tools::kUnobservedRgb[0], g = tools::kUnobservedRgb[1],
+        b = tools::kUnobservedRgb[2];  // unknown
       } else if (c == core::kCostLethal) {
         r = 0, g = 0, b = 0;  // lethal: black
       } else if (c == core::kCostInscribed) {
@@ -60,7 +61,7 @@ std::vector<std::uint8_t> render_distance(const core::DistanceField& field, doub
       std::uint8_t* px = &rgb[(static_cast<std::size_t>(h - 1 - y) * w + x) * 3];
       const float d = field.distance_m[static_cast<std::size_t>(y) * w + x];
       if (std::isnan(d)) {
-        px[0] = 70, px[1] = 80, px[2] = 110;
+        std::copy_n(tools::kUnobservedRgb, 3, px);
         continue;
       }
       const double t = std::min(1.0, static_cast<double>(d) / max_m);
@@ -91,7 +92,7 @@ void render_change_row(std::span<const float> cells, std::uint8_t* rgb) {
       return static_cast<std::uint8_t>(245 - (245 - full) * std::min(1.0f, std::abs(c)));
     };
     if (std::isnan(c)) {
-      px[0] = 70, px[1] = 80, px[2] = 110;  // not observed in both: slate
+      std::copy_n(tools::kUnobservedRgb, 3, px);  // not observed in both
     } else if (c > 0) {
       px[0] = 230, px[1] = fade(0), px[2] = fade(0);  // new: red
     } else if (c < 0) {

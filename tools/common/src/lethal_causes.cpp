@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tarmac/core/costmap_builder.hpp"
+#include "tarmac/tools/array_io.hpp"
 
 namespace tarmac::tools {
 
@@ -73,14 +74,14 @@ std::vector<std::uint8_t> render_lethal_causes(const core::Costmap& costmap,
                                                const LethalCauseView& view) {
   const std::uint32_t w = costmap.width(), h = costmap.height();
   std::vector<std::uint8_t> rgb(std::size_t{w} * h * 3);
-  constexpr std::uint8_t kUnknown[3] = {70, 80, 110}, kOtherCell[3] = {230, 230, 230};
+  constexpr std::uint8_t kOtherCell[3] = {230, 230, 230};
   for (std::uint32_t y = 0; y < h; ++y) {
     for (std::uint32_t x = 0; x < w; ++x) {
       const int c = costmap.at(x, y);
       const std::uint8_t* colour =
           c == core::kCostLethal
               ? kLethalCauseColour[static_cast<std::size_t>(view.of(std::size_t{y} * w + x))]
-          : c == core::kCostUnknown ? kUnknown
+          : c == core::kCostUnknown ? kUnobservedRgb
                                     : kOtherCell;
       std::copy(colour, colour + 3, &rgb[(std::size_t{h - 1 - y} * w + x) * 3]);  // north up
     }

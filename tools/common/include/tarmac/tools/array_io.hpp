@@ -23,6 +23,9 @@ core::Status write_npy(const std::filesystem::path& file, std::span<const std::i
 core::Status write_npy(const std::filesystem::path& file, std::span<const std::uint8_t> data,
                        const std::vector<std::size_t>& shape);
 
+/// The pictures' colour for what was not observed (slate blue), the same in every image.
+inline constexpr std::uint8_t kUnobservedRgb[3] = {70, 80, 110};
+
 /// Writes an RGB image, rows top to bottom, 3 bytes per pixel.
 core::Status write_png(const std::filesystem::path& file, std::span<const std::uint8_t> rgb,
                        std::uint32_t width, std::uint32_t height);
