@@ -32,22 +32,19 @@ std::vector<std::uint8_t> render_costmap(const core::CostmapLayers& layers) {
       std::uint8_t* px = &rgb[(std::size_t{h - 1 - y} * w + x) * 3];  // north up
       const auto cls = static_cast<core::ColumnClass>(layers.column_class.at(x, y));
       const int c = cm.at(x, y);
-      std::uint8_t r, g, b;
       if (cls == core::ColumnClass::kVirtual) {
-        r = 200, g = 0, b = 200;  // virtual zone: magenta
+        px[0] = 200, px[1] = 0, px[2] = 200;  // virtual zone: magenta
       } else if (c == core::kCostUnknown) {
-        r = tools::kUnobservedRgb[0], g = tools::kUnobservedRgb[1],
-        b = tools::kUnobservedRgb[2];  // unknown
+        std::copy_n(tools::kUnobservedRgb, 3, px);  // unknown
       } else if (c == core::kCostLethal) {
-        r = 0, g = 0, b = 0;  // lethal: black
+        px[0] = 0, px[1] = 0, px[2] = 0;  // lethal: black
       } else if (c == core::kCostInscribed) {
-        r = 180, g = 0, b = 0;  // inscribed: dark red
+        px[0] = 180, px[1] = 0, px[2] = 0;  // inscribed: dark red
       } else if (c > 0) {
-        r = 255, g = static_cast<std::uint8_t>(230 - 2 * c), b = 60;  // inflated: yellow → orange
+        px[0] = 255, px[1] = static_cast<std::uint8_t>(230 - 2 * c), px[2] = 60;  // inflated
       } else {
-        r = g = b = 245;  // free: white
+        px[0] = px[1] = px[2] = 245;  // free: white
       }
-      px[0] = r, px[1] = g, px[2] = b;
     }
   }
   return rgb;
