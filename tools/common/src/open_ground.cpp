@@ -179,10 +179,11 @@ std::vector<std::uint8_t> OpenGroundTracker::render(std::uint32_t& width,
   return rgb;
 }
 
-std::string open_ground_summary(const OpenGroundTracker& tracker) {
+namespace {
+
+/// Every cycle's counts added up (`scan` left 0).
+OpenGroundCycle total(const OpenGroundTracker& tracker) {
   OpenGroundCycle sum;
-  double worst = 0.0;
-  int worst_scan = -1;
   for (const OpenGroundCycle& c : tracker.cycles()) {
     sum.cells += c.cells;
     sum.lethal += c.lethal;
@@ -195,6 +196,17 @@ std::string open_ground_summary(const OpenGroundTracker& tracker) {
     sum.away_inscribed += c.away_inscribed;
     sum.lethal_by_cause += c.lethal_by_cause;
     sum.away_lethal_by_cause += c.away_lethal_by_cause;
+  }
+  return sum;
+}
+
+}  // namespace
+
+std::string open_ground_summary(const OpenGroundTracker& tracker) {
+  const OpenGroundCycle sum = total(tracker);
+  double worst = 0.0;
+  int worst_scan = -1;
+  for (const OpenGroundCycle& c : tracker.cycles()) {
     if (share(c.lethal, c.cells) > worst || worst_scan < 0) {
       worst = share(c.lethal, c.cells);
       worst_scan = c.scan;
@@ -230,13 +242,9 @@ nlohmann::ordered_json open_ground_json(const OpenGroundTracker& tracker) {
     rows.push_back({c.scan, c.cells, c.lethal, c.inscribed, c.inflated, c.free, c.unknown, c.away,
                     c.away_lethal, c.away_inscribed});
   }
-  LethalCauseCounts all, away;
-  for (const OpenGroundCycle& c : tracker.cycles()) {
-    all += c.lethal_by_cause;
-    away += c.away_lethal_by_cause;
-  }
-  out["lethal_by_rule"] = all.json();
-  out["away_lethal_by_rule"] = away.json();
+  const OpenGroundCycle sum = total(tracker);
+  out["lethal_by_rule"] = sum.lethal_by_cause.json();
+  out["away_lethal_by_rule"] = sum.away_lethal_by_cause.json();
   return out;
 }
 
