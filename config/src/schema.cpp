@@ -432,7 +432,8 @@ std::vector<Key> make_schema() {
               "rising returns (one scan or several) that make a low object lethal",
               [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.confirm_returns; }),
           integer("occupancy.low_object_clear_scans", 1, 100, "scans",
-                  "scans in a row with a ray past a low object under its top that remove it",
+                  "scans in a row with a ray past a low object under its top, or the ground "
+                  "found at its top, that remove it",
                   [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.clear_scans; }),
           integer(
               "occupancy.low_object_candidate_scans", 1, 1000, "scans",

@@ -172,6 +172,28 @@ bool LowObjects::sees_through(const LowObject& o, const Eigen::Vector3f& origin,
   return up.dot(p - top) < -0.02f;
 }
 
+bool LowObjects::ground_at_top(const LowObject& o, const Scan& scan, std::size_t i) const {
+  // A return on the ground (rising at most kOnGroundCm above it), on the object's spot and as
+  // high as its top less kTopBandM: the ground here lies within min_rise of its top, so nothing
+  // stands on it that rises min_rise. A glossy floor's mirror returns under the floor lower one
+  // scan's ground and make the floor itself rise; the next scans find the floor where those
+  // tops are. A return on a real object's face lies above the ground, and one on its top
+  // rises (touched: no clearing this scan). The ground is the lower of the scan's and the one
+  // remembered round the spot: a kerb's top seen from behind, its road not returned, lies on
+  // the scan's ground alone.
+  constexpr int kOnGroundCm = 3;
+  constexpr float kTopBandM = 0.04f;
+  constexpr float kSpotM = 0.08f;
+  const Eigen::Vector3f& p = scan.points_W[i];
+  if (scan.rise_cm[i] > kOnGroundCm || (p.head<2>() - o.xy_W).squaredNorm() > kSpotM * kSpotM) {
+    return false;
+  }
+  const Eigen::Vector3f top(o.xy_W.x(), o.xy_W.y(), o.top_z_W);
+  if (scan.up_W.dot(p - top) < -kTopBandM) return false;
+  return scan.ground == nullptr || scan.up_W.dot(p) - scan.ground->ground_z(scan.column[i]) <
+                                       static_cast<float>(kOnGroundCm + 1) * 0.01f;
+}
+
 void LowObjects::expire(const Scan& scan) {
   std::size_t out = 0;
   for (std::size_t k = 0; k < objects_.size(); ++k) {
@@ -250,7 +272,8 @@ void LowObjects::update(const Scan& scan) {
       for (int x = std::max(0, cx - kReach); x <= std::min(nx_ - 1, cx + kReach); ++x) {
         for (std::uint32_t k = head_[static_cast<std::size_t>(y) * nx_ + x]; k != kNone;
              k = next_[k]) {
-          if (saw_through_[k] == 0 && sees_through(objects_[k], scan.origin_W, p, scan.up_W)) {
+          if (saw_through_[k] == 0 && (sees_through(objects_[k], scan.origin_W, p, scan.up_W) ||
+                                       ground_at_top(objects_[k], scan, i))) {
             saw_through_[k] = 1;
           }
         }

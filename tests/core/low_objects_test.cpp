@@ -1,10 +1,12 @@
 // LowObjects: debris kept across scans, confirmed by its rising returns, removed only by rays
-// that went past where it stood.
+// that went past where it stood or by the ground found at its top.
 
 #include "tarmac/core/low_objects.hpp"
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <map>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -15,13 +17,25 @@ namespace {
 constexpr double kVoxel = 0.2;
 constexpr int kN = 100;  // a 20 m window from (0, 0)
 
-/// One scan's returns, built by hand: each with its rise (cm) and its window column.
+/// The ground remembered under some columns, lower than a scan's; +inf (none) elsewhere.
+struct RememberedGround final : LowObjects::GroundMemory {
+  std::map<std::uint32_t, float> z;
+  [[nodiscard]] float ground_z(std::uint32_t column) const override {
+    const auto it = z.find(column);
+    return it == z.end() ? std::numeric_limits<float>::infinity() : it->second;
+  }
+};
+
+/// One scan's returns, built by hand: each with its rise (cm) and its window column, and the
+/// ground remembered under their columns.
 struct ScanBuilder {
   std::vector<Eigen::Vector3f> points;
   std::vector<std::uint32_t> voxel, column;
   std::vector<std::uint8_t> rise;
+  RememberedGround remembered;
 
-  void add(const Eigen::Vector3f& p, int rise_cm) {
+  /// `remembered_below_m`: the ground remembered under its column this far under it (0: none).
+  void add(const Eigen::Vector3f& p, int rise_cm, float remembered_below_m = 0.0f) {
     points.push_back(p);
     const int x = static_cast<int>(std::floor(p.x() / kVoxel));
     const int y = static_cast<int>(std::floor(p.y() / kVoxel));
@@ -29,6 +43,7 @@ struct ScanBuilder {
     voxel.push_back(inside ? 0u : LowObjects::Scan::kNoColumn);
     column.push_back(inside ? static_cast<std::uint32_t>(y * kN + x) : 0u);
     rise.push_back(static_cast<std::uint8_t>(rise_cm));
+    if (remembered_below_m > 0.0f) remembered.z[column.back()] = p.z() - remembered_below_m;
   }
   LowObjects::Scan scan(std::uint32_t number, const Eigen::Vector3f& origin) const {
     LowObjects::Scan s;
@@ -37,6 +52,7 @@ struct ScanBuilder {
     s.voxel = voxel;
     s.column = column;
     s.rise_cm = rise;
+    s.ground = &remembered;
     s.number = number;
     s.stamp_ns = static_cast<std::int64_t>(number) * 100'000'000;
     return s;
@@ -158,6 +174,39 @@ TEST(LowObjects, RaysThatWentPastUnderItsTopRemoveIt) {
   objects.update(past.scan(5, kSensor));
   EXPECT_EQ(confirmed_count(objects), 0) << "two scans in a row saw through it";
   EXPECT_TRUE(objects.all().empty());
+}
+
+TEST(LowObjects, TheGroundFoundAtItsTopRemovesIt) {
+  // A glossy floor's mirror returns lower one scan's ground, and the floor itself "rises"
+  // 10 cm there. The next scans find the ground where its top was: no object stands there.
+  LowObjects objects = make();
+  ScanBuilder seen;
+  seen.add(kCubeTop, 10);
+  seen.add(kCubeTop + Eigen::Vector3f(0.02f, 0.0f, 0.0f), 10);
+  objects.update(seen.scan(1, kSensor));
+  ASSERT_EQ(confirmed_count(objects), 1);
+  const Eigen::Vector3f centre(12.01f, 10.0f, 0.1f);
+  // Not evidence: a return on its face above this scan's ground (rise 5 cm, 2 cm under its
+  // top), one on the ground 8 cm under its top, one at its top's height 12 cm aside, and one
+  // at its top's height on this scan's ground but 10 cm above the ground remembered round it
+  // (a kerb's top where this scan did not return the road).
+  for (std::uint32_t k = 2; k < 12; ++k) {
+    ScanBuilder s;
+    s.add(centre + Eigen::Vector3f(0.0f, 0.0f, -0.02f), 5);
+    s.add(centre + Eigen::Vector3f(-0.03f, 0.0f, -0.08f), 0);
+    s.add(centre + Eigen::Vector3f(0.0f, 0.12f, 0.0f), 0);
+    s.add(centre + Eigen::Vector3f(-0.04f, 0.0f, 0.0f), 0, 0.10f);
+    objects.update(s.scan(k, kSensor));
+  }
+  ASSERT_EQ(confirmed_count(objects), 1);
+  // Evidence: a return on this scan's ground (rise 1 cm) within 8 cm of its centre, 3 cm under
+  // its top. One scan is not enough (clear_scans 2); two in a row remove it.
+  ScanBuilder floor;
+  floor.add(centre + Eigen::Vector3f(-0.05f, 0.03f, -0.03f), 1);
+  objects.update(floor.scan(12, kSensor));
+  EXPECT_EQ(confirmed_count(objects), 1);
+  objects.update(floor.scan(13, kSensor));
+  EXPECT_TRUE(objects.all().empty()) << "two scans in a row found the ground at its top";
 }
 
 TEST(LowObjects, BeamsOverItsTopOrBesideItDoNotRemoveIt) {

@@ -64,6 +64,8 @@ void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
   scan.voxel = std::span<const std::uint32_t>(hit_slot_.data(), points_W.size());
   scan.column = std::span<const std::uint32_t>(hit_column_.data(), points_W.size());
   scan.rise_cm = std::span<const std::uint8_t>(hit_rise_.data(), points_W.size());
+  const ClearingGround clearing_ground(*this);
+  scan.ground = &clearing_ground;
   scan.number = scans_integrated_;
   scan.stamp_ns = observation_stamp_ns_;
   low_objects_.update(scan);
@@ -178,11 +180,6 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
   const auto ring = [&](int x, int y) {
     return static_cast<std::size_t>(ring_y(y)) * nx + static_cast<std::size_t>(ring_x(x));
   };
-  // The column centre's (x, y) in the map frame: heights along up depend on it.
-  const auto centre = [&](int x, int y) {
-    return Eigen::Vector2f(static_cast<float>((min_.x() + x + 0.5) * v_m),
-                           static_cast<float>((min_.y() + y + 0.5) * v_m));
-  };
   // Two passes, so that no column's ground depends on the order the scan's points came in: the
   // first takes every column's own ground and remembers the dense ones'; the second lowers the
   // sparse columns' to the ground remembered round them, this scan's included. The sparse
@@ -214,7 +211,8 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
     // scatter in depth under it; a ground returns at one height). (Not on a vehicle on its
     // side: the world height along its up axis is undefined.)
     if (second != kNoGround && second - lowest <= kGroundAgreeM && up_.z() > 0.1f) {
-      const Eigen::Vector2f xy = centre(cx, cy);
+      const auto xy = Eigen::Vector2f(static_cast<float>((min_.x() + cx + 0.5) * v_m),
+                                      static_cast<float>((min_.y() + cy + 0.5) * v_m));
       ground_memory_z_[ring(cx, cy)] =
           (scan_ground_near_z_[c] - up_.x() * xy.x() - up_.y() * xy.y()) / up_.z();
       ground_memory_scan_[ring(cx, cy)] = scan;
@@ -224,18 +222,7 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
     const std::uint32_t c = cols[k];
     const int cx = static_cast<int>(c % static_cast<std::uint32_t>(nx));
     const int cy = static_cast<int>(c / static_cast<std::uint32_t>(nx));
-    float near = scan_ground_near_z_[c];
-    for (int y = std::max(0, cy - 1); y <= std::min(ny - 1, cy + 1); ++y) {
-      for (int x = std::max(0, cx - 1); x <= std::min(nx - 1, cx + 1); ++x) {
-        const std::size_t q = ring(x, y);
-        if (ground_memory_scan_[q] == 0 || scan - ground_memory_scan_[q] > kGroundMemoryScans) {
-          continue;
-        }
-        const Eigen::Vector2f xy = centre(x, y);
-        near = std::min(near, up_.x() * xy.x() + up_.y() * xy.y() + up_.z() * ground_memory_z_[q]);
-      }
-    }
-    scan_ground_near_z_[c] = near;
+    scan_ground_near_z_[c] = lowest_remembered(cx, cy, kGroundMemoryScans, scan_ground_near_z_[c]);
   }
   // The loops that store bytes read through locals: a byte store may alias anything, and the
   // compiler would reload every member after each.
@@ -249,6 +236,31 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
     rise_of_hit[i] = static_cast<std::uint8_t>(
         std::clamp(static_cast<int>((height[i] - ground_z) * 100.0f), 0, 255));
   }
+}
+
+float OccupancyMap::lowest_remembered(int cx, int cy, std::uint32_t max_age, float z) const {
+  const int nx = dims_.x(), ny = dims_.y();
+  const double v_m = params_.voxel_size_m;
+  for (int y = std::max(0, cy - 1); y <= std::min(ny - 1, cy + 1); ++y) {
+    for (int x = std::max(0, cx - 1); x <= std::min(nx - 1, cx + 1); ++x) {
+      const std::size_t q = static_cast<std::size_t>(ring_y(y)) * nx + ring_x(x);
+      if (ground_memory_scan_[q] == 0 || scans_integrated_ - ground_memory_scan_[q] > max_age) {
+        continue;
+      }
+      // The column centre's (x, y) in the map frame: heights along up depend on it.
+      const auto xy = Eigen::Vector2f(static_cast<float>((min_.x() + x + 0.5) * v_m),
+                                      static_cast<float>((min_.y() + y + 0.5) * v_m));
+      z = std::min(z, up_.x() * xy.x() + up_.y() * xy.y() + up_.z() * ground_memory_z_[q]);
+    }
+  }
+  return z;
+}
+
+float OccupancyMap::ClearingGround::ground_z(std::uint32_t column) const {
+  const auto nx = static_cast<std::uint32_t>(map_.dims_.x());
+  return map_.lowest_remembered(static_cast<int>(column % nx), static_cast<int>(column / nx),
+                                std::numeric_limits<std::uint32_t>::max(),
+                                map_.scan_ground_near_z_[column]);
 }
 
 void OccupancyMap::apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdate& stats) {

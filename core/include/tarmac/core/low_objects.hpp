@@ -10,11 +10,15 @@
 ///    objects fill voxels above the ground's, which the costmap reads directly), within
 ///    match_radius_m of the object's centre are its evidence; confirm_returns of them (in one
 ///    scan or over several) confirm it;
-///  - it is removed only when clear_scans scans in a row each had a ray that passed its centre
-///    (within clear_radius_m, horizontally) lower than its top and went on past it, with no
-///    rising return on it: the rays that would have hit it went past. A return on its spot at
-///    ground height does not clear it (a beam under its front edge lands there), nor does a beam
-///    without a return (a black object returns nothing), nor any time elapsed;
+///  - it is removed only when clear_scans scans in a row, with no rising return on it, each
+///    showed its spot empty: a ray that passed its centre (within clear_radius_m, horizontally)
+///    lower than its top and went on past it (the rays that would have hit it went past), or a
+///    return within 8 cm of its centre lying on the ground, as this scan and the ground
+///    remembered round it have it, no more than 4 cm under its top (the ground rose to its
+///    top: what rose was ground seen against a wrong reference, e.g. a glossy floor's mirror
+///    returns under it). A return on its spot at ground height under its top does not clear it
+///    (a beam under its front edge lands there), nor does a beam without a return (a black
+///    object returns nothing), nor any time elapsed;
 ///  - a candidate (fewer returns than confirm) lapses after candidate_scans scans without
 ///    another: a lone stray return is no object;
 ///  - objects are kept while their centre is inside the occupancy window.
@@ -70,6 +74,21 @@ inline bool stands_on_ground(const LowObject& o, double ground_z_m, double voxel
 
 class LowObjects {
  public:
+  /// The ground under a window column that holds a return of the scan being integrated, as a
+  /// height along its up axis: the lower of the scan's ground there and the ground remembered
+  /// round it from earlier scans (OccupancyMap's). Asked only for the few returns that may show
+  /// an object's spot empty.
+  class GroundMemory {
+   public:
+    [[nodiscard]] virtual float ground_z(std::uint32_t column) const = 0;
+
+   protected:
+    GroundMemory() = default;
+    GroundMemory(const GroundMemory&) = default;
+    GroundMemory& operator=(const GroundMemory&) = default;
+    ~GroundMemory() = default;
+  };
+
   /// One scan, as OccupancyMap::integrate has it.
   struct Scan {
     static constexpr std::uint32_t kNoColumn = ~std::uint32_t{0};
@@ -81,7 +100,9 @@ class LowObjects {
     std::span<const std::uint32_t> voxel;
     std::span<const std::uint32_t> column;
     std::span<const std::uint8_t> rise_cm;  ///< per return, above its scan's ground
-    std::uint32_t number = 0;               ///< increasing per scan
+    /// The ground the clearing reads (nullptr: the scan's own, as rise_cm has it).
+    const GroundMemory* ground = nullptr;
+    std::uint32_t number = 0;  ///< increasing per scan
     std::int64_t stamp_ns = 0;
   };
 
@@ -119,6 +140,8 @@ class LowObjects {
   /// Whether the ray origin → q passed object k under its top and went on past it.
   [[nodiscard]] bool sees_through(const LowObject& o, const Eigen::Vector3f& origin,
                                   const Eigen::Vector3f& q, const Eigen::Vector3f& up) const;
+  /// Whether return i of `scan` lies on the ground known round it at o's top.
+  [[nodiscard]] bool ground_at_top(const LowObject& o, const Scan& scan, std::size_t i) const;
   void expire(const Scan& scan);
 
   static constexpr std::uint32_t kNone = ~std::uint32_t{0};

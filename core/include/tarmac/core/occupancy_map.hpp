@@ -331,6 +331,20 @@ class OccupancyMap {
   void hit_heights(std::span<const Eigen::Vector3f> points_W, const Eigen::Vector3f& up);
   /// Each return's rise (cm) above the scan's second-lowest return within ground_radius_m.
   void hit_rises(std::size_t n_points);
+  /// The lower of `z` and the ground remembered in the 3×3 columns round window column
+  /// (cx, cy) by scans at most `max_age` scans old, as a height along up_ (hit_rises()).
+  [[nodiscard]] float lowest_remembered(int cx, int cy, std::uint32_t max_age, float z) const;
+  /// The ground the low objects' clearing reads: this scan's under a column that holds a
+  /// return, or the ground remembered round it from any earlier scan where lower (a scan that
+  /// sees a kerb's top from behind, without its road, is no evidence that the road rose).
+  class ClearingGround final : public LowObjects::GroundMemory {
+   public:
+    explicit ClearingGround(const OccupancyMap& map) : map_(map) {}
+    [[nodiscard]] float ground_z(std::uint32_t column) const override;
+
+   private:
+    const OccupancyMap& map_;
+  };
   /// One hit per voxel in point order, its static-layer state and its sub-voxel heights.
   void apply_hits(std::span<const Eigen::Vector3f> points_W, OccupancyUpdate& stats);
   /// integrate()'s last step: the misses of the occupied voxels a ray crossed (candidates_),
