@@ -13,12 +13,69 @@
 
 #include "tarmac/daemon/thread_pool.hpp"
 
+#include "../support/apron_scene.hpp"
 #include "occupancy_test_util.hpp"
 
 namespace tarmac::core {
 namespace {
 
 using namespace occupancy_test;  // NOLINT(google-build-using-namespace): the tests' own helpers
+
+/// Returns every 0.1 m over x in [2, 4], y in [y0, y1), at height z.
+void add_patch(std::vector<Eigen::Vector3f>& points, float y0, float y1, float z) {
+  for (float x = 2.0f; x <= 4.0f; x += 0.1f) {
+    for (float y = y0; y < y1; y += 0.1f) points.emplace_back(x + 0.013f, y + 0.017f, z);
+  }
+}
+
+/// The confirmed low objects whose centre lies south of y_max.
+std::size_t confirmed_low_objects(const OccupancyMap& map, float y_max = 100.0f) {
+  const LowObjects& objects = map.low_objects();
+  return static_cast<std::size_t>(std::count_if(
+      objects.all().begin(), objects.all().end(),
+      [&](const LowObject& o) { return objects.confirmed(o) && o.xy_W.y() < y_max; }));
+}
+
+TEST(OccupancyMap, LowObjects_TheFloorFoundAtTheirTopRemovesThem_AKerbsTopAloneDoesNot) {
+  const Eigen::Vector3d origin(0.05, 0.05, 2.0);
+  SerialRunner runner;
+  // A floor at 5 cm that one scan also returned twice under itself (a glossy floor's mirror
+  // images, 4 cm apart in depth: the scan's ground round them lies 10 cm low, and is not
+  // remembered). The floor round them rises 10 cm: low objects. The next two scans return
+  // from the floor alone, where their tops are: they are gone.
+  {
+    OccupancyMap map(test::apron_window_params());
+    map.recenter(Eigen::Vector3d::Zero());
+    std::vector<Eigen::Vector3f> floor;
+    add_patch(floor, -5.0f, -3.0f, 0.05f);
+    std::vector<Eigen::Vector3f> mirrored = floor;
+    mirrored.emplace_back(3.013f, -3.983f, -0.05f);
+    mirrored.emplace_back(3.113f, -3.983f, -0.09f);
+    map.integrate(origin, mirrored, {}, runner);
+    ASSERT_GT(confirmed_low_objects(map), 0u);
+    map.integrate(origin, floor, {}, runner);
+    EXPECT_GT(confirmed_low_objects(map), 0u) << "one scan is not enough (clear_scans 2)";
+    map.integrate(origin, floor, {}, runner);
+    EXPECT_EQ(confirmed_low_objects(map), 0u) << "two scans found the floor at their tops";
+  }
+  // A 15 cm kerb at y = -4 seen with its road, then from where its road is not returned: the
+  // kerb's top lies on those scans' ground, but the road is remembered beside its edge, and
+  // the objects there stay. (Those further up the top rose only because the road lay within
+  // ground_radius_m of them; scans of the top alone overwrite the memory under them.)
+  {
+    OccupancyMap map(test::apron_window_params());
+    map.recenter(Eigen::Vector3d::Zero());
+    std::vector<Eigen::Vector3f> kerb, top_only;
+    add_patch(kerb, -5.0f, -4.0f, 0.05f);
+    add_patch(kerb, -4.0f, -3.0f, 0.20f);
+    add_patch(top_only, -4.0f, -3.0f, 0.20f);
+    map.integrate(origin, kerb, {}, runner);
+    const std::size_t edge = confirmed_low_objects(map, -3.8f);
+    ASSERT_GT(edge, 0u);
+    for (int i = 0; i < 5; ++i) map.integrate(origin, top_only, {}, runner);
+    EXPECT_EQ(confirmed_low_objects(map, -3.8f), edge) << "the kerb's road is remembered";
+  }
+}
 
 TEST(OccupancyMap, LogOddsArithmeticAndClamping) {
   OccupancyMap map(small_params());
