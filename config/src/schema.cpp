@@ -428,8 +428,14 @@ std::vector<Key> make_schema() {
                "(from costmap.min_obstacle_height_m up)",
                [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.max_rise_m; }),
           integer(
+              "occupancy.low_object_lethal_returns", 1, 1000, "returns",
+              "rising returns (one scan or several) that make a low object lethal; at most "
+              "low_object_confirm_returns",
+              [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.lethal_returns; }),
+          integer(
               "occupancy.low_object_confirm_returns", 1, 1000, "returns",
-              "rising returns (one scan or several) that make a low object lethal",
+              "rising returns (one scan or several) that confirm a low object: kept until its "
+              "spot is seen empty, and debris",
               [](Config& c) -> Field { return &c.mapping.occupancy.low_objects.confirm_returns; }),
           integer("occupancy.low_object_clear_scans", 1, 100, "scans",
                   "scans in a row with a ray past a low object under its top, or the ground "

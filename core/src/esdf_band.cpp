@@ -126,12 +126,12 @@ void build_esdf_band(const OccupancyMap& map, const CostmapLayers& layers,
     }
   });
 
-  // Confirmed low objects, as the costmap marks them (standing_cell): occupied from their
+  // Lethal low objects, as the costmap marks them (standing_cell): occupied from their
   // column's ground voxel up to the voxel of their top, so a 10 cm piece of debris the voxels
   // lost is in the band as it is in the slice.
   const LowObjects& objects = map.low_objects();
   for (const LowObject& o : objects.all()) {
-    if (!objects.confirmed(o)) continue;
+    if (!objects.lethal(o)) continue;
     const std::int64_t c = standing_cell(o, layers.ground_z_m);
     if (c < 0) continue;
     const int top = static_cast<int>(std::floor(static_cast<double>(o.top_z_W) / v)) - wmin.z();

@@ -24,6 +24,9 @@ Status LowObjectParams::validate() const {
   if (confirm_returns < 1 || confirm_returns > 1000) {
     return bad("confirm_returns", "must be in [1, 1000]");
   }
+  if (lethal_returns < 1 || lethal_returns > confirm_returns) {
+    return bad("lethal_returns", "must be in [1, confirm_returns]");
+  }
   if (clear_scans < 1 || clear_scans > 100) return bad("clear_scans", "must be in [1, 100]");
   if (candidate_scans < 1 || candidate_scans > 1000) {
     return bad("candidate_scans", "must be in [1, 1000]");

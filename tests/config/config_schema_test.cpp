@@ -186,6 +186,8 @@ TEST(ConfigSchema, EveryNumericKey_AtEitherEndOfItsRange_PassesTheLibrariesValid
       {"occupancy.window_z_vox min", below},
       {"occupancy.window_below_m max", below},
       {"occupancy.window_z_vox max", "occupancy.window_*_vox: window larger than 512 M voxels"},
+      {"occupancy.low_object_lethal_returns max",
+       "low_objects.lethal_returns: must be in [1, confirm_returns]"},
       {"costmap.min_obstacle_height_m max",
        "costmap.vehicle_height_m: must be > min_obstacle_height_m"},
       {"costmap.inscribed_radius_m max", inflation},

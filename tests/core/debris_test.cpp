@@ -44,7 +44,7 @@ class World {
     }
   }
 
-  /// Integrates the queued returns as one scan and marks the confirmed objects' columns as
+  /// Integrates the queued returns as one scan and marks the lethal objects' columns as
   /// the costmap does (mark_low_objects).
   void scan() {
     LowObjects::Scan s;
@@ -61,7 +61,7 @@ class World {
     column_.clear();
     rise_.clear();
     for (const LowObject& o : objects_.all()) {
-      if (objects_.confirmed(o)) obstacle(o.xy_W.x(), o.xy_W.y());
+      if (objects_.lethal(o)) obstacle(o.xy_W.x(), o.xy_W.y());
     }
   }
 
@@ -152,8 +152,9 @@ TEST(Debris, ConfirmedInOneScan_IsListedOnceASecondScanSeesItRise) {
 
 TEST(Debris, Candidate_IsNotDebris) {
   World w;
-  w.object(10.1f, 10.1f, 10, 1);  // one return: not confirmed
+  w.object(10.1f, 10.1f, 10, 1);  // one return: lethal, not confirmed
   w.scan();
+  EXPECT_TRUE(w.objects().lethal(w.objects().all()[0]));
   EXPECT_TRUE(w.debris().empty());
 }
 

@@ -231,7 +231,12 @@ TEST(LowObjects, ALoneReturnLapsesAndTheWindowDropsWhatLeavesIt) {
   stray.add(Eigen::Vector3f(5.0f, 5.0f, 0.1f), 10);
   objects.update(stray.scan(1, kSensor));
   ASSERT_EQ(objects.all().size(), 1u);
-  for (std::uint32_t k = 2; k <= 11; ++k) objects.update(ScanBuilder{}.scan(k, kSensor));
+  EXPECT_FALSE(objects.confirmed(objects.all()[0]));
+  EXPECT_TRUE(objects.lethal(objects.all()[0]))
+      << "lethal from its first return (lethal_returns 1)";
+  for (std::uint32_t k = 2; k <= 10; ++k) objects.update(ScanBuilder{}.scan(k, kSensor));
+  ASSERT_EQ(objects.all().size(), 1u) << "lethal while it waits for a second";
+  objects.update(ScanBuilder{}.scan(11, kSensor));
   EXPECT_TRUE(objects.all().empty()) << "candidate_scans without a second return";
 
   ScanBuilder seen;
@@ -279,6 +284,28 @@ TEST(LowObjects, InvalidParametersAreRefused) {
   p = LowObjectParams{};
   p.clear_scans = 0;
   EXPECT_FALSE(p.validate().ok());
+  p = LowObjectParams{};
+  p.lethal_returns = 3;  // more than confirm_returns (2)
+  EXPECT_FALSE(p.validate().ok());
+  p.confirm_returns = 3;
+  EXPECT_TRUE(p.validate().ok());
+  p.lethal_returns = 0;
+  EXPECT_FALSE(p.validate().ok());
+}
+
+TEST(LowObjects, LethalReturnsSaysWhenACandidateBlocks) {
+  LowObjectParams p;
+  p.lethal_returns = 2;
+  LowObjects objects(p, kN, kN, kVoxel);
+  objects.place(0, 0);
+  ScanBuilder one;
+  one.add(kCubeTop, 10);
+  objects.update(one.scan(1, kSensor));
+  ASSERT_EQ(objects.all().size(), 1u);
+  EXPECT_FALSE(objects.lethal(objects.all()[0])) << "one return of two";
+  objects.update(one.scan(2, kSensor));
+  EXPECT_TRUE(objects.lethal(objects.all()[0]));
+  EXPECT_TRUE(objects.confirmed(objects.all()[0]));
 }
 
 }  // namespace

@@ -315,7 +315,7 @@ void mark_low_objects(const CostmapPass& pass) {
   const LowObjects& objects = pass.map.low_objects();
   auto& classes = pass.out.column_class.cells();
   for (const LowObject& o : objects.all()) {
-    if (!objects.confirmed(o)) continue;
+    if (!objects.lethal(o)) continue;
     const std::int64_t c = standing_cell(o, pass.out.ground_z_m);
     if (c < 0) continue;
     const auto i = static_cast<std::size_t>(c);

@@ -91,7 +91,7 @@ void fill_ground_gaps(const CostmapPass& pass, const GroundPlane& plane);
 /// 6. Every column's ground and class against the vehicle's envelope: out.ground_layer,
 ///    out.ground_z_m, out.column_class, out.esdf_input, out.obstacle_rule.
 void classify_columns(const CostmapPass& pass);
-/// 6b. The occupancy map's confirmed low objects (debris kept across scans) block their cells,
+/// 6b. The occupancy map's lethal low objects (debris kept across scans) block their cells,
 /// whatever the voxels say (low_objects.hpp).
 void mark_low_objects(const CostmapPass& pass);
 /// 6b. Peers' cells where this vehicle's are unknown or older (BevPeers::fuse, the fleet's

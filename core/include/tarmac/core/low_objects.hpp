@@ -8,8 +8,9 @@
 /// is kept as a point with its evidence:
 ///  - returns rising at least min_rise_m above their scan's ground, up to max_rise_m (taller
 ///    objects fill voxels above the ground's, which the costmap reads directly), within
-///    match_radius_m of the object's centre are its evidence; confirm_returns of them (in one
-///    scan or over several) confirm it;
+///    match_radius_m of the object's centre are its evidence; lethal_returns of them make it
+///    an obstacle in the costmap, confirm_returns of them (in one scan or over several) confirm
+///    it;
 ///  - it is removed only when clear_scans scans in a row, with no rising return on it, each
 ///    showed its spot empty: a ray that passed its centre (within clear_radius_m, horizontally)
 ///    lower than its top and went on past it (the rays that would have hit it went past), or a
@@ -41,6 +42,7 @@ struct LowObjectParams {
   double max_rise_m = 0.5;       ///< rising returns above this are not low objects'
   double match_radius_m = 0.15;  ///< rising returns this close to a centre are its evidence
   double clear_radius_m = 0.03;  ///< a ray this close to a centre, under its top, saw through
+  int lethal_returns = 1;        ///< rising returns that make it lethal (≤ confirm_returns)
   int confirm_returns = 2;       ///< rising returns that make a candidate an object
   int clear_scans = 2;           ///< scans in a row seeing through an object that remove it
   int candidate_scans = 10;      ///< scans a candidate waits for its next rising return
@@ -119,6 +121,11 @@ class LowObjects {
   [[nodiscard]] std::span<const LowObject> all() const { return objects_; }
   [[nodiscard]] bool confirmed(const LowObject& o) const {
     return o.returns >= static_cast<std::uint32_t>(params_.confirm_returns);
+  }
+  /// Whether the costmap reads it as an obstacle (where it stands on the ground): a candidate
+  /// too, from lethal_returns, until it lapses.
+  [[nodiscard]] bool lethal(const LowObject& o) const {
+    return o.returns >= static_cast<std::uint32_t>(params_.lethal_returns);
   }
   /// Rising returns that found no room (capacity reached), since construction.
   [[nodiscard]] std::uint64_t refused() const { return refused_; }
