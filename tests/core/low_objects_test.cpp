@@ -76,6 +76,14 @@ LowObjects make() {
   return objects;
 }
 
+/// Two rising returns on the cube's top edge, `apart`: one scan with them confirms it.
+ScanBuilder two_on_its_top(const Eigen::Vector3f& apart) {
+  ScanBuilder s;
+  s.add(kCubeTop, 10);
+  s.add(kCubeTop + apart, 10);
+  return s;
+}
+
 int confirmed_count(const LowObjects& objects) {
   int n = 0;
   for (const LowObject& o : objects.all()) n += objects.confirmed(o) ? 1 : 0;
@@ -156,9 +164,7 @@ TEST(LowObjects, TheOrderOfTheReturnsChangesNothing) {
 
 TEST(LowObjects, RaysThatWentPastUnderItsTopRemoveIt) {
   LowObjects objects = make();
-  ScanBuilder seen;
-  seen.add(kCubeTop, 10);
-  seen.add(kCubeTop + Eigen::Vector3f(0.0f, 0.02f, 0.0f), 10);
+  const ScanBuilder seen = two_on_its_top(Eigen::Vector3f(0.0f, 0.02f, 0.0f));
   objects.update(seen.scan(1, kSensor));
   ASSERT_EQ(confirmed_count(objects), 1);
   EXPECT_EQ(objects.all()[0].scans, 1u) << "two returns, one scan";
@@ -180,10 +186,7 @@ TEST(LowObjects, TheGroundFoundAtItsTopRemovesIt) {
   // A glossy floor's mirror returns lower one scan's ground, and the floor itself "rises"
   // 10 cm there. The next scans find the ground where its top was: no object stands there.
   LowObjects objects = make();
-  ScanBuilder seen;
-  seen.add(kCubeTop, 10);
-  seen.add(kCubeTop + Eigen::Vector3f(0.02f, 0.0f, 0.0f), 10);
-  objects.update(seen.scan(1, kSensor));
+  objects.update(two_on_its_top(Eigen::Vector3f(0.02f, 0.0f, 0.0f)).scan(1, kSensor));
   ASSERT_EQ(confirmed_count(objects), 1);
   const Eigen::Vector3f centre(12.01f, 10.0f, 0.1f);
   // Not evidence: a return on its face above this scan's ground (rise 5 cm, 2 cm under its
