@@ -174,6 +174,28 @@ TEST_F(Envelope, LowObjectBlocks_WhateverTheFreeRuleSaysOfTheEnvelopeAbove) {
   EXPECT_EQ(rule_at(3.0, -4.0) & (obstacle_rule::kVoxel | obstacle_rule::kDrop), 0);
 }
 
+TEST_F(Envelope, ALoneRisingReturnIsALethalLowObjectUntilItLapses) {
+  // One return rising 10 cm over the 5 cm apron: a candidate, lethal (lethal_returns 1). Then
+  // scans that return only far from it (nothing sees its spot): it lapses after
+  // candidate_scans (10) scans without a second rising return.
+  scan({Eigen::Vector3f(3.013f, -3.983f, 0.15f)}, 1);
+  build();
+  EXPECT_EQ(cost_at(3.0, -4.0), kCostLethal);
+  EXPECT_NE(rule_at(3.0, -4.0) & obstacle_rule::kLowObject, 0) << "one return makes it lethal";
+  std::vector<Eigen::Vector3f> far;
+  for (float x = -10.0f; x <= -8.0f; x += 0.1f) {
+    for (float y = -1.0f; y <= 1.0f; y += 0.1f) far.emplace_back(x + 0.013f, y + 0.017f, 0.05f);
+  }
+  SerialRunner runner;
+  for (int i = 0; i < 9; ++i) map_.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), far, {}, runner);
+  build();
+  EXPECT_NE(rule_at(3.0, -4.0) & obstacle_rule::kLowObject, 0) << "nine scans: still waiting";
+  map_.integrate(Eigen::Vector3d(0.05, 0.05, 2.0), far, {}, runner);
+  build();
+  EXPECT_EQ(rule_at(3.0, -4.0) & obstacle_rule::kLowObject, 0) << "ten scans without a second";
+  EXPECT_TRUE(map_.low_objects().all().empty());
+}
+
 TEST_F(Envelope, DebrisStaysLethalUntilRaysGoPastWhereItStood) {
   // 10 cm debris (returns 10 cm over the 5 cm apron) seen in one scan, then scans whose only
   // return on it lies low on its face, with the apron behind it in its shadow: the voxel's
