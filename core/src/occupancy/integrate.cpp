@@ -31,6 +31,13 @@ using namespace occupancy;  // NOLINT(google-build-using-namespace): this file i
 /// A window column the scan has no return in: its lowest return is +inf.
 constexpr float kNoGround = std::numeric_limits<float>::infinity();
 
+/// The map-frame (x, y) of window column (x, y)'s centre, the window's lowest voxel `min`:
+/// heights along a tilted up axis depend on it.
+Eigen::Vector2f column_centre(const VoxelIndex& min, double v_m, int x, int y) {
+  return {static_cast<float>((min.x() + x + 0.5) * v_m),
+          static_cast<float>((min.y() + y + 0.5) * v_m)};
+}
+
 }  // namespace
 
 void OccupancyMap::integrate_hits(const Eigen::Vector3d& origin_W,
@@ -211,8 +218,7 @@ void OccupancyMap::hit_rises(std::size_t n_points) {
     // scatter in depth under it; a ground returns at one height). (Not on a vehicle on its
     // side: the world height along its up axis is undefined.)
     if (second != kNoGround && second - lowest <= kGroundAgreeM && up_.z() > 0.1f) {
-      const auto xy = Eigen::Vector2f(static_cast<float>((min_.x() + cx + 0.5) * v_m),
-                                      static_cast<float>((min_.y() + cy + 0.5) * v_m));
+      const Eigen::Vector2f xy = column_centre(min_, v_m, cx, cy);
       ground_memory_z_[ring(cx, cy)] =
           (scan_ground_near_z_[c] - up_.x() * xy.x() - up_.y() * xy.y()) / up_.z();
       ground_memory_scan_[ring(cx, cy)] = scan;
@@ -247,9 +253,7 @@ float OccupancyMap::lowest_remembered(int cx, int cy, std::uint32_t max_age, flo
       if (ground_memory_scan_[q] == 0 || scans_integrated_ - ground_memory_scan_[q] > max_age) {
         continue;
       }
-      // The column centre's (x, y) in the map frame: heights along up depend on it.
-      const auto xy = Eigen::Vector2f(static_cast<float>((min_.x() + x + 0.5) * v_m),
-                                      static_cast<float>((min_.y() + y + 0.5) * v_m));
+      const Eigen::Vector2f xy = column_centre(min_, v_m, x, y);
       z = std::min(z, up_.x() * xy.x() + up_.y() * xy.y() + up_.z() * ground_memory_z_[q]);
     }
   }
